@@ -1,0 +1,1 @@
+"""One module per ``mocapedit`` sub-command; each defines ``register(subparsers)``."""

@@ -1,0 +1,277 @@
+"""The processor: read a stage, build and run the solves, author the edits layer.
+
+``solve()`` is the Python API behind ``mocapedit solve``. It never modifies the input;
+it returns the edits as a new (anonymous) Sdf layer, saved atomically when ``output`` is
+given, plus a :class:`~mocapedit.report.Report`.
+
+The solve runs as a list of passes over a shared :class:`SolveContext`. Each pass reads
+the source data and what earlier passes produced (edited paths, time maps, layered
+poses) and adds its own; ``compose_edits`` turns the result into what the writer
+authors. A pass does its numerical work through :mod:`mocapedit._solver` and numpy.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from pxr import Sdf, Usd, Vt
+
+from . import animation, ground, reader, trajectory, writer
+from .errors import MocapEditError
+from .model import StageData
+from .progress import Progress, Silent
+from .report import Report
+
+
+@dataclass
+class EditedPath:
+    """An agent's edited ground path, one row per source frame."""
+    ground: np.ndarray            # (F,2)
+    heading: np.ndarray           # (F,)
+
+
+@dataclass
+class SolveOptions:
+    guides: bool = True
+    collisions: bool | None = None     # None: follow MocapSolveSettings.collisionAvoidance
+    overrides: dict = field(default_factory=dict)  # settings overrides by python field name
+
+
+@dataclass
+class SolveContext:
+    data: StageData
+    options: SolveOptions
+    report: Report
+    progress: Progress
+    trajectories: dict[str, trajectory.Trajectory] = field(default_factory=dict)
+    # Spatial edits: the edited ground path per source frame.
+    paths: dict[str, EditedPath] = field(default_factory=dict)
+    # Time edits: the shot time at which each source frame plays, (F,) increasing.
+    time_maps: dict[str, np.ndarray] = field(default_factory=dict)
+    # Pose edits (layering), applied in order to the time-warped source pose:
+    # fn(pose, out_times (T,), src_frames (T,)) -> Pose.
+    pose_edits: dict[str, list[Callable]] = field(default_factory=dict)
+    # Output times chosen by a pass for an agent (else whole shot frames for a time map,
+    # the clip's own samples otherwise).
+    out_times: dict[str, np.ndarray] = field(default_factory=dict)
+    edits: dict[str, writer.AgentEdit] = field(default_factory=dict)   # what the writer authors
+    guides: list = field(default_factory=list)
+
+
+Pass = Callable[[SolveContext], None]
+
+#: The solve passes, in order. Feature modules append themselves with ``register_pass``.
+PASSES: list[tuple[str, Pass]] = []
+
+
+def register_pass(name: str, fn: Pass, before: str | None = None) -> None:
+    """Adds a pass (idempotent by name); ``before`` puts it ahead of another pass."""
+    for i, (n, _) in enumerate(PASSES):
+        if n == name:
+            PASSES[i] = (name, fn)
+            return
+    if before is not None:
+        for i, (n, _) in enumerate(PASSES):
+            if n == before:
+                PASSES.insert(i, (name, fn))
+                return
+    PASSES.append((name, fn))
+
+
+def extract_trajectories(ctx: SolveContext) -> None:
+    info = ctx.data.info
+    task = ctx.progress.task("trajectories", len(ctx.data.agents))
+    for i, (path, agent) in enumerate(ctx.data.agents.items()):
+        ctx.trajectories[path] = trajectory.extract(agent, ctx.data.clip_of(agent), info.up_axis,
+                                                    info.meters_per_unit)
+        task.update(i + 1)
+    task.done()
+
+
+def output_frames(ctx: SolveContext, path: str) -> tuple[np.ndarray, np.ndarray]:
+    """(stage times to author, fractional source frame at each) for one agent."""
+    agent = ctx.data.agents[path]
+    frames = np.arange(agent.frame_count, dtype=np.float64)
+    time_map = ctx.time_maps.get(path)
+    if time_map is None:
+        times = ctx.out_times.get(path, agent.sample_times)
+        return times, np.interp(times, agent.sample_times, frames)
+    times = ctx.out_times.get(path)
+    if times is None:
+        # A warped clip is authored on the shot's whole frames.
+        times = np.arange(np.ceil(time_map[0] - 1e-9), np.floor(time_map[-1] + 1e-9) + 1.0)
+    return times, np.interp(times, time_map, frames)
+
+
+def compose_edits(ctx: SolveContext) -> None:
+    """Turns edited paths, time maps and pose edits into what the writer authors.
+
+    The pose is the source sampled at the (warped) source frame of each output time, then
+    modified by the pose edits in order (layering); the edited path carries the whole body
+    by one rigid ground motion per output time (the prepended xform op).
+    """
+    up = ctx.data.info.up_axis
+    touched = sorted(set(ctx.paths) | set(ctx.time_maps) | set(ctx.pose_edits))
+    for path in touched:
+        agent, traj = ctx.data.agents[path], ctx.trajectories[path]
+        times, frames = output_frames(ctx, path)
+        edit = writer.AgentEdit()
+        if path in ctx.time_maps or path in ctx.pose_edits:
+            pose = animation.sample_pose(ctx.data.clip_of(agent), frames)
+            for fn in ctx.pose_edits.get(path, []):
+                pose = fn(pose, times, frames)
+            edit.animation = writer.BakedAnimation(
+                joints=pose.joints, times=times, translations=pose.translations,
+                rotations=pose.rotations, scales=pose.scales)
+        edited = ctx.paths.get(path)
+        if edited is not None:
+            motion = trajectory.ground_motion(
+                animation.interp_frames(traj.ground, frames), animation.interp_frames(traj.heading, frames),
+                animation.interp_frames(edited.ground, frames), animation.interp_frames(edited.heading, frames),
+                up)
+            if not np.allclose(motion, np.eye(4), atol=1e-12):
+                edit.times = times
+                parent = agent.agent_parent_to_world
+                if parent.shape[0] > 1:  # a moving parent, sampled per source frame
+                    agent_view = _with_parent(agent, animation.interp_frames(parent, frames))
+                else:
+                    agent_view = agent
+                edit.xform_op = trajectory.agent_xform_op(agent_view, motion)
+        if edit.animation is not None or edit.xform_op is not None:
+            ctx.edits[path] = edit
+
+
+def _with_parent(agent, parent_to_world):
+    import dataclasses
+    return dataclasses.replace(agent, agent_parent_to_world=parent_to_world)
+
+
+def source_path_guides(ctx: SolveContext) -> None:
+    if not ctx.options.guides:
+        return
+    up = ctx.data.info.up_axis
+    curves = [ground.from_ground(t.ground, 0.0, up) for _, t in sorted(ctx.trajectories.items())]
+    ctx.guides.append(writer.GuideCurves(
+        name="SourcePaths", curves=curves, color=(0.55, 0.55, 0.6),
+        width=ctx.data.info.metres(0.03), doc="Ground paths of the agents' source clips, one curve per agent."))
+    edited = [ground.from_ground(ctx.paths[p].ground, 0.0, up) for p in sorted(ctx.paths)]
+    if edited:
+        ctx.guides.append(writer.GuideCurves(
+            name="EditedPaths", curves=edited, color=(1.0, 0.55, 0.1),
+            width=ctx.data.info.metres(0.04), doc="Edited ground paths, one curve per edited agent."))
+
+
+def content_hash(stage: Usd.Stage) -> str:
+    """SHA-256 over the content of every layer the input uses, in identifier order."""
+    session = stage.GetSessionLayer()
+    digests = []
+    for layer in stage.GetUsedLayers():
+        if layer == session:
+            continue
+        h = hashlib.sha256()
+        if layer.realPath and os.path.isfile(layer.realPath):
+            h.update(os.path.basename(layer.realPath).encode())
+            with open(layer.realPath, "rb") as f:
+                for block in iter(lambda: f.read(1 << 20), b""):
+                    h.update(block)
+        else:
+            h.update(layer.ExportToString().encode())
+        digests.append(h.hexdigest())
+    # Anonymous identifiers change from run to run: order by content, not by name.
+    return hashlib.sha256("".join(sorted(digests)).encode()).hexdigest()
+
+
+def input_layers(stage: Usd.Stage) -> list[str]:
+    """The input's layer identifiers, root first; anonymous (in-memory) layers are left out."""
+    root = stage.GetRootLayer().identifier
+    others = sorted(l.identifier for l in stage.GetUsedLayers()
+                    if l != stage.GetSessionLayer() and not l.anonymous and l.identifier != root)
+    return [root] + others
+
+
+@dataclass
+class SolveResult:
+    layer: Sdf.Layer
+    report: Report
+    data: StageData
+
+
+def solve(stage_or_path, output: str | None = None, composed: str | None = None,
+          guides: bool = True, collisions: bool | None = None, progress: Progress | None = None,
+          **overrides) -> SolveResult:
+    """Solves every edit authored on a stage and returns the edits layer and a report.
+
+    Args:
+      stage_or_path: a ``Usd.Stage`` or the path of a stage file. The input is read only.
+      output: if given, the edits layer is saved there (``.usda`` or ``.usdc``), atomically.
+      composed: if given (needs ``output``), a stage that sub-layers the edits over the input.
+      guides: author guide geometry under ``/MocapEdit/Guides``.
+      collisions: force collision avoidance on or off; None follows MocapSolveSettings.
+      progress: a :class:`~mocapedit.progress.Progress`; silent by default.
+      overrides: MocapSolveSettings values by their Python names (``max_iterations=...``).
+
+    Raises:
+      MocapEditError: bad input, naming the prim and property. Nothing is written.
+    """
+    progress = progress or Silent()
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    if isinstance(stage_or_path, Usd.Stage):
+        stage, input_name = stage_or_path, stage_or_path.GetRootLayer().identifier
+    else:
+        stage, input_name = reader.open_stage(str(stage_or_path)), str(stage_or_path)
+    if composed and not output:
+        raise MocapEditError("--composed needs an output path for the edits layer (-o)")
+
+    data = reader.read_stage(stage, progress)
+    for key, value in overrides.items():
+        if not hasattr(data.settings, key):
+            raise MocapEditError(f"unknown solve setting '{key}'")
+        setattr(data.settings, key, value)
+    timings["read"] = time.perf_counter() - t0
+
+    report = Report(input=input_name, output=output)
+    ctx = SolveContext(data=data, options=SolveOptions(guides=guides, collisions=collisions,
+                                                       overrides=overrides),
+                       report=report, progress=progress)
+    t = time.perf_counter()
+    extract_trajectories(ctx)
+    timings["trajectories"] = time.perf_counter() - t
+    for name, fn in PASSES:
+        t = time.perf_counter()
+        fn(ctx)
+        timings[name] = time.perf_counter() - t
+    compose_edits(ctx)
+    source_path_guides(ctx)
+
+    constraint_count = sum(len(x) for x in (data.position_constraints, data.relative_constraints,
+                                            data.time_constraints, data.sync_constraints))
+    report.stats = {"agents": len(data.agents), "editedAgents": len(ctx.edits), "clips": len(data.clips),
+                    "constraints": constraint_count, "groups": len(data.groups),
+                    "avoidRegions": len(data.avoid_regions), "animationLayers": len(data.layers)}
+    for path, traj in ctx.trajectories.items():
+        entry = report.agent(path)
+        entry.setdefault("frames", int(len(traj.ground)))
+        entry.setdefault("edited", path in ctx.edits)
+        if traj.projected_hip:
+            entry.setdefault("trajectoryJoint", data.agents[path].joints[traj.joint])
+
+    t = time.perf_counter()
+    provenance = {"inputs": Vt.StringArray(input_layers(stage)), "contentHash": content_hash(stage)}
+    layer = writer.build_layer(writer.LayerContent(
+        info=data.info, agents=data.agents, edits=ctx.edits, guides=ctx.guides,
+        provenance=provenance, stats=report.stats))
+    if output:
+        writer.save_layer(layer, output)
+        if composed:
+            default_prim = stage.GetRootLayer().defaultPrim or None
+            writer.save_composed(composed, output, input_name if not isinstance(stage_or_path, Usd.Stage)
+                                 else stage.GetRootLayer().realPath, data.info, default_prim)
+    timings["write"] = time.perf_counter() - t
+    timings["total"] = time.perf_counter() - t0
+    report.timings = timings
+    return SolveResult(layer=layer, report=report, data=data)

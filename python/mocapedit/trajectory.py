@@ -1,0 +1,103 @@
+"""Ground trajectories of agents, and the rigid ground motions that carry an edit.
+
+The trajectory of an agent is its root joint's world position on the ground plane at
+each source frame (section 5.4.1 of the deliverable): the root joint when it carries the
+motion, otherwise the hip joint projected to the ground. Its heading follows the path
+tangent, held constant through stationary ranges.
+
+An edit moves an agent's ground pose ``(position, heading)`` at each frame to a new one.
+Because only the ground-plane motion and the yaw change, the whole body follows by one
+rigid motion about the up axis per frame, ``M(t)``; everything else (height, every joint)
+keeps its source value.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _solver, ground, kinematics
+from .model import Agent, Clip
+
+#: Ground travel (in metres) below which the root is said to carry no motion.
+STILL_ROOT_M = 1e-4
+
+
+@dataclass
+class Trajectory:
+    ground: np.ndarray        # (F,2) ground coordinates of the tracked joint
+    heading: np.ndarray       # (F,) radians, counter-clockwise about up
+    height: np.ndarray        # (F,) world height of the tracked joint
+    joint: int                # skeleton index of the tracked joint
+    projected_hip: bool       # True when the root carries no motion and the hip is used
+
+
+def local_transforms(agent: Agent, clip: Clip, joints: np.ndarray | None = None) -> np.ndarray:
+    """(F,J,4,4) joint-local matrices in skeleton order; joints the clip lacks take the rest pose."""
+    f = clip.frame_count
+    local = np.broadcast_to(agent.rest_transforms, (f,) + agent.rest_transforms.shape).copy()
+    have = agent.anim_to_skel >= 0
+    local[:, agent.anim_to_skel[have]] = kinematics.compose_trs(
+        clip.translations[:, have], clip.rotations[:, have], clip.scales[:, have])
+    return local
+
+
+def joint_world(agent: Agent, clip: Clip, joint: int) -> np.ndarray:
+    """(F,4,4) world matrices of one joint at every source frame."""
+    local = local_transforms(agent, clip)
+    return kinematics.chain_to_skel(local, agent.parents, joint) @ agent.skel_to_world
+
+
+def extract(agent: Agent, clip: Clip, up_axis: str, meters_per_unit: float) -> Trajectory:
+    """The agent's ground trajectory, its heading and height at each source frame."""
+    local = local_transforms(agent, clip)
+    root = kinematics.chain_to_skel(local, agent.parents, agent.root_joint) @ agent.skel_to_world
+    pos = root[:, 3, :3]
+    uv = ground.to_ground(pos, up_axis)
+    joint, projected = agent.root_joint, False
+    travel = np.ptp(uv, axis=0).max() if len(uv) else 0.0
+    if travel < STILL_ROOT_M / meters_per_unit and agent.hip_joint is not None:
+        hip = kinematics.chain_to_skel(local, agent.parents, agent.hip_joint) @ agent.skel_to_world
+        if np.ptp(ground.to_ground(hip[:, 3, :3], up_axis), axis=0).max() > travel:
+            pos = hip[:, 3, :3]
+            uv = ground.to_ground(pos, up_axis)
+            joint, projected = agent.hip_joint, True
+    heading = headings(uv, [(a, b) for _, a, b in agent.stationary], meters_per_unit)
+    return Trajectory(ground=uv, heading=heading, height=ground.height(pos, up_axis), joint=joint,
+                      projected_hip=projected)
+
+
+def headings(uv: np.ndarray, fixed: list[tuple[int, int]], meters_per_unit: float) -> np.ndarray:
+    """Tangent headings; each fixed (stationary) range keeps the heading it is entered with."""
+    still = 1e-5 / meters_per_unit
+    free = _solver.tangent_headings(np.ascontiguousarray(uv, dtype=np.float64), [], np.zeros(0), still)
+    if not fixed:
+        return free
+    fallback = np.array([free[a] for a, _ in fixed])
+    return _solver.tangent_headings(np.ascontiguousarray(uv, dtype=np.float64), fixed, fallback, still)
+
+
+def ground_motion(src_uv: np.ndarray, src_heading: np.ndarray, new_uv: np.ndarray,
+                  new_heading: np.ndarray, up_axis: str) -> np.ndarray:
+    """(F,4,4) world-space rigid motions taking each source ground pose to the edited one.
+
+    A world point ``p`` of the agent at frame ``i`` moves to ``p @ M[i]``: it is turned
+    about the up axis through the source root by the change of heading, then carried
+    from the source root position to the edited one.
+    """
+    zero = np.zeros(len(src_uv))
+    to_origin = kinematics.translation_matrix(-ground.from_ground(src_uv, zero, up_axis))
+    turn = kinematics.yaw_matrix(np.asarray(new_heading) - np.asarray(src_heading), up_axis)
+    to_new = kinematics.translation_matrix(ground.from_ground(new_uv, zero, up_axis))
+    return to_origin @ turn @ to_new
+
+
+def agent_xform_op(agent: Agent, motion: np.ndarray) -> np.ndarray:
+    """(F,4,4) values of the transform op prepended to the agent prim's xformOpOrder.
+
+    The prepended op ``O`` makes the agent's local matrix ``local @ O``; with the parent's
+    world matrix ``W`` the new world matrix is ``local @ O @ W``, which must equal
+    ``local @ W @ M``: so ``O = W @ M @ W^-1``.
+    """
+    w = agent.agent_parent_to_world
+    return w @ motion @ np.linalg.inv(w)

@@ -1,0 +1,269 @@
+"""Authors the edits layer. Write-only; no linear algebra.
+
+The layer holds only ``over`` opinions on edited agents and new prims under
+``/MocapEdit``; placed over the input stage it plays the edited motion through plain
+UsdSkel and UsdGeom. Layout:
+
+- an edited agent gets ``xformOp:transform:mocapEdit`` (time-sampled) prepended to its
+  ``xformOpOrder``: the rigid ground motion of its path edit;
+- an agent whose joints changed (time warp, layering) gets a baked SkelAnimation under
+  ``/MocapEdit/Animations`` bound to its skeleton with ``skel:animationSource``;
+- guide geometry goes under ``/MocapEdit/Guides`` with purpose ``guide``;
+- ``customLayerData["mocapedit"]`` records the version, the input layers, a content hash
+  and the solve statistics.
+
+Prims and samples are authored in sorted order so the same input gives the same bytes.
+Files are written to a temporary name beside the target and renamed into place.
+"""
+from __future__ import annotations
+
+import os
+import re
+import tempfile
+from dataclasses import dataclass, field
+
+import numpy as np
+from pxr import Gf, Sdf, Vt
+
+from . import __version__
+from .model import Agent, StageInfo
+
+EDIT_OP = "xformOp:transform:mocapEdit"
+ROOT = Sdf.Path("/MocapEdit")
+GUIDES = ROOT.AppendChild("Guides")
+ANIMATIONS = ROOT.AppendChild("Animations")
+
+
+@dataclass
+class BakedAnimation:
+    joints: list[str]
+    times: np.ndarray            # (T,) stage times
+    translations: np.ndarray     # (T,J,3)
+    rotations: np.ndarray        # (T,J,4) (x,y,z,w)
+    scales: np.ndarray | None    # (T,J,3)
+
+
+@dataclass
+class AgentEdit:
+    """What the writer authors for one agent; both parts optional."""
+    times: np.ndarray | None = None          # (T,) stage times of the xform op samples
+    xform_op: np.ndarray | None = None       # (T,4,4) prepended op values
+    animation: BakedAnimation | None = None
+
+
+@dataclass
+class GuideCurves:
+    name: str                    # prim name under /MocapEdit/Guides
+    curves: list[np.ndarray]     # each (K,3) world points
+    color: tuple[float, float, float]
+    width: float                 # stage units
+    doc: str = ""
+
+
+@dataclass
+class GuidePoints:
+    name: str
+    points: np.ndarray           # (K,3) world
+    colors: np.ndarray           # (K,3)
+    width: float
+    doc: str = ""
+
+
+@dataclass
+class LayerContent:
+    info: StageInfo
+    agents: dict[str, Agent]
+    edits: dict[str, AgentEdit]
+    guides: list = field(default_factory=list)
+    provenance: dict = field(default_factory=dict)
+    stats: dict = field(default_factory=dict)
+
+
+def _safe_name(path: str, taken: set[str]) -> str:
+    name = re.sub(r"[^A-Za-z0-9_]", "_", path.strip("/")) or "agent"
+    if name[0].isdigit():
+        name = "_" + name
+    base, i = name, 1
+    while name in taken:
+        i += 1
+        name = f"{base}_{i}"
+    taken.add(name)
+    return name
+
+
+def _over_chain(layer: Sdf.Layer, path: Sdf.Path) -> Sdf.PrimSpec:
+    spec = layer.GetPrimAtPath(path)
+    if spec:
+        return spec
+    parent = layer.pseudoRoot if path.GetParentPath() == Sdf.Path.absoluteRootPath else \
+        _over_chain(layer, path.GetParentPath())
+    return Sdf.PrimSpec(parent, path.name, Sdf.SpecifierOver)
+
+
+def _def(layer: Sdf.Layer, path: Sdf.Path, type_name: str) -> Sdf.PrimSpec:
+    parent = layer.GetPrimAtPath(path.GetParentPath())
+    return Sdf.PrimSpec(parent, path.name, Sdf.SpecifierDef, type_name)
+
+
+def _attr(spec: Sdf.PrimSpec, name: str, type_name, value=None, uniform=False) -> Sdf.AttributeSpec:
+    attr = Sdf.AttributeSpec(spec, name, type_name,
+                             Sdf.VariabilityUniform if uniform else Sdf.VariabilityVarying)
+    if value is not None:
+        attr.default = value
+    return attr
+
+
+def _author_xform_op(layer: Sdf.Layer, agent: Agent, edit: AgentEdit) -> None:
+    spec = _over_chain(layer, Sdf.Path(agent.path))
+    order = list(agent.xform_op_order)
+    if EDIT_OP in order:
+        order.remove(EDIT_OP)
+    at = 1 if order and order[0] == "!resetXformStack!" else 0
+    order.insert(at, EDIT_OP)
+    _attr(spec, "xformOpOrder", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(order), uniform=True)
+    attr = _attr(spec, EDIT_OP, Sdf.ValueTypeNames.Matrix4d)
+    for t, m in zip(edit.times, edit.xform_op):
+        layer.SetTimeSample(attr.path, float(t), Gf.Matrix4d(m.tolist()))
+
+
+def _author_animation(layer: Sdf.Layer, agent: Agent, anim: BakedAnimation, name: str) -> None:
+    path = ANIMATIONS.AppendChild(name)
+    spec = _def(layer, path, "SkelAnimation")
+    _attr(spec, "joints", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(anim.joints), uniform=True)
+    values = [("translations", Sdf.ValueTypeNames.Float3Array, Vt.Vec3fArray, anim.translations),
+              ("rotations", Sdf.ValueTypeNames.QuatfArray, Vt.QuatfArray, anim.rotations)]
+    if anim.scales is not None:
+        values.append(("scales", Sdf.ValueTypeNames.Half3Array, Vt.Vec3hArray, anim.scales))
+    for attr_name, type_name, array_type, data in values:
+        attr = _attr(spec, attr_name, type_name)
+        data = np.ascontiguousarray(data, dtype=np.float32)
+        for t, frame in zip(anim.times, data):
+            layer.SetTimeSample(attr.path, float(t), array_type.FromNumpy(frame))
+    skel = _over_chain(layer, Sdf.Path(agent.skeleton_path))
+    skel.SetInfo("apiSchemas", Sdf.TokenListOp.Create(prependedItems=["SkelBindingAPI"]))
+    rel = Sdf.RelationshipSpec(skel, "skel:animationSource", custom=False)
+    rel.targetPathList.explicitItems = [path]
+
+
+def _author_guides(layer: Sdf.Layer, guides: list) -> None:
+    for guide in guides:
+        path = GUIDES.AppendChild(guide.name)
+        if isinstance(guide, GuideCurves):
+            if not guide.curves:
+                continue
+            spec = _def(layer, path, "BasisCurves")
+            pts = np.concatenate(guide.curves).astype(np.float32)
+            _attr(spec, "type", Sdf.ValueTypeNames.Token, "linear", uniform=True)
+            _attr(spec, "curveVertexCounts", Sdf.ValueTypeNames.IntArray,
+                  Vt.IntArray([int(len(c)) for c in guide.curves]))
+            _attr(spec, "points", Sdf.ValueTypeNames.Point3fArray, Vt.Vec3fArray.FromNumpy(pts))
+            _attr(spec, "widths", Sdf.ValueTypeNames.FloatArray, Vt.FloatArray([float(guide.width)]))
+            spec.attributes["widths"].SetInfo("interpolation", "constant")
+            _attr(spec, "primvars:displayColor", Sdf.ValueTypeNames.Color3fArray,
+                  Vt.Vec3fArray([Gf.Vec3f(*guide.color)]))
+            spec.attributes["primvars:displayColor"].SetInfo("interpolation", "constant")
+        else:
+            if len(guide.points) == 0:
+                continue
+            spec = _def(layer, path, "Points")
+            _attr(spec, "points", Sdf.ValueTypeNames.Point3fArray,
+                  Vt.Vec3fArray.FromNumpy(np.asarray(guide.points, dtype=np.float32)))
+            _attr(spec, "widths", Sdf.ValueTypeNames.FloatArray, Vt.FloatArray([float(guide.width)]))
+            spec.attributes["widths"].SetInfo("interpolation", "constant")
+            _attr(spec, "primvars:displayColor", Sdf.ValueTypeNames.Color3fArray,
+                  Vt.Vec3fArray.FromNumpy(np.asarray(guide.colors, dtype=np.float32)))
+            spec.attributes["primvars:displayColor"].SetInfo("interpolation", "vertex")
+        _attr(spec, "purpose", Sdf.ValueTypeNames.Token, "guide", uniform=True)
+        if guide.doc:
+            spec.documentation = guide.doc
+
+
+def build_layer(content: LayerContent) -> Sdf.Layer:
+    """An anonymous layer holding the edits; save it with :func:`save_layer`."""
+    layer = Sdf.Layer.CreateAnonymous(".usda")
+    info = content.info
+    layer.timeCodesPerSecond = info.time_codes_per_second
+    layer.framesPerSecond = info.time_codes_per_second
+    if info.start_time is not None:
+        layer.startTimeCode = info.start_time
+    if info.end_time is not None:
+        layer.endTimeCode = info.end_time
+    layer.documentation = "mocapedit edits: place over the input stage (sublayer above it)."
+    data = {"version": __version__}
+    data.update(content.provenance)
+    if content.stats:
+        data["stats"] = content.stats
+    layer.customLayerData = {"mocapedit": data}
+    with Sdf.ChangeBlock():
+        root = Sdf.PrimSpec(layer.pseudoRoot, ROOT.name, Sdf.SpecifierDef, "Scope")
+        Sdf.PrimSpec(root, GUIDES.name, Sdf.SpecifierDef, "Scope")
+        taken: set[str] = set()
+        if any(e.animation is not None for e in content.edits.values()):
+            Sdf.PrimSpec(root, ANIMATIONS.name, Sdf.SpecifierDef, "Scope")
+        for agent_path in sorted(content.edits):
+            edit, agent = content.edits[agent_path], content.agents[agent_path]
+            if edit.xform_op is not None:
+                _author_xform_op(layer, agent, edit)
+            if edit.animation is not None:
+                _author_animation(layer, agent, edit.animation, _safe_name(agent_path, taken))
+        _author_guides(layer, content.guides)
+    return layer
+
+
+def _temp_beside(path: str) -> str:
+    directory, base = os.path.split(os.path.abspath(path))
+    stem, ext = os.path.splitext(base)
+    fd, tmp = tempfile.mkstemp(prefix=f".{stem}.", suffix=ext, dir=directory)
+    os.close(fd)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; the result is an ordinary file
+    return tmp
+
+
+def save_layer(layer: Sdf.Layer, path: str) -> None:
+    """Writes the layer to ``path`` through a temporary file and a rename."""
+    directory = os.path.dirname(os.path.abspath(path))
+    os.makedirs(directory, exist_ok=True)
+    tmp = _temp_beside(path)
+    try:
+        if not layer.Export(tmp):
+            raise OSError(f"{path}: USD could not write the layer")
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def save_composed(path: str, edits_path: str, input_path: str, info: StageInfo,
+                  default_prim: str | None = None) -> None:
+    """Writes a stage that sub-layers the edits over the input (relative paths)."""
+    here = os.path.dirname(os.path.abspath(path))
+    layer = Sdf.Layer.CreateAnonymous(os.path.splitext(path)[1] or ".usda")
+    layer.subLayerPaths = [os.path.relpath(os.path.abspath(edits_path), here),
+                           os.path.relpath(os.path.abspath(input_path), here)]
+    # A root layer that only sub-layers others still sets the stage's time and units.
+    layer.timeCodesPerSecond = info.time_codes_per_second
+    layer.framesPerSecond = info.time_codes_per_second
+    if info.start_time is not None:
+        layer.startTimeCode = info.start_time
+    if info.end_time is not None:
+        layer.endTimeCode = info.end_time
+    layer.pseudoRoot.SetInfo("upAxis", info.up_axis)
+    layer.pseudoRoot.SetInfo("metersPerUnit", info.meters_per_unit)
+    if default_prim:
+        layer.defaultPrim = default_prim
+    save_layer(layer, path)
+
+
+def save_text(path: str, text: str) -> None:
+    """Writes a text file (a report) through a temporary file and a rename."""
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    tmp = _temp_beside(path)
+    try:
+        with open(tmp, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)

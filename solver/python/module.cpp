@@ -1,0 +1,21 @@
+#include <pybind11/pybind11.h>
+
+#include <stdexcept>
+
+#include "registry.h"
+
+namespace mocapedit::python {
+
+std::vector<BindFunction>& Registry() {
+  static std::vector<BindFunction> functions;
+  return functions;
+}
+
+}  // namespace mocapedit::python
+
+PYBIND11_MODULE(_solver, m) {
+  m.doc() = "mocapedit's C++ solver (Eigen + SuiteSparse). Arrays in, arrays out; no USD.";
+  // std::invalid_argument maps to ValueError and std::runtime_error to RuntimeError by
+  // pybind11's default translators.
+  for (auto fn : mocapedit::python::Registry()) fn(m);
+}

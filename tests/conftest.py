@@ -1,0 +1,107 @@
+"""Shared fixtures: small hand-built UsdSkel stages whose answers are known exactly."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
+
+import mocapedit  # noqa: F401  (registers the schema plugin)
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_MOCAP = REPO.parent / "shared" / "mocap"
+
+TOY_JOINTS = ["Root", "Root/Hips", "Root/Hips/LeftFoot", "Root/Hips/RightFoot"]
+
+
+def toy_clip(frames: int = 48, speed: float = 5.0, sway: float = 10.0):
+    """Root walks along the ground's first axis with a lateral sway; body is static."""
+    f = np.arange(frames, dtype=np.float64)
+    t = np.zeros((frames, 4, 3), np.float32)
+    t[:, 0, 0] = f * speed
+    t[:, 0, 1] = sway * np.sin(f / 5.0)
+    t[:, 1] = (0, 0, 90)
+    t[:, 2] = (10, 0, -90)
+    t[:, 3] = (-10, 0, -90)
+    q = np.zeros((frames, 4, 4), np.float32)
+    q[..., 3] = 1
+    # A slow yaw on the hips so the body has some rotation to carry.
+    a = 0.2 * np.sin(f / 7.0)
+    q[:, 1, 2], q[:, 1, 3] = np.sin(a / 2), np.cos(a / 2)
+    return t, q
+
+
+def write_toy_stage(path, agents=3, up_axis="Z", meters_per_unit=0.01, fps=24.0, frames=48,
+                    spacing=100.0, time_offsets=None, skip=None) -> Path:
+    """A Z-up (or Y-up) stage of toy agents; each has its own SkelAnimation below its Skeleton.
+
+    For Y-up stages the clip's 'up' axis is authored on Y (translations are swizzled).
+    ``skip``: None, "skeleton", "animation" or "samples", to make broken agents.
+    """
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, up_axis)
+    UsdGeom.SetStageMetersPerUnit(stage, meters_per_unit)
+    stage.SetTimeCodesPerSecond(fps)
+    stage.SetStartTimeCode(0)
+    stage.SetEndTimeCode(frames - 1)
+    t, q = toy_clip(frames)
+    if up_axis == "Y":  # clip ground (x, v) -> world (x, -z); up -> y
+        t = np.stack([t[..., 0], t[..., 2], -t[..., 1]], -1).astype(np.float32)
+    UsdGeom.Xform.Define(stage, "/World")
+    stage.SetDefaultPrim(stage.GetPrimAtPath("/World"))
+    for k in range(agents):
+        root = UsdSkel.Root.Define(stage, f"/World/agent{k}")
+        xf = UsdGeom.Xformable(root)
+        offset = Gf.Vec3d(0, 0, spacing * k) if up_axis == "Y" else Gf.Vec3d(0, spacing * k, 0)
+        xf.AddTranslateOp().Set(offset)
+        xf.AddRotateXYZOp().Set(Gf.Vec3f(0, 15.0 * k, 0) if up_axis == "Y" else Gf.Vec3f(0, 0, 15.0 * k))
+        root.GetPrim().AddAppliedSchema("MocapAgentAPI")
+        if skip == "skeleton":
+            continue
+        skel = UsdSkel.Skeleton.Define(stage, f"/World/agent{k}/Skel")
+        skel.GetJointsAttr().Set(TOY_JOINTS)
+        skel.GetRestTransformsAttr().Set(Vt.Matrix4dArray([Gf.Matrix4d(1)] * 4))
+        skel.GetBindTransformsAttr().Set(Vt.Matrix4dArray([Gf.Matrix4d(1)] * 4))
+        if skip == "animation":
+            continue
+        anim = UsdSkel.Animation.Define(stage, f"/World/agent{k}/Skel/Anim")
+        anim.GetJointsAttr().Set(TOY_JOINTS)
+        if skip != "samples":
+            for i in range(frames):
+                anim.GetTranslationsAttr().Set(Vt.Vec3fArray.FromNumpy(t[i]), i)
+                anim.GetRotationsAttr().Set(Vt.QuatfArray.FromNumpy(q[i]), i)
+            # UsdSkel poses an animation only when translations, rotations and scales are all set.
+            anim.GetScalesAttr().Set(Vt.Vec3hArray.FromNumpy(np.ones((4, 3), np.float16)))
+        UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
+    stage.GetRootLayer().Save()
+    return Path(path)
+
+
+def world_joints(stage: Usd.Stage, skel_path: str, times) -> np.ndarray:
+    """(T,J,3) joint world positions by UsdSkel forward kinematics on a composed stage."""
+    cache = UsdSkel.Cache()
+    skel = UsdSkel.Skeleton(stage.GetPrimAtPath(skel_path))
+    root = UsdSkel.Root.Find(skel.GetPrim())
+    cache.Populate(root, Usd.PrimDefaultPredicate)
+    query = cache.GetSkelQuery(skel)
+    out = []
+    for t in times:
+        mats = query.ComputeJointWorldTransforms(UsdGeom.XformCache(Usd.TimeCode(float(t))))
+        out.append(np.array(mats)[:, 3, :3])
+    return np.array(out)
+
+
+def run_cli(*args, cwd=None):
+    """Runs the installed `mocapedit` command and returns the CompletedProcess."""
+    exe = Path(sys.executable).with_name("mocapedit")
+    return subprocess.run([str(exe), *map(str, args)], capture_output=True, text=True, cwd=cwd,
+                          env={**os.environ, "PYTHONWARNINGS": "error"})
+
+
+@pytest.fixture
+def toy_stage(tmp_path):
+    return write_toy_stage(tmp_path / "shot.usda")

@@ -1,0 +1,35 @@
+#!/usr/bin/env bash
+# The main job on a generated example stage: generate the stage, solve it, show what changed.
+set -euo pipefail
+out=${1:-build/demo}
+here=$(cd "$(dirname "$0")/.." && pwd)
+py="$here/.venv/bin/python"
+cli="$here/.venv/bin/mocapedit"
+mkdir -p "$out"
+
+echo "== generating the example stages into $out"
+"$py" "$here/example_stages/make_stages.py" --out "$out"
+
+stage="$out/${DEMO_STAGE:-crowd_zup_cm.usda}"
+echo
+echo "== mocapedit solve $(basename "$stage")"
+"$cli" solve "$stage" -o "$out/demo.edits.usda" --composed "$out/demo.edited.usda" \
+  --report "$out/demo.report.json"
+
+echo
+echo "== result"
+"$py" - "$out" <<'PY'
+import json, sys
+out = sys.argv[1]
+report = json.load(open(f"{out}/demo.report.json"))
+s = report["stats"]
+print(f"agents read: {s['agents']}, edited: {s['editedAgents']}, clips read: {s['clips']}, "
+      f"constraints: {s['constraints']}")
+for name, seconds in report["timings"].items():
+    print(f"  {name:<14} {seconds * 1000:8.1f} ms")
+for c in report["constraints"]:
+    print(f"  {c.get('prim')}: residual {c.get('residual', 0.0):.2e}")
+PY
+echo
+echo "edits layer:    $out/demo.edits.usda"
+echo "composed stage: $out/demo.edited.usda   (open it in usdview; PXR_PLUGINPATH_NAME=\$($cli plugin-path))"
