@@ -18,7 +18,8 @@ from conftest import world_joints, write_toy_stage
 @pytest.fixture
 def with_pass(monkeypatch):
     def install(fn):
-        monkeypatch.setattr(processor, "PASSES", [("test", fn)])
+        monkeypatch.setattr(processor, "load_passes", lambda: None)
+        monkeypatch.setattr(processor, "PASSES", [(0, "test", fn)])
     return install
 
 
