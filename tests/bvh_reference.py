@@ -16,8 +16,16 @@ from __future__ import annotations
 
 import sys
 import types
+import warnings
 
 import numpy as np
+
+from conftest import REPO
+
+#: The real CMU clips: ../shared/mocap beside the repository (or beside the folder of
+#: worktrees that holds it); tests skip what needs them when it is absent.
+REAL_MOCAP = next((p for p in (REPO.parent / "shared" / "mocap", REPO.parent.parent / "shared" / "mocap")
+                   if p.is_dir()), REPO.parent / "shared" / "mocap")
 
 _MODULES = ("SpatialTransform.lib.euler", "SpatialTransform.lib.pose", "SpatialTransform.lib.transform",
             "bvhio.lib.Parser", "bvhio.lib.bvh.BvhJoint", "bvhio.lib.hierarchy.Joint")
@@ -55,7 +63,10 @@ def _prepare():
     global _READY
     if _READY:
         return
-    import bvhio  # noqa: F401  (imports every module patched below)
+    with warnings.catch_warnings():
+        # pyglm 2.8 announces that "import glm" (which bvhio uses) will become "from pyglm import glm".
+        warnings.simplefilter("ignore", PendingDeprecationWarning)
+        import bvhio  # noqa: F401  (imports every module patched below)
     shim = _double_glm()
     for name in _MODULES:
         sys.modules[name].glm = shim
