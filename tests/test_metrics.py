@@ -487,13 +487,13 @@ def test_foot_skate_sliding_foot_known_speed(tmp_path, up, tcps):
 
 
 def test_foot_skate_meters_per_unit_scales_default_threshold(tmp_path):
-    # Centimetre stage: the foot bobs 0..4 cm while sliding at 30 cm/s, then lifts to 8 cm and
-    # moves at 100 cm/s. The default 5 cm threshold must become 5 units.
+    # Centimetre stage: the foot bobs 0..1.5 cm while sliding at 30 cm/s, then lifts to 8 cm and
+    # moves at 100 cm/s. The default 2 cm threshold must become 2 units.
     n, tcps = 20, 25.0
     stage = _new_stage(tmp_path, "cm.usda", up="Y", tcps=tcps, mpu=0.01)
     k = np.arange(n)
     contact = k < 10
-    h = np.where(contact, np.where(k % 2 == 0, 0.0, 4.0), 8.0)
+    h = np.where(contact, np.where(k % 2 == 0, 0.0, 1.5), 8.0)
     gu = np.where(contact, 30.0 * k / tcps, 30.0 * 9 / tcps + 100.0 * (k - 9) / tcps)
     left = _foot(n, gu, 10.0, h)
     right = _foot(n, 0.0, -10.0, 0.0)
@@ -505,6 +505,13 @@ def test_foot_skate_meters_per_unit_scales_default_threshold(tmp_path):
     strict = M.foot_skate(stage, "/Agent", contact_height=1.0)
     assert math.isnan(strict.speeds[0])
     assert strict.mean == pytest.approx(0.0, abs=1e-3)
+    # A contact mask from elsewhere (the source stage) replaces the height test.
+    mask = np.zeros_like(skate.contact)
+    mask[12:, 0] = True
+    given = M.foot_skate(stage, "/Agent", contact=mask)
+    assert given.speeds[0] == pytest.approx(100.0, abs=1e-3)
+    with pytest.raises(ValueError, match="contact mask"):
+        M.foot_skate(stage, "/Agent", contact=mask[1:])
 
 
 def test_foot_skate_ignores_times_outside_the_clip(tmp_path):

@@ -573,18 +573,21 @@ class FootSkate:
 
 def foot_skate(stage: Usd.Stage, agent_path: PathLike, times: Iterable | None = None,
                foot_joints: Sequence[Union[int, str]] | None = None,
-               contact_height: float | None = None) -> FootSkate:
+               contact_height: float | None = None,
+               contact: np.ndarray | None = None) -> FootSkate:
     """Foot skate: mean horizontal foot speed while the foot is in contact with the ground.
 
     Evaluated by forward kinematics on the composed stage. A foot is in contact at a sample when it
-    is within ``contact_height`` (default 5 cm in stage units, from ``metersPerUnit``) above its
+    is within ``contact_height`` (default 2 cm in stage units, from ``metersPerUnit``) above its
     lowest height over the clip and the sample lies within the clip's sample range. The speed of a
     foot over an interval between consecutive samples that are both in contact is its horizontal
     (ground-plane) displacement over the interval's duration in seconds (``timeCodesPerSecond``).
 
     ``times``: time codes (default: the animation's authored samples as composed). ``foot_joints``:
     joint indices, full joint paths or unique joint names (default: joints named like a foot, toe
-    or ankle, but not an end site).
+    or ankle, but not an end site). ``contact``: a (T, feet) boolean mask to use instead of the
+    height test, typically ``source.contact`` from the source stage, so that an edited stage is
+    measured over the frames where the source feet were planted (pass ``times=source.times``).
     """
     skel = _Skel(stage, agent_path)
     t = np.unique(skel.default_times() if times is None else _times(times))
@@ -597,7 +600,7 @@ def foot_skate(stage: Usd.Stage, agent_path: PathLike, times: Iterable | None = 
         feet = [skel.joint_index(j) for j in foot_joints]
     up = UsdGeom.GetStageUpAxis(stage)
     if contact_height is None:
-        contact_height = 0.05 / UsdGeom.GetStageMetersPerUnit(stage)
+        contact_height = 0.02 / UsdGeom.GetStageMetersPerUnit(stage)
     seconds_per_code = 1.0 / stage.GetTimeCodesPerSecond()
 
     pos = np.empty((len(t), len(feet), 3))
@@ -612,10 +615,17 @@ def foot_skate(stage: Usd.Stage, agent_path: PathLike, times: Iterable | None = 
     else:
         in_clip = np.ones(len(t), dtype=bool)
     height = pos[..., ground_axes(up)[0]]
-    contact = np.zeros(height.shape, dtype=bool)
-    if in_clip.any():
+    if contact is not None:
+        contact = np.asarray(contact, dtype=bool)
+        if contact.shape != height.shape:
+            raise ValueError(f"contact mask has shape {contact.shape}; expected {height.shape} "
+                             "(times, feet)")
+    elif in_clip.any():
+        contact = np.zeros(height.shape, dtype=bool)
         lowest = height[in_clip].min(axis=0)
         contact = in_clip[:, None] & (height - lowest <= contact_height)
+    else:
+        contact = np.zeros(height.shape, dtype=bool)
 
     ground = to_ground(pos, up)
     step = np.linalg.norm(np.diff(ground, axis=0), axis=2)          # (T-1, F)
