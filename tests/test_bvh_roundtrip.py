@@ -51,13 +51,13 @@ def test_an_imported_clip_goes_through_solve_and_plays_back(tmp_path):
     edited = Usd.Stage.Open(str(tmp_path / "edited.usda"))
     assert edited.GetTimeCodesPerSecond() == 30.0
     # The reader found the detected tag on the imported clip.
-    anim = edited.GetPrimAtPath("/walk/Animation")
+    anim = edited.GetPrimAtPath("/walk/Skel/Anim")
     a, b = anim.GetAttribute("stationary:auto1:frames").Get()
     assert idle[0] - 6 <= a and b <= idle[1] + 6
     # With or without a path pass, the composed stage plays through UsdSkel: the hips
     # follow the BVH root wherever no edit applies.
     if not report["stats"]["editedAgents"]:
-        hips = world_joints(edited, "/walk/Skeleton", range(len(values)))[:, 0]
+        hips = world_joints(edited, "/walk/Skel", range(len(values)))[:, 0]
         np.testing.assert_allclose(hips, values[:, :3], atol=1e-4)
 
 
@@ -82,13 +82,13 @@ def test_a_path_edit_moves_the_imported_walk_and_keeps_its_idle_rigid(tmp_path):
     edited = Usd.Stage.Open(str(tmp_path / "edited.usda"))
     source = Usd.Stage.Open(str(tmp_path / "shot.usda"))
     frames = range(len(values))
-    hips_new = world_joints(edited, "/walk/Skeleton", frames)[:, 0]
-    hips_src = world_joints(source, "/walk/Skeleton", frames)[:, 0]
+    hips_new = world_joints(edited, "/walk/Skel", frames)[:, 0]
+    hips_src = world_joints(source, "/walk/Skel", frames)[:, 0]
     # The pinned frame is where it was asked to be, on the ground plane (x, -z).
     np.testing.assert_allclose(hips_new[last, [0, 2]], [target[0], target[2]], atol=1e-3)
     np.testing.assert_allclose(hips_new[0, [0, 2]], hips_src[0, [0, 2]], atol=1e-3)
     # The tagged idle moves as one rigid piece: distances between its root positions keep.
-    a, b = Usd.Stage.Open(str(tmp_path / "edited.usda")).GetPrimAtPath("/walk/Animation") \
+    a, b = Usd.Stage.Open(str(tmp_path / "edited.usda")).GetPrimAtPath("/walk/Skel/Anim") \
         .GetAttribute("stationary:auto1:frames").Get()
     span_src, span_new = hips_src[a:b + 1][:, [0, 2]], hips_new[a:b + 1][:, [0, 2]]
     d_src = np.linalg.norm(span_src[:, None] - span_src[None], axis=-1)

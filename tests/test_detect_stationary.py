@@ -92,16 +92,17 @@ def _walk_clip(tmp_path, agent: bool, up: str = "Y"):
 
 @pytest.mark.parametrize("agent,up", [(True, "Y"), (False, "Z")])
 def test_the_idle_of_a_generated_walk_is_tagged_and_nothing_else(tmp_path, agent, up):
+    anim_path = "/walk/Skel/Anim" if agent else "/Skel/Anim"
     (first, last), frames = _walk_clip(tmp_path, agent, up)
     out = run_cli("detect-stationary", tmp_path / "walk.usda", "-o", tmp_path / "tags.usda",
                   "--composed", tmp_path / "tagged.usda")
     assert out.returncode == 0, out.stderr
     assert "1 stationary range" in out.stderr
     layer = Sdf.Layer.FindOrOpen(str(tmp_path / "tags.usda"))
-    assert layer.GetPrimAtPath("/walk/Animation").specifier == Sdf.SpecifierOver
-    assert not layer.GetPrimAtPath("/walk/Skeleton"), "only the clip is touched"
+    assert layer.GetPrimAtPath(anim_path).specifier == Sdf.SpecifierOver
+    assert not layer.GetPrimAtPath(anim_path).nameParent.properties, "only the clip is touched"
     stage = Usd.Stage.Open(str(tmp_path / "tagged.usda"))
-    anim = stage.GetPrimAtPath("/walk/Animation")
+    anim = stage.GetPrimAtPath(anim_path)
     assert "MocapStationaryAPI:auto1" in anim.GetAppliedSchemas()
     a, b = anim.GetAttribute("stationary:auto1:frames").Get()
     fps = 60
@@ -113,13 +114,13 @@ def test_the_idle_of_a_generated_walk_is_tagged_and_nothing_else(tmp_path, agent
         data = reader.read_stage(stage)
         assert data.agents["/walk"].stationary == [("auto1", a, b)]
     # The clip itself is untouched.
-    assert not Usd.Stage.Open(str(tmp_path / "walk.usda")).GetPrimAtPath("/walk/Animation").GetAppliedSchemas()
+    assert not Usd.Stage.Open(str(tmp_path / "walk.usda")).GetPrimAtPath(anim_path).GetAppliedSchemas()
 
     # Running again over the tagged stage proposes the same range under a free name.
     again = run_cli("detect-stationary", tmp_path / "tagged.usda", "-o", tmp_path / "tags2.usda", "-q")
     assert again.returncode == 0 and again.stderr == ""
     tags2 = Sdf.Layer.FindOrOpen(str(tmp_path / "tags2.usda"))
-    assert tags2.GetPrimAtPath("/walk/Animation").GetInfo("apiSchemas").prependedItems == ["MocapStationaryAPI:auto2"]
+    assert tags2.GetPrimAtPath(anim_path).GetInfo("apiSchemas").prependedItems == ["MocapStationaryAPI:auto2"]
 
 
 def test_thresholds_are_options_and_bad_input_writes_nothing(tmp_path):

@@ -27,7 +27,7 @@ def _to_bvh_frame(points: np.ndarray, up_axis: str, scale: float) -> np.ndarray:
 def _imported_world(path, settings: ImportSettings, out) -> np.ndarray:
     result = bvh_usd.import_bvh(path, out, settings)
     stage = Usd.Stage.Open(str(out))
-    joints = world_joints(stage, f"{result.prim}/Skeleton", range(result.frames))
+    joints = world_joints(stage, result.skeleton, range(result.frames))
     return _to_bvh_frame(joints, settings.up_axis, settings.scale)
 
 
@@ -91,10 +91,11 @@ def test_the_clip_layer_sets_units_rate_and_layout(tmp_path):
     agent = stage.GetPrimAtPath("/walk_idle")
     assert agent.IsA(UsdSkel.Root) and "MocapAgentAPI" in agent.GetAppliedSchemas()
     assert agent.GetAttribute("mocap:rootJoint").Get() == "Hips"
-    skel = UsdSkel.Skeleton(stage.GetPrimAtPath("/walk_idle/Skeleton"))
+    assert (result.skeleton, result.animation) == ("/walk_idle/Skel", "/walk_idle/Skel/Anim")
+    skel = UsdSkel.Skeleton(stage.GetPrimAtPath("/walk_idle/Skel"))
     assert list(skel.GetJointsAttr().Get())[:3] == ["Hips", "Hips/Spine", "Hips/Spine/Chest"]
     assert len(skel.GetRestTransformsAttr().Get()) == len(rig.names)
-    anim = UsdSkel.Animation(stage.GetPrimAtPath("/walk_idle/Animation"))
+    anim = UsdSkel.Animation(stage.GetPrimAtPath("/walk_idle/Skel/Anim"))
     assert UsdSkel.BindingAPI(skel).GetAnimationSourceRel().GetTargets() == [anim.GetPath()]
     assert anim.GetRotationsAttr().GetNumTimeSamples() == len(values)
     assert anim.GetTranslationsAttr().GetNumTimeSamples() == len(values)
@@ -116,15 +117,16 @@ def test_a_clip_without_agent_plays_when_referenced_into_a_skelroot(tmp_path):
     write_bvh(tmp_path / "c.bvh", rig, random_motion(rng, rig, 20))
     bvh_usd.import_bvh(tmp_path / "c.bvh", tmp_path / "c.usda", ImportSettings(position_mode="absolute"))
     clip = Usd.Stage.Open(str(tmp_path / "c.usda"))
-    assert clip.GetPrimAtPath("/c").GetTypeName() == "Scope"
+    assert clip.GetDefaultPrim().GetPath() == Sdf.Path("/Skel") and clip.GetPrimAtPath("/Skel/Anim")
+    # Referenced the way mocapedit.examples references its clip layers into agents.
     shot = Usd.Stage.CreateNew(str(tmp_path / "shot.usda"))
     UsdGeom.SetStageMetersPerUnit(shot, 0.01)
     shot.SetTimeCodesPerSecond(clip.GetTimeCodesPerSecond())
-    root = UsdSkel.Root.Define(shot, "/agent")
-    root.GetPrim().GetReferences().AddReference("c.usda")
+    UsdSkel.Root.Define(shot, "/agent")
+    shot.DefinePrim("/agent/Skel").GetReferences().AddReference("c.usda")
     shot.GetRootLayer().Save()
     _, expect = world_positions(tmp_path / "c.bvh")
-    got = world_joints(shot, "/agent/Skeleton", range(20))
+    got = world_joints(shot, "/agent/Skel", range(20))
     assert np.abs(got - expect).max() < TOLERANCE
 
 
@@ -149,8 +151,7 @@ def test_real_clips_match_bvhio_on_every_frame(tmp_path, name):
     # The automatic reading differs only where the file moves its root about the OFFSET:
     # a hip-rooted rig stands on the ground instead of sinking by its hip height.
     auto = bvh_usd.import_bvh(path, tmp_path / "b.usda", ImportSettings(agent=True))
-    got_auto = world_joints(Usd.Stage.Open(str(tmp_path / "b.usda")), f"{auto.prim}/Skeleton",
-                            range(auto.frames))
+    got_auto = world_joints(Usd.Stage.Open(str(tmp_path / "b.usda")), auto.skeleton, range(auto.frames))
     shift = np.zeros(3)
     if auto.position_modes.get(skeleton.names[0]) == "relative":
         shift = skeleton.offsets[0]

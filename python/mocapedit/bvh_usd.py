@@ -1,17 +1,23 @@
 """Writes an imported BVH clip as a UsdSkel layer; drives :mod:`mocapedit.bvh` chunk by chunk.
 
-Layout of the written layer (``<Clip>`` is the file name made a valid identifier)::
+The layer has the layout of the clip layers of :mod:`mocapedit.examples`, so an imported
+clip is referenced into an agent exactly like a generated one::
 
-    def Scope "<Clip>"                      # def SkelRoot with MocapAgentAPI when agent=True
-        def Skeleton "Skeleton"             # joints, restTransforms, bindTransforms,
-                                            # skel:animationSource -> </<Clip>/Animation>
-        def SkelAnimation "Animation"       # joints; translations and rotations sampled at
+    def Skeleton "Skel"                     # the default prim: joints, restTransforms,
+        (SkelBindingAPI)                    # bindTransforms, skel:animationSource -> <Anim>
+        def SkelAnimation "Anim"            # joints; translations and rotations sampled at
                                             # time codes 0..F-1; scales (constant ones)
 
-``<Clip>`` is the default prim: reference the file into a ``SkelRoot`` to play the clip on
-an agent, or import with ``agent=True`` to get a ready agent that ``mocapedit solve`` and
-usdview take as it is. The layer sets ``metersPerUnit``, ``upAxis``, ``timeCodesPerSecond``,
-``framesPerSecond`` and the time range, and records its source in ``customLayerData``.
+With ``agent=True`` the default prim is instead a ready agent that ``mocapedit solve`` and
+usdview take as it is (``<Clip>`` is the file name made a valid identifier)::
+
+    def SkelRoot "<Clip>" (MocapAgentAPI)   # mocap:rootJoint, mocap:hipJoint if given
+        def Skeleton "Skel"
+            def SkelAnimation "Anim"
+
+The layer sets ``metersPerUnit``, ``upAxis``, ``timeCodesPerSecond``, ``framesPerSecond``
+and the time range, and records its source in ``customLayerData``; the BVH joint names
+are kept in the Skeleton's ``customData["bvhJointNames"]``.
 
 Samples are authored through Sdf inside one change block per chunk, from numpy with
 ``Vt.*Array.FromNumpy``; a clip that is streamed in is authored as it streams. The layer
@@ -26,9 +32,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from pxr import Sdf, Vt
 
-from . import __version__, bvh, writer
+from . import __version__, bvh, examples, writer
 from .errors import MocapEditError
 from .progress import Progress, Silent
+
+#: Names of the Skeleton and SkelAnimation prims, as in mocapedit.examples' clip layers.
+SKELETON = examples.CLIP_SKELETON_PATH.name
+ANIMATION = examples.CLIP_ANIMATION_PATH.name
 
 
 @dataclass
@@ -43,7 +53,7 @@ class ImportSettings:
     agent: bool = False                # author a SkelRoot with MocapAgentAPI
     root_joint: str | None = None      # mocap:rootJoint of the agent (BVH name, token or path)
     hip_joint: str | None = None       # mocap:hipJoint of the agent
-    name: str | None = None            # default prim name; None: from the file name
+    name: str | None = None            # default prim name; None: "Skel", or the file name for an agent
     chunk_frames: int = bvh.CHUNK_FRAMES
 
 
@@ -53,6 +63,8 @@ class ImportResult:
     output: str | None
     layer: Sdf.Layer
     prim: str                          # the default prim's path
+    skeleton: str                      # the Skeleton prim's path
+    animation: str                     # the SkelAnimation prim's path
     frames: int
     fps: float
     joints: int
@@ -82,7 +94,8 @@ class ClipLayerBuilder:
                  provenance: dict, root_joint: str | None, hip_joint: str | None):
         self.layer = Sdf.Layer.CreateAnonymous(".usda")
         self.root = Sdf.Path.absoluteRootPath.AppendChild(name)
-        self.anim_path = self.root.AppendChild("Animation")
+        self.skel_path = self.root.AppendChild(SKELETON) if settings.agent else self.root
+        self.anim_path = self.skel_path.AppendChild(ANIMATION)
         self.frames = 0
         layer = self.layer
         layer.timeCodesPerSecond = fps
@@ -95,15 +108,16 @@ class ClipLayerBuilder:
         layer.customLayerData = {"mocapedit": {"version": __version__, "bvh": provenance}}
         joints = Vt.TokenArray(pose.joints)
         with Sdf.ChangeBlock():
-            top = Sdf.PrimSpec(layer.pseudoRoot, name, Sdf.SpecifierDef,
-                               "SkelRoot" if settings.agent else "Scope")
             if settings.agent:
+                top = Sdf.PrimSpec(layer.pseudoRoot, name, Sdf.SpecifierDef, "SkelRoot")
                 top.SetInfo("apiSchemas", Sdf.TokenListOp.Create(prependedItems=["MocapAgentAPI"]))
                 if root_joint:
                     _attr(top, "mocap:rootJoint", Sdf.ValueTypeNames.Token, root_joint, uniform=True)
                 if hip_joint:
                     _attr(top, "mocap:hipJoint", Sdf.ValueTypeNames.Token, hip_joint, uniform=True)
-            skel = Sdf.PrimSpec(top, "Skeleton", Sdf.SpecifierDef, "Skeleton")
+                skel = Sdf.PrimSpec(top, SKELETON, Sdf.SpecifierDef, "Skeleton")
+            else:
+                skel = Sdf.PrimSpec(layer.pseudoRoot, name, Sdf.SpecifierDef, "Skeleton")
             skel.SetInfo("apiSchemas", Sdf.TokenListOp.Create(prependedItems=["SkelBindingAPI"]))
             skel.customData = {"bvhJointNames": Vt.StringArray(pose.names)}
             _attr(skel, "joints", Sdf.ValueTypeNames.TokenArray, joints, uniform=True)
@@ -113,7 +127,7 @@ class ClipLayerBuilder:
                   Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(pose.bind_transforms)), uniform=True)
             rel = Sdf.RelationshipSpec(skel, "skel:animationSource", custom=False)
             rel.targetPathList.explicitItems = [self.anim_path]
-            anim = Sdf.PrimSpec(top, "Animation", Sdf.SpecifierDef, "SkelAnimation")
+            anim = Sdf.PrimSpec(skel, ANIMATION, Sdf.SpecifierDef, "SkelAnimation")
             _attr(anim, "joints", Sdf.ValueTypeNames.TokenArray, joints, uniform=True)
             # BVH has no scale channels: one constant value serves every time.
             _attr(anim, "scales", Sdf.ValueTypeNames.Half3Array,
@@ -167,7 +181,9 @@ def build_clip(source: str, settings: ImportSettings | None = None, progress: Pr
     fps = float(settings.fps) if settings.fps else skeleton.fps
     if not (np.isfinite(fps) and fps > 0):
         raise MocapEditError(f"{source}: frame rate must be positive, got {fps}")
-    name = settings.name or clip_name(source)
+    name = settings.name or (clip_name(source) if settings.agent else SKELETON)
+    if not Sdf.Path.IsValidIdentifier(name):
+        raise MocapEditError(f"prim name '{name}' is not a valid USD identifier")
     task = progress.task(f"import {os.path.basename(source)}", skeleton.frame_count)
 
     builder = converter = None
@@ -194,7 +210,8 @@ def build_clip(source: str, settings: ImportSettings | None = None, progress: Pr
     up = 2 if settings.up_axis == "Z" else 1
     height = float(np.ptp(converter.pose.bind_transforms[:, 3, up])) * settings.meters_per_unit
     task.done(f"({converter.joint_count} joints, {fps:g} fps)")
-    return ImportResult(source=source, output=None, layer=layer, prim=str(builder.root), frames=builder.frames,
+    return ImportResult(source=source, output=None, layer=layer, prim=str(builder.root),
+                        skeleton=str(builder.skel_path), animation=str(builder.anim_path), frames=builder.frames,
                         fps=fps, joints=converter.joint_count, height_m=height,
                         position_modes={skeleton.names[j]: modes[j] for j, labels in enumerate(skeleton.channels)
                                         if any(lab.lower().endswith("position") for lab in labels)})

@@ -19,11 +19,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from pxr import Gf, Sdf, Usd, UsdSkel
 
-from . import __version__, ground, reader, stationary, trajectory, writer
+from . import __version__, examples, reader, stationary, trajectory, writer
 from .errors import MocapEditError
-
-STATIONARY_API = "MocapStationaryAPI"
-
 
 @dataclass
 class ClipTags:
@@ -80,7 +77,7 @@ def detect(stage: Usd.Stage, settings: stationary.DetectSettings | None = None,
         settings.validate()
     except ValueError as exc:
         raise MocapEditError(str(exc)) from None
-    if not prefix or not Sdf.Path.IsValidNamespacedIdentifier(prefix + "1") or ":" in prefix:
+    if not Sdf.Path.IsValidIdentifier(prefix + "1"):
         raise MocapEditError(f"tag name prefix '{prefix}' is not a valid identifier")
     _view_skeletons_as_agents(stage, root_joint)
     data = reader.read_stage(stage)
@@ -124,12 +121,7 @@ def detect(stage: Usd.Stage, settings: stationary.DetectSettings | None = None,
 def build_layer(clips: list[ClipTags], info, settings: stationary.DetectSettings) -> Sdf.Layer:
     """A layer of ``over``s tagging each proposed range with MocapStationaryAPI."""
     layer = Sdf.Layer.CreateAnonymous(".usda")
-    layer.timeCodesPerSecond = info.time_codes_per_second
-    layer.framesPerSecond = info.time_codes_per_second
-    if info.start_time is not None:
-        layer.startTimeCode = info.start_time
-    if info.end_time is not None:
-        layer.endTimeCode = info.end_time
+    writer._set_time_metadata(layer, info)
     layer.pseudoRoot.SetInfo("upAxis", info.up_axis)
     layer.pseudoRoot.SetInfo("metersPerUnit", info.meters_per_unit)
     layer.documentation = ("Stationary ranges proposed by mocapedit detect-stationary, for review: "
@@ -140,12 +132,8 @@ def build_layer(clips: list[ClipTags], info, settings: stationary.DetectSettings
             if not clip.ranges:
                 continue
             spec = writer._over_chain(layer, Sdf.Path(clip.animation))
-            spec.SetInfo("apiSchemas", Sdf.TokenListOp.Create(
-                prependedItems=[f"{STATIONARY_API}:{n}" for n in clip.names]))
             for name, r in zip(clip.names, clip.ranges):
-                attr = Sdf.AttributeSpec(spec, f"stationary:{name}:frames", Sdf.ValueTypeNames.Int2,
-                                         Sdf.VariabilityUniform)
-                attr.default = Gf.Vec2i(r.first, r.last)
+                examples.tag_stationary(spec, name, (r.first, r.last))
                 report[f"{clip.animation}.{name}"] = {
                     "frames": Gf.Vec2i(r.first, r.last), "seconds": round(r.duration, 4),
                     "maxSpeed": round(r.max_speed, 4), "maxTurn": round(r.max_turn, 3)}
@@ -159,4 +147,4 @@ def build_layer(clips: list[ClipTags], info, settings: stationary.DetectSettings
     return layer
 
 
-__all__ = ["ClipTags", "detect", "build_layer", "STATIONARY_API"]
+__all__ = ["ClipTags", "detect", "build_layer"]
