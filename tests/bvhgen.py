@@ -184,3 +184,36 @@ def walk_idle_walk(fps: float = 60.0, walk1: float = 2.5, idle: float = 3.0, wal
             col += 1
     still = np.nonzero(v == 0)[0]
     return rig, values, (int(still[0]), int(still[-1]))
+
+
+# ---- the procedural walker as a BVH file -------------------------------------------------------
+
+EULER_ORDERS = ("ZXY", "XYZ", "YZX", "ZYX", "XZY", "YXZ")
+
+
+def walker_rig(clip) -> tuple[Rig, np.ndarray]:
+    """A mocapedit.walker clip as BVH: (rig, values (F,C)).
+
+    Joints whose translation changes over the clip (the root and the hips) get six
+    channels with absolute positions; the others three rotation channels, cycling
+    through the six Euler orders. Angles come from scipy's intrinsic Euler conversion.
+    """
+    from scipy.spatial.transform import Rotation
+
+    t = np.asarray(clip.translations, dtype=np.float64)
+    q = np.asarray(clip.rotations, dtype=np.float64)
+    names = [j.rsplit("/", 1)[-1] for j in clip.joints]
+    channels, columns = [], []
+    for j in range(clip.num_joints):
+        order = EULER_ORDERS[(j + 1) % len(EULER_ORDERS)]   # the root: XYZ, clear of gimbal lock
+        euler = Rotation.from_quat(q[:, j]).as_euler(order, degrees=True)
+        rot = [f"{a}rotation" for a in order]
+        if j == 0 or np.ptp(t[:, j], axis=0).max() > 1e-9:
+            channels.append(["Xposition", "Yposition", "Zposition"] + rot)
+            columns += [t[:, j, 0], t[:, j, 1], t[:, j, 2]]
+        else:
+            channels.append(rot)
+        columns += [euler[:, 0], euler[:, 1], euler[:, 2]]
+    rig = Rig(names=names, parents=[int(p) for p in clip.parents], offsets=t[0].copy(), channels=channels,
+              end_sites={})
+    return rig, np.stack(columns, axis=1)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from pxr import Sdf, Usd
 
-from mocapedit import bvh_usd, reader, stationary
+from mocapedit import bvh_usd, examples, reader, stationary, walker
 from mocapedit.bvh_usd import ImportSettings
 from mocapedit.stationary import DetectSettings
 
@@ -144,6 +144,25 @@ def test_thresholds_are_options_and_bad_input_writes_nothing(tmp_path):
                     "--root-joint", "Tail")
     assert joint.returncode == 1 and "'Tail' is not a joint" in joint.stderr
     assert not (tmp_path / "bad.usda").exists()
+
+
+@pytest.mark.parametrize("fps,up,mpu", [(24.0, "Y", 1.0), (30.0, "Z", 0.01), (60.0, "Y", 0.01)])
+def test_the_walkers_stop_is_tagged_over_its_standing_frames(tmp_path, fps, up, mpu):
+    """mocapedit.walker's walk-idle-walk: the root stands exactly still on known frames."""
+    clip, (first, last) = walker.walk_idle_walk(frames=int(8 * fps), fps=fps, idle_frames=int(2 * fps), up=up,
+                                                meters_per_unit=mpu)
+    examples.write_clip_layer(clip, tmp_path / "clip.usda")
+    out = run_cli("detect-stationary", tmp_path / "clip.usda", "-o", tmp_path / "tags.usda")
+    assert out.returncode == 0, out.stderr
+    stage = Usd.Stage.Open(str(tmp_path / "clip.usda"))
+    stage.GetRootLayer().subLayerPaths.append(str(tmp_path / "tags.usda"))
+    anim = stage.GetPrimAtPath(examples.CLIP_ANIMATION_PATH)
+    assert [s for s in anim.GetAppliedSchemas() if s.startswith("MocapStationaryAPI")] == ["MocapStationaryAPI:auto1"]
+    a, b = anim.GetAttribute("stationary:auto1:frames").Get()
+    # Every standing frame is tagged; the tag reaches at most 0.3 s into the walk's ease
+    # out and in, where the root moves slower than the speed threshold.
+    assert a <= first and b >= last, ((a, b), (first, last))
+    assert a >= first - 0.3 * fps and b <= last + 0.3 * fps, ((a, b), (first, last))
 
 
 START_WALK_STOP = ["cmu131_01_start_walk_stop.bvh", "cmu131_02_start_walk_stop.bvh"]

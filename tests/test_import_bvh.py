@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from pxr import Sdf, Usd, UsdGeom, UsdSkel
 
-from mocapedit import bvh, bvh_usd, reader, trajectory
+from mocapedit import bvh, bvh_usd, reader, trajectory, walker
 from mocapedit.bvh_usd import ImportSettings
 
 from bvh_reference import REAL_MOCAP, world_positions
-from bvhgen import random_motion, random_rig, walk_idle_walk, write_bvh
+from bvhgen import random_motion, random_rig, walk_idle_walk, walker_rig, write_bvh
 from conftest import run_cli, world_joints
 
 TOLERANCE = 1e-4   # in the clip's own length unit
@@ -226,3 +226,17 @@ def test_the_trajectory_of_an_imported_walk_follows_the_bvh_root(tmp_path):
     traj = trajectory.extract(agent, data.clip_of(agent), "Z", 0.01)
     # BVH (x, z) on the Y-up ground is (x, -z)... turned Z-up: ground (x, y) = (x, -z).
     np.testing.assert_allclose(traj.ground, np.stack([values[:, 0], -values[:, 2]], 1), atol=1e-4)
+
+
+@pytest.mark.parametrize("up", ["Y", "Z"])
+def test_the_procedural_walker_through_bvh_comes_back_joint_for_joint(tmp_path, up):
+    """Walker clip -> BVH text -> import: UsdSkel FK on the result equals the walker's own FK."""
+    clip, _ = walker.walk_idle_walk(frames=96, fps=24.0, up=up, meters_per_unit=0.01)
+    rig, values = walker_rig(clip)
+    write_bvh(tmp_path / "walker.bvh", rig, values, frame_time="0.0416667", digits=9)
+    result = bvh_usd.import_bvh(tmp_path / "walker.bvh", tmp_path / "walker.usda",
+                                ImportSettings(agent=True, position_mode="absolute", up_axis="Y"))
+    assert result.fps == 24.0 and result.frames == 96
+    got = world_joints(Usd.Stage.Open(str(tmp_path / "walker.usda")), result.skeleton, range(96))
+    expect = walker.joint_world_positions(clip)
+    assert np.abs(got - expect).max() < TOLERANCE
