@@ -83,7 +83,7 @@ def test_streaming_in_small_chunks_gives_the_same_clip(tmp_path):
     whole = bvh.Converter(skeleton, scale=2.0, up_axis="Z")
     t_all, q_all = whole(bvh.load(tmp_path / "s.bvh").values)
     chunked = bvh.Converter(skeleton, scale=2.0, up_axis="Z")
-    parts = [chunked(v) for v in bvh.iter_frames(tmp_path / "s.bvh", skeleton, chunk_frames=10)]
+    parts = [chunked(v) for v in bvh.iter_frames(tmp_path / "s.bvh", chunk_frames=10)]
     assert len(parts) == 16
     np.testing.assert_array_equal(np.concatenate([p[0] for p in parts]), t_all)
     np.testing.assert_array_equal(np.concatenate([p[1] for p in parts]), q_all)

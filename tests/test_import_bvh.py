@@ -211,6 +211,12 @@ def test_cli_writes_nothing_for_a_malformed_file(tmp_path):
     assert going.returncode == 1 and "wrote 1 of 2 clips" in going.stderr
     assert os.listdir(tmp_path / "out") == ["good.usda"]
 
+    empty = (tmp_path / "good.bvh").read_text().split("MOTION")[0] + "MOTION\nFrames: 0\nFrame Time: 0.04\n"
+    (tmp_path / "empty.bvh").write_text(empty)
+    nothing = run_cli("import-bvh", tmp_path / "empty.bvh", "-o", tmp_path / "x.usda")
+    frames_line = empty.count("\n") - 1
+    assert nothing.returncode == 1 and f"empty.bvh:{frames_line}: 'Frames: 0'" in nothing.stderr
+
     missing = run_cli("import-bvh", tmp_path / "good.bvh", "-o", tmp_path / "x.usda", "--root-joint", "Pelvis")
     assert missing.returncode == 1 and "root joint 'Pelvis' is not a joint" in missing.stderr
     assert not (tmp_path / "x.usda").exists()

@@ -72,7 +72,7 @@ class BvhSkeleton:
     end_sites: list[tuple[int, np.ndarray]] = field(default_factory=list)  # (parent joint, (3,) offset)
     frame_count: int = 0               # Frames:
     frame_time: float = 0.0            # Frame Time:, seconds
-    motion_line: int = 0               # line of the first frame row
+    frames_line: int = 0               # line of 'Frames:'
 
     @property
     def joint_count(self) -> int:
@@ -362,6 +362,7 @@ def _parse_motion_header(path: str, lines: _Lines, skeleton: BvhSkeleton) -> Non
     if not _WHOLE.fullmatch(m.group(1)):
         raise _error(path, number, f"frame count '{m.group(1)[:20]}' is not a whole number")
     skeleton.frame_count = int(m.group(1))
+    skeleton.frames_line = number
     got = lines.next()
     if got is None:
         raise _error(path, lines.number + 1, "file ends before 'Frame Time:' (truncated)")
@@ -376,7 +377,6 @@ def _parse_motion_header(path: str, lines: _Lines, skeleton: BvhSkeleton) -> Non
     if not (math.isfinite(frame_time) and frame_time > 0):
         raise _error(path, number, f"frame time must be a positive number of seconds, got {m.group(1)[:20]}")
     skeleton.frame_time = frame_time
-    skeleton.motion_line = lines.number + 1
 
 
 def read_header(path: str) -> BvhSkeleton:
@@ -416,13 +416,11 @@ def _parse_rows(path: str, rows: list[tuple[int, str]], width: int) -> np.ndarra
     return values
 
 
-def iter_frames(path: str, skeleton: BvhSkeleton | None = None,
-                chunk_frames: int = CHUNK_FRAMES) -> Iterator[np.ndarray]:
+def iter_frames(path: str, chunk_frames: int = CHUNK_FRAMES) -> Iterator[np.ndarray]:
     """Streams the frame rows as (n,C) float64 chunks of at most ``chunk_frames`` rows.
 
-    Parses the header on the way (``skeleton`` is accepted for symmetry with
-    :func:`read_header` but the file is the authority), then the rows; at most one chunk
-    of text is held at a time. Raises on the first malformed row, on fewer rows than
+    Parses the header again on the way (a few milliseconds), then the rows; at most one
+    chunk of text is held at a time. Raises on the first malformed row, on fewer rows than
     ``Frames:`` declares, and on more.
     """
     path = str(path)
@@ -432,6 +430,9 @@ def iter_frames(path: str, skeleton: BvhSkeleton | None = None,
         head = _parse_hierarchy(path, lines)
         _parse_motion_header(path, lines, head)
         width, expected = head.channel_count, head.frame_count
+        if width == 0 and expected > 0:
+            raise _error(path, head.frames_line, "the HIERARCHY declares no channels, so no frame can hold "
+                         "values")
         number, done = lines.number, 0
         rows: list[tuple[int, str]] = []
         for line in f:
@@ -456,7 +457,7 @@ def iter_frames(path: str, skeleton: BvhSkeleton | None = None,
 def load(path: str, chunk_frames: int = CHUNK_FRAMES) -> BvhMotion:
     """Reads a whole BVH file (streamed in chunks, then joined)."""
     skeleton = read_header(path)
-    chunks = list(iter_frames(path, skeleton, chunk_frames))
+    chunks = list(iter_frames(path, chunk_frames))
     width = skeleton.channel_count
     values = np.concatenate(chunks) if chunks else np.zeros((0, width))
     return BvhMotion(skeleton=skeleton, values=values)
@@ -607,7 +608,7 @@ class Converter:
         n, j_count = values.shape[0], self.skeleton.joint_count
         total = self.joint_count
 
-        translations = np.broadcast_to(self.pose.rest_translations / 1.0, (n, total, 3)).copy()
+        translations = np.broadcast_to(self.pose.rest_translations, (n, total, 3)).copy()
         if self.up_axis == "Z":  # positions below are in the file's frame: undo the root turn first
             translations[:, self._roots] = self.skeleton.offsets[self._roots] * self.scale
         pj, pa, pc, pb = self._pos

@@ -177,7 +177,7 @@ def build_clip(source: str, settings: ImportSettings | None = None, progress: Pr
         raise MocapEditError(f"{source}: no such file")
     skeleton = bvh.read_header(source)
     if skeleton.frame_count == 0:
-        raise MocapEditError(f"{source}:{skeleton.motion_line - 1}: 'Frames: 0': the clip has no frames")
+        raise MocapEditError(f"{source}:{skeleton.frames_line}: 'Frames: 0': the clip has no frames")
     fps = float(settings.fps) if settings.fps else skeleton.fps
     if not (np.isfinite(fps) and fps > 0):
         raise MocapEditError(f"{source}: frame rate must be positive, got {fps}")
@@ -188,7 +188,7 @@ def build_clip(source: str, settings: ImportSettings | None = None, progress: Pr
 
     builder = converter = None
     modes: list[str] = []
-    for values in bvh.iter_frames(source, skeleton, settings.chunk_frames):
+    for values in bvh.iter_frames(source, settings.chunk_frames):
         if converter is None:
             # The first chunk decides how position channels combine with OFFSETs.
             modes = bvh.position_modes(skeleton, values, settings.position_mode)

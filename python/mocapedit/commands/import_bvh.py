@@ -7,11 +7,11 @@ import sys
 
 HELP = "convert BVH motion capture files to UsdSkel clip layers"
 DESCRIPTION = """\
-Converts BVH files to USD: a Skeleton (joints, rest and bind transforms) and a
-SkelAnimation (translations and rotations sampled at time codes 0..F-1) under one
-default prim named after the file; with --agent the default prim is a SkelRoot with
-MocapAgentAPI, ready for `mocapedit solve` and usdview. The layer sets metersPerUnit,
-upAxis and timeCodesPerSecond.
+Converts BVH files to USD: a Skeleton "Skel" (joints, rest and bind transforms) holding
+a SkelAnimation "Anim" (translations and rotations sampled at time codes 0..F-1), the
+layout of mocapedit's clip layers, to reference into an agent; with --agent the default
+prim is a SkelRoot named after the file with MocapAgentAPI, ready for `mocapedit solve`
+and usdview. The layer sets metersPerUnit, upAxis and timeCodesPerSecond.
 
   mocapedit import-bvh walk.bvh -o walk.usda
   mocapedit import-bvh 131_01.bvh -o 131_01.usda --unit cmu --agent
@@ -50,8 +50,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--up", choices=("Y", "Z"), default="Y", help="upAxis of the written layer (default Y)")
     p.add_argument("--positions", choices=("auto", "absolute", "relative"), default="auto",
                    help="position channels replace the joint's OFFSET (absolute) or add to it (relative); "
-                        "auto (default) decides per joint from the first frames: relative when the "
-                        "channel values stay nearer zero than the OFFSET")
+                        "auto (default) decides per joint on its Yposition over the first frames: relative "
+                        "when it stays nearer zero than the OFFSET's height (a hip-rooted rig)")
     p.add_argument("--end-sites", action="store_true",
                    help="also import End Sites as joints (<parent>_end), e.g. to draw head and toe tips")
     p.add_argument("--agent", action="store_true",
@@ -59,7 +59,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--root-joint", metavar="JOINT",
                    help="the agent's mocap:rootJoint (the joint that carries the root motion), by BVH name")
     p.add_argument("--hip-joint", metavar="JOINT", help="the agent's mocap:hipJoint, by BVH name")
-    p.add_argument("--name", help="name of the default prim (one input only; default: from the file name)")
+    p.add_argument("--name", help="name of the default prim (one input only; default: Skel, or the file name "
+                                  "with --agent)")
     p.add_argument("--keep-going", action="store_true",
                    help="with several files, write every file that converts and report the others")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
