@@ -165,6 +165,25 @@ def test_the_walkers_stop_is_tagged_over_its_standing_frames(tmp_path, fps, up, 
     assert a >= first - 0.3 * fps and b <= last + 0.3 * fps, ((a, b), (first, last))
 
 
+def test_on_a_crowd_stage_each_agent_playing_a_stop_is_tagged(tmp_path):
+    stop_go, (first, last) = walker.walk_idle_walk(frames=144, fps=24.0, idle_frames=48)
+    walk = walker.walk(frames=144, fps=24.0)
+    agents = [examples.AgentSpec("a0", stop_go, (0, 0, 0), 0.0),
+              examples.AgentSpec("a1", stop_go, (300, 0, 0), 70.0, time_offset=6.0),
+              examples.AgentSpec("a2", walk, (-300, 0, 0), 0.0)]
+    examples.build_crowd_stage(tmp_path / "shot.usda", agents, fps=24.0)
+    out = run_cli("detect-stationary", tmp_path / "shot.usda", "-o", tmp_path / "tags.usda", "--composed",
+                  tmp_path / "tagged.usda")
+    assert out.returncode == 0, out.stderr
+    data = reader.read_stage(Usd.Stage.Open(str(tmp_path / "tagged.usda")))
+    tags = {p: a.stationary for p, a in data.agents.items()}
+    assert tags["/World/Crowd/a2"] == []
+    # A time offset keeps frame numbers: both agents get the same range of their clip.
+    assert tags["/World/Crowd/a0"] == tags["/World/Crowd/a1"]
+    (name, a, b), = tags["/World/Crowd/a0"]
+    assert a <= first and b >= last
+
+
 START_WALK_STOP = ["cmu131_01_start_walk_stop.bvh", "cmu131_02_start_walk_stop.bvh"]
 
 

@@ -187,7 +187,6 @@ def build_clip(source: str, settings: ImportSettings | None = None, progress: Pr
     task = progress.task(f"import {os.path.basename(source)}", skeleton.frame_count)
 
     builder = converter = None
-    modes: list[str] = []
     for values in bvh.iter_frames(source, settings.chunk_frames):
         if converter is None:
             # The first chunk decides how position channels combine with OFFSETs.
@@ -212,9 +211,7 @@ def build_clip(source: str, settings: ImportSettings | None = None, progress: Pr
     task.done(f"({converter.joint_count} joints, {fps:g} fps)")
     return ImportResult(source=source, output=None, layer=layer, prim=str(builder.root),
                         skeleton=str(builder.skel_path), animation=str(builder.anim_path), frames=builder.frames,
-                        fps=fps, joints=converter.joint_count, height_m=height,
-                        position_modes={skeleton.names[j]: modes[j] for j, labels in enumerate(skeleton.channels)
-                                        if any(lab.lower().endswith("position") for lab in labels)})
+                        fps=fps, joints=converter.joint_count, height_m=height, position_modes=with_positions)
 
 
 def import_bvh(source: str, output: str, settings: ImportSettings | None = None,

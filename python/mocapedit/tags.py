@@ -8,6 +8,9 @@ the tags, or keep it beside the clip.
 
 A clip is found through the agents of the stage (prims with ``MocapAgentAPI``: their
 root joint, or hip joint when the root carries no motion, as the solve reads them).
+On a shot stage each agent's composed SkelAnimation prim is tagged, so the tags layer
+sub-layered over the shot tags every agent; to tag a clip once for every shot that uses
+it, run the command on the clip layer itself.
 A clip layer with no agent (``mocapedit import-bvh`` without ``--agent``) is read the
 same way through each Skeleton that binds an animation, as if it were an agent: that
 view is made in the stage's session layer, in memory, and never saved.
@@ -86,6 +89,7 @@ def detect(stage: Usd.Stage, settings: stationary.DetectSettings | None = None,
         raise MocapEditError(f"<{animation}> is not a SkelAnimation played by an agent or bound to a "
                              "skeleton on this stage")
     out: dict[str, ClipTags] = {}
+    chains: dict = {}   # skeleton-space chains of clips that several agents play, composed once
     for path in sorted(data.agents):
         agent = data.agents[path]
         if agent.animation_path in out or (animation is not None and agent.animation_path != animation):
@@ -97,7 +101,7 @@ def detect(stage: Usd.Stage, settings: stationary.DetectSettings | None = None,
                                      f"(its joints start {', '.join(agent.joints[:3])}, ...)")
             agent.root_joint = index
         clip = data.clip_of(agent)
-        traj = trajectory.extract(agent, clip, info.up_axis, info.meters_per_unit)
+        traj = trajectory.extract(agent, clip, info.up_axis, info.meters_per_unit, chains)
         world = trajectory.joint_world(agent, clip, traj.joint)
         heading = stationary.facing(world, info.up_axis)
         seconds = agent.sample_times / info.time_codes_per_second
