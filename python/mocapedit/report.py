@@ -27,6 +27,18 @@ class Report:
                 "timings": self.timings, "notes": self.notes, "constraints": self.constraints,
                 "agents": self.agents}
 
+    def to_layer_dict(self) -> dict:
+        """What the edits layer stores: everything but the timings and the file names, so
+        the same input gives the same bytes wherever it is written."""
+        return {"stats": self.stats, "notes": self.notes, "constraints": self.constraints,
+                "agents": self.agents}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "Report":
+        return cls(input=data.get("input", ""), output=data.get("output"), agents=dict(data.get("agents", {})),
+                   constraints=list(data.get("constraints", [])), notes=list(data.get("notes", [])),
+                   stats=dict(data.get("stats", {})), timings=dict(data.get("timings", {})))
+
     def to_json(self, indent: int = 2) -> str:
         return json.dumps(self.to_dict(), indent=indent, sort_keys=True, default=_plain)
 
