@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import ground, writer
+from . import ground, inspection, writer
 from .inspection import Crowd, Remaining
 
 SOURCE = (0.55, 0.55, 0.6)
@@ -46,21 +46,8 @@ COLLISION = (1.0, 0.1, 0.65)
 _LIFT_M = {"source": 0.01, "edited": 0.02, "stationary": 0.03, "links": 0.04, "points": 0.05}
 
 
-def constraint_status(report) -> dict[str, dict]:
-    """prim path -> the worst report entry for it (unmet before met, larger residual first)."""
-    out: dict[str, dict] = {}
-    for entry in report.constraints:
-        prim = entry.get("prim")
-        if prim is None:
-            continue
-        old = out.get(prim)
-        key = (not entry.get("met", True), float(entry.get("residual") or 0.0))
-        if old is None or key > (not old.get("met", True), float(old.get("residual") or 0.0)):
-            out[prim] = entry
-    return out
-
-
 def status_color(entry: dict | None, met_color=MET) -> tuple[float, float, float]:
+    """Green (or ``met_color``) when met, red when not, yellow when no pass reported on it."""
     if entry is None:
         return NOT_REPORTED
     return met_color if entry.get("met", True) else NOT_MET
@@ -118,20 +105,11 @@ def build(ctx, crowd: Crowd, remaining: Remaining | None) -> None:
         colors=np.tile(STATIONARY, (len(starts), 1)), width=info.metres(0.15),
         doc="Where each stationary range starts."))
 
-    status = constraint_status(ctx.report)
-    handles, colors = [], []
-    for entry in ctx.report.constraints:
-        if entry.get("kind") == "collision" or entry.get("position") is None:
-            continue
-        handles.append(np.asarray(entry["position"], dtype=np.float64))
-        colors.append(status_color(entry))
-    reported = {e.get("prim") for e in ctx.report.constraints if e.get("position") is not None}
-    for c in ctx.data.position_constraints:
-        if c.path not in reported:
-            handles.append(np.asarray(c.position, dtype=np.float64))
-            colors.append(status_color(status.get(c.path)))
+    status = inspection.constraint_status(ctx.report.constraints)
+    handles = inspection.handles(ctx.report.constraints, ctx.data.position_constraints)
     add(writer.GuidePoints(
-        name="ConstraintHandles", points=np.array(handles).reshape(-1, 3), colors=np.array(colors).reshape(-1, 3),
+        name="ConstraintHandles", points=np.array([h for h, _ in handles]).reshape(-1, 3),
+        colors=np.array([status_color(e) for _, e in handles]).reshape(-1, 3),
         width=info.metres(0.25),
         doc="Constraint handles: green when met, red when not, yellow when no solve reported on it."))
 
@@ -155,9 +133,7 @@ def build(ctx, crowd: Crowd, remaining: Remaining | None) -> None:
             "members share."))
 
     if remaining is None:   # a collision pass reported what is left
-        points = [np.asarray(e["position"], dtype=np.float64) for e in ctx.report.constraints
-                  if e.get("kind") == "collision" and e.get("position") is not None and not e.get("met", False)]
-        points = np.array(points).reshape(-1, 3)
+        points = inspection.reported_collisions(ctx.report.constraints)
     else:
         points = world(remaining.ground, lift["points"]).reshape(-1, 3)
     add(writer.GuidePoints(

@@ -75,7 +75,7 @@ class Crowd:
     def proximity(self, reach: float = 0.0, progress=None) -> tuple[np.ndarray, overlaps.Proximity]:
         """(shot times, pairs closer than ``reach``) on the edited tracks of colliding agents."""
         times = self.shot_times()
-        task = progress.task("overlaps", len(self.agents)) if progress else None
+        task = progress.task("overlaps", len(self.agents), "agents") if progress else None
         pos = np.empty((len(self.agents), len(times), 2))
         for i, a in enumerate(self.agents):
             pos[i] = a.edited.at(times)
@@ -134,6 +134,42 @@ def from_stages(source, source_trajectories, edited=None, edited_trajectories=No
                            and np.abs(out.ground - src.ground).max(initial=0.0) <= tol)
         agents.append(AgentTracks(path, src, out, float(agent.collision_radius), bool(agent.collide), changed))
     return Crowd(info, agents, float(source.settings.sample_step))
+
+
+def constraint_status(entries: list[dict]) -> dict[str, dict]:
+    """Constraint prim path -> its worst report entry (not met first, then the largest residual)."""
+    out: dict[str, dict] = {}
+    for entry in entries:
+        prim = entry.get("prim")
+        if prim is None:
+            continue
+        key = (not entry.get("met", True), float(entry.get("residual") or 0.0))
+        old = out.get(prim)
+        if old is None or key > (not old.get("met", True), float(old.get("residual") or 0.0)):
+            out[prim] = entry
+    return out
+
+
+def handles(entries: list[dict], position_constraints) -> list[tuple[np.ndarray, dict | None]]:
+    """(world position (3,), report entry or None) of every constraint handle.
+
+    The handles are the report entries that give a ``position`` (collisions aside), and
+    the position constraints of the stage that no entry placed (None: not reported on).
+    """
+    out = [(np.asarray(e["position"], dtype=np.float64), e) for e in entries
+           if e.get("kind") != "collision" and e.get("position") is not None]
+    placed = {e.get("prim") for e in entries if e.get("position") is not None}
+    status = constraint_status(entries)
+    out.extend((np.asarray(c.position, dtype=np.float64), status.get(c.path))
+               for c in position_constraints if c.path not in placed)
+    return out
+
+
+def reported_collisions(entries: list[dict]) -> np.ndarray:
+    """#N by 3 world positions of the collisions a pass reported as left (not met)."""
+    pts = [e["position"] for e in entries
+           if e.get("kind") == "collision" and e.get("position") is not None and not e.get("met", False)]
+    return np.array(pts, dtype=np.float64).reshape(-1, 3)
 
 
 def path_figures(source: np.ndarray, edited: np.ndarray) -> dict:

@@ -295,14 +295,21 @@ def save_composed(path: str, edits_path: str, input_path: str, info: StageInfo,
     save_layer(layer, path)
 
 
-def save_text(path: str, text: str) -> None:
-    """Writes a text file (a report) through a temporary file and a rename."""
+def save_with(path: str, write) -> None:
+    """Writes a file through ``write(temporary path)`` beside it and a rename into place."""
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     tmp = _temp_beside(path)
     try:
-        with open(tmp, "w", encoding="utf-8") as f:
-            f.write(text)
+        write(tmp)
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
+
+
+def save_text(path: str, text: str) -> None:
+    """Writes a text file (a report) through a temporary file and a rename."""
+    def write(tmp):
+        with open(tmp, "w", encoding="utf-8") as f:
+            f.write(text)
+    save_with(path, write)
