@@ -401,6 +401,10 @@ def write_exr(scene: Scene, path: str, resolution=None, bounds: np.ndarray | Non
 # ---- the PNG ---------------------------------------------------------------------------------
 
 UNCHANGED = (0.42, 0.45, 0.55)
+#: Up to this many agents, each path is labelled with the agent's name.
+LABELLED_AGENTS = 40
+#: Up to this many collisions, each is labelled with its shot time.
+LABELLED_COLLISIONS = 20
 
 
 def _nice_length(span_m: float) -> float:
@@ -508,6 +512,26 @@ def write_png(scene: Scene, path: str, resolution=None, bounds: np.ndarray | Non
         ax.scatter(starts[:, 0], starts[:, 1], s=9 * scale ** 2, color=(0.25, 0.25, 0.3), zorder=4, linewidths=0)
         legend.append(Line2D([], [], marker="o", linestyle="", color=(0.25, 0.25, 0.3),
                              markersize=3 * scale, label="start of each path"))
+        # Which way each agent goes: an arrow head on the last step that moves.
+        heads, dirs = [], []
+        for a in agents:
+            g = plan(a.edited.ground, up)
+            step = np.diff(g, axis=0)
+            moving = np.flatnonzero(np.linalg.norm(step, axis=1) > 1e-9)
+            if len(moving):
+                heads.append(g[moving[-1] + 1])
+                dirs.append(step[moving[-1]] / np.linalg.norm(step[moving[-1]]))
+        if heads:
+            heads, dirs = np.array(heads), np.array(dirs)
+            size = 9.0 * scale                  # arrow length in pixels, whatever the view's size
+            ax.quiver(heads[:, 0], heads[:, 1], dirs[:, 0] * size, dirs[:, 1] * size, angles="xy",
+                      scale_units="dots", scale=1.0, units="dots", width=1.3 * scale, headwidth=5,
+                      headlength=6, headaxislength=5.5, pivot="tip", color=(0.25, 0.25, 0.3), zorder=4)
+        if len(agents) <= LABELLED_AGENTS:
+            for a in agents:
+                end = plan(a.edited.ground[-1], up)
+                ax.annotate(a.path.rsplit("/", 1)[-1], end, xytext=(4, 3), textcoords="offset points",
+                            fontsize=7 * scale, color=(0.3, 0.3, 0.35), zorder=8)
     task.update(2)
 
     for kind, color, style in (("relative", colors.RELATIVE, "-"), ("sync", colors.SYNC, ":")):
@@ -542,9 +566,14 @@ def write_png(scene: Scene, path: str, resolution=None, bounds: np.ndarray | Non
         pts = plan(remaining.ground, up)
         ax.scatter(pts[:, 0], pts[:, 1], s=110 * scale ** 2, marker="X", color=colors.COLLISION,
                    edgecolors="black", linewidths=0.6 * scale, zorder=7)
+        n = len(remaining.a)
         legend.append(Line2D([], [], marker="X", linestyle="", markerfacecolor=colors.COLLISION,
                              markeredgecolor="black", markersize=9 * scale,
-                             label=f"collision left ({len(remaining.a)} pairs)"))
+                             label=f"collision left ({n} pair{'s' if n != 1 else ''})"))
+        if n <= LABELLED_COLLISIONS:
+            for p, t in zip(pts, remaining.time):
+                ax.annotate(f"t={t:g}", p, xytext=(7, -10), textcoords="offset points", fontsize=7.5 * scale,
+                            color=(0.6, 0.0, 0.35), zorder=8)
 
     view_m = float(span[0]) * info.meters_per_unit
     bar_m = _nice_length(view_m)
