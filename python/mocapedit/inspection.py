@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import overlaps
+from . import metrics, overlaps
 from .model import StageInfo
 
 #: Clearance (metres) within which the nearest neighbour is measured for the report's
@@ -179,9 +179,7 @@ def path_figures(source: np.ndarray, edited: np.ndarray) -> dict:
       source, edited: #F by 2 ground paths, one row per source frame
     """
     d = np.linalg.norm(np.asarray(edited) - np.asarray(source), axis=1)
-    src_len = float(np.linalg.norm(np.diff(source, axis=0), axis=1).sum())
-    new_len = float(np.linalg.norm(np.diff(edited, axis=0), axis=1).sum())
-    return {"lengthRatio": new_len / src_len if src_len > 0 else None,
+    return {"lengthRatio": metrics.length_ratio(edited, source),
             "maxDisplacement": float(d.max(initial=0.0)), "meanDisplacement": float(d.mean()) if len(d) else 0.0}
 
 
