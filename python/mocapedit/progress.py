@@ -49,10 +49,12 @@ class Progress:
       interval: seconds between updates (default: 0.1 on a terminal, 5 otherwise)
       tty: force bars (True) or plain lines (False); default: ask the stream
       clock: a function returning seconds (for tests); default ``time.perf_counter``
+      min_interval: the former name of ``interval``
     """
 
     def __init__(self, stream=None, quiet: bool = False, interval: float | None = None,
-                 tty: bool | None = None, clock=None):
+                 tty: bool | None = None, clock=None, min_interval: float | None = None):
+        interval = min_interval if interval is None else interval
         self.stream = stream if stream is not None else sys.stderr
         self.quiet = quiet
         self.tty = bool(getattr(self.stream, "isatty", lambda: False)()) if tty is None else tty
