@@ -184,7 +184,7 @@ def build_clip(source: str, settings: ImportSettings | None = None, progress: Pr
     name = settings.name or (clip_name(source) if settings.agent else SKELETON)
     if not Sdf.Path.IsValidIdentifier(name):
         raise MocapEditError(f"prim name '{name}' is not a valid USD identifier")
-    task = progress.task(f"import {os.path.basename(source)}", skeleton.frame_count)
+    task = progress.task(f"import {os.path.basename(source)}", skeleton.frame_count, unit="frames")
 
     builder = converter = None
     for values in bvh.iter_frames(source, settings.chunk_frames):
@@ -208,7 +208,7 @@ def build_clip(source: str, settings: ImportSettings | None = None, progress: Pr
     layer = builder.finish()
     up = 2 if settings.up_axis == "Z" else 1
     height = float(np.ptp(converter.pose.bind_transforms[:, 3, up])) * settings.meters_per_unit
-    task.done(f"({converter.joint_count} joints, {fps:g} fps)")
+    task.done(f"{converter.joint_count} joints, {fps:g} fps")
     return ImportResult(source=source, output=None, layer=layer, prim=str(builder.root),
                         skeleton=str(builder.skel_path), animation=str(builder.anim_path), frames=builder.frames,
                         fps=fps, joints=converter.joint_count, height_m=height, position_modes=with_positions)
@@ -243,7 +243,7 @@ def import_many(sources: list[str], out_dir: str, settings: ImportSettings | Non
     done: list[ImportResult] = []
     failed: list[tuple[str, str]] = []
     staged: list[tuple[str, str]] = []
-    files = progress.task("import files", len(sources))
+    files = progress.task("import files", len(sources), unit="files")
     try:
         for i, (src, dst) in enumerate(zip(sources, targets)):
             try:
