@@ -83,7 +83,7 @@ def random_rig(rng: np.random.Generator, joints: int, six_channel_share: float =
 
 def random_motion(rng: np.random.Generator, rig: Rig, frames: int, spin_joints: tuple[int, ...] = (0,),
                   spin_degrees: float = 1000.0, travel: float = 200.0) -> np.ndarray:
-    """(F,C) smooth random channel values; the spin joints turn past 360 degrees about one axis."""
+    """(F,C) smooth random channel values; the spin joints turn past 360 degrees about Y."""
     t = np.linspace(0.0, 1.0, frames)
     cols = []
     for j, labels in enumerate(rig.channels):
@@ -99,7 +99,8 @@ def random_motion(rng: np.random.Generator, rig: Rig, frames: int, spin_joints: 
             else:
                 v = rng.uniform(20, 170) * np.sin(2 * np.pi * freq * t + phase)
                 if j in spin_joints and label[0] == "Y":
-                    v = v * 0.1 + spin_degrees * t
+                    # Written wrapped to [-180, 180), as exporters do: the values jump by 360.
+                    v = (v * 0.1 + spin_degrees * t + 180.0) % 360.0 - 180.0
             cols.append(v)
     return np.stack(cols, axis=1) if cols else np.zeros((frames, 0))
 

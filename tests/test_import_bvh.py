@@ -55,6 +55,11 @@ def test_world_joints_match_bvhio_on_every_frame_of_written_files(tmp_path, case
     got = _imported_world(path, settings, tmp_path / f"{case}.usda")
     err = np.abs(got - expect).max()
     assert err < TOLERANCE, f"largest joint position error {err:.2e} in BVH units"
+    # The spins are stored without a quaternion sign flip between neighbouring frames.
+    stage = Usd.Stage.Open(str(tmp_path / f"{case}.usda"))
+    rotations = stage.GetPrimAtPath(f"/{case.replace('-', '_')}/Skel/Anim").GetAttribute("rotations")
+    rot = np.array([np.asarray(rotations.Get(t)) for t in range(frames)])
+    assert np.sum(rot[1:] * rot[:-1], axis=-1).min() > 0
 
 
 def test_an_importer_fault_shows_against_bvhio(tmp_path, monkeypatch):
