@@ -191,6 +191,10 @@ def test_cli_converts_one_file_and_a_folder(tmp_path):
     assert many.returncode == 0, many.stderr
     assert many.stderr == "" and many.stdout == ""
     assert sorted(os.listdir(tmp_path / "out")) == ["clip0.usda", "clip1.usda", "clip2.usda"]
+    # An output without a USD extension is a folder, even for one file.
+    folder = run_cli("import-bvh", src / "clip1.bvh", "-o", tmp_path / "single", "--ext", ".usdc", "-q")
+    assert folder.returncode == 0, folder.stderr
+    assert os.listdir(tmp_path / "single") == ["clip1.usdc"]
 
 
 def test_cli_writes_nothing_for_a_malformed_file(tmp_path):

@@ -6,6 +6,7 @@ import os
 import sys
 
 HELP = "convert BVH motion capture files to UsdSkel clip layers"
+USD_EXTENSIONS = (".usd", ".usda", ".usdc")
 DESCRIPTION = """\
 Converts BVH files to USD: a Skeleton "Skel" (joints, rest and bind transforms) holding
 a SkelAnimation "Anim" (translations and rotations sampled at time codes 0..F-1), the
@@ -33,8 +34,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("inputs", nargs="+", metavar="CLIP.bvh",
                    help="BVH files, or folders whose .bvh files are all converted")
     p.add_argument("-o", "--output", required=True, metavar="OUT",
-                   help="layer to write (.usda or .usdc) for one file; a folder for several files "
-                        "or a folder input (each written as <name><ext>)")
+                   help="layer to write (.usda, .usdc or .usd) for one file; otherwise a folder, where "
+                        "each file is written as <name><ext>")
     p.add_argument("--ext", choices=(".usda", ".usdc"), default=".usda",
                    help="extension of the layers written into a folder (default .usda)")
     p.add_argument("--fps", type=float, metavar="N",
@@ -104,7 +105,7 @@ def _inputs(args) -> tuple[list[str], bool]:
             files.append(item)
         else:
             raise MocapEditError(f"{item}: no such file or folder")
-    if os.path.isdir(args.output) or args.output.endswith(os.sep):
+    if os.path.isdir(args.output) or not args.output.lower().endswith(USD_EXTENSIONS):
         folder = True
     return files, folder
 
