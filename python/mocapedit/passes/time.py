@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import _solver, ground, retime, writer
+from .. import _solver, ground, retime
 from ..errors import prim_error
 from ..processor import SolveContext, register_pass
 
@@ -163,34 +163,18 @@ def time_pass(ctx: SolveContext) -> None:
         ctx.report.note(f"time warp: the minimum interval (minTimeInterval {fraction:g}) was enforced for "
                         f"{len(enforced)} agent(s): " + ", ".join(f"<{p}>" for p in enforced))
 
-    markers, colors, links = [], [], []
     for c, residual in zip(tc, result["time_residuals"]):
         residual = float(residual)
-        position = _root_position(ctx, c.agent, c.frame)
         ctx.report.constraints.append({
             "prim": c.path, "kind": "time", "agent": c.agent, "frame": c.frame, "target": None,
             "targetFrame": None, "hard": c.hard, "residual": residual, "met": residual <= MET,
-            "position": position})
-        markers.append(position)
-        colors.append((0.2, 0.8, 0.3) if residual <= MET else (0.9, 0.2, 0.2))
+            "position": _root_position(ctx, c.agent, c.frame)})
     for c, residual in zip(sc, result["sync_residuals"]):
         residual = float(residual)
-        a, b = _root_position(ctx, c.agent, c.frame), _root_position(ctx, c.target, c.target_frame)
         ctx.report.constraints.append({
             "prim": c.path, "kind": "sync", "agent": c.agent, "frame": c.frame, "target": c.target,
             "targetFrame": c.target_frame, "hard": c.hard, "residual": residual, "met": residual <= MET,
-            "position": a})
-        links.append(np.array([a, b]))
-    if ctx.options.guides:
-        width = data.info.metres(0.08)
-        if markers:
-            ctx.guides.append(writer.GuidePoints(
-                name="TimeConstraints", points=np.array(markers), colors=np.array(colors), width=width,
-                doc="Root of each time-constrained frame on its (edited) path: green when met, red when not."))
-        if links:
-            ctx.guides.append(writer.GuideCurves(
-                name="SyncConstraints", curves=links, color=(0.3, 0.6, 1.0), width=data.info.metres(0.02),
-                doc="One segment per sync constraint, between the roots of the two synchronised frames."))
+            "position": _root_position(ctx, c.agent, c.frame)})
 
 
 register_pass(ORDER, "time", time_pass)
