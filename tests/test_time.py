@@ -345,3 +345,27 @@ def test_the_solver_samples_clips_like_the_numpy_reference():
     np.testing.assert_allclose(np.linalg.norm(a.rotations, axis=-1), 1.0, atol=1e-6)
     q = Gf.Quatf(*map(float, (a.rotations[0, 1, 3], *a.rotations[0, 1, :3])))
     assert abs(q.GetLength() - 1.0) < 1e-6
+
+
+def test_the_example_stages_do_what_they_say(tmp_path):
+    import importlib.util
+    from conftest import REPO
+    spec = importlib.util.spec_from_file_location("stages_time", REPO / "example_stages" / "stages_time.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    for name, build in module.STAGES.items():
+        build(tmp_path)
+    (tmp_path / "handshake").mkdir()
+    result, out, src = _solve(tmp_path / "handshake", Usd.Stage.Open(str(tmp_path / "time_handshake.usda")))
+    t_host, e_host = _play_time(src, out, f"{CROWD}/host", 50)
+    t_guest, e_guest = _play_time(src, out, f"{CROWD}/guest", 50)
+    assert max(e_host, e_guest) < 1e-6
+    assert t_host == pytest.approx(58.0, abs=1e-6) and t_guest == pytest.approx(58.0, abs=1e-6)
+
+    (tmp_path / "beats").mkdir()
+    result, out, src = _solve(tmp_path / "beats", Usd.Stage.Open(str(tmp_path / "time_beats.usda")))
+    beats = [c for c in result.report.constraints if c["kind"] == "time"]
+    assert len(beats) == 3 and all(c["met"] for c in beats)
+    for prim, t in zip(("/Edits/beat1", "/Edits/beat2", "/Edits/beat3"), (24.0, 44.0, 72.0)):
+        frame = src.GetPrimAtPath(prim).GetAttribute("frame").Get()
+        assert _time_error(src, out, f"{CROWD}/dancer", frame, t) < 1e-6
