@@ -24,12 +24,16 @@ void Slerp(const float* q0, const float* q1, double t, float* out) {
     for (double& v : b) v = -v;
     dot = -dot;
   }
-  const double theta = std::acos(std::min(dot, 1.0));
-  const double s = std::sin(theta);
+  // sin(theta) from the dot product, and sin((1 - t) theta) = sin(theta) cos(t theta) -
+  // cos(theta) sin(t theta): one acos and one sin/cos pair per joint.
+  const double c = std::min(dot, 1.0);
+  const double s = std::sqrt(std::max(0.0, 1.0 - c * c));
   double w0 = 1.0 - t, w1 = t;
   if (s >= kSmallAngle) {
-    w0 = std::sin((1.0 - t) * theta) / s;
-    w1 = std::sin(t * theta) / s;
+    const double theta = std::acos(c);
+    const double st = std::sin(t * theta), ct = std::cos(t * theta);
+    w0 = (s * ct - c * st) / s;
+    w1 = st / s;
   }
   double r[4], norm = 0.0;
   for (int k = 0; k < 4; ++k) {

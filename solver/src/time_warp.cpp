@@ -14,6 +14,7 @@ namespace mocapedit {
 namespace {
 
 using SparseMatrix = Eigen::SparseMatrix<double>;
+using RowMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor>;
 using Triplet = Eigen::Triplet<double>;
 
 // Hard constraints fix a time within this of what they ask (well below the 1e-6 time codes
@@ -21,7 +22,8 @@ using Triplet = Eigen::Triplet<double>;
 constexpr double kConsistency = 1e-9;
 // A pivot below this fraction of the largest one marks the normal equations singular.
 constexpr double kSingularPivot = 1e-13;
-constexpr int kRefinementSteps = 2;
+constexpr int kMaxRefinementSteps = 4;
+constexpr double kRefinedError = 1e-13;
 
 enum class EdgeKind { kTime, kSync, kInterval };
 
@@ -141,9 +143,15 @@ std::vector<int> TreePath(const Forest& f, int a, int b) {
 }
 
 // The linear system left once the equalities of a forest are eliminated, factored.
+// Least-squares rows A over the nodes; the reduced unknowns z are the free classes
+// (x = P z + offset), and the normal equations P'A'A P z = P'A'(targets - A offset) are
+// assembled directly from the rows. A banded chain per agent plus a few sync couplings
+// factor with little fill in their natural order.
 struct Reduced {
-  SparseMatrix ap;  // rows of A, one column per free class
-  Eigen::SimplicialLDLT<SparseMatrix> ldlt;
+  std::vector<int> column;  // #nodes column of each node, -1 when its time is known
+  int unknowns = 0;
+  Eigen::SimplicialLDLT<SparseMatrix, Eigen::Lower, Eigen::NaturalOrdering<int>> ldlt;
+  SparseMatrix ap;          // A P, kept for the SPQR fallback only
   std::unique_ptr<Eigen::SPQR<SparseMatrix>> qr;
   bool fallback = false;
 };
@@ -160,7 +168,7 @@ struct TimeWarpComponent {
   std::vector<int> node_agent;  // #nodes local agent
   std::vector<Edge> hard;       // hard equalities
   std::vector<SoftRow> soft;
-  SparseMatrix a;               // least-squares rows over the nodes (weights applied)
+  RowMatrix a;                  // least-squares rows over the nodes (weights applied)
   Forest forest;                // of the hard edges
   std::unique_ptr<Reduced> base;
   int max_iterations = 0;
@@ -194,14 +202,20 @@ void Require(bool ok, const std::string& message) {
   if (!ok) throw std::invalid_argument("TimeWarp: " + message);
 }
 
-void CheckFrame(const TimeWarpProblem& p, int agent, int frame, const std::string& what) {
+// Messages are built only on failure: validation runs on every frame of every agent.
+bool FrameOk(const TimeWarpProblem& p, int agent, int frame) {
+  return agent >= 0 && agent < static_cast<int>(p.rest_times.size()) && frame >= 0 &&
+         frame < p.rest_times[agent].size();
+}
+
+void CheckFrame(const TimeWarpProblem& p, int agent, int frame, const char* kind, Eigen::Index k) {
+  if (FrameOk(p, agent, frame)) return;
+  const std::string what = std::string(kind) + " " + std::to_string(k);
   Require(agent >= 0 && agent < static_cast<int>(p.rest_times.size()),
           what + ": agent " + std::to_string(agent) + " is not one of the " +
               std::to_string(p.rest_times.size()) + " agents");
-  const auto count = p.rest_times[agent].size();
-  Require(frame >= 0 && frame < count, what + ": frame " + std::to_string(frame) + " is outside agent " +
-                                           std::to_string(agent) + "'s frames 0.." +
-                                           std::to_string(count - 1));
+  Require(false, what + ": frame " + std::to_string(frame) + " is outside agent " + std::to_string(agent) +
+                     "'s frames 0.." + std::to_string(p.rest_times[agent].size() - 1));
 }
 
 void Validate(const TimeWarpProblem& p) {
@@ -217,7 +231,7 @@ void Validate(const TimeWarpProblem& p) {
     Require(r.size() > 0, who + " has no frames");
     Require(r.allFinite(), who + ": rest times must be finite");
     for (Eigen::Index i = 1; i < r.size(); ++i)
-      Require(r[i] > r[i - 1], who + ": rest times must increase (frame " + std::to_string(i) + ")");
+      if (!(r[i] > r[i - 1])) Require(false, who + ": rest times must increase (frame " + std::to_string(i) + ")");
     if (!p.min_intervals.empty() && p.min_intervals[a].size() > 0) {
       const Eigen::VectorXd& m = p.min_intervals[a];
       Require(m.size() == r.size() - 1, who + ": min_intervals needs one value per interval");
@@ -228,18 +242,18 @@ void Validate(const TimeWarpProblem& p) {
   Require(p.time_hard.size() == t && p.time_weights.size() == t,
           "time_hard and time_weights need one value per time constraint");
   for (Eigen::Index k = 0; k < t; ++k) {
-    CheckFrame(p, p.time_frames(k, 0), p.time_frames(k, 1), "time constraint " + std::to_string(k));
-    Require(std::isfinite(p.time_weights[k]) && p.time_weights[k] >= 0,
-            "time constraint " + std::to_string(k) + ": weight must be finite and >= 0");
+    CheckFrame(p, p.time_frames(k, 0), p.time_frames(k, 1), "time constraint", k);
+    if (!(std::isfinite(p.time_weights[k]) && p.time_weights[k] >= 0))
+      Require(false, "time constraint " + std::to_string(k) + ": weight must be finite and >= 0");
   }
   const auto s = p.sync_frames.rows();
   Require(p.sync_hard.size() == s && p.sync_weights.size() == s,
           "sync_hard and sync_weights need one value per sync constraint");
   for (Eigen::Index k = 0; k < s; ++k) {
-    const std::string what = "sync constraint " + std::to_string(k);
-    CheckFrame(p, p.sync_frames(k, 0), p.sync_frames(k, 1), what);
-    CheckFrame(p, p.sync_frames(k, 2), p.sync_frames(k, 3), what + " (target)");
-    Require(std::isfinite(p.sync_weights[k]) && p.sync_weights[k] >= 0, what + ": weight must be finite and >= 0");
+    CheckFrame(p, p.sync_frames(k, 0), p.sync_frames(k, 1), "sync constraint", k);
+    CheckFrame(p, p.sync_frames(k, 2), p.sync_frames(k, 3), "sync constraint (target)", k);
+    if (!(std::isfinite(p.sync_weights[k]) && p.sync_weights[k] >= 0))
+      Require(false, "sync constraint " + std::to_string(k) + ": weight must be finite and >= 0");
   }
 }
 
@@ -248,23 +262,25 @@ void Validate(const TimeWarpProblem& p) {
 // Node of (local agent, frame).
 int Node(const TimeWarpComponent& c, int local_agent, int frame) { return c.first[local_agent] + frame; }
 
-// Column of the reduced system for a node, -1 when its time is known.
-int Column(const Forest& f, int node) { return f.unknown[f.cls[node]]; }
-
 std::unique_ptr<Reduced> Factor(const TimeWarpComponent& c, const Forest& f) {
   auto r = std::make_unique<Reduced>();
-  std::vector<Triplet> trip;
-  trip.reserve(static_cast<size_t>(c.a.nonZeros()));
-  for (int col = 0; col < c.a.outerSize(); ++col)
-    for (SparseMatrix::InnerIterator it(c.a, col); it; ++it) {
-      const int k = Column(f, col);
-      if (k >= 0) trip.emplace_back(static_cast<int>(it.row()), k, it.value());
-    }
-  r->ap.resize(c.a.rows(), f.unknowns);
-  r->ap.setFromTriplets(trip.begin(), trip.end());
+  r->unknowns = f.unknowns;
+  r->column.resize(c.nodes);
+  for (int n = 0; n < c.nodes; ++n) r->column[n] = f.unknown[f.cls[n]];
   if (f.unknowns == 0) return r;
-  const SparseMatrix normal = SparseMatrix(r->ap.transpose()) * r->ap;
-  r->ldlt.compute(normal);
+  std::vector<Triplet> normal;
+  std::vector<std::pair<int, double>> row;
+  for (int i = 0; i < c.a.outerSize(); ++i) {
+    row.clear();
+    for (RowMatrix::InnerIterator it(c.a, i); it; ++it)
+      if (r->column[it.col()] >= 0) row.emplace_back(r->column[it.col()], it.value());
+    for (const auto& [ci, vi] : row)
+      for (const auto& [cj, vj] : row)
+        if (ci >= cj) normal.emplace_back(ci, cj, vi * vj);
+  }
+  SparseMatrix m(f.unknowns, f.unknowns);
+  m.setFromTriplets(normal.begin(), normal.end());
+  r->ldlt.compute(m);
   bool ok = r->ldlt.info() == Eigen::Success;
   if (ok) {
     const Eigen::VectorXd d = r->ldlt.vectorD();
@@ -273,11 +289,25 @@ std::unique_ptr<Reduced> Factor(const TimeWarpComponent& c, const Forest& f) {
   }
   if (!ok) {
     r->fallback = true;
+    std::vector<Triplet> trip;
+    for (int i = 0; i < c.a.outerSize(); ++i)
+      for (RowMatrix::InnerIterator it(c.a, i); it; ++it)
+        if (r->column[it.col()] >= 0) trip.emplace_back(i, r->column[it.col()], it.value());
+    r->ap.resize(c.a.rows(), f.unknowns);
+    r->ap.setFromTriplets(trip.begin(), trip.end());
     r->qr = std::make_unique<Eigen::SPQR<SparseMatrix>>();
     r->qr->compute(r->ap);
     if (r->qr->info() != Eigen::Success) throw std::runtime_error("TimeWarp: SPQR factorization failed");
   }
   return r;
+}
+
+// P' v: node values summed into the columns of their classes.
+Eigen::VectorXd Gather(const Reduced& red, const Eigen::VectorXd& v) {
+  Eigen::VectorXd out = Eigen::VectorXd::Zero(red.unknowns);
+  for (size_t n = 0; n < red.column.size(); ++n)
+    if (red.column[n] >= 0) out[red.column[n]] += v[static_cast<Eigen::Index>(n)];
+  return out;
 }
 
 // The value an equality edge asks for.
@@ -326,16 +356,24 @@ Eigen::VectorXd SolveReduced(const TimeWarpComponent& c, const Forest& f, const 
   }
   Eigen::VectorXd z;
   if (f.unknowns > 0) {
-    const Eigen::VectorXd rhs = targets - c.a * offset;
     if (red.fallback) {
-      z = red.qr->solve(rhs);
+      z = red.qr->solve(Eigen::VectorXd(targets - c.a * offset));
     } else {
       // Normal equations square the condition number of the interval-change rows (it grows
-      // like n^4); corrected semi-normal equations (two refinement steps on the
-      // least-squares residual) recover the accuracy of a QR solve.
-      z = red.ldlt.solve(red.ap.transpose() * rhs);
-      for (int step = 0; step < kRefinementSteps; ++step)
-        z += red.ldlt.solve(red.ap.transpose() * (rhs - red.ap * z));
+      // like n^4); corrected semi-normal equations (refinement on the least-squares
+      // residual) recover the accuracy of a QR solve.
+      z = red.ldlt.solve(Gather(red, c.a.transpose() * (targets - c.a * offset)));
+      for (int step = 0; step < kMaxRefinementSteps; ++step) {
+        Eigen::VectorXd x = offset;
+        for (int n = 0; n < c.nodes; ++n)
+          if (red.column[n] >= 0) x[n] += z[red.column[n]];
+        const Eigen::VectorXd delta = red.ldlt.solve(Gather(red, c.a.transpose() * (targets - c.a * x)));
+        z += delta;
+        // Each step shrinks the error by about |delta| / |z|: stop once what is left,
+        // |delta|^2 / |z|, is at the level of rounding.
+        const double d = delta.cwiseAbs().maxCoeff(), scale = 1.0 + z.cwiseAbs().maxCoeff();
+        if (d * d <= kRefinedError * scale * scale) break;
+      }
     }
     if (!z.allFinite()) throw std::runtime_error("TimeWarp: the linear solve produced non-finite times");
   }
