@@ -369,3 +369,24 @@ def test_the_example_stages_do_what_they_say(tmp_path):
     for prim, t in zip(("/Edits/beat1", "/Edits/beat2", "/Edits/beat3"), (24.0, 44.0, 72.0)):
         frame = src.GetPrimAtPath(prim).GetAttribute("frame").Get()
         assert _time_error(src, out, f"{CROWD}/dancer", frame, t) < 1e-6
+
+
+def test_match_speed_from_the_settings_prim_and_the_command_line(tmp_path, monkeypatch):
+    import json
+
+    from mocapedit import cli
+    stage = _stage(tmp_path, [("walker", (0, 0, 0), 0.0, 0.0)])
+    examples.define_mocap_prim(stage, "/Settings", "MocapSolveSettings")
+    stage.GetPrimAtPath("/Settings").GetAttribute("matchSpeed").Set(True)
+    stage.GetRootLayer().Save()
+    monkeypatch.setattr(processor, "load_passes", lambda: None)
+    monkeypatch.setattr(processor, "PASSES", [(100, "stretch", _stretch_path), (200, "time", time_pass.time_pass)])
+    matched = {}
+    for flag in (None, "--no-match-speed", "--match-speed"):
+        report = tmp_path / f"{flag}.json"
+        args = ["solve", stage.GetRootLayer().realPath, "-o", str(tmp_path / f"{flag}.usda"), "--report",
+                str(report), "-q"] + ([flag] if flag else [])
+        assert cli.main(args) == 0
+        entry = json.loads(report.read_text())["agents"][f"{CROWD}/walker"]
+        matched[flag] = any("matchSpeed" in n for n in entry.get("notes", []))
+    assert matched == {None: True, "--no-match-speed": False, "--match-speed": True}
