@@ -160,8 +160,9 @@ def time_pass(ctx: SolveContext) -> None:
         if result["solver"][i] == "SPQR fallback":
             ctx.report.note(f"time warp: a singular system for <{path}> was solved by {result['solver'][i]}")
     if enforced:
+        named = ", ".join(f"<{p}>" for p in enforced[:10]) + (", ..." if len(enforced) > 10 else "")
         ctx.report.note(f"time warp: the minimum interval (minTimeInterval {fraction:g}) was enforced for "
-                        f"{len(enforced)} agent(s): " + ", ".join(f"<{p}>" for p in enforced))
+                        f"{len(enforced)} agent(s): {named}")
 
     for c, residual in zip(tc, result["time_residuals"]):
         residual = float(residual)
