@@ -1,8 +1,9 @@
-"""Poses of a clip sampled at fractional frames, in the clip's own joint order (numpy).
+"""Poses of a clip sampled at fractional frames, in the clip's own joint order.
 
 A :class:`Pose` is what the time warp samples and the layering modifies before the
 writer bakes it: translations interpolate linearly, rotations by normalised
-shortest-arc slerp, scales linearly.
+shortest-arc slerp, scales linearly. The sampling runs in the solver
+(:func:`sample_pose`); :func:`sample_pose_numpy` is the same in numpy.
 """
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _solver
 from .model import Clip
 
 
@@ -39,7 +41,18 @@ def slerp(q0: np.ndarray, q1: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 def sample_pose(clip: Clip, frames: np.ndarray) -> Pose:
-    """The clip at fractional frame positions (clamped to the clip)."""
+    """The clip at fractional frame positions (clamped to the clip).
+
+    Sampled by the solver (``_solver.sample_clip``); whole frames keep their authored
+    values bit for bit.
+    """
+    t, r, s = _solver.sample_clip(clip.translations, clip.rotations, clip.scales,
+                                  np.ascontiguousarray(frames, dtype=np.float64).reshape(-1))
+    return Pose(joints=list(clip.joints), translations=t, rotations=r, scales=s)
+
+
+def sample_pose_numpy(clip: Clip, frames: np.ndarray) -> Pose:
+    """:func:`sample_pose` in numpy: the reference the benchmark measures the solver against."""
     f = np.clip(np.asarray(frames, dtype=np.float64), 0, clip.frame_count - 1)
     i0 = np.floor(f).astype(np.int64)
     i1 = np.minimum(i0 + 1, clip.frame_count - 1)
