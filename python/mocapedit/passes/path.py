@@ -27,6 +27,10 @@ MET = 1e-6  # stage units: a hard constraint's residual within this is met
 
 #: Lengths that set the solve's tolerances, in metres.
 MIN_BASELINE_M = 0.01      # local frames of the shape terms are at least this long
+#: A path curve holds its agent on the remapped path by soft handles this far apart (s),
+#: so other constraints bend the path away from the curve only where they act.
+CURVE_ANCHOR_S = 0.5
+CURVE_ANCHOR_WEIGHT = 0.05
 RIGID_MIN_EXTENT_M = 0.02  # smaller stationary ranges turn with the path around them
 STILL_M = 1e-5             # as trajectory.headings: tangents shorter than this stand still
 
@@ -121,6 +125,13 @@ class _Component:
                         for c in self.positions]
         self.links = [path_edit.Link(c.agent, c.frame, c.target, c.target_frame, ground.to_ground(c.offset, up),
                                      c.space, _weight(c), c.path) for c in self.relatives]
+        self.curve_only = not self.handles and not self.links
+        step = max(1, int(round(CURVE_ANCHOR_S * fps)))
+        for a in self.inputs:
+            curve = data.agents[a.path].path_curve
+            if curve:
+                frames = sorted(set(range(0, a.frames, step)) | {a.frames - 1})
+                self.handles.extend(path_edit.Handle(a.path, f, a.rest[f], CURVE_ANCHOR_WEIGHT, curve) for f in frames)
         self.settings = path_edit.Settings(
             min_baseline=info.metres(MIN_BASELINE_M), rigid_min_extent=info.metres(RIGID_MIN_EXTENT_M),
             still=info.metres(STILL_M), group_step=max(1.0, float(data.settings.sample_step)) * 4.0)
@@ -128,7 +139,7 @@ class _Component:
         self.problem: path_edit.ComponentProblem | None = None
 
     def run(self) -> None:
-        if not self.handles and not self.links:   # path curves alone: the remapped paths
+        if self.curve_only:   # path curves alone: the remapped paths
             self.result = path_edit.ComponentResult(
                 agents={a.path: path_edit.AgentResult(ground=a.rest, heading=path_edit.rest_heading(a),
                                                       range_turn=a.rest_turn if a.rest_turn is not None
