@@ -140,6 +140,8 @@ struct StepSystem {
   bool use_qr = false;
   std::string solver = "none";
   double condition = 0;  // estimate of cond(A^H A)
+  // Residuals need extended precision only when cond * eps is not negligible.
+  bool extended = true;
   mutable std::once_flag qr_once;
   mutable std::unique_ptr<Eigen::SPQR<Sparse>> qr;
 
@@ -428,16 +430,16 @@ std::string Describe(const std::vector<ConstraintRef>& refs) {
 
 // beta: the constant part of every vertex (offsets from its class root, plus the fixed
 // value of a fixed class). `tie_offset(t)` gives the offset of tie t.
-template <typename TieOffset>
+template <typename T, typename TieOffset>
 void ComputeBeta(const PathEditData& d, const Elimination& e, const Eigen::Ref<const Trajectory2>& handle_positions,
-                 TieOffset tie_offset, std::vector<LCplx>& beta) {
+                 TieOffset tie_offset, std::vector<T>& beta) {
   const int n = e.vertices;
-  beta.assign(n, 0.0L);
+  beta.assign(n, T(0));
   for (int v : e.order) {
     const int p = e.parent[v];
     if (p < 0) continue;
     const Tie& t = e.ties[e.parent_tie[v]];
-    const LCplx o = tie_offset(e.parent_tie[v]);
+    const T o = T(tie_offset(e.parent_tie[v]));
     beta[v] = t.a == v ? beta[p] + o : beta[p] - o;
   }
   // A fixed class: its root sits where its first hard handle puts it. Roots come first in
@@ -447,21 +449,21 @@ void ComputeBeta(const PathEditData& d, const Elimination& e, const Eigen::Ref<c
     const int h = e.fix_handle[r];
     if (h < 0) continue;
     if (v == r)
-      beta[v] = LCplx(C(handle_positions, h)) - beta[d.handles[h]];  // beta[root] was 0
+      beta[v] = T(C(handle_positions, h)) - beta[d.handles[h]];  // beta[root] was 0
     else
       beta[v] += beta[r];
   }
   for (size_t k = 0; k < e.dep_vertex.size(); ++k) {
-    const LCplx g = e.dep_gamma[k];
-    beta[e.dep_vertex[k]] = (1.0L - g) * beta[e.dep_m1[k]] + g * beta[e.dep_m2[k]];
+    const T g = T(e.dep_gamma[k]);
+    beta[e.dep_vertex[k]] = (T(1) - g) * beta[e.dep_m1[k]] + g * beta[e.dep_m2[k]];
   }
 }
 
 // Throws ContradictionError when a tie closing a cycle, or a second hard handle on a
 // class, disagrees with the values beta gives.
-template <typename TieOffset>
+template <typename T, typename TieOffset>
 void CheckConsistency(const PathEditData& d, const Elimination& e, const Eigen::Ref<const Trajectory2>& handle_positions,
-                      TieOffset tie_offset, const std::vector<LCplx>& beta) {
+                      TieOffset tie_offset, const std::vector<T>& beta) {
   const double tol = kConsistencyAbsolute + kConsistencyRelative * d.scale;
   auto fail = [](double miss, std::vector<ConstraintRef> refs) {
     Deduplicate(refs);
@@ -471,7 +473,7 @@ void CheckConsistency(const PathEditData& d, const Elimination& e, const Eigen::
   };
   for (int t : e.extra_ties) {
     const Tie& tie = e.ties[t];
-    const double miss = static_cast<double>(std::abs(beta[tie.a] - beta[tie.b] - tie_offset(t)));
+    const double miss = static_cast<double>(std::abs(beta[tie.a] - beta[tie.b] - T(tie_offset(t))));
     if (miss > tol) {
       std::vector<ConstraintRef> refs{
           {tie.kind == TieKind::kLink ? ConstraintRef::kLink : ConstraintRef::kRigid, tie.index}};
@@ -481,7 +483,7 @@ void CheckConsistency(const PathEditData& d, const Elimination& e, const Eigen::
   }
   for (int h : e.extra_handles) {
     const int v = d.handles[h];
-    const double miss = static_cast<double>(std::abs(beta[v] - LCplx(C(handle_positions, h))));
+    const double miss = static_cast<double>(std::abs(beta[v] - T(C(handle_positions, h))));
     if (miss > tol) {
       const int h0 = e.fix_handle[e.root[v]];
       std::vector<ConstraintRef> refs{{ConstraintRef::kHandle, h0}, {ConstraintRef::kHandle, h}};
@@ -563,7 +565,11 @@ void AssembleStep(const Rows& rows, const Elimination& e, StepSystem<Scalar>& s)
       crow[fill[s.a_col[p]]++] = r;
     }
   std::vector<int> outer(n + 1, 0), inner, mark(n, -1);
-  std::vector<Scalar> values, acc(n);
+  std::vector<Scalar> values;
+  // Accumulate conj(a_qi) a_qj in plain doubles (complex temporaries stall the pipeline).
+  constexpr int W = std::is_same<Scalar, Cplx>::value ? 2 : 1;
+  const double* av = reinterpret_cast<const double*>(s.a_val.data());
+  std::vector<double> acc(static_cast<size_t>(n) * W);
   inner.reserve(s.a_col.size() * 2);
   values.reserve(s.a_col.size() * 2);
   int bandwidth = 0;
@@ -571,20 +577,35 @@ void AssembleStep(const Rows& rows, const Elimination& e, StepSystem<Scalar>& s)
     const size_t start = inner.size();
     for (int k = cptr[j]; k < cptr[j + 1]; ++k) {
       const int r = crow[k];
-      const Scalar aj = s.a_val[centry[k]];
+      const double jr = av[W * centry[k]], ji = W == 2 ? av[W * centry[k] + 1] : 0.0;
       for (int q = s.a_ptr[r]; q < s.a_ptr[r + 1]; ++q) {
         const int i = s.a_col[q];
         if (i < j) continue;
+        double* out = &acc[static_cast<size_t>(W) * i];
         if (mark[i] != j) {
           mark[i] = j;
-          acc[i] = Scalar(0);
+          out[0] = 0.0;
+          if (W == 2) out[W - 1] = 0.0;
           inner.push_back(i);
         }
-        acc[i] += MulConj(s.a_val[q], aj);
+        const double qr = av[W * q];
+        if constexpr (W == 2) {
+          const double qi = av[W * q + 1];
+          out[0] += qr * jr + qi * ji;
+          out[1] += qr * ji - qi * jr;
+        } else {
+          out[0] += qr * jr;
+        }
       }
     }
     std::sort(inner.begin() + static_cast<std::ptrdiff_t>(start), inner.end());
-    for (size_t k = start; k < inner.size(); ++k) values.push_back(acc[inner[k]]);
+    for (size_t k = start; k < inner.size(); ++k) {
+      const double* v = &acc[static_cast<size_t>(W) * inner[k]];
+      if constexpr (W == 2)
+        values.push_back(Scalar(v[0], v[1]));
+      else
+        values.push_back(v[0]);
+    }
     if (inner.size() > start) bandwidth = std::max(bandwidth, inner.back() - j);
     outer[j + 1] = static_cast<int>(inner.size());
   }
@@ -602,14 +623,17 @@ double EstimateCondition(const StepSystem<Scalar>& s) {
   Eigen::VectorXd rowsum = Eigen::VectorXd::Zero(s.cols);
   for (int j = 0; j < s.cols; ++j)
     for (typename StepSystem<Scalar>::Sparse::InnerIterator it(s.normal, j); it; ++it) {
-      rowsum[j] += std::abs(it.value());
-      if (it.row() != j) rowsum[it.row()] += std::abs(it.value());
+      const double a = std::abs(std::real(it.value())) + std::abs(std::imag(it.value()));  // >= |value|
+      rowsum[j] += a;
+      if (it.row() != j) rowsum[it.row()] += a;
     }
   const double lmax = rowsum.maxCoeff();
   typename StepSystem<Scalar>::Vector v(s.cols);
   for (int j = 0; j < s.cols; ++j) v[j] = Scalar(1.0 + 0.25 * ((j * 7919) % 13) / 13.0);
+  // Two passes of inverse iteration: the smallest eigenvalue of these path Laplacians is
+  // well separated, and an estimate within a small factor is all the refinement needs.
   double lmin = 0;
-  for (int it = 0; it < 3; ++it) {
+  for (int it = 0; it < 2; ++it) {
     v /= v.norm();
     s.SolveNormalInPlace(v);
     lmin = 1.0 / v.norm();
@@ -648,6 +672,7 @@ void Factor(StepSystem<Scalar>& s, bool force_qr) {
     return;
   }
   s.condition = EstimateCondition(s);
+  s.extended = s.condition * kEps > 1e-9;
   s.solver = s.use_amd ? "LDLT (AMD)" : "LDLT";
   if (force_qr || s.condition * kEps > kLdltTrust) {
     s.use_qr = true;
@@ -663,11 +688,17 @@ struct Work {
 
 // The correction for the residual of u: QR of the rectangular system, or the factored
 // normal equations. Row residuals are accumulated in extended precision.
-template <typename Scalar>
-void Correction(const StepSystem<Scalar>& s, const std::vector<LCplx>& c, const CVec& u, Work& w,
+template <typename Scalar, typename T>
+void Correction(const StepSystem<Scalar>& s, const std::vector<T>& c, const CVec& u, Work& w,
                 bool qr, CVec& delta) {
   w.rr.resize(s.rows);
-  for (int r = 0; r < s.rows; ++r) {
+  if constexpr (std::is_same<T, Cplx>::value) {  // well conditioned: double residuals are enough
+    for (int r = 0; r < s.rows; ++r) {
+      Cplx acc = c[r];
+      for (int p = s.a_ptr[r]; p < s.a_ptr[r + 1]; ++p) acc -= s.a_val[p] * u[s.a_col[p]];
+      w.rr[r] = acc;
+    }
+  } else for (int r = 0; r < s.rows; ++r) {
     long double re = c[r].real(), im = c[r].imag();
     for (int p = s.a_ptr[r]; p < s.a_ptr[r + 1]; ++p) {
       const LCplx& a = s.a_ext[p];
@@ -712,8 +743,8 @@ void Correction(const StepSystem<Scalar>& s, const std::vector<LCplx>& c, const 
 
 // Solves min |A u - c| from the start u by refinement: each pass removes all but about
 // cond * eps of the error (QR: about cond(A) * eps). Returns false when it does not converge.
-template <typename Scalar>
-bool Refine(const StepSystem<Scalar>& s, const std::vector<LCplx>& c, double scale, CVec& u, StepInfo& info,
+template <typename Scalar, typename T>
+bool Refine(const StepSystem<Scalar>& s, const std::vector<T>& c, double scale, CVec& u, StepInfo& info,
             bool qr) {
   Work w;
   CVec delta;
@@ -963,35 +994,37 @@ namespace {
 
 // c = sqrt(w) target - G beta, per row, in extended precision. Triangle rows have no
 // target; only rows listed in beta_rows read beta.
-template <typename Scalar>
-void RowConstants(const Rows& rows, const StepSystem<Scalar>& s, const std::vector<LCplx>& beta,
+template <typename Scalar, typename T>
+void RowConstants(const Rows& rows, const StepSystem<Scalar>& s, const std::vector<T>& beta,
                   const Eigen::Ref<const Trajectory2>& handle_positions, const Eigen::Ref<const Trajectory2>& link_offsets,
-                  const std::vector<LCplx>& edge_targets, std::vector<LCplx>& c) {
-  c.assign(rows.size(), 0.0L);
+                  const std::vector<Cplx>& edge_targets, std::vector<T>& c) {
+  using R = typename T::value_type;
+  c.resize(rows.size());
   for (int r = 0; r < rows.size(); ++r) {
-    LCplx t;
+    T t;
     switch (rows.target[r]) {
-      case TargetKind::kZero: continue;
-      case TargetKind::kHandle: t = LCplx(C(handle_positions, rows.target_index[r])); break;
-      case TargetKind::kLink: t = LCplx(C(link_offsets, rows.target_index[r])); break;
-      case TargetKind::kEdge: t = edge_targets[rows.target_index[r]]; break;
+      case TargetKind::kZero: c[r] = T(0); continue;
+      case TargetKind::kHandle: t = T(C(handle_positions, rows.target_index[r])); break;
+      case TargetKind::kLink: t = T(C(link_offsets, rows.target_index[r])); break;
+      case TargetKind::kEdge: t = T(edge_targets[rows.target_index[r]]); break;
     }
-    c[r] = t * rows.sqrt_weight[r];
+    c[r] = rows.sqrt_weight[r] == 1.0L ? t : t * static_cast<R>(rows.sqrt_weight[r]);
   }
   for (int r : s.beta_rows)
-    for (int p = rows.ptr[r]; p < rows.ptr[r + 1]; ++p) c[r] -= rows.coeff[p] * beta[rows.vertex[p]];
+    for (int p = rows.ptr[r]; p < rows.ptr[r + 1]; ++p) c[r] -= T(rows.coeff[p]) * beta[rows.vertex[p]];
 }
 
 // Positions from unknowns: x_v = sum e u + beta_v (rounded once to double).
-void Expand(const Elimination& e, const CVec& u, const std::vector<LCplx>& beta, std::vector<Cplx>& x) {
+template <typename T>
+void Expand(const Elimination& e, const CVec& u, const std::vector<T>& beta, std::vector<Cplx>& x) {
   x.resize(e.vertices);
   for (int v = 0; v < e.vertices; ++v) {
     if (e.e_ptr[v] == e.e_ptr[v + 1]) {
       x[v] = Cplx(beta[v]);
-    } else if (e.e_ptr[v + 1] - e.e_ptr[v] == 1 && beta[v] == 0.0L && e.e_coeff[e.e_ptr[v]] == 1.0L) {
+    } else if (e.e_ptr[v + 1] - e.e_ptr[v] == 1 && beta[v] == T(0) && e.e_coeff[e.e_ptr[v]] == 1.0L) {
       x[v] = u[e.e_col[e.e_ptr[v]]];
     } else {
-      LCplx acc = beta[v];
+      LCplx acc = LCplx(beta[v]);
       for (int q = e.e_ptr[v]; q < e.e_ptr[v + 1]; ++q) acc += e.e_coeff[q] * LCplx(u[e.e_col[q]]);
       x[v] = Cplx(acc);
     }
@@ -1007,8 +1040,8 @@ CVec Start(const Elimination& e, const std::vector<Cplx>& z, Cplx a, Cplx b, con
   return u;
 }
 
-template <typename Scalar>
-void SolveStep(const StepSystem<Scalar>& s, const std::vector<LCplx>& c, double scale, CVec& u, StepInfo& info) {
+template <typename Scalar, typename T>
+void SolveStep(const StepSystem<Scalar>& s, const std::vector<T>& c, double scale, CVec& u, StepInfo& info) {
   info.solver = s.solver;
   info.unknowns = s.cols;
   info.refinements = 0;
@@ -1027,6 +1060,33 @@ void SolveStep(const StepSystem<Scalar>& s, const std::vector<LCplx>& c, double 
 }
 
 // Step 1 from scratch, starting from the similarity z -> a z + b.
+// One step: constants from the handle positions and offsets, refinement from u, positions.
+// Extended precision where the step's conditioning needs it.
+template <typename T, typename Scalar, typename TieOffset>
+void SolveWith(const PathEditData& d, const Elimination& e, const Rows& rows, const StepSystem<Scalar>& s,
+               const Eigen::Ref<const Trajectory2>& handle_positions, const Eigen::Ref<const Trajectory2>& link_offsets,
+               TieOffset offset, const std::vector<Cplx>& edge_targets, bool check, double scale, CVec u,
+               std::vector<Cplx>& x, StepInfo& info) {
+  std::vector<T> beta, c;
+  ComputeBeta(d, e, handle_positions, offset, beta);
+  if (check) CheckConsistency(d, e, handle_positions, offset, beta);
+  RowConstants(rows, s, beta, handle_positions, link_offsets, edge_targets, c);
+  SolveStep(s, c, scale, u, info);
+  Expand(e, u, beta, x);
+}
+
+template <typename Scalar, typename TieOffset>
+void Solve(const PathEditData& d, const Elimination& e, const Rows& rows, const StepSystem<Scalar>& s,
+           const Eigen::Ref<const Trajectory2>& handle_positions, const Eigen::Ref<const Trajectory2>& link_offsets,
+           TieOffset offset, const std::vector<Cplx>& edge_targets, bool check, double scale, CVec u,
+           std::vector<Cplx>& x, StepInfo& info) {
+  if (s.extended || s.use_qr)
+    SolveWith<LCplx>(d, e, rows, s, handle_positions, link_offsets, offset, edge_targets, check, scale, u, x, info);
+  else
+    SolveWith<Cplx>(d, e, rows, s, handle_positions, link_offsets, offset, edge_targets, check, scale, u, x, info);
+}
+
+// Step 1 from scratch, starting from the similarity z -> a z + b.
 void SolveShape(const PathEditData& d, const Eigen::Ref<const Trajectory2>& handle_positions,
                 const Eigen::Ref<const Trajectory2>& link_offsets, Cplx a, Cplx b, double scale, bool check,
                 std::vector<Cplx>& x1, StepInfo& info) {
@@ -1034,13 +1094,8 @@ void SolveShape(const PathEditData& d, const Eigen::Ref<const Trajectory2>& hand
     const Tie& tie = d.elim1.ties[t];
     return tie.kind == TieKind::kLink ? LCplx(C(link_offsets, tie.index)) : tie.rest;
   };
-  std::vector<LCplx> beta, c;
-  ComputeBeta(d, d.elim1, handle_positions, offset, beta);
-  if (check) CheckConsistency(d, d.elim1, handle_positions, offset, beta);
-  RowConstants(d.rows1, d.step1, beta, handle_positions, link_offsets, {}, c);
-  CVec u = Start(d.elim1, d.z, a, b, nullptr);
-  SolveStep(d.step1, c, scale, u, info);
-  Expand(d.elim1, u, beta, x1);
+  Solve(d, d.elim1, d.rows1, d.step1, handle_positions, link_offsets, offset, {}, check, scale,
+        Start(d.elim1, d.z, a, b, nullptr), x1, info);
 }
 
 void PrecomputeResponses(PathEditData& d) {
@@ -1141,13 +1196,15 @@ void PathEditSolve(const PathEditData& d, const Eigen::Ref<const Trajectory2>& h
   // Step 1: shape.
   std::vector<Cplx> x1;
   if (d.responses) {
-    std::vector<LCplx> beta;
-    auto offset = [&](int t) -> LCplx {
-      const Tie& tie = d.elim1.ties[t];
-      return tie.kind == TieKind::kLink ? LCplx(C(link_offsets, tie.index)) : tie.rest;
-    };
-    ComputeBeta(d, d.elim1, handle_positions, offset, beta);
-    CheckConsistency(d, d.elim1, handle_positions, offset, beta);
+    if (!d.elim1.extra_ties.empty() || !d.elim1.extra_handles.empty()) {
+      std::vector<LCplx> beta;
+      auto offset = [&](int t) -> LCplx {
+        const Tie& tie = d.elim1.ties[t];
+        return tie.kind == TieKind::kLink ? LCplx(C(link_offsets, tie.index)) : tie.rest;
+      };
+      ComputeBeta(d, d.elim1, handle_positions, offset, beta);
+      CheckConsistency(d, d.elim1, handle_positions, offset, beta);
+    }
     x1 = d.response_base;
     auto add = [&](const std::vector<Cplx>& resp, Cplx value) {
       if (value == Cplx(0.0)) return;
@@ -1182,13 +1239,13 @@ void PathEditSolve(const PathEditData& d, const Eigen::Ref<const Trajectory2>& h
   }
 
   // Step 2: each edge keeps its rest length along its step-1 direction.
-  std::vector<LCplx> edge_targets(d.edges.rows());
+  std::vector<Cplx> edge_targets(d.edges.rows());
   for (Eigen::Index e = 0; e < d.edges.rows(); ++e) {
     const int j = d.edges(e, 0), k = d.edges(e, 1);
     const Cplx dir = x1[k] - x1[j];
     const Cplx rest = d.z[k] - d.z[j];
     const double dl = std::sqrt(std::norm(dir)), rl = std::sqrt(std::norm(rest));
-    edge_targets[e] = LCplx(dl > 0 ? dir * (rl / dl) : rest);
+    edge_targets[e] = dl > 0 ? dir * (rl / dl) : rest;
   }
   auto offset2 = [&](int t) -> LCplx {
     const Tie& tie = d.elim2.ties[t];
@@ -1199,14 +1256,9 @@ void PathEditSolve(const PathEditData& d, const Eigen::Ref<const Trajectory2>& h
     }
     return tie.rest;
   };
-  std::vector<LCplx> beta2, c2;
   std::vector<Cplx> x2;
-  ComputeBeta(d, d.elim2, handle_positions, offset2, beta2);
-  CheckConsistency(d, d.elim2, handle_positions, offset2, beta2);
-  RowConstants(d.rows2, d.step2, beta2, handle_positions, link_offsets, edge_targets, c2);
-  CVec u2 = Start(d.elim2, d.z, 1.0, 0.0, &x1);
-  SolveStep(d.step2, c2, scale, u2, result.step2);
-  Expand(d.elim2, u2, beta2, x2);
+  Solve(d, d.elim2, d.rows2, d.step2, handle_positions, link_offsets, offset2, edge_targets, true, scale,
+        Start(d.elim2, d.z, 1.0, 0.0, &x1), x2, result.step2);
 
   result.positions.resize(n, 2);
   result.shape.resize(n, 2);
