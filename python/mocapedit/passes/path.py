@@ -157,7 +157,7 @@ class _Component:
 
     def _contradiction(self, exc) -> MocapEditError:
         p = self.problem
-        prims, stationary = [], []
+        prims, stationary, held = [], [], []
         for kind, index in exc.constraints:
             if kind == "handle" and p is not None and index < len(p.handle_refs) and p.handle_refs[index]:
                 prims.append(p.handle_refs[index])
@@ -166,6 +166,8 @@ class _Component:
             elif kind == "rigid" and p is not None and p.rigid_refs[index][0] == "stationary":
                 _, agent, r = p.rigid_refs[index]
                 stationary.append(next(a for a in self.inputs if a.path == agent).stationary_refs[r])
+            elif kind == "rigid" and p is not None:
+                held.extend(p.rigid_refs[index][1])
         if p is None or (not prims and not stationary):
             return MocapEditError(f"hard constraints contradict each other: {exc}")
         named = ", ".join(f"<{x}>" for x in sorted(set(prims)))
@@ -179,6 +181,9 @@ class _Component:
             prop = "position"
         else:
             extra = (" and the stationary range " + ", ".join(stationary) + " (which moves rigidly)") if stationary else ""
+            if held:
+                extra += (", which hold " + ", ".join(f"<{h}>" for h in held) + " at a single place (so it only "
+                          "moves by one translation)")
             message = (f"hard constraints {named}{extra} contradict each other: they cannot all hold (they miss by "
                        f"{exc.mismatch:g} stage units); make some of them soft")
             prop = "offset" if any(x not in positions for x in prims) else "position"
