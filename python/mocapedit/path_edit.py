@@ -168,54 +168,64 @@ class ComponentProblem:
         self.extra_handle_positions: list[np.ndarray] = []          # gauge pins
 
     def _group_terms(self, g: Group):
-        """Triangles and edges joining the members of a group at sampled shared times."""
+        """Triangles and edges joining the members of a group at every sampled shared time:
+        each member to its nearest neighbours there, its position in their local path frame
+        (step 1) and its distance to them (step 2)."""
         s = self.settings
         members = [self.agents[self.index[m]] for m in g.members if m in self.index]
         if g.stiffness <= 0 or len(members) < 2:
             return np.zeros((0, 3), np.int32), np.zeros((0, 2), np.int32), 0.0
         start = max(float(m.sample_times[0]) for m in members)
         end = min(float(m.sample_times[-1]) for m in members)
-        times = np.arange(start, end + 1e-9, s.group_step) if end >= start else np.zeros(0)
-        pairs = set()
-        for t in times:
-            frames, here = [], []
-            for m in members:
-                f = int(np.clip(np.searchsorted(m.sample_times, t - 1e-9), 0, m.frames - 1))
-                if abs(m.sample_times[f] - t) < 1e-6:
-                    frames.append((m, f))
-                    here.append(m.rest[f])
-            if len(frames) < 2:
-                continue
-            here = np.array(here)
-            d = np.linalg.norm(here[:, None] - here[None], axis=2)
-            np.fill_diagonal(d, np.inf)
-            k = min(s.group_neighbours, len(frames) - 1)
-            near = np.argsort(d, axis=1, kind="stable")[:, :k]
-            for i in range(len(frames)):
-                for j in near[i]:
-                    a, b = (i, int(j)) if i < j else (int(j), i)
-                    (ma, fa), (mb, fb) = frames[a], frames[b]
-                    pairs.add((self.vertex(ma.path, fa), self.vertex(mb.path, fb)))
-        tri, edg = [], []
-        for va, vb in sorted(pairs):
-            edg.append((va, vb))
-            for v, w in ((va, vb), (vb, va)):
-                frame = self._frame_partner(w)
-                if frame is not None and np.linalg.norm(self.rest[v] - self.rest[w]) > 0:
-                    tri.append((v, w, frame))
-        # Weight per sampled time, so the formation's pull does not depend on the sampling.
-        weight = g.stiffness * s.group_step / max(1, s.group_neighbours)
-        return (np.array(tri, np.int32).reshape(-1, 3), np.array(edg, np.int32).reshape(-1, 2), weight)
+        if end < start:
+            return np.zeros((0, 3), np.int32), np.zeros((0, 2), np.int32), 0.0
+        times = np.arange(start, end + 1e-9, s.group_step)
+        # (M,T) frame of each member at each time (-1 where it has no sample there).
+        frames = np.empty((len(members), len(times)), np.int64)
+        for k, m in enumerate(members):
+            f = np.clip(np.searchsorted(m.sample_times, times - 1e-9), 0, m.frames - 1)
+            frames[k] = np.where(np.abs(m.sample_times[f] - times) < 1e-6, f, -1)
+        ok = (frames >= 0).all(axis=0)
+        frames = frames[:, ok]
+        vert = frames + np.array([self.offset[self.index[m.path]] for m in members])[:, None]   # (M,T)
+        k = min(s.group_neighbours, len(members) - 1)
+        pairs = []
+        for chunk in range(0, vert.shape[1], 256):   # bounded memory: (M, M, 256) distances
+            v = vert[:, chunk:chunk + 256]
+            p = self.rest[v]                                                       # (M,t,2)
+            d = np.linalg.norm(p[:, None] - p[None], axis=-1)                      # (M,M,t)
+            d[np.arange(len(members)), np.arange(len(members))] = np.inf
+            near = np.argsort(d, axis=1, kind="stable")[:, :k]                     # (M,k,t)
+            a = np.broadcast_to(v[:, None, :], near.shape)
+            b = np.take_along_axis(np.broadcast_to(v[None], (len(members),) + v.shape), near, axis=1)
+            pairs.append(np.stack([np.minimum(a, b).ravel(), np.maximum(a, b).ravel()], axis=1))
+        edg = np.unique(np.concatenate(pairs), axis=0)
+        partner = self._frame_partners()
+        tri = []
+        for v, w in ((edg[:, 0], edg[:, 1]), (edg[:, 1], edg[:, 0])):
+            f = partner[w]
+            keep = (f >= 0) & (np.linalg.norm(self.rest[v] - self.rest[w], axis=1) > 0)
+            tri.append(np.stack([v[keep], w[keep], f[keep]], axis=1))
+        # A weight per sampled time, so the formation's pull does not depend on the sampling.
+        weight = g.stiffness * s.group_step
+        return np.concatenate(tri).astype(np.int32), edg.astype(np.int32), weight
 
-    def _frame_partner(self, v: int) -> int | None:
-        """A vertex of the same agent at least min_baseline from v (later frames first)."""
-        i = int(np.searchsorted(self.offset, v, side="right") - 1)
-        lo, hi = int(self.offset[i]), int(self.offset[i + 1])
-        for step in range(1, hi - lo):
-            for w in (v + step, v - step):
-                if lo <= w < hi and np.linalg.norm(self.rest[w] - self.rest[v]) >= self.settings.min_baseline:
-                    return w
-        return None
+    def _frame_partners(self) -> np.ndarray:
+        """(V,) per vertex: the nearest later frame of the same agent at least min_baseline
+        away (an earlier one near the end; -1 if none), to frame a group triangle."""
+        out = np.full(len(self.rest), -1, np.int64)
+        for i, a in enumerate(self.agents):
+            lo = int(self.offset[i])
+            arc = _solver.cumulative_arc_length(np.ascontiguousarray(a.rest))
+            idx = np.arange(a.frames)
+            ahead = np.searchsorted(arc, arc + self.settings.min_baseline, side="left")
+            behind = np.searchsorted(arc, arc - self.settings.min_baseline, side="right") - 1
+            for cand in (ahead, behind):
+                c = np.clip(cand, 0, a.frames - 1)
+                far = np.linalg.norm(a.rest[c] - a.rest, axis=1) >= self.settings.min_baseline
+                take = (out[lo:lo + a.frames] < 0) & far & (cand >= 0) & (cand < a.frames) & (c != idx)
+                out[lo:lo + a.frames][take] = c[take] + lo
+        return out
 
     # ---- the freedom the constraints leave -------------------------------------------
 
@@ -332,15 +342,10 @@ class ComponentProblem:
                 rows.append(row)
         if not rows:
             return set(range(len(self.agents)))
-        m = np.array(rows)
-        scale = np.abs(m).max(axis=0)
-        m = m / np.where(scale > 0, scale, 1.0)
-        _, sv, vh = np.linalg.svd(m)
-        rank = int(np.sum(sv > 1e-9 * sv[0])) if len(sv) else 0
-        null = vh[rank:]
+        moving = _null_columns(np.array(rows))
         free = set()
         for b, body in enumerate(bodies):
-            if np.abs(null[:, start[b]:start[b + 1]]).max(initial=0.0) > 1e-9:
+            if moving[start[b]:start[b + 1]].any():
                 free.update(body)
         return free
 
@@ -421,6 +426,37 @@ class ComponentProblem:
                                                                        else None),
                                       range_turn=turn)
         return out
+
+
+def _null_columns(m: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+    """(C,) bool: the columns some null vector of m uses (reduced row echelon form by
+    Gaussian elimination with partial pivoting; the matrices here are small, and LAPACK's
+    thread pool costs more than the work)."""
+    a = np.array(m, dtype=complex)
+    scale = np.abs(a).max(axis=0)
+    a /= np.where(scale > 0, scale, 1.0)
+    rows, cols = a.shape
+    pivots, r = [], 0
+    for c in range(cols):
+        if r == rows:
+            break
+        k = r + int(np.argmax(np.abs(a[r:, c])))
+        if abs(a[k, c]) <= tol:
+            continue
+        a[[r, k]] = a[[k, r]]
+        a[r] /= a[r, c]
+        others = np.abs(a[:, c]) > 0
+        others[r] = False
+        a[others] -= np.outer(a[others, c], a[r])
+        pivots.append(c)
+        r += 1
+    free = np.ones(cols, dtype=bool)
+    free[pivots] = False
+    used = free.copy()
+    for row, c in enumerate(pivots):
+        if np.abs(a[row, free]).max(initial=0.0) > tol:
+            used[c] = True
+    return used
 
 
 def rest_heading(a: AgentInput) -> np.ndarray:

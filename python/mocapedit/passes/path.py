@@ -134,7 +134,7 @@ class _Component:
                 self.handles.extend(path_edit.Handle(a.path, f, a.rest[f], CURVE_ANCHOR_WEIGHT, curve) for f in frames)
         self.settings = path_edit.Settings(
             min_baseline=info.metres(MIN_BASELINE_M), rigid_min_extent=info.metres(RIGID_MIN_EXTENT_M),
-            still=info.metres(STILL_M), group_step=max(1.0, float(data.settings.sample_step)) * 4.0)
+            still=info.metres(STILL_M), group_step=max(1.0, float(data.settings.sample_step)))
         self.result: path_edit.ComponentResult | None = None
         self.problem: path_edit.ComponentProblem | None = None
 
