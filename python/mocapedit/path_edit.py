@@ -121,12 +121,15 @@ class ComponentProblem:
 
     def __init__(self, agents: list[AgentInput], handles: list[Handle], links: list[Link],
                  groups: list[Group], settings: Settings, precompute_responses: bool = False):
-        self.agents = sorted(agents, key=lambda a: a.path)
-        self.index = {a.path: i for i, a in enumerate(self.agents)}
-        self.offset = np.concatenate([[0], np.cumsum([a.frames for a in self.agents])]).astype(np.int64)
+        self.full = {a.path: a for a in agents}
         self.handles, self.links, self.groups = list(handles), list(links), list(groups)
         self.settings = settings
         self.notes: list[str] = []
+        # Group members are solved on key frames; the frames between follow (see _keys).
+        self.keys = self._keys()
+        self.agents = [self._reduced(self.full[p]) for p in sorted(self.full)]
+        self.index = {a.path: i for i, a in enumerate(self.agents)}
+        self.offset = np.concatenate([[0], np.cumsum([a.frames for a in self.agents])]).astype(np.int64)
         self.rest = np.concatenate([a.rest for a in self.agents]).astype(np.float64)
         self._build_terms()
         self._resolve_freedom()
@@ -135,9 +138,84 @@ class ComponentProblem:
             self.handle_vertex, self.handle_weight, self.link_vertex, self.link_weight,
             settings.rigid_min_extent, precompute_responses=precompute_responses)
 
+    # ---- key frames --------------------------------------------------------------------
+
+    def _keys(self) -> dict[str, np.ndarray]:
+        """Key frames of each group member: the group's sampled shared times, constrained
+        frames, stationary ranges (and the frames around them), the ends, and every frame of
+        a stretch too short to interpolate across. Other agents keep every frame.
+
+        Kwon et al. build the group mesh on sampled frames too; here the frames between two
+        keys follow them as one similarity, so they keep their shape and their sway."""
+        s = self.settings
+        out = {}
+        members = {m for g in self.groups if g.stiffness > 0 for m in g.members if m in self.full}
+        for g in self.groups:
+            if g.stiffness <= 0:
+                continue
+            inside = [self.full[m] for m in g.members if m in self.full]
+            start = max(float(m.sample_times[0]) for m in inside)
+            end = min(float(m.sample_times[-1]) for m in inside)
+            times = np.arange(start, end + 1e-9, s.group_step) if end >= start else np.zeros(0)
+            for m in inside:
+                f = np.clip(np.searchsorted(m.sample_times, times - 1e-9), 0, m.frames - 1)
+                hit = f[np.abs(m.sample_times[f] - times) < 1e-6]
+                out.setdefault(m.path, set()).update(int(x) for x in hit)
+        for path in sorted(members):
+            a = self.full[path]
+            key = np.zeros(a.frames, bool)
+            key[sorted(out.get(path, ()))] = True
+            key[0] = key[-1] = True
+            for h in self.handles:
+                if h.agent == path and h.weight > 0:
+                    key[h.frame] = True
+            for k in self.links:
+                if k.weight > 0:
+                    key[k.frame] |= k.agent == path
+                    key[k.target_frame] |= k.target == path
+            for first, last in a.stationary:
+                key[max(first - 1, 0):min(last + 2, a.frames)] = True
+            at = np.flatnonzero(key)
+            short = np.linalg.norm(a.rest[at[1:]] - a.rest[at[:-1]], axis=1) < s.min_baseline
+            for lo, hi in zip(at[:-1][short], at[1:][short]):
+                key[lo:hi] = True
+            out[path] = np.flatnonzero(key)
+        return out
+
+    def _reduced(self, a: AgentInput) -> AgentInput:
+        keys = self.keys.get(a.path)
+        if keys is None:
+            return a
+        where = np.searchsorted(keys, [f for f, _ in a.stationary] + [l for _, l in a.stationary])
+        n = len(a.stationary)
+        return AgentInput(path=a.path, rest=a.rest[keys], source=a.source[keys], source_heading=a.source_heading[keys],
+                          stationary=[(int(where[r]), int(where[n + r])) for r in range(n)],
+                          stationary_refs=a.stationary_refs,
+                          rest_turn=a.rest_turn, sample_times=a.sample_times[keys])
+
+    def _expand(self, path: str, g: np.ndarray) -> np.ndarray:
+        """The (F,2) path of an agent from its key frames: each frame between two keys is
+        carried by the similarity that takes the keys' rest positions to their new ones."""
+        keys = self.keys.get(path)
+        a = self.full[path]
+        if keys is None:
+            return g
+        z = a.rest[:, 0] + 1j * a.rest[:, 1]
+        x = np.empty(a.frames, complex)
+        x[keys] = g[:, 0] + 1j * g[:, 1]
+        k1 = np.searchsorted(keys, np.arange(a.frames))
+        between = np.flatnonzero((k1 > 0) & (k1 < len(keys)) & ~np.isin(np.arange(a.frames), keys))
+        lo, hi = keys[k1[between] - 1], keys[k1[between]]
+        gamma = (z[between] - z[lo]) / (z[hi] - z[lo])
+        x[between] = x[lo] + gamma * (x[hi] - x[lo])
+        return np.stack([x.real, x.imag], axis=1)
+
     # ---- structure ---------------------------------------------------------------------
 
     def vertex(self, agent: str, frame: int) -> int:
+        keys = self.keys.get(agent)
+        if keys is not None:
+            frame = int(np.searchsorted(keys, frame))
         return int(self.offset[self.index[agent]] + frame)
 
     def _build_terms(self) -> None:
@@ -206,8 +284,7 @@ class ComponentProblem:
             f = partner[w]
             keep = (f >= 0) & (np.linalg.norm(self.rest[v] - self.rest[w], axis=1) > 0)
             tri.append(np.stack([v[keep], w[keep], f[keep]], axis=1))
-        # A weight per sampled time, so the formation's pull does not depend on the sampling.
-        weight = g.stiffness * s.group_step
+        weight = g.stiffness
         return np.concatenate(tri).astype(np.int32), edg.astype(np.int32), weight
 
     def _frame_partners(self) -> np.ndarray:
@@ -365,7 +442,7 @@ class ComponentProblem:
             if k.space == "target":
                 h = (headings or {}).get(k.target)
                 a = float(h[k.target_frame]) if h is not None else \
-                    float(self.agents[self.index[k.target]].source_heading[k.target_frame])
+                    float(self.full[k.target].source_heading[k.target_frame])
                 c, s = np.cos(a), np.sin(a)
                 o = np.array([c * o[0] - s * o[1], s * o[0] + c * o[1]])
             out.append(o)
@@ -408,8 +485,9 @@ class ComponentProblem:
             if ref[0] == "stationary":
                 turn_of[(ref[1], ref[2])] = float(angle)
         out = {}
-        for i, a in enumerate(self.agents):
-            g = positions[self.offset[i]:self.offset[i + 1]].copy()
+        for i, reduced in enumerate(self.agents):
+            a = self.full[reduced.path]
+            g = self._expand(a.path, positions[self.offset[i]:self.offset[i + 1]].copy())
             rest_turn = a.rest_turn if a.rest_turn is not None else np.zeros(len(a.stationary))
             if i in self.translate_only:
                 # Moved by one translation: the heading is the rest path's.

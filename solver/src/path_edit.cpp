@@ -1,5 +1,6 @@
 #include "mocapedit/path_edit.h"
 
+#include <Eigen/CholmodSupport>
 #include <Eigen/SPQRSupport>
 #include <Eigen/Sparse>
 #include <Eigen/SparseCholesky>
@@ -31,8 +32,12 @@ constexpr double kConsistencyAbsolute = 1e-7;
 constexpr double kConsistencyRelative = 1e-12;
 // Rigid-motion shortcut: constraints met by one rigid motion to this relative tolerance.
 constexpr double kRigidTolerance = 1e-11;
-// Normal matrices whose bandwidth is at most this are factored in their natural order.
+// Normal matrices whose bandwidth is at most this are factored in their natural order
+// (a simplicial LDLT); larger wide ones (group meshes) by CHOLMOD's supernodal Cholesky,
+// which orders them better and factors dense blocks with BLAS.
 constexpr int kNaturalBandwidth = 24;
+constexpr int kSupernodalColumns = 2000;
+constexpr int kSupernodalFill = 100;  // factor entries per column above which fronts are dense
 // LDLT pivots below this fraction of the largest mean a singular system.
 constexpr double kSingularPivot = 1e-13;
 
@@ -120,6 +125,12 @@ struct Elimination {
 // ---------------------------------------------------------------------------------------
 // A factored normal matrix with its rectangular rows for refinement.
 
+// A simplicial LDLT that also tells the size of its factor after the symbolic analysis.
+template <typename Sparse, typename Ordering>
+struct Ldlt : Eigen::SimplicialLDLT<Sparse, Eigen::Lower, Ordering> {
+  Eigen::Index FactorNonZeros() const { return this->m_nonZerosPerCol.sum(); }
+};
+
 template <typename Scalar>
 struct StepSystem {
   using Sparse = Eigen::SparseMatrix<Scalar, Eigen::ColMajor, int>;
@@ -134,10 +145,11 @@ struct StepSystem {
   // Rows whose constant part depends on beta (they touch tied or fixed vertices).
   std::vector<int> beta_rows;
   Sparse normal;  // lower triangle of A^H A
-  Eigen::SimplicialLDLT<Sparse, Eigen::Lower, Eigen::NaturalOrdering<int>> natural;
-  Eigen::SimplicialLDLT<Sparse, Eigen::Lower, Eigen::AMDOrdering<int>> amd;
+  Ldlt<Sparse, Eigen::NaturalOrdering<int>> natural;
+  Ldlt<Sparse, Eigen::AMDOrdering<int>> amd;
   bool use_amd = false;
   bool use_qr = false;
+  std::unique_ptr<Eigen::CholmodSupernodalLLT<Sparse, Eigen::Lower>> supernodal;
   std::string solver = "none";
   double condition = 0;  // estimate of cond(A^H A)
   // Residuals need extended precision only when cond * eps is not negligible.
@@ -149,6 +161,12 @@ struct StepSystem {
   // interleaved (x[i * k + c]).
   template <typename T>
   void SolveInterleaved(T* x, int k) const {
+    if (supernodal) {
+      Eigen::Map<Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> m(x, cols, k);
+      Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic> b = m;
+      m = supernodal->solve(b);
+      return;
+    }
     const auto& l = use_amd ? amd.matrixL().nestedExpression() : natural.matrixL().nestedExpression();
     const auto& dg = use_amd ? amd.vectorD() : natural.vectorD();
     const int n = cols;
@@ -651,8 +669,15 @@ void Factor(StepSystem<Scalar>& s, bool force_qr) {
   }
   bool ok;
   Eigen::VectorXd diag;
-  if (s.use_amd) {
-    s.amd.compute(s.normal);
+  if (s.use_amd) s.amd.analyzePattern(s.normal);
+  if (s.use_amd && s.cols >= kSupernodalColumns && s.amd.FactorNonZeros() > kSupernodalFill * s.cols) {
+    s.supernodal = std::make_unique<Eigen::CholmodSupernodalLLT<typename StepSystem<Scalar>::Sparse, Eigen::Lower>>();
+    s.supernodal->compute(s.normal);
+    ok = s.supernodal->info() == Eigen::Success;   // CHOLMOD fails unless positive definite
+    if (ok) diag = Eigen::VectorXd::Ones(1);
+    if (!ok) s.supernodal.reset();
+  } else if (s.use_amd) {
+    s.amd.factorize(s.normal);
     ok = s.amd.info() == Eigen::Success;
     if (ok) diag = s.amd.vectorD().real();
   } else {
@@ -673,7 +698,7 @@ void Factor(StepSystem<Scalar>& s, bool force_qr) {
   }
   s.condition = EstimateCondition(s);
   s.extended = s.condition * kEps > 1e-9;
-  s.solver = s.use_amd ? "LDLT (AMD)" : "LDLT";
+  s.solver = s.supernodal ? "CHOLMOD supernodal" : s.use_amd ? "LDLT (AMD)" : "LDLT";
   if (force_qr || s.condition * kEps > kLdltTrust) {
     s.use_qr = true;
     s.solver = force_qr ? "SPQR" : "SPQR (ill-conditioned)";
@@ -877,6 +902,21 @@ void AppendChainTerms(const Eigen::Ref<const Trajectory2>& rest, int first, int 
   for (int k = 0; k < ne; ++k) edges.row(e0 + k) << first + k, first + k + 1;
 }
 
+namespace {
+
+// Soft handles and links: rows of both steps.
+void AddSoftRows(const PathEditProblem& p, const PathEditData& d, Rows& rows) {
+  for (Eigen::Index h = 0; h < p.handles.size(); ++h)
+    if (d.handle_weights[h] != kInf && d.handle_weights[h] > 0)
+      rows.Add({{p.handles[h], 1.0L}}, TargetKind::kHandle, static_cast<int>(h), d.handle_weights[h]);
+  for (Eigen::Index l = 0; l < p.links.rows(); ++l)
+    if (d.link_weights[l] != kInf && d.link_weights[l] > 0)
+      rows.Add({{p.links(l, 0), 1.0L}, {p.links(l, 1), -1.0L}}, TargetKind::kLink, static_cast<int>(l),
+               d.link_weights[l]);
+}
+
+}  // namespace
+
 void PathEditPrecompute(const PathEditProblem& p, std::shared_ptr<PathEditData>& out) {
   auto d = std::make_shared<PathEditData>();
   const int n = static_cast<int>(p.rest.rows());
@@ -952,13 +992,7 @@ void PathEditPrecompute(const PathEditProblem& p, std::shared_ptr<PathEditData>&
     const LCplx c = (d->zl[i] - d->zl[j]) / (d->zl[k] - d->zl[j]);
     d->rows1.Add({{i, 1.0L}, {j, c - 1.0L}, {k, -c}}, TargetKind::kZero, static_cast<int>(t), tw[t]);
   }
-  for (Eigen::Index h = 0; h < p.handles.size(); ++h)
-    if (d->handle_weights[h] != kInf && d->handle_weights[h] > 0)
-      d->rows1.Add({{p.handles[h], 1.0L}}, TargetKind::kHandle, static_cast<int>(h), d->handle_weights[h]);
-  for (Eigen::Index l = 0; l < p.links.rows(); ++l)
-    if (d->link_weights[l] != kInf && d->link_weights[l] > 0)
-      d->rows1.Add({{p.links(l, 0), 1.0L}, {p.links(l, 1), -1.0L}}, TargetKind::kLink, static_cast<int>(l),
-                   d->link_weights[l]);
+  AddSoftRows(p, *d, d->rows1);
   // Step 2 rows: edges, then soft handles and links.
   for (Eigen::Index e = 0; e < p.edges.rows(); ++e) {
     const int j = p.edges(e, 0), k = p.edges(e, 1);
@@ -970,13 +1004,7 @@ void PathEditPrecompute(const PathEditProblem& p, std::shared_ptr<PathEditData>&
     if (ew[e] == 0 || j == k || same_range({j, k})) continue;
     d->rows2.Add({{k, 1.0L}, {j, -1.0L}}, TargetKind::kEdge, static_cast<int>(e), ew[e]);
   }
-  for (Eigen::Index h = 0; h < p.handles.size(); ++h)
-    if (d->handle_weights[h] != kInf && d->handle_weights[h] > 0)
-      d->rows2.Add({{p.handles[h], 1.0L}}, TargetKind::kHandle, static_cast<int>(h), d->handle_weights[h]);
-  for (Eigen::Index l = 0; l < p.links.rows(); ++l)
-    if (d->link_weights[l] != kInf && d->link_weights[l] > 0)
-      d->rows2.Add({{p.links(l, 0), 1.0L}, {p.links(l, 1), -1.0L}}, TargetKind::kLink, static_cast<int>(l),
-                   d->link_weights[l]);
+  AddSoftRows(p, *d, d->rows2);
 
   BuildElimination(*d, true, d->elim1);
   BuildElimination(*d, false, d->elim2);

@@ -410,3 +410,47 @@ TEST(PathEdit, SolvesFromSeveralThreadsAgree) {
   EXPECT_EQ(out[1].positions, out[3].positions);
   EXPECT_GT((out[0].positions - out[1].positions).cwiseAbs().maxCoeff(), 1.0);
 }
+
+TEST(PathEdit, WideMeshesUseTheSupernodalFactorAndAgreeWithQR) {
+  // A block of 8 x 5 walkers joined at every frame to their grid neighbours, as a group
+  // mesh is: a 3D-like structure whose factor has dense fronts.
+  const int rows = 8, cols = 5, frames = 80;
+  const int n = rows * cols * frames;
+  Trajectory2 z(n, 2);
+  PathEditProblem p;
+  p.triangles.resize(0, 3);
+  p.edges.resize(0, 2);
+  auto vertex = [&](int r, int c, int f) { return (r * cols + c) * frames + f; };
+  for (int r = 0; r < rows; ++r)
+    for (int c = 0; c < cols; ++c)
+      for (int f = 0; f < frames; ++f) z.row(vertex(r, c, f)) << 1.0 * c + 0.03 * std::sin(f / 4.0), 0.06 * f - 1.2 * r;
+  p.rest = z;
+  for (int a = 0; a < rows * cols; ++a) mocapedit::AppendChainTerms(z, a * frames, frames, 1e-3, p.triangles, p.edges);
+  std::vector<std::array<int, 3>> tri;
+  std::vector<std::array<int, 2>> edg;
+  for (int r = 0; r < rows; ++r)
+    for (int c = 0; c < cols; ++c)
+      for (int f = 0; f + 1 < frames; ++f)
+        for (auto [dr, dc] : {std::pair{1, 0}, std::pair{0, 1}}) {
+          if (r + dr >= rows || c + dc >= cols) continue;
+          const int a = vertex(r, c, f), b = vertex(r + dr, c + dc, f);
+          tri.push_back({a, b, b + 1});
+          tri.push_back({b, a, a + 1});
+          edg.push_back({a, b});
+        }
+  const Eigen::Index t0 = p.triangles.rows(), e0 = p.edges.rows();
+  p.triangles.conservativeResize(t0 + static_cast<Eigen::Index>(tri.size()), 3);
+  p.edges.conservativeResize(e0 + static_cast<Eigen::Index>(edg.size()), 2);
+  for (size_t k = 0; k < tri.size(); ++k) p.triangles.row(t0 + k) << tri[k][0], tri[k][1], tri[k][2];
+  for (size_t k = 0; k < edg.size(); ++k) p.edges.row(e0 + k) << edg[k][0], edg[k][1];
+  SetHandles(p, {vertex(0, 0, 0), vertex(0, 0, 40), vertex(0, 0, 79)});
+  Trajectory2 h = Rows(z, p.handles);
+  h.row(2) << 2.5, h(1, 1);   // turn the second half of the leader's walk
+  const PathEditResult r = Solve(p, h);
+  EXPECT_EQ(r.step1.solver, "CHOLMOD supernodal");
+  PathEditProblem q = p;
+  q.force_qr = true;
+  const PathEditResult qr = Solve(q, h);
+  EXPECT_LE((r.positions - qr.positions).cwiseAbs().maxCoeff(), 1e-8);
+  EXPECT_LE((Rows(r.positions, p.handles) - h).cwiseAbs().maxCoeff(), 1e-9);
+}

@@ -33,6 +33,8 @@ CURVE_ANCHOR_S = 0.5
 CURVE_ANCHOR_WEIGHT = 0.05
 RIGID_MIN_EXTENT_M = 0.02  # smaller stationary ranges turn with the path around them
 STILL_M = 1e-5             # as trajectory.headings: tangents shorter than this stand still
+#: A group's mesh joins its members this often (seconds); the frames between follow.
+GROUP_SAMPLE_S = 0.5
 
 
 def _validate(ctx: SolveContext) -> None:
@@ -134,7 +136,7 @@ class _Component:
                 self.handles.extend(path_edit.Handle(a.path, f, a.rest[f], CURVE_ANCHOR_WEIGHT, curve) for f in frames)
         self.settings = path_edit.Settings(
             min_baseline=info.metres(MIN_BASELINE_M), rigid_min_extent=info.metres(RIGID_MIN_EXTENT_M),
-            still=info.metres(STILL_M), group_step=max(1.0, float(data.settings.sample_step)))
+            still=info.metres(STILL_M), group_step=max(1.0, round(GROUP_SAMPLE_S * fps)))
         self.result: path_edit.ComponentResult | None = None
         self.problem: path_edit.ComponentProblem | None = None
 
