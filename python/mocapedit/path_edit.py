@@ -10,9 +10,12 @@ per frame:
 - each stationary range moves rigidly, turned by the rotation the solve gives it;
 - position constraints are handles, relative constraints links (hard ones eliminated,
   so they hold exactly);
-- a group joins its members' paths at sampled shared times: each member is linked to its
-  nearest neighbours there, its position kept in their local path frames (step 1) and its
-  distance to them kept (step 2), weighted by the group's stiffness (Kwon et al. 2008).
+- a group joins its members' paths at sampled shared times (every ``group_step`` time
+  codes): each member is linked to its nearest neighbours there, its position kept in
+  their local path frames (step 1) and its distance to them kept (step 2), weighted by the
+  group's stiffness (Kwon et al. 2008). Group members are solved on key frames only (the
+  sampled times, constrained frames, stationary ranges, the ends); each frame between two
+  keys follows them as one similarity, so it keeps its shape and sway.
 
 The constraints leave some motions free; these are resolved so that an edit moves no more
 than it must:
@@ -94,7 +97,7 @@ class Settings:
     min_baseline: float                   # stage units: shortest local frame of a triangle
     rigid_min_extent: float               # stage units: smaller stationary ranges turn with their ends
     still: float                          # stage units: tangent steps below this stand still
-    group_step: float = 4.0               # time codes between the sampled times of a group mesh
+    group_step: float = 12.0              # time codes between the sampled times of a group mesh
     group_neighbours: int = 3
 
 
@@ -363,7 +366,7 @@ class ComponentProblem:
         if not any(h.weight > 0 for h in self.handles) and len(self.links):
             self.pinned = int(self.link_vertex[0, 0])
             self._append_handle(self.pinned, self.rest[self.pinned], HARD, None)
-        kernel = self._similarity_kernel(bodies)
+        kernel = set() if self._pinned_down(bodies) else self._similarity_kernel(bodies)
         if kernel:
             for body, anchor in zip(bodies, anchors):
                 if len(anchor) == 2 and any(i in kernel for i in body):
@@ -378,6 +381,18 @@ class ComponentProblem:
                                   "between the two frames it is held at")
             if self._similarity_kernel(bodies):
                 self.notes.append("the constraints leave some agents free to move; add a position constraint")
+
+    def _pinned_down(self, bodies: list[list[int]]) -> bool:
+        """True when every body carries hard handles at two or more places and no link ties
+        bodies together: nothing is left free (the common case, decided without analysis)."""
+        if len(self.link_vertex):
+            return False
+        owner = np.searchsorted(self.offset, self.handle_vertex, side="right") - 1
+        for body in bodies:
+            mine = np.isin(owner, body) & np.isinf(self.handle_weight)
+            if len({tuple(p) for p in self.rest[self.handle_vertex[mine]]}) < 2:
+                return False
+        return True
 
     def _append_handle(self, v: int, position: np.ndarray, weight: float, ref) -> None:
         self.handle_vertex = np.append(self.handle_vertex, np.int32(v)).astype(np.int32)

@@ -269,11 +269,13 @@ void CheckIndex(int v, int n, const char* what, Eigen::Index i) {
 
 Eigen::VectorXd Weights(const Eigen::VectorXd& w, Eigen::Index n, const char* what, bool allow_inf) {
   if (w.size() == 0) return Eigen::VectorXd::Ones(n);
-  Require(w.size() == n, std::string(what) + " weights: expected " + std::to_string(n) + ", got " +
+  if (w.size() != n)
+    Require(false, std::string(what) + " weights: expected " + std::to_string(n) + ", got " +
                              std::to_string(w.size()));
   for (Eigen::Index i = 0; i < n; ++i) {
     const bool ok = w[i] >= 0 && (std::isfinite(w[i]) || (allow_inf && w[i] == kInf));
-    Require(ok, std::string(what) + " " + std::to_string(i) + " has weight " + std::to_string(w[i]) +
+    if (!ok)
+      Require(false, std::string(what) + " " + std::to_string(i) + " has weight " + std::to_string(w[i]) +
                     (allow_inf ? " (expected >= 0, or +inf for hard)" : " (expected a finite value >= 0)"));
   }
   return w;
@@ -945,15 +947,16 @@ void PathEditPrecompute(const PathEditProblem& p, std::shared_ptr<PathEditData>&
   for (Eigen::Index h = 0; h < p.handles.size(); ++h) CheckIndex(p.handles[h], n, "handle", h);
   for (Eigen::Index l = 0; l < p.links.rows(); ++l) {
     for (int c = 0; c < 2; ++c) CheckIndex(p.links(l, c), n, "link", l);
-    Require(p.links(l, 0) != p.links(l, 1), "link " + std::to_string(l) + " ties a vertex to itself");
+    if (p.links(l, 0) == p.links(l, 1)) Require(false, "link " + std::to_string(l) + " ties a vertex to itself");
   }
   d->rigid = p.rigid;
   d->rigid_of.assign(n, -1);
   for (size_t r = 0; r < d->rigid.size(); ++r) {
-    Require(!d->rigid[r].vertices.empty(), "rigid range " + std::to_string(r) + " is empty");
+    if (d->rigid[r].vertices.empty()) Require(false, "rigid range " + std::to_string(r) + " is empty");
     for (int v : d->rigid[r].vertices) {
       CheckIndex(v, n, "rigid range", static_cast<Eigen::Index>(r));
-      Require(d->rigid_of[v] < 0, "rigid ranges " + std::to_string(d->rigid_of[v] < 0 ? r : d->rigid_of[v]) +
+      if (d->rigid_of[v] >= 0)
+        Require(false, "rigid ranges " + std::to_string(d->rigid_of[v]) +
                                       " and " + std::to_string(r) + " share vertex " + std::to_string(v));
       d->rigid_of[v] = static_cast<int>(r);
     }
@@ -1153,10 +1156,12 @@ void PrecomputeResponses(PathEditData& d) {
 void PathEditSolve(const PathEditData& d, const Eigen::Ref<const Trajectory2>& handle_positions,
                    const Eigen::Ref<const Trajectory2>& link_offsets, PathEditResult& result) {
   const int n = d.vertices;
-  Require(handle_positions.rows() == d.handles.size(),
+  if (handle_positions.rows() != d.handles.size())
+    Require(false,
           "expected " + std::to_string(d.handles.size()) + " handle positions, got " +
               std::to_string(handle_positions.rows()));
-  Require(link_offsets.rows() == d.links.rows(), "expected " + std::to_string(d.links.rows()) +
+  if (link_offsets.rows() != d.links.rows())
+    Require(false, "expected " + std::to_string(d.links.rows()) +
                                                      " link offsets, got " + std::to_string(link_offsets.rows()));
   Require(handle_positions.allFinite() && link_offsets.allFinite(), "handle positions and link offsets must be finite");
   const int nr = static_cast<int>(d.rigid.size());
