@@ -2,11 +2,16 @@
 
 #include "view_checks.h"
 
+#include <algorithm>
+#if defined(__SSE__)
+#include <xmmintrin.h>
+#endif
 #include <cmath>
-#include <cstdint>
 #include <cstring>
 #include <stdexcept>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace mocapedit {
 namespace {
@@ -34,13 +39,26 @@ struct SlerpWeights {
   float pd[kTerms + 1] = {};   // P_i(1 - t)
 };
 
-void Coefficients(double t, float* p) {
-  double acc = 1.0;
+// P_i(t) = P_{i-1}(t) * (u_i t^2 - v_i) with u_i = 1 / (i (2i + 1)), v_i = i / (2i + 1).
+struct EberlyTable {
+  float u[kTerms + 1] = {}, v[kTerms + 1] = {};
+  constexpr EberlyTable() {
+    for (int k = 1; k <= kTerms; ++k) {
+      const double scale = k == kTerms ? kMu : 1.0;
+      u[k] = static_cast<float>(scale / (k * (2.0 * k + 1.0)));
+      v[k] = static_cast<float>(scale * k / (2.0 * k + 1.0));
+    }
+  }
+};
+constexpr EberlyTable kEberly;
+
+// At t = 1 the first factor is u_1 - v_1 = 0 exactly, so P_i(1) = (1, 0, 0, ...).
+void Coefficients(float t, float* p) {
+  float acc = 1.f;
   p[0] = 1.f;
   for (int k = 1; k <= kTerms; ++k) {
-    const double scale = k == kTerms ? kMu : 1.0;
-    acc *= scale * (t * t - double(k) * double(k)) / (double(k) * (2.0 * k + 1.0));
-    p[k] = static_cast<float>(acc);
+    acc *= kEberly.u[k] * (t * t) - kEberly.v[k];
+    p[k] = acc;
   }
 }
 
@@ -53,55 +71,144 @@ SlerpWeights MakeSlerpWeights(float t) {
   return w;
 }
 
-inline float Horner(const float* p, float xm1) {
-  float c = p[kTerms];
-  for (int i = kTerms - 1; i >= 0; --i) c = c * xm1 + p[i];
-  return c;
+// ---- the rotation kernel, on lanes of joints ---------------------------------------
+//
+// Quaternions are gathered from the (x, y, z, w) arrays into lanes, one vector per component
+// and four joints per vector, so the polynomial (a long chain of dependent multiply-adds for
+// one joint) runs on kLanes joints side by side. F4 is a GCC/Clang vector type: plain
+// arithmetic on it compiles to SIMD on every target.
+typedef float F4 __attribute__((vector_size(16)));
+typedef int I4 __attribute__((vector_size(16)));
+constexpr int kVectors = 4;
+constexpr int kLanes = 4 * kVectors;
+
+inline F4 Sqrt(F4 v) {
+#if defined(__SSE__)
+  return _mm_sqrt_ps(v);
+#else
+  for (int i = 0; i < 4; ++i) v[i] = std::sqrt(v[i]);
+  return v;
+#endif
 }
 
-// Shortest-arc slerp of a to b, normalised. `a` and `b` are (x, y, z, w).
-inline void SlerpKernel(const float* a, const float* b, const SlerpWeights& w, float* out) {
-  float x = a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3];
-  const float sign = x < 0.f ? -1.f : 1.f;
-  x = std::fabs(x);
-  // |a.b| may exceed 1 by rounding (or for quaternions that are not quite unit).
-  const float xm1 = (x < 1.f ? x : 1.f) - 1.f;
-  const float ct = sign * w.t * Horner(w.pt, xm1);
-  const float cd = w.d * Horner(w.pd, xm1);
-  float q[4];
-  for (int i = 0; i < 4; ++i) q[i] = cd * a[i] + ct * b[i];
-  const float n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
-  for (int i = 0; i < 4; ++i) out[i] = q[i] / n;
+inline F4 Select(I4 mask, F4 a, F4 b) {  // mask ? a : b, lane by lane
+  return reinterpret_cast<F4>((reinterpret_cast<I4>(a) & mask) | (reinterpret_cast<I4>(b) & ~mask));
 }
 
-// slerp((0, 0, 0, 1), delta, w), normalised: the weighted additive delta. A delta of exactly
-// identity gives exactly identity (sqrt(v * v) == v in IEEE arithmetic).
-inline void WeightedDelta(const float* delta, const SlerpWeights& w, float* out) {
-  const float sign = delta[3] < 0.f ? -1.f : 1.f;
-  const float x = std::fabs(delta[3]);
-  const float xm1 = (x < 1.f ? x : 1.f) - 1.f;
-  const float ct = sign * w.t * Horner(w.pt, xm1);
-  const float cd = w.d * Horner(w.pd, xm1);
-  const float q[4] = {ct * delta[0], ct * delta[1], ct * delta[2], cd + ct * delta[3]};
-  const float n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
-  for (int i = 0; i < 4; ++i) out[i] = q[i] / n;
+struct QuatLanes {
+  F4 x[kVectors], y[kVectors], z[kVectors], w[kVectors];
+
+  void Load(int lane, const float* q) {
+    x[lane / 4][lane % 4] = q[0];
+    y[lane / 4][lane % 4] = q[1];
+    z[lane / 4][lane % 4] = q[2];
+    w[lane / 4][lane % 4] = q[3];
+  }
+  void Store(int lane, float* q) const {
+    q[0] = x[lane / 4][lane % 4];
+    q[1] = y[lane / 4][lane % 4];
+    q[2] = z[lane / 4][lane % 4];
+    q[3] = w[lane / 4][lane % 4];
+  }
+  // Gathers the quaternions of joints js[0..count) from an (x, y, z, w) array; unused lanes
+  // hold identity. Four consecutive joints load as one 4x4 transpose.
+  void Gather(const float* quats, const int* js, int count) {
+    for (int v = 0; v < kVectors; ++v) {
+      const int first = v * 4, n = std::min(4, count - first);
+#if defined(__SSE__)
+      if (n == 4 && js[first + 3] == js[first] + 3) {
+        const float* p = quats + js[first] * 4;
+        __m128 r0 = _mm_loadu_ps(p), r1 = _mm_loadu_ps(p + 4), r2 = _mm_loadu_ps(p + 8), r3 = _mm_loadu_ps(p + 12);
+        _MM_TRANSPOSE4_PS(r0, r1, r2, r3);
+        x[v] = r0;
+        y[v] = r1;
+        z[v] = r2;
+        w[v] = r3;
+        continue;
+      }
+#endif
+      x[v] = y[v] = z[v] = F4{};
+      w[v] = F4{} + 1.f;
+      for (int l = 0; l < n; ++l) Load(first + l, quats + js[first + l] * 4);
+    }
+  }
+  void Scatter(float* quats, const int* js, int count) const {
+    for (int v = 0; v < kVectors; ++v) {
+      const int first = v * 4, n = std::min(4, count - first);
+#if defined(__SSE__)
+      if (n == 4 && js[first + 3] == js[first] + 3) {
+        float* p = quats + js[first] * 4;
+        __m128 r0 = x[v], r1 = y[v], r2 = z[v], r3 = w[v];
+        _MM_TRANSPOSE4_PS(r0, r1, r2, r3);
+        _mm_storeu_ps(p, r0);
+        _mm_storeu_ps(p + 4, r1);
+        _mm_storeu_ps(p + 8, r2);
+        _mm_storeu_ps(p + 12, r3);
+        continue;
+      }
+#endif
+      for (int l = 0; l < n; ++l) Store(first + l, quats + js[first + l] * 4);
+    }
+  }
+  void FillIdentity() {
+    for (int v = 0; v < kVectors; ++v) {
+      x[v] = y[v] = z[v] = F4{};
+      w[v] = F4{} + 1.f;
+    }
+  }
+};
+
+// out = slerp(a, b, t) on the short arc, lane by lane, normalised. At t == 1 the result is b
+// (with the sign that puts it on a's side) and is not renormalised, so it stays bit for bit.
+// For a == b == identity the result is exactly identity.
+void SlerpLanes(const QuatLanes& a, const QuatLanes& b, const SlerpWeights& sw, QuatLanes& out) {
+  for (int v = 0; v < kVectors; ++v) {
+    const F4 dot = a.x[v] * b.x[v] + a.y[v] * b.y[v] + a.z[v] * b.z[v] + a.w[v] * b.w[v];
+    const I4 negative = dot < 0.f;
+    const F4 x = Select(negative, -dot, dot);
+    // |a.b| may exceed 1 by rounding (or for quaternions that are not quite unit).
+    const F4 xm1 = Select(x < 1.f, x, F4{} + 1.f) - 1.f;
+    F4 ht = F4{} + sw.pt[kTerms], hd = F4{} + sw.pd[kTerms];
+    for (int k = kTerms - 1; k >= 0; --k) {
+      ht = ht * xm1 + sw.pt[k];
+      hd = hd * xm1 + sw.pd[k];
+    }
+    const F4 ct = Select(negative, F4{} - sw.t, F4{} + sw.t) * ht, cd = sw.d * hd;
+    F4 qx = cd * a.x[v] + ct * b.x[v], qy = cd * a.y[v] + ct * b.y[v];
+    F4 qz = cd * a.z[v] + ct * b.z[v], qw = cd * a.w[v] + ct * b.w[v];
+    if (sw.t != 1.f) {
+      // One division: for q = (0, 0, 0, v) with v within an ulp of 1 (identity slerped with
+      // identity), v * (1 / sqrt(v * v)) is still exactly 1.
+      const F4 inv = 1.f / Sqrt(qx * qx + qy * qy + qz * qz + qw * qw);
+      qx *= inv;
+      qy *= inv;
+      qz *= inv;
+      qw *= inv;
+    }
+    out.x[v] = qx;
+    out.y[v] = qy;
+    out.z[v] = qz;
+    out.w[v] = qw;
+  }
 }
 
-// Hamilton product a * b of (x, y, z, w) quaternions: rotates by b, then by a.
-inline void Multiply(const float* a, const float* b, float* out) {
-  const float x = a[3] * b[0] + a[0] * b[3] + a[1] * b[2] - a[2] * b[1];
-  const float y = a[3] * b[1] - a[0] * b[2] + a[1] * b[3] + a[2] * b[0];
-  const float z = a[3] * b[2] + a[0] * b[1] - a[1] * b[0] + a[2] * b[3];
-  const float w = a[3] * b[3] - a[0] * b[0] - a[1] * b[1] - a[2] * b[2];
-  out[0] = x;
-  out[1] = y;
-  out[2] = z;
-  out[3] = w;
+// out = a * b (Hamilton product: rotate by b, then by a), lane by lane.
+void MultiplyLanes(const QuatLanes& a, const QuatLanes& b, QuatLanes& out) {
+  for (int v = 0; v < kVectors; ++v) {
+    const F4 x = a.w[v] * b.x[v] + a.x[v] * b.w[v] + a.y[v] * b.z[v] - a.z[v] * b.y[v];
+    const F4 y = a.w[v] * b.y[v] - a.x[v] * b.z[v] + a.y[v] * b.w[v] + a.z[v] * b.x[v];
+    const F4 z = a.w[v] * b.z[v] + a.x[v] * b.y[v] - a.y[v] * b.x[v] + a.z[v] * b.w[v];
+    const F4 w = a.w[v] * b.w[v] - a.x[v] * b.x[v] - a.y[v] * b.y[v] - a.z[v] * b.z[v];
+    out.x[v] = x;
+    out.y[v] = y;
+    out.z[v] = z;
+    out.w[v] = w;
+  }
 }
-
-bool InUnitRange(float v) { return v >= 0.f && v <= 1.f; }  // false for NaN
 
 // ---- the pipeline ---------------------------------------------------------------------
+
+bool InUnitRange(float v) { return v >= 0.f && v <= 1.f; }  // false for NaN
 
 void CopySource(const LayeringJob& job) {
   auto copy = [](Span<const float> from, Span<float> to) {
@@ -112,54 +219,91 @@ void CopySource(const LayeringJob& job) {
   copy(job.source.scales, job.output.scales);
 }
 
-// Per pose: the layer weight and its slerp coefficients, made once for every joint whose
-// joint weight is 1; a joint with a fractional joint weight gets its own.
-struct PoseWeight {
-  float weight;
-  SlerpWeights slerp;
+// The joints a layer touches, grouped by joint weight: joints at joint weight 1 (all of
+// them without a joint mask; the subtree of a 0/1 mask) take the pose's layer weight and share
+// one set of slerp coefficients per pose, and are also listed as runs of consecutive joints,
+// which UsdSkel's parent-first order makes of a subtree. Joints at a fractional joint weight
+// get their own coefficients; joints at joint weight 0 are not touched.
+struct LayerJoints {
+  std::vector<int> uniform;                       // joints at joint weight 1
+  std::vector<std::pair<int, int>> runs;          // the same joints as [begin, end) ranges
+  std::vector<std::pair<int, float>> fractional;  // (joint, joint weight)
+
+  LayerJoints(const LayeringJob::Layer& layer, std::size_t num_joints) {
+    for (std::size_t j = 0; j < num_joints; ++j) {
+      const int joint = static_cast<int>(j);
+      const float jw = layer.joint_weights.empty() ? 1.f : layer.joint_weights[j];
+      if (jw == 1.f) {
+        if (!runs.empty() && runs.back().second == joint)
+          ++runs.back().second;
+        else
+          runs.emplace_back(joint, joint + 1);
+        uniform.push_back(joint);
+      } else if (jw != 0.f) {
+        fractional.emplace_back(joint, jw);
+      }
+    }
+  }
+
+  // Calls `vec3(begin, end, weight)` on runs of joints that share a weight, in floats.
+  template <typename Fn>
+  void ForRuns(float w, Fn&& vec3) const {
+    for (const auto& [b, e] : runs) vec3(b * 3, e * 3, w);
+    for (const auto& [j, jw] : fractional) vec3(j * 3, j * 3 + 3, w * jw);
+  }
+
+  // Calls `rotate(joints, count, slerp weights)` on lanes of at most kLanes joints;
+  // `with_uniform` false leaves out the joints at joint weight 1.
+  template <typename Fn>
+  void ForLanes(float w, bool with_uniform, Fn&& rotate) const {
+    const SlerpWeights pose_weights = MakeSlerpWeights(w);
+    for (std::size_t i = 0; with_uniform && i < uniform.size(); i += kLanes) {
+      const int count = static_cast<int>(std::min<std::size_t>(kLanes, uniform.size() - i));
+      rotate(&uniform[i], count, pose_weights);
+    }
+    for (const auto& [j, jw] : fractional) rotate(&j, 1, MakeSlerpWeights(w * jw));
+  }
 };
 
 void BlendLayer(const LayeringJob& job, const LayeringJob::Layer& layer) {
   const std::size_t nj = job.num_joints;
-  const bool masked = !layer.joint_weights.empty();
+  const LayerJoints joints(layer, nj);
+  QuatLanes from, to;
   for (std::size_t t = 0; t < job.num_poses; ++t) {
     const float w = layer.weights[t];
     if (w == 0.f) continue;
-    const SlerpWeights pose_slerp = MakeSlerpWeights(w);
-    for (std::size_t j = 0; j < nj; ++j) {
-      const float wj = masked ? w * layer.joint_weights[j] : w;
-      if (wj == 0.f) continue;
-      const std::size_t i = t * nj + j;
-      const float* lt = &layer.transforms.translations[i * 3];
-      const float* lr = &layer.transforms.rotations[i * 4];
-      const float* ls = &layer.transforms.scales[i * 3];
-      float* ot = &job.output.translations[i * 3];
-      float* orot = &job.output.rotations[i * 4];
-      float* os = &job.output.scales[i * 3];
-      if (wj == 1.f) {
-        for (int k = 0; k < 3; ++k) ot[k] = lt[k];
-        for (int k = 0; k < 4; ++k) orot[k] = lr[k];
-        for (int k = 0; k < 3; ++k) os[k] = ls[k];
-        continue;
-      }
+    const std::size_t base = t * nj;
+    const float* lt = &layer.transforms.translations[base * 3];
+    const float* lr = &layer.transforms.rotations[base * 4];
+    const float* ls = &layer.transforms.scales[base * 3];
+    float* ot = &job.output.translations[base * 3];
+    float* orot = &job.output.rotations[base * 4];
+    float* os = &job.output.scales[base * 3];
+    joints.ForRuns(w, [&](int begin, int end, float wj) {
+      // (1 - w) a + w b: exactly a at 0 and exactly b at 1.
       const float vd = 1.f - wj;
-      for (int k = 0; k < 3; ++k) ot[k] = vd * ot[k] + wj * lt[k];
-      for (int k = 0; k < 3; ++k) os[k] = vd * os[k] + wj * ls[k];
-      if (wj == w)
-        SlerpKernel(orot, lr, pose_slerp, orot);
-      else
-        SlerpKernel(orot, lr, MakeSlerpWeights(wj), orot);
-    }
+      for (int i = begin; i < end; ++i) ot[i] = vd * ot[i] + wj * lt[i];
+      for (int i = begin; i < end; ++i) os[i] = vd * os[i] + wj * ls[i];
+    });
+    if (w == 1.f)  // the layer's rotations, bit for bit, on the joints at the full weight
+      for (const auto& [b, e] : joints.runs) std::memcpy(orot + b * 4, lr + b * 4, (e - b) * 4 * sizeof(float));
+    joints.ForLanes(w, w != 1.f, [&](const int* js, int count, const SlerpWeights& sw) {
+      from.Gather(orot, js, count);
+      to.Gather(lr, js, count);
+      SlerpLanes(from, to, sw, from);
+      from.Scatter(orot, js, count);
+    });
   }
 }
 
 void AddLayer(const LayeringJob& job, const LayeringJob::Layer& layer) {
   const std::size_t nj = job.num_joints;
-  const bool masked = !layer.joint_weights.empty();
+  const LayerJoints joints(layer, nj);
+  QuatLanes identity, delta, source;
+  identity.FillIdentity();
   for (std::size_t t = 0; t < job.num_poses; ++t) {
     const float w = layer.weights[t];
     if (w == 0.f) continue;
-    const SlerpWeights pose_slerp = MakeSlerpWeights(w);
     const std::size_t base = t * nj;
     const float* dt = &layer.transforms.translations[base * 3];
     const float* dr = &layer.transforms.rotations[base * 4];
@@ -167,30 +311,31 @@ void AddLayer(const LayeringJob& job, const LayeringJob::Layer& layer) {
     float* ot = &job.output.translations[base * 3];
     float* orot = &job.output.rotations[base * 4];
     float* os = &job.output.scales[base * 3];
-    for (std::size_t j = 0; j < nj; ++j) {
-      const float wj = masked ? w * layer.joint_weights[j] : w;
-      if (wj == 0.f) continue;
-      for (int k = 0; k < 3; ++k) ot[j * 3 + k] += wj * dt[j * 3 + k];
-      for (int k = 0; k < 3; ++k) os[j * 3 + k] *= 1.f + wj * (ds[j * 3 + k] - 1.f);
-      float q[4];
-      if (wj == 1.f) {
-        // The delta itself, on its short arc (q and -q are the same rotation).
-        const float sign = dr[j * 4 + 3] < 0.f ? -1.f : 1.f;
-        for (int k = 0; k < 4; ++k) q[k] = sign * dr[j * 4 + k];
-      } else if (wj == w) {
-        WeightedDelta(&dr[j * 4], pose_slerp, q);
-      } else {
-        WeightedDelta(&dr[j * 4], MakeSlerpWeights(wj), q);
-      }
-      Multiply(q, &orot[j * 4], &orot[j * 4]);
-    }
+    joints.ForRuns(w, [&](int begin, int end, float wj) {
+      for (int i = begin; i < end; ++i) ot[i] += wj * dt[i];
+      for (int i = begin; i < end; ++i) os[i] *= 1.f + wj * (ds[i] - 1.f);
+    });
+    // slerp(identity, delta, w) * source
+    joints.ForLanes(w, true, [&](const int* js, int count, const SlerpWeights& sw) {
+      delta.Gather(dr, js, count);
+      source.Gather(orot, js, count);
+      SlerpLanes(identity, delta, sw, delta);
+      MultiplyLanes(delta, source, source);
+      source.Scatter(orot, js, count);
+    });
   }
 }
 
 }  // namespace
 
 void Slerp(const float a[4], const float b[4], float t, float out[4]) {
-  SlerpKernel(a, b, MakeSlerpWeights(t), out);
+  QuatLanes qa, qb;
+  qa.FillIdentity();
+  qb.FillIdentity();
+  qa.Load(0, a);
+  qb.Load(0, b);
+  SlerpLanes(qa, qb, MakeSlerpWeights(t), qa);
+  qa.Store(0, out);
 }
 
 bool LayeringJob::Validate(std::string* error) const {
