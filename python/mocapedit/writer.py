@@ -178,16 +178,21 @@ def _author_guides(layer: Sdf.Layer, guides: list) -> None:
             spec.documentation = guide.doc
 
 
-def build_layer(content: LayerContent) -> Sdf.Layer:
-    """An anonymous layer holding the edits; save it with :func:`save_layer`."""
-    layer = Sdf.Layer.CreateAnonymous(".usda")
-    info = content.info
+def _set_time_metadata(layer: Sdf.Layer, info: StageInfo) -> None:
+    """The input's time codes per second and range: a layer whose rate differs from the
+    stage's would be rescaled when sub-layered."""
     layer.timeCodesPerSecond = info.time_codes_per_second
     layer.framesPerSecond = info.time_codes_per_second
     if info.start_time is not None:
         layer.startTimeCode = info.start_time
     if info.end_time is not None:
         layer.endTimeCode = info.end_time
+
+
+def build_layer(content: LayerContent) -> Sdf.Layer:
+    """An anonymous layer holding the edits; save it with :func:`save_layer`."""
+    layer = Sdf.Layer.CreateAnonymous(".usda")
+    _set_time_metadata(layer, content.info)
     layer.documentation = "mocapedit edits: place over the input stage (sublayer above it)."
     data = {"version": __version__}
     data.update(content.provenance)
@@ -243,12 +248,7 @@ def save_composed(path: str, edits_path: str, input_path: str, info: StageInfo,
     layer.subLayerPaths = [os.path.relpath(os.path.abspath(edits_path), here),
                            os.path.relpath(os.path.abspath(input_path), here)]
     # A root layer that only sub-layers others still sets the stage's time and units.
-    layer.timeCodesPerSecond = info.time_codes_per_second
-    layer.framesPerSecond = info.time_codes_per_second
-    if info.start_time is not None:
-        layer.startTimeCode = info.start_time
-    if info.end_time is not None:
-        layer.endTimeCode = info.end_time
+    _set_time_metadata(layer, info)
     layer.pseudoRoot.SetInfo("upAxis", info.up_axis)
     layer.pseudoRoot.SetInfo("metersPerUnit", info.meters_per_unit)
     if default_prim:
