@@ -38,11 +38,17 @@ def slerp(q0: np.ndarray, q1: np.ndarray, t: np.ndarray) -> np.ndarray:
     return out / np.linalg.norm(out, axis=-1, keepdims=True)
 
 
-def sample_pose(clip: Clip, frames: np.ndarray) -> Pose:
-    """The clip at fractional frame positions (clamped to the clip)."""
-    f = np.clip(np.asarray(frames, dtype=np.float64), 0, clip.frame_count - 1)
+def sample_pose(clip: Clip, frames: np.ndarray, loop: bool = False) -> Pose:
+    """The clip at fractional frame positions: clamped to the clip, or with ``loop`` taken
+    modulo the frame count, the last frame interpolating back to the first."""
+    n = clip.frame_count
+    if loop:
+        f = np.mod(np.asarray(frames, dtype=np.float64), n)
+        f = np.where(f >= n, 0.0, f)  # mod of a tiny negative number can round up to n
+    else:
+        f = np.clip(np.asarray(frames, dtype=np.float64), 0, n - 1)
     i0 = np.floor(f).astype(np.int64)
-    i1 = np.minimum(i0 + 1, clip.frame_count - 1)
+    i1 = (i0 + 1) % n if loop else np.minimum(i0 + 1, n - 1)
     a = (f - i0)
     exact = a == 0
     at = a[:, None, None]

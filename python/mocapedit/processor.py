@@ -257,7 +257,9 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
 
     constraint_count = sum(len(x) for x in (data.position_constraints, data.relative_constraints,
                                             data.time_constraints, data.sync_constraints))
-    report.stats = {"agents": len(data.agents), "editedAgents": len(ctx.edits), "clips": len(data.clips),
+    # Run-wide counts of the passes (ctx.report.stats[...]) are kept beside these.
+    report.stats = {**report.stats,
+                    "agents": len(data.agents), "editedAgents": len(ctx.edits), "clips": len(data.clips),
                     "constraints": constraint_count, "groups": len(data.groups),
                     "avoidRegions": len(data.avoid_regions), "animationLayers": len(data.layers)}
     for path, traj in ctx.trajectories.items():
