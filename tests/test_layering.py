@@ -13,7 +13,7 @@ from mocapedit.errors import MocapEditError
 from mocapedit.passes.layering import layering_pass
 from mocapedit.processor import EditedPath, solve
 
-from conftest import run_cli, world_joints
+from conftest import REPO, run_cli, world_joints
 
 FRAMES = 36
 CHEST = "Root/Hips/Spine/Chest"
@@ -502,3 +502,24 @@ def test_a_bare_joint_name_must_be_unique(tmp_path):
     stage.GetPrimAtPath("/Layers/L").GetAttribute("joint").Set("Neck")
     with pytest.raises(MocapEditError, match=r"</Layers/L>\.joint: the bare name 'Neck' is not unique"):
         solve(stage)
+
+
+# ---- the example street -------------------------------------------------------------------
+
+def test_the_phone_call_street_example(tmp_path):
+    """example_stages/layering_street.usda: five of eight walkers take a call."""
+    stage_path = REPO / "example_stages" / "layering_street.usda"
+    result = solve(str(stage_path), output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"))
+    out, src = Usd.Stage.Open(str(tmp_path / "c.usda")), Usd.Stage.Open(str(stage_path))
+    layered = {f"/World/Crowd/agent_{i:04d}" for i in (0, 2, 3, 5, 6)}
+    assert {p for p in result.data.agents if written(result, p)} == layered
+    hand, head = (walker.JOINTS.index(j) for j in (
+        "Root/Hips/Spine/Chest/RightShoulder/RightArm/RightForeArm/RightHand", "Root/Hips/Spine/Chest/Neck/Head"))
+    for agent in sorted(result.data.agents):
+        skel = agent + "/Skel"
+        start = float(result.data.agents[agent].sample_times[0])
+        before = world_joints(out, skel, [start + 2])[0]
+        np.testing.assert_array_equal(before, world_joints(src, skel, [start + 2])[0])  # weight 0 there
+        mid = world_joints(out, skel, [70.0])[0]
+        near = np.linalg.norm(mid[hand] - mid[head]) < 0.25
+        assert near == (agent in layered), agent  # the phone at the ear in the middle of the call

@@ -72,10 +72,10 @@ def phone_call(frames: int = 96, fps: float = 24.0, up: str = "Y", meters_per_un
     local[:, index["Head"]] = _rot("z", np.full(frames, -0.12)) @ _rot("x", nod)
     # Right hand at the ear: the upper arm out and forward, the elbow folded, the hand
     # turned so the phone lies along the cheek.
-    local[:, index["RightArm"]] = (_rot("z", np.full(frames, -0.5))
-                                   @ _rot("x", -1.05 + 0.03 * np.sin(phase)))
+    local[:, index["RightArm"]] = (_rot("z", np.full(frames, 0.2)) @ _rot("x", -1.1 + 0.03 * np.sin(phase))
+                                   @ _rot("y", np.full(frames, 0.8)))
     local[:, index["RightForeArm"]] = _rot("x", np.full(frames, -2.6))
-    local[:, index["RightHand"]] = _rot("x", np.full(frames, -0.6)) @ _rot("z", np.full(frames, 0.3))
+    local[:, index["RightHand"]] = _rot("z", np.full(frames, 0.3))
     # Left hand talking: forearm raised, beating in time with the speech.
     local[:, index["LeftArm"]] = _rot("z", 0.12 + 0.04 * talk) @ _rot("x", -0.15 - 0.05 * talk)
     local[:, index["LeftForeArm"]] = _rot("x", -1.1 - 0.25 * talk) @ _rot("y", -0.4 + 0.1 * talk)
