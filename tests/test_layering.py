@@ -523,3 +523,32 @@ def test_the_phone_call_street_example(tmp_path):
         mid = world_joints(out, skel, [70.0])[0]
         near = np.linalg.norm(mid[hand] - mid[head]) < 0.25
         assert near == (agent in layered), agent  # the phone at the ear in the middle of the call
+
+
+def test_the_avx2_and_baseline_kernels_give_the_same_bits(tmp_path):
+    """The job picks its SIMD kernel for the machine; MOCAPEDIT_NO_AVX2=1 forces the baseline."""
+    import os
+    import subprocess
+    import sys
+    script = tmp_path / "layer.py"
+    script.write_text(
+        "import sys\nimport numpy as np\nfrom mocapedit import _solver\n"
+        "rng = np.random.default_rng(4)\n"
+        "def pose():\n"
+        "    q = rng.normal(size=(40, 23, 4))\n"
+        "    return (rng.normal(size=(40, 23, 3)).astype(np.float32),\n"
+        "            (q / np.linalg.norm(q, axis=-1, keepdims=True)).astype(np.float32),\n"
+        "            (1 + 0.1 * rng.normal(size=(40, 23, 3))).astype(np.float32))\n"
+        "src, a, b = pose(), pose(), pose()\n"
+        "mask = np.where(np.arange(23) % 5 == 0, 0.5, 1.0).astype(np.float32)\n"
+        "w = rng.uniform(0, 1, 40).astype(np.float32)\n"
+        "out = _solver.apply_layers(src, [('additive', a, w, None), ('blend', b, w[::-1].copy(), mask)])\n"
+        "np.save(sys.argv[1], np.concatenate([o.ravel() for o in out]))\n")
+    results = []
+    for flag in ("0", "1"):
+        out = tmp_path / f"out{flag}.npy"
+        proc = subprocess.run([sys.executable, str(script), str(out)], capture_output=True, text=True,
+                              env={**os.environ, "MOCAPEDIT_NO_AVX2": flag})
+        assert proc.returncode == 0, proc.stderr
+        results.append(np.load(out))
+    np.testing.assert_array_equal(results[0], results[1])

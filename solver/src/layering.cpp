@@ -3,10 +3,8 @@
 #include "view_checks.h"
 
 #include <algorithm>
-#if defined(__SSE__)
-#include <xmmintrin.h>
-#endif
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <stdexcept>
 #include <string>
@@ -73,137 +71,260 @@ SlerpWeights MakeSlerpWeights(float t) {
 
 // ---- the rotation kernel, on lanes of joints ---------------------------------------
 //
-// Quaternions are gathered from the (x, y, z, w) arrays into lanes, one vector per component
-// and four joints per vector, so the polynomial (a long chain of dependent multiply-adds for
-// one joint) runs on kLanes joints side by side. F4 is a GCC/Clang vector type: plain
-// arithmetic on it compiles to SIMD on every target.
-typedef float F4 __attribute__((vector_size(16)));
-typedef int I4 __attribute__((vector_size(16)));
-constexpr int kVectors = 4;
-constexpr int kLanes = 4 * kVectors;
+// Quaternions are gathered from the (x, y, z, w) arrays into lanes, one vector per component,
+// so the polynomial (a long chain of dependent multiply-adds for one joint) runs on kLanes
+// joints side by side. The vectors are GCC/Clang vector types of W floats: plain arithmetic
+// on them compiles to SIMD on every target. The kernel is built for 8-float vectors with AVX2
+// and for 4-float vectors for the baseline; the first call picks one for the machine. Both do
+// the same IEEE operations in the same order (no FMA contraction), so both give the same bits.
+constexpr int kLanes = 16;
 
-inline F4 Sqrt(F4 v) {
-#if defined(__SSE__)
-  return _mm_sqrt_ps(v);
-#else
-  for (int i = 0; i < 4; ++i) v[i] = std::sqrt(v[i]);
+#define MOCAPEDIT_INLINE inline __attribute__((always_inline))
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define MOCAPEDIT_AVX2 1
+#endif
+#if defined(__GNUC__) && !defined(__clang__)
+// Vectors never cross a call boundary (the helpers are all inlined): their ABI does not matter.
+#pragma GCC diagnostic ignored "-Wpsabi"
+#endif
+
+template <int W>
+struct Vec {
+  typedef float F __attribute__((vector_size(4 * W)));
+  typedef int I __attribute__((vector_size(4 * W)));
+};
+
+template <typename F, typename I>
+MOCAPEDIT_INLINE F Select(I mask, F a, F b) {  // mask ? a : b, lane by lane
+  return reinterpret_cast<F>((reinterpret_cast<I>(a) & mask) | (reinterpret_cast<I>(b) & ~mask));
+}
+
+template <typename F>
+MOCAPEDIT_INLINE F LoadVec(const float* p) {
+  F v;
+  std::memcpy(&v, p, sizeof(F));
   return v;
-#endif
 }
 
-inline F4 Select(I4 mask, F4 a, F4 b) {  // mask ? a : b, lane by lane
-  return reinterpret_cast<F4>((reinterpret_cast<I4>(a) & mask) | (reinterpret_cast<I4>(b) & ~mask));
+template <typename F>
+MOCAPEDIT_INLINE void StoreVec(float* p, const F& v) {
+  std::memcpy(p, &v, sizeof(F));
 }
 
+// W quaternions (4 W floats, x y z w each) to component vectors and back, by in-lane
+// shuffles. With W = 8 the lanes come out in the order 0 2 4 6 1 3 5 7; Untranspose undoes
+// exactly what Transpose does and every lane is computed on its own, so that does not matter.
+template <typename F>
+MOCAPEDIT_INLINE void Transpose(const float* q, F& x, F& y, F& z, F& w) {
+  constexpr int W = sizeof(F) / sizeof(float);
+  const F r0 = LoadVec<F>(q), r1 = LoadVec<F>(q + W), r2 = LoadVec<F>(q + 2 * W), r3 = LoadVec<F>(q + 3 * W);
+  if constexpr (W == 4) {
+    const F t0 = __builtin_shufflevector(r0, r1, 0, 4, 1, 5), t1 = __builtin_shufflevector(r0, r1, 2, 6, 3, 7);
+    const F t2 = __builtin_shufflevector(r2, r3, 0, 4, 1, 5), t3 = __builtin_shufflevector(r2, r3, 2, 6, 3, 7);
+    x = __builtin_shufflevector(t0, t2, 0, 1, 4, 5);
+    y = __builtin_shufflevector(t0, t2, 2, 3, 6, 7);
+    z = __builtin_shufflevector(t1, t3, 0, 1, 4, 5);
+    w = __builtin_shufflevector(t1, t3, 2, 3, 6, 7);
+  } else {
+    const F t0 = __builtin_shufflevector(r0, r1, 0, 8, 1, 9, 4, 12, 5, 13);
+    const F t1 = __builtin_shufflevector(r0, r1, 2, 10, 3, 11, 6, 14, 7, 15);
+    const F t2 = __builtin_shufflevector(r2, r3, 0, 8, 1, 9, 4, 12, 5, 13);
+    const F t3 = __builtin_shufflevector(r2, r3, 2, 10, 3, 11, 6, 14, 7, 15);
+    x = __builtin_shufflevector(t0, t2, 0, 1, 8, 9, 4, 5, 12, 13);
+    y = __builtin_shufflevector(t0, t2, 2, 3, 10, 11, 6, 7, 14, 15);
+    z = __builtin_shufflevector(t1, t3, 0, 1, 8, 9, 4, 5, 12, 13);
+    w = __builtin_shufflevector(t1, t3, 2, 3, 10, 11, 6, 7, 14, 15);
+  }
+}
+
+template <typename F>
+MOCAPEDIT_INLINE void Untranspose(const F& x, const F& y, const F& z, const F& w, float* q) {
+  constexpr int W = sizeof(F) / sizeof(float);
+  if constexpr (W == 4) {
+    const F t0 = __builtin_shufflevector(x, y, 0, 4, 1, 5), t1 = __builtin_shufflevector(z, w, 0, 4, 1, 5);
+    const F t2 = __builtin_shufflevector(x, y, 2, 6, 3, 7), t3 = __builtin_shufflevector(z, w, 2, 6, 3, 7);
+    StoreVec(q, F(__builtin_shufflevector(t0, t1, 0, 1, 4, 5)));
+    StoreVec(q + 4, F(__builtin_shufflevector(t0, t1, 2, 3, 6, 7)));
+    StoreVec(q + 8, F(__builtin_shufflevector(t2, t3, 0, 1, 4, 5)));
+    StoreVec(q + 12, F(__builtin_shufflevector(t2, t3, 2, 3, 6, 7)));
+  } else {
+    const F t0 = __builtin_shufflevector(x, y, 0, 1, 8, 9, 4, 5, 12, 13);
+    const F t2 = __builtin_shufflevector(x, y, 2, 3, 10, 11, 6, 7, 14, 15);
+    const F t1 = __builtin_shufflevector(z, w, 0, 1, 8, 9, 4, 5, 12, 13);
+    const F t3 = __builtin_shufflevector(z, w, 2, 3, 10, 11, 6, 7, 14, 15);
+    StoreVec(q, F(__builtin_shufflevector(t0, t1, 0, 2, 8, 10, 4, 6, 12, 14)));
+    StoreVec(q + 8, F(__builtin_shufflevector(t0, t1, 1, 3, 9, 11, 5, 7, 13, 15)));
+    StoreVec(q + 16, F(__builtin_shufflevector(t2, t3, 0, 2, 8, 10, 4, 6, 12, 14)));
+    StoreVec(q + 24, F(__builtin_shufflevector(t2, t3, 1, 3, 9, 11, 5, 7, 13, 15)));
+  }
+}
+
+template <int W>
 struct QuatLanes {
-  F4 x[kVectors], y[kVectors], z[kVectors], w[kVectors];
+  typedef typename Vec<W>::F F;
+  static constexpr int kVectors = kLanes / W;
+  F x[kVectors], y[kVectors], z[kVectors], w[kVectors];
 
-  void Load(int lane, const float* q) {
-    x[lane / 4][lane % 4] = q[0];
-    y[lane / 4][lane % 4] = q[1];
-    z[lane / 4][lane % 4] = q[2];
-    w[lane / 4][lane % 4] = q[3];
-  }
-  void Store(int lane, float* q) const {
-    q[0] = x[lane / 4][lane % 4];
-    q[1] = y[lane / 4][lane % 4];
-    q[2] = z[lane / 4][lane % 4];
-    q[3] = w[lane / 4][lane % 4];
-  }
-  // Gathers the quaternions of joints js[0..count) from an (x, y, z, w) array; unused lanes
-  // hold identity. Four consecutive joints load as one 4x4 transpose.
-  void Gather(const float* quats, const int* js, int count) {
+  // Gathers the quaternions of joints js[0..count) (count <= kLanes) from an (x, y, z, w)
+  // array; unused lanes hold identity. W consecutive joints load straight from the array.
+  MOCAPEDIT_INLINE void Gather(const float* quats, const int* js, int count) {
     for (int v = 0; v < kVectors; ++v) {
-      const int first = v * 4, n = std::min(4, count - first);
-#if defined(__SSE__)
-      if (n == 4 && js[first + 3] == js[first] + 3) {
-        const float* p = quats + js[first] * 4;
-        __m128 r0 = _mm_loadu_ps(p), r1 = _mm_loadu_ps(p + 4), r2 = _mm_loadu_ps(p + 8), r3 = _mm_loadu_ps(p + 12);
-        _MM_TRANSPOSE4_PS(r0, r1, r2, r3);
-        x[v] = r0;
-        y[v] = r1;
-        z[v] = r2;
-        w[v] = r3;
+      const int first = v * W, n = std::min(W, count - first);
+      if (n == W && js[first + W - 1] == js[first] + W - 1) {
+        Transpose(quats + js[first] * 4, x[v], y[v], z[v], w[v]);
         continue;
       }
-#endif
-      x[v] = y[v] = z[v] = F4{};
-      w[v] = F4{} + 1.f;
-      for (int l = 0; l < n; ++l) Load(first + l, quats + js[first + l] * 4);
+      alignas(32) float q[4 * W];
+      for (int l = 0; l < W; ++l) {
+        if (l < n) {
+          std::memcpy(q + l * 4, quats + js[first + l] * 4, 4 * sizeof(float));
+        } else {
+          q[l * 4] = q[l * 4 + 1] = q[l * 4 + 2] = 0.f;
+          q[l * 4 + 3] = 1.f;
+        }
+      }
+      Transpose(q, x[v], y[v], z[v], w[v]);
     }
   }
-  void Scatter(float* quats, const int* js, int count) const {
+
+  MOCAPEDIT_INLINE void Scatter(float* quats, const int* js, int count) const {
     for (int v = 0; v < kVectors; ++v) {
-      const int first = v * 4, n = std::min(4, count - first);
-#if defined(__SSE__)
-      if (n == 4 && js[first + 3] == js[first] + 3) {
-        float* p = quats + js[first] * 4;
-        __m128 r0 = x[v], r1 = y[v], r2 = z[v], r3 = w[v];
-        _MM_TRANSPOSE4_PS(r0, r1, r2, r3);
-        _mm_storeu_ps(p, r0);
-        _mm_storeu_ps(p + 4, r1);
-        _mm_storeu_ps(p + 8, r2);
-        _mm_storeu_ps(p + 12, r3);
+      const int first = v * W, n = std::min(W, count - first);
+      if (n <= 0) break;
+      if (n == W && js[first + W - 1] == js[first] + W - 1) {
+        Untranspose(x[v], y[v], z[v], w[v], quats + js[first] * 4);
         continue;
       }
-#endif
-      for (int l = 0; l < n; ++l) Store(first + l, quats + js[first + l] * 4);
+      alignas(32) float q[4 * W];
+      Untranspose(x[v], y[v], z[v], w[v], q);
+      for (int l = 0; l < n; ++l) std::memcpy(quats + js[first + l] * 4, q + l * 4, 4 * sizeof(float));
     }
   }
-  void FillIdentity() {
+
+  MOCAPEDIT_INLINE void FillIdentity() {
     for (int v = 0; v < kVectors; ++v) {
-      x[v] = y[v] = z[v] = F4{};
-      w[v] = F4{} + 1.f;
+      x[v] = y[v] = z[v] = F{};
+      w[v] = F{} + 1.f;
     }
   }
 };
 
 // out = slerp(a, b, t) on the short arc, lane by lane, normalised. At t == 1 the result is b
-// (with the sign that puts it on a's side) and is not renormalised, so it stays bit for bit.
-// For a == b == identity the result is exactly identity.
-void SlerpLanes(const QuatLanes& a, const QuatLanes& b, const SlerpWeights& sw, QuatLanes& out) {
-  for (int v = 0; v < kVectors; ++v) {
-    const F4 dot = a.x[v] * b.x[v] + a.y[v] * b.y[v] + a.z[v] * b.z[v] + a.w[v] * b.w[v];
-    const I4 negative = dot < 0.f;
-    const F4 x = Select(negative, -dot, dot);
+// (with the sign that puts it on a's side), not renormalised, so it stays bit for bit. For
+// a == b == identity the result is exactly identity.
+template <int W>
+MOCAPEDIT_INLINE void SlerpLanes(const QuatLanes<W>& a, const QuatLanes<W>& b, const SlerpWeights& sw,
+                                 QuatLanes<W>& out) {
+  typedef typename Vec<W>::F F;
+  typedef typename Vec<W>::I I;
+  for (int v = 0; v < QuatLanes<W>::kVectors; ++v) {
+    const F dot = a.x[v] * b.x[v] + a.y[v] * b.y[v] + a.z[v] * b.z[v] + a.w[v] * b.w[v];
+    const I negative = dot < 0.f;
+    if (sw.t == 1.f) {  // P_i(1) = (1, 0, 0, ...) and 1 - t = 0: the polynomial is not needed
+      const F sign = Select(negative, F{} - 1.f, F{} + 1.f);
+      out.x[v] = sign * b.x[v];
+      out.y[v] = sign * b.y[v];
+      out.z[v] = sign * b.z[v];
+      out.w[v] = sign * b.w[v];
+      continue;
+    }
+    const F x = Select(negative, -dot, dot);
     // |a.b| may exceed 1 by rounding (or for quaternions that are not quite unit).
-    const F4 xm1 = Select(x < 1.f, x, F4{} + 1.f) - 1.f;
-    F4 ht = F4{} + sw.pt[kTerms], hd = F4{} + sw.pd[kTerms];
+    const F xm1 = Select(x < 1.f, x, F{} + 1.f) - 1.f;
+    F ht = F{} + sw.pt[kTerms], hd = F{} + sw.pd[kTerms];
     for (int k = kTerms - 1; k >= 0; --k) {
       ht = ht * xm1 + sw.pt[k];
       hd = hd * xm1 + sw.pd[k];
     }
-    const F4 ct = Select(negative, F4{} - sw.t, F4{} + sw.t) * ht, cd = sw.d * hd;
-    F4 qx = cd * a.x[v] + ct * b.x[v], qy = cd * a.y[v] + ct * b.y[v];
-    F4 qz = cd * a.z[v] + ct * b.z[v], qw = cd * a.w[v] + ct * b.w[v];
-    if (sw.t != 1.f) {
-      // One division: for q = (0, 0, 0, v) with v within an ulp of 1 (identity slerped with
-      // identity), v * (1 / sqrt(v * v)) is still exactly 1.
-      const F4 inv = 1.f / Sqrt(qx * qx + qy * qy + qz * qz + qw * qw);
-      qx *= inv;
-      qy *= inv;
-      qz *= inv;
-      qw *= inv;
-    }
-    out.x[v] = qx;
-    out.y[v] = qy;
-    out.z[v] = qz;
-    out.w[v] = qw;
+    const F ct = Select(negative, F{} - sw.t, F{} + sw.t) * ht, cd = sw.d * hd;
+    const F qx = cd * a.x[v] + ct * b.x[v], qy = cd * a.y[v] + ct * b.y[v];
+    const F qz = cd * a.z[v] + ct * b.z[v], qw = cd * a.w[v] + ct * b.w[v];
+    // One division: for q = (0, 0, 0, s) with s within an ulp of 1 (identity slerped with
+    // identity), s * (1 / sqrt(s * s)) is still exactly 1.
+    F n = qx * qx + qy * qy + qz * qz + qw * qw;
+    for (int l = 0; l < W; ++l) n[l] = std::sqrt(n[l]);
+    const F inv = 1.f / n;
+    out.x[v] = qx * inv;
+    out.y[v] = qy * inv;
+    out.z[v] = qz * inv;
+    out.w[v] = qw * inv;
   }
 }
 
 // out = a * b (Hamilton product: rotate by b, then by a), lane by lane.
-void MultiplyLanes(const QuatLanes& a, const QuatLanes& b, QuatLanes& out) {
-  for (int v = 0; v < kVectors; ++v) {
-    const F4 x = a.w[v] * b.x[v] + a.x[v] * b.w[v] + a.y[v] * b.z[v] - a.z[v] * b.y[v];
-    const F4 y = a.w[v] * b.y[v] - a.x[v] * b.z[v] + a.y[v] * b.w[v] + a.z[v] * b.x[v];
-    const F4 z = a.w[v] * b.z[v] + a.x[v] * b.y[v] - a.y[v] * b.x[v] + a.z[v] * b.w[v];
-    const F4 w = a.w[v] * b.w[v] - a.x[v] * b.x[v] - a.y[v] * b.y[v] - a.z[v] * b.z[v];
+template <int W>
+MOCAPEDIT_INLINE void MultiplyLanes(const QuatLanes<W>& a, const QuatLanes<W>& b, QuatLanes<W>& out) {
+  typedef typename Vec<W>::F F;
+  for (int v = 0; v < QuatLanes<W>::kVectors; ++v) {
+    const F x = a.w[v] * b.x[v] + a.x[v] * b.w[v] + a.y[v] * b.z[v] - a.z[v] * b.y[v];
+    const F y = a.w[v] * b.y[v] - a.x[v] * b.z[v] + a.y[v] * b.w[v] + a.z[v] * b.x[v];
+    const F z = a.w[v] * b.z[v] + a.x[v] * b.y[v] - a.y[v] * b.x[v] + a.z[v] * b.w[v];
+    const F w = a.w[v] * b.w[v] - a.x[v] * b.x[v] - a.y[v] * b.y[v] - a.z[v] * b.z[v];
     out.x[v] = x;
     out.y[v] = y;
     out.z[v] = z;
     out.w[v] = w;
   }
+}
+
+// rotations[j] = slerp(identity, deltas[j], w) * rotations[j] for joints js[0..count).
+template <int W>
+MOCAPEDIT_INLINE void AddRotations(const float* deltas, float* rotations, const int* js, int count,
+                                   const SlerpWeights& sw) {
+  QuatLanes<W> identity, delta, source;
+  identity.FillIdentity();
+  delta.Gather(deltas, js, count);
+  source.Gather(rotations, js, count);
+  SlerpLanes(identity, delta, sw, delta);
+  MultiplyLanes(delta, source, source);
+  source.Scatter(rotations, js, count);
+}
+
+// rotations[j] = slerp(rotations[j], layer[j], w) for joints js[0..count).
+template <int W>
+MOCAPEDIT_INLINE void BlendRotations(const float* layer, float* rotations, const int* js, int count,
+                                     const SlerpWeights& sw) {
+  QuatLanes<W> from, to;
+  from.Gather(rotations, js, count);
+  to.Gather(layer, js, count);
+  SlerpLanes(from, to, sw, from);
+  from.Scatter(rotations, js, count);
+}
+
+struct RotationKernels {
+  void (*add)(const float*, float*, const int*, int, const SlerpWeights&);
+  void (*blend)(const float*, float*, const int*, int, const SlerpWeights&);
+};
+
+void AddRotations4(const float* d, float* r, const int* js, int n, const SlerpWeights& sw) {
+  AddRotations<4>(d, r, js, n, sw);
+}
+void BlendRotations4(const float* l, float* r, const int* js, int n, const SlerpWeights& sw) {
+  BlendRotations<4>(l, r, js, n, sw);
+}
+#ifdef MOCAPEDIT_AVX2
+__attribute__((target("avx2"))) void AddRotations8(const float* d, float* r, const int* js, int n,
+                                                   const SlerpWeights& sw) {
+  AddRotations<8>(d, r, js, n, sw);
+}
+__attribute__((target("avx2"))) void BlendRotations8(const float* l, float* r, const int* js, int n,
+                                                     const SlerpWeights& sw) {
+  BlendRotations<8>(l, r, js, n, sw);
+}
+#endif
+
+// The kernels for this machine; MOCAPEDIT_NO_AVX2=1 in the environment forces the baseline.
+const RotationKernels& Kernels() {
+  static const RotationKernels kernels = [] {
+#ifdef MOCAPEDIT_AVX2
+    __builtin_cpu_init();
+    const char* no_avx2 = std::getenv("MOCAPEDIT_NO_AVX2");
+    if (__builtin_cpu_supports("avx2") && !(no_avx2 && std::string(no_avx2) == "1"))
+      return RotationKernels{AddRotations8, BlendRotations8};
+#endif
+    return RotationKernels{AddRotations4, BlendRotations4};
+  }();
+  return kernels;
 }
 
 // ---- the pipeline ---------------------------------------------------------------------
@@ -268,7 +389,7 @@ struct LayerJoints {
 void BlendLayer(const LayeringJob& job, const LayeringJob::Layer& layer) {
   const std::size_t nj = job.num_joints;
   const LayerJoints joints(layer, nj);
-  QuatLanes from, to;
+  const RotationKernels& kernels = Kernels();
   for (std::size_t t = 0; t < job.num_poses; ++t) {
     const float w = layer.weights[t];
     if (w == 0.f) continue;
@@ -288,10 +409,7 @@ void BlendLayer(const LayeringJob& job, const LayeringJob::Layer& layer) {
     if (w == 1.f)  // the layer's rotations, bit for bit, on the joints at the full weight
       for (const auto& [b, e] : joints.runs) std::memcpy(orot + b * 4, lr + b * 4, (e - b) * 4 * sizeof(float));
     joints.ForLanes(w, w != 1.f, [&](const int* js, int count, const SlerpWeights& sw) {
-      from.Gather(orot, js, count);
-      to.Gather(lr, js, count);
-      SlerpLanes(from, to, sw, from);
-      from.Scatter(orot, js, count);
+      kernels.blend(lr, orot, js, count, sw);
     });
   }
 }
@@ -299,8 +417,7 @@ void BlendLayer(const LayeringJob& job, const LayeringJob::Layer& layer) {
 void AddLayer(const LayeringJob& job, const LayeringJob::Layer& layer) {
   const std::size_t nj = job.num_joints;
   const LayerJoints joints(layer, nj);
-  QuatLanes identity, delta, source;
-  identity.FillIdentity();
+  const RotationKernels& kernels = Kernels();
   for (std::size_t t = 0; t < job.num_poses; ++t) {
     const float w = layer.weights[t];
     if (w == 0.f) continue;
@@ -317,11 +434,7 @@ void AddLayer(const LayeringJob& job, const LayeringJob::Layer& layer) {
     });
     // slerp(identity, delta, w) * source
     joints.ForLanes(w, true, [&](const int* js, int count, const SlerpWeights& sw) {
-      delta.Gather(dr, js, count);
-      source.Gather(orot, js, count);
-      SlerpLanes(identity, delta, sw, delta);
-      MultiplyLanes(delta, source, source);
-      source.Scatter(orot, js, count);
+      kernels.add(dr, orot, js, count, sw);
     });
   }
 }
@@ -329,13 +442,10 @@ void AddLayer(const LayeringJob& job, const LayeringJob::Layer& layer) {
 }  // namespace
 
 void Slerp(const float a[4], const float b[4], float t, float out[4]) {
-  QuatLanes qa, qb;
-  qa.FillIdentity();
-  qb.FillIdentity();
-  qa.Load(0, a);
-  qb.Load(0, b);
-  SlerpLanes(qa, qb, MakeSlerpWeights(t), qa);
-  qa.Store(0, out);
+  const int joint = 0;
+  float q[4] = {a[0], a[1], a[2], a[3]};
+  Kernels().blend(b, q, &joint, 1, MakeSlerpWeights(t));
+  std::memcpy(out, q, sizeof(q));
 }
 
 bool LayeringJob::Validate(std::string* error) const {
