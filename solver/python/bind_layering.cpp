@@ -72,6 +72,18 @@ struct PoseOutput {
   py::tuple tuple() const { return py::make_tuple(t, r, s); }
 };
 
+// Runs a job or builder without the GIL; its validation failure becomes a ValueError.
+template <typename Job>
+void RunOrThrow(const Job& job, const char* name) {
+  std::string error;
+  bool ok;
+  {
+    py::gil_scoped_release release;
+    ok = job.Run(&error);
+  }
+  if (!ok) throw std::invalid_argument(std::string(name) + ": " + error);
+}
+
 mocapedit::LayerMode ParseMode(const std::string& mode) {
   if (mode == "blend") return mocapedit::LayerMode::kBlend;
   if (mode == "additive") return mocapedit::LayerMode::kAdditive;
@@ -106,13 +118,7 @@ MOCAPEDIT_BINDINGS(BindLayering) {
         builder.reference = ref.view();
         builder.clip = c.view();
         builder.output = out.view();
-        std::string error;
-        bool ok;
-        {
-          py::gil_scoped_release release;
-          ok = builder.Run(&error);
-        }
-        if (!ok) throw std::invalid_argument("build_additive_clip: " + error);
+        RunOrThrow(builder, "build_additive_clip");
         return out.tuple();
       },
       py::arg("reference"), py::arg("clip"),
@@ -160,13 +166,7 @@ MOCAPEDIT_BINDINGS(BindLayering) {
         job.source = src.view();
         job.layers = Span<const mocapedit::LayeringJob::Layer>(job_layers.data(), job_layers.size());
         job.output = out.view();
-        std::string error;
-        bool ok;
-        {
-          py::gil_scoped_release release;
-          ok = job.Run(&error);
-        }
-        if (!ok) throw std::invalid_argument("apply_layers: " + error);
+        RunOrThrow(job, "apply_layers");
         return out.tuple();
       },
       py::arg("source"), py::arg("layers"),

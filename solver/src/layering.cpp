@@ -386,57 +386,56 @@ struct LayerJoints {
   }
 };
 
-void BlendLayer(const LayeringJob& job, const LayeringJob::Layer& layer) {
-  const std::size_t nj = job.num_joints;
-  const LayerJoints joints(layer, nj);
-  const RotationKernels& kernels = Kernels();
+// One pose of a layer and of the output: pointers to its #J transforms.
+struct PoseSlice {
+  const float *t, *r, *s;  // the layer's (blend) or its deltas (additive)
+  float *out_t, *out_r, *out_s;
+};
+
+// Calls fn(weight, slice) for every pose whose layer weight is not 0.
+template <typename Fn>
+void ForWeightedPoses(const LayeringJob& job, const LayeringJob::Layer& layer, Fn&& fn) {
   for (std::size_t t = 0; t < job.num_poses; ++t) {
     const float w = layer.weights[t];
     if (w == 0.f) continue;
-    const std::size_t base = t * nj;
-    const float* lt = &layer.transforms.translations[base * 3];
-    const float* lr = &layer.transforms.rotations[base * 4];
-    const float* ls = &layer.transforms.scales[base * 3];
-    float* ot = &job.output.translations[base * 3];
-    float* orot = &job.output.rotations[base * 4];
-    float* os = &job.output.scales[base * 3];
-    joints.ForRuns(w, [&](int begin, int end, float wj) {
-      // (1 - w) a + w b: exactly a at 0 and exactly b at 1.
-      const float vd = 1.f - wj;
-      for (int i = begin; i < end; ++i) ot[i] = vd * ot[i] + wj * lt[i];
-      for (int i = begin; i < end; ++i) os[i] = vd * os[i] + wj * ls[i];
-    });
-    if (w == 1.f)  // the layer's rotations, bit for bit, on the joints at the full weight
-      for (const auto& [b, e] : joints.runs) std::memcpy(orot + b * 4, lr + b * 4, (e - b) * 4 * sizeof(float));
-    joints.ForLanes(w, w != 1.f, [&](const int* js, int count, const SlerpWeights& sw) {
-      kernels.blend(lr, orot, js, count, sw);
-    });
+    const std::size_t base = t * job.num_joints;
+    fn(w, PoseSlice{&layer.transforms.translations[base * 3], &layer.transforms.rotations[base * 4],
+                    &layer.transforms.scales[base * 3], &job.output.translations[base * 3],
+                    &job.output.rotations[base * 4], &job.output.scales[base * 3]});
   }
 }
 
-void AddLayer(const LayeringJob& job, const LayeringJob::Layer& layer) {
-  const std::size_t nj = job.num_joints;
-  const LayerJoints joints(layer, nj);
+void BlendLayer(const LayeringJob& job, const LayeringJob::Layer& layer) {
+  const LayerJoints joints(layer, job.num_joints);
   const RotationKernels& kernels = Kernels();
-  for (std::size_t t = 0; t < job.num_poses; ++t) {
-    const float w = layer.weights[t];
-    if (w == 0.f) continue;
-    const std::size_t base = t * nj;
-    const float* dt = &layer.transforms.translations[base * 3];
-    const float* dr = &layer.transforms.rotations[base * 4];
-    const float* ds = &layer.transforms.scales[base * 3];
-    float* ot = &job.output.translations[base * 3];
-    float* orot = &job.output.rotations[base * 4];
-    float* os = &job.output.scales[base * 3];
+  ForWeightedPoses(job, layer, [&](float w, const PoseSlice& p) {
     joints.ForRuns(w, [&](int begin, int end, float wj) {
-      for (int i = begin; i < end; ++i) ot[i] += wj * dt[i];
-      for (int i = begin; i < end; ++i) os[i] *= 1.f + wj * (ds[i] - 1.f);
+      // (1 - w) a + w b: exactly a at 0 and exactly b at 1.
+      const float vd = 1.f - wj;
+      for (int i = begin; i < end; ++i) p.out_t[i] = vd * p.out_t[i] + wj * p.t[i];
+      for (int i = begin; i < end; ++i) p.out_s[i] = vd * p.out_s[i] + wj * p.s[i];
     });
-    // slerp(identity, delta, w) * source
+    if (w == 1.f)  // the layer's rotations, bit for bit, on the joints at the full weight
+      for (const auto& [b, e] : joints.runs) std::memcpy(p.out_r + b * 4, p.r + b * 4, (e - b) * 4 * sizeof(float));
+    joints.ForLanes(w, w != 1.f, [&](const int* js, int count, const SlerpWeights& sw) {
+      kernels.blend(p.r, p.out_r, js, count, sw);
+    });
+  });
+}
+
+void AddLayer(const LayeringJob& job, const LayeringJob::Layer& layer) {
+  const LayerJoints joints(layer, job.num_joints);
+  const RotationKernels& kernels = Kernels();
+  ForWeightedPoses(job, layer, [&](float w, const PoseSlice& p) {
+    joints.ForRuns(w, [&](int begin, int end, float wj) {
+      for (int i = begin; i < end; ++i) p.out_t[i] += wj * p.t[i];
+      for (int i = begin; i < end; ++i) p.out_s[i] *= 1.f + wj * (p.s[i] - 1.f);
+    });
+    // slerp(identity, delta, w) * rotation
     joints.ForLanes(w, true, [&](const int* js, int count, const SlerpWeights& sw) {
-      kernels.add(dr, orot, js, count, sw);
+      kernels.add(p.r, p.out_r, js, count, sw);
     });
-  }
+  });
 }
 
 }  // namespace

@@ -67,6 +67,17 @@ Poses RandomPoses(std::size_t n, unsigned seed) {
   return p;
 }
 
+AdditiveClipBuilder MakeBuilder(std::size_t frames, std::size_t joints, const Poses& reference, const Poses& clip,
+                                Poses& out) {
+  AdditiveClipBuilder b;
+  b.num_frames = frames;
+  b.num_joints = joints;
+  b.reference = reference.cview();
+  b.clip = clip.cview();
+  b.output = out.view();
+  return b;
+}
+
 LayeringJob MakeJob(std::size_t poses, std::size_t joints, const Poses& src, Poses& out,
                     const std::vector<LayeringJob::Layer>& layers) {
   LayeringJob job;
@@ -176,12 +187,7 @@ TEST(Layering, ValidityRejectsEveryBadSetup) {
 TEST(Layering, ValidityOfTheAdditiveBuilder) {
   const std::size_t F = 2, J = 2;
   Poses ref(J), clip(F * J), out(F * J);
-  AdditiveClipBuilder b;
-  b.num_frames = F;
-  b.num_joints = J;
-  b.reference = ref.cview();
-  b.clip = clip.cview();
-  b.output = out.view();
+  const AdditiveClipBuilder b = MakeBuilder(F, J, ref, clip, out);
   std::string why;
   EXPECT_TRUE(b.Validate(&why)) << why;
   {
@@ -338,13 +344,7 @@ TEST(Layering, AdditiveComposesAKnownDeltaOnTheLeftInJointLocalSpace) {
   clip.SetRotation(0, D * ref);
   clip.t = {1.5f, 2, 2};
   clip.s = {3, 2, 1};
-  AdditiveClipBuilder builder;
-  builder.num_frames = 1;
-  builder.num_joints = 1;
-  builder.reference = reference.cview();
-  builder.clip = clip.cview();
-  builder.output = delta.view();
-  ASSERT_TRUE(builder.Run());
+  ASSERT_TRUE(MakeBuilder(1, 1, reference, clip, delta).Run());
   ExpectSameRotation(delta.Rotation(0), D, 1e-6f, "delta");
   EXPECT_FLOAT_EQ(delta.t[0], 0.5f);
   EXPECT_FLOAT_EQ(delta.t[2], -1.f);
@@ -384,13 +384,7 @@ TEST(Layering, AdditiveOnItsReferenceGivesTheClipAndAReferenceFrameChangesNothin
   std::copy(clip.t.begin(), clip.t.begin() + J * 3, reference.t.begin());
   std::copy(clip.r.begin(), clip.r.begin() + J * 4, reference.r.begin());
   std::copy(clip.s.begin(), clip.s.begin() + J * 3, reference.s.begin());
-  AdditiveClipBuilder builder;
-  builder.num_frames = F;
-  builder.num_joints = J;
-  builder.reference = reference.cview();
-  builder.clip = clip.cview();
-  builder.output = delta.view();
-  ASSERT_TRUE(builder.Run());
+  ASSERT_TRUE(MakeBuilder(F, J, reference, clip, delta).Run());
   for (std::size_t j = 0; j < J; ++j) {  // frame 0's delta is exactly identity
     for (int k = 0; k < 3; ++k) EXPECT_EQ(delta.t[j * 3 + k], 0.f);
     for (int k = 0; k < 3; ++k) EXPECT_EQ(delta.s[j * 3 + k], 1.f);
