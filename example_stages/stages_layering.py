@@ -30,9 +30,9 @@ def build_street(out: Path) -> None:
     agents = []
     for i in range(8):
         lane = i % 2  # lane 0 walks towards +Z, lane 1 back towards -Z
-        x = -1.0 if lane == 0 else 1.0
-        z = -8.0 + 2.5 * (i // 2) if lane == 0 else 10.0 - 2.5 * (i // 2)
-        agents.append(examples.AgentSpec(f"agent_{i:04d}", walk, (x + 0.15 * (i % 3), 0.0, z),
+        x = -4.07 if lane == 0 else 4.04  # the two sidewalks of a street
+        z = -8.1 + 2.45 * (i // 2) if lane == 0 else 9.9 - 2.45 * (i // 2)
+        agents.append(examples.AgentSpec(f"agent_{i:04d}", walk, (x + 0.13 * (i % 3), 0.0, z),
                                          0.0 if lane == 0 else 180.0, time_offset=float(3 * (i % 4))))
     path = out / "layering_street.usda"
     stage = examples.build_crowd_stage(path, agents, up_axis="Y", meters_per_unit=1.0, fps=FPS,
