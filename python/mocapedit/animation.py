@@ -49,19 +49,18 @@ def sample_pose(clip: Clip, frames: np.ndarray, loop: bool = False) -> Pose:
         f = np.clip(np.asarray(frames, dtype=np.float64), 0, n - 1)
     i0 = np.floor(f).astype(np.int64)
     i1 = (i0 + 1) % n if loop else np.minimum(i0 + 1, n - 1)
-    a = (f - i0)
-    exact = a == 0
-    at = a[:, None, None]
-    tr = clip.translations[i0] * (1 - at) + clip.translations[i1] * at
-    sc = clip.scales[i0] * (1 - at) + clip.scales[i1] * at
-    rot = slerp(clip.rotations[i0], clip.rotations[i1], np.broadcast_to(a[:, None], clip.rotations[i0].shape[:2]))
-    # Whole frames keep their authored values bit for bit.
-    tr[exact] = clip.translations[i0[exact]]
-    sc[exact] = clip.scales[i0[exact]]
-    rot = rot.astype(np.float32)
-    rot[exact] = clip.rotations[i0[exact]]
-    return Pose(joints=list(clip.joints), translations=tr.astype(np.float32), rotations=rot,
-                scales=sc.astype(np.float32))
+    a = f - i0
+    # Whole frames keep their authored values bit for bit; only the others are interpolated.
+    tr, rot, sc = clip.translations[i0], clip.rotations[i0], clip.scales[i0]
+    part = np.flatnonzero(a != 0)
+    if part.size:
+        j0, j1, at = i0[part], i1[part], a[part][:, None, None]
+        tr[part] = clip.translations[j0] * (1 - at) + clip.translations[j1] * at
+        sc[part] = clip.scales[j0] * (1 - at) + clip.scales[j1] * at
+        rot[part] = slerp(clip.rotations[j0], clip.rotations[j1],
+                          np.broadcast_to(at[..., 0], clip.rotations[j0].shape[:2]))
+    return Pose(joints=list(clip.joints), translations=tr.astype(np.float32, copy=False),
+                rotations=rot.astype(np.float32, copy=False), scales=sc.astype(np.float32, copy=False))
 
 
 def interp_frames(values: np.ndarray, frames: np.ndarray) -> np.ndarray:

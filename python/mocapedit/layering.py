@@ -23,7 +23,7 @@ by ``a``). Matrices follow USD's row-vector convention (see :mod:`mocapedit.kine
 from __future__ import annotations
 
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -171,9 +171,18 @@ class PreparedLayer:
     clip_columns: np.ndarray    # (K,) layer clip joint of each layered joint
     pose_columns: np.ndarray    # (K,) its column in the (extended) source pose
     joint_name: str             # the subtree's top joint, for reports
+    _samples: dict = field(default_factory=dict, repr=False)
 
     def sample(self, times: np.ndarray, width: int) -> tuple[PoseArrays, np.ndarray, np.ndarray]:
-        """(layer transforms (T,width,...), weights (T,), joint weights (width,)) for the job."""
+        """(layer transforms (T,width,...), weights (T,), joint weights (width,)) for the job;
+        agents layered at the same shot times share them."""
+        key = (times.tobytes(), width)
+        hit = self._samples.get(key)
+        if hit is None:
+            hit = self._samples[key] = self._sample(times, width)
+        return hit
+
+    def _sample(self, times: np.ndarray, width: int) -> tuple[PoseArrays, np.ndarray, np.ndarray]:
         frames, loop = layer_frames(self.layer, self.clip, times)
         sampled = animation.sample_pose(self.clip, frames, loop)
         count = len(times)
@@ -216,9 +225,9 @@ class AgentLayers:
         times = np.asarray(times, dtype=np.float64)
         key = times.tobytes()
         hit = self._memo.get(key)
-        if hit is not None and all(np.array_equal(a, b) for a, b in zip(
+        if hit is not None and (hit[0] is pose or all(np.array_equal(a, b) for a, b in zip(
                 (hit[0].translations, hit[0].rotations, hit[0].scales),
-                (pose.translations, pose.rotations, pose.scales))):
+                (pose.translations, pose.rotations, pose.scales)))):
             return hit[1]
         source = self.extend(pose)
         job = [(p.layer.mode,) + p.sample(times, len(self.joints)) for p in self.layers]

@@ -30,6 +30,7 @@ def layering_pass(ctx: processor.SolveContext) -> None:
             stacks.setdefault(agent_path, []).append(layer)
 
     plans: dict[tuple, layering.AgentLayers] = {}
+    poses: dict[tuple, animation.Pose] = {}
     deltas: dict = {}
     layered = samples = 0
     task = ctx.progress.task("layering", len(stacks))
@@ -48,7 +49,11 @@ def layering_pass(ctx: processor.SolveContext) -> None:
         for p in plan.layers:
             notes.append(f"layer <{p.layer.path}>: {p.layer.mode} on {len(p.pose_columns)} joints "
                          f"from {p.joint_name}")
-        if plan.changes(animation.sample_pose(source, frames), times):
+        pose_key = (agent.clip_key, frames.tobytes())
+        pose = poses.get(pose_key)
+        if pose is None:  # unwarped agents of one clip all play frames 0, 1, ...: one pose
+            pose = poses[pose_key] = animation.sample_pose(source, frames)
+        if plan.changes(pose, times):
             ctx.pose_edits.setdefault(agent_path, []).append(
                 lambda pose, out_times, src_frames, plan=plan: plan.apply(pose, out_times))
             layered += 1
