@@ -1,8 +1,9 @@
-"""Poses of a clip sampled at fractional frames, in the clip's own joint order (numpy).
+"""Poses of a clip sampled at fractional frames, in the clip's own joint order.
 
 A :class:`Pose` is what the time warp samples and the layering modifies before the
 writer bakes it: translations interpolate linearly, rotations by normalised
-shortest-arc slerp, scales linearly.
+shortest-arc slerp, scales linearly. The sampling runs in the solver
+(:func:`sample_pose`); :func:`sample_pose_numpy` is the same in numpy.
 """
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _solver
 from .model import Clip
 
 
@@ -40,27 +42,40 @@ def slerp(q0: np.ndarray, q1: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 def sample_pose(clip: Clip, frames: np.ndarray, loop: bool = False) -> Pose:
     """The clip at fractional frame positions: clamped to the clip, or with ``loop`` taken
-    modulo the frame count, the last frame interpolating back to the first."""
-    n = clip.frame_count
+    modulo the frame count, the last frame interpolating back to the first.
+
+    Sampled by the solver (``_solver.sample_clip``); whole frames keep their authored
+    values bit for bit.
+    """
+    frames = np.ascontiguousarray(frames, dtype=np.float64).reshape(-1)
+    arrays = (clip.translations, clip.rotations, clip.scales)
     if loop:
-        f = np.mod(np.asarray(frames, dtype=np.float64), n)
-        f = np.where(f >= n, 0.0, f)  # mod of a tiny negative number can round up to n
-    else:
-        f = np.clip(np.asarray(frames, dtype=np.float64), 0, n - 1)
+        n = clip.frame_count
+        frames = np.mod(frames, n)
+        frames = np.where(frames >= n, 0.0, frames)  # mod of a tiny negative number can round up to n
+        arrays = tuple(np.concatenate([a, a[:1]]) for a in arrays)  # frame n is frame 0 again
+    t, r, s = _solver.sample_clip(*arrays, frames)
+    return Pose(joints=list(clip.joints), translations=t, rotations=r, scales=s)
+
+
+def sample_pose_numpy(clip: Clip, frames: np.ndarray) -> Pose:
+    """:func:`sample_pose` in numpy: the reference the benchmark measures the solver against."""
+    f = np.clip(np.asarray(frames, dtype=np.float64), 0, clip.frame_count - 1)
     i0 = np.floor(f).astype(np.int64)
-    i1 = (i0 + 1) % n if loop else np.minimum(i0 + 1, n - 1)
-    a = f - i0
-    # Whole frames keep their authored values bit for bit; only the others are interpolated.
-    tr, rot, sc = clip.translations[i0], clip.rotations[i0], clip.scales[i0]
-    part = np.flatnonzero(a != 0)
-    if part.size:
-        j0, j1, at = i0[part], i1[part], a[part][:, None, None]
-        tr[part] = clip.translations[j0] * (1 - at) + clip.translations[j1] * at
-        sc[part] = clip.scales[j0] * (1 - at) + clip.scales[j1] * at
-        rot[part] = slerp(clip.rotations[j0], clip.rotations[j1],
-                          np.broadcast_to(at[..., 0], clip.rotations[j0].shape[:2]))
-    return Pose(joints=list(clip.joints), translations=tr.astype(np.float32, copy=False),
-                rotations=rot.astype(np.float32, copy=False), scales=sc.astype(np.float32, copy=False))
+    i1 = np.minimum(i0 + 1, clip.frame_count - 1)
+    a = (f - i0)
+    exact = a == 0
+    at = a[:, None, None]
+    tr = clip.translations[i0] * (1 - at) + clip.translations[i1] * at
+    sc = clip.scales[i0] * (1 - at) + clip.scales[i1] * at
+    rot = slerp(clip.rotations[i0], clip.rotations[i1], np.broadcast_to(a[:, None], clip.rotations[i0].shape[:2]))
+    # Whole frames keep their authored values bit for bit.
+    tr[exact] = clip.translations[i0[exact]]
+    sc[exact] = clip.scales[i0[exact]]
+    rot = rot.astype(np.float32)
+    rot[exact] = clip.rotations[i0[exact]]
+    return Pose(joints=list(clip.joints), translations=tr.astype(np.float32), rotations=rot,
+                scales=sc.astype(np.float32))
 
 
 def interp_frames(values: np.ndarray, frames: np.ndarray) -> np.ndarray:
