@@ -133,8 +133,9 @@ struct LayeringJob {
 std::vector<float> SubtreeJointWeights(Span<const int> parents, int root);
 
 // Normalised shortest-arc slerp of two quaternions (x, y, z, w) by t in [0, 1], the kernel
-// the job uses (Eberly's polynomial slerp, no trigonometry; within 2e-7 of exact slerp on
-// unit float quaternions). t = 0 gives a (normalised), t = 1 gives b up to its sign.
+// the job uses (Eberly's polynomial slerp, no trigonometry; each component within 5e-7 of
+// exact slerp on unit float quaternions). t = 0 gives a (normalised), t = 1 gives b with the
+// sign that puts it on a's side, bit for bit.
 void Slerp(const float a[4], const float b[4], float t, float out[4]);
 
 }  // namespace mocapedit
