@@ -40,14 +40,21 @@ def slerp(q0: np.ndarray, q1: np.ndarray, t: np.ndarray) -> np.ndarray:
     return out / np.linalg.norm(out, axis=-1, keepdims=True)
 
 
-def sample_pose(clip: Clip, frames: np.ndarray) -> Pose:
-    """The clip at fractional frame positions (clamped to the clip).
+def sample_pose(clip: Clip, frames: np.ndarray, loop: bool = False) -> Pose:
+    """The clip at fractional frame positions: clamped to the clip, or with ``loop`` taken
+    modulo the frame count, the last frame interpolating back to the first.
 
     Sampled by the solver (``_solver.sample_clip``); whole frames keep their authored
     values bit for bit.
     """
-    t, r, s = _solver.sample_clip(clip.translations, clip.rotations, clip.scales,
-                                  np.ascontiguousarray(frames, dtype=np.float64).reshape(-1))
+    frames = np.ascontiguousarray(frames, dtype=np.float64).reshape(-1)
+    arrays = (clip.translations, clip.rotations, clip.scales)
+    if loop:
+        n = clip.frame_count
+        frames = np.mod(frames, n)
+        frames = np.where(frames >= n, 0.0, frames)  # mod of a tiny negative number can round up to n
+        arrays = tuple(np.concatenate([a, a[:1]]) for a in arrays)  # frame n is frame 0 again
+    t, r, s = _solver.sample_clip(*arrays, frames)
     return Pose(joints=list(clip.joints), translations=t, rotations=r, scales=s)
 
 
