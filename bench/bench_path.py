@@ -13,7 +13,10 @@ normal equations), measured in the same run on the same terms:
   similarity meets: step 1 must return that similarity) and against a QR reference on a
   bend; with the condition number of step 1's normal matrix;
 - a group of 100 agents x 500 frames turned by one edit (under 50 ms), and a relay of 78
-  agents x 500 frames tied by hard relative constraints (under 50 ms).
+  agents x 500 frames tied by hard relative constraints (under 50 ms);
+- the example stages of ``example_stages/stages_path.py``, solved through ``solve``: the
+  path pass's time and, per edited agent, the foot skate (``metrics.foot_skate``, m/s,
+  measured over the source's contact frames) before and after, and the length ratio.
 """
 from __future__ import annotations
 
@@ -219,6 +222,41 @@ def _component(ctx, inputs, hs, links, groups, target):
     }
 
 
+def _examples(ctx):
+    import importlib.util
+
+    from pxr import Usd
+
+    from mocapedit import metrics
+    from mocapedit.processor import solve
+    here = Path(__file__).resolve().parents[1] / "example_stages" / "stages_path.py"
+    spec = importlib.util.spec_from_file_location("stages_path", here)
+    stages = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(stages)
+    out = {}
+    for name, build in sorted(stages.STAGES.items()):
+        folder = ctx.workdir / "path_examples"
+        build(folder)
+        result = solve(str(folder / name), output=str(folder / f"{name}.edits.usda"),
+                       composed=str(folder / f"{name}.edited.usda"))
+        src, edited = Usd.Stage.Open(str(folder / name)), Usd.Stage.Open(str(folder / f"{name}.edited.usda"))
+        agents = {}
+        for path, fig in sorted(result.report.agents.items()):
+            if not fig.get("edited"):
+                continue
+            before = metrics.foot_skate(src, path)
+            after = metrics.foot_skate(edited, path, times=before.times, contact=before.contact)
+            agents[path] = {"footSkateSource": round(before.mean, 4), "footSkateEdited": round(after.mean, 4),
+                            "lengthRatio": round(fig["lengthRatio"], 4)}
+        skate = [a["footSkateEdited"] - a["footSkateSource"] for a in agents.values()]
+        out[name] = {"pathSeconds": round(result.report.timings["path"], 4),
+                     "worstResidual": max([c["residual"] for c in result.report.constraints] + [0.0]),
+                     "meanFootSkateIncrease": round(float(np.mean(skate)), 4),
+                     "maxFootSkateIncrease": round(float(np.max(skate)), 4),
+                     "agents": agents if len(agents) <= 6 else f"{len(agents)} edited"}
+    return out
+
+
 def run(ctx):
     out = {"single": _single(ctx)}
     out["long"] = _long(ctx, 5000 if ctx.quick else 20000)
@@ -228,4 +266,5 @@ def run(ctx):
     relay, frames = (20, 200) if ctx.quick else (78, 500)
     inputs, hs, links = _relay(relay, frames)
     out["relay"] = _component(ctx, inputs, hs, links, [], 50e-3)
+    out["examples"] = _examples(ctx)
     return out

@@ -228,3 +228,18 @@ def test_free_motions_are_resolved_without_drifting():
     np.testing.assert_allclose(da, np.tile([0.0, 1.0], (50, 1)), atol=1e-9)
     np.testing.assert_allclose(db, np.tile([0.0, -1.0], (50, 1)), atol=1e-9)
     assert result.agents["a"].translate_only
+
+
+@pytest.mark.parametrize("builder, stage", [("path_edit", "path_edit.usda"), ("path_stationary", "path_stationary.usda"),
+                                            ("path_handshake", "path_handshake.usda")])
+def test_example_edits_keep_foot_skate_low(tmp_path, builder, stage):
+    """Foot skate (mean horizontal foot speed in contact, m/s) on the composed stage, over
+    the source's contact frames, rises by less than 4 cm/s for the example edits."""
+    getattr(_load_stages(), builder)(tmp_path)
+    result, src, out = _solve(tmp_path, Usd.Stage.Open(str(tmp_path / stage)))
+    edited = [a for a, e in result.report.agents.items() if e.get("edited")]
+    assert edited
+    for agent in edited:
+        before = metrics.foot_skate(src, agent)
+        after = metrics.foot_skate(out, agent, times=before.times, contact=before.contact)
+        assert after.mean - before.mean < 0.04, f"{agent}: {before.mean:.3f} -> {after.mean:.3f} m/s"

@@ -24,7 +24,7 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kRefineTolerance = 1e-12;
 constexpr int kMaxRefinements = 10;
 // cond * eps above which refinement of the normal equations is not trusted: use QR.
-constexpr double kLdltTrust = 0.25;
+constexpr double kLdltTrust = 0.05;
 constexpr double kEps = 1.1102230246251565e-16;
 // Hard constraints that disagree by more than this (plus kConsistencyRelative * scale) are
 // reported as contradictions.
