@@ -26,8 +26,9 @@ than it must:
 - a component with no position constraint at all keeps its mean position: it is solved
   with one link end pinned, then shifted back so the ends of its links move by zero on
   average (the two sides of a handshake each walk half way);
-- an agent held at exactly two frames, whose turn the constraints still leave free (a
-  chain of agents linked end to end), keeps the direction between them (a soft term).
+- an agent whose turn and scale the constraints still leave free (a chain of agents
+  linked end to end) keeps the direction and distance between the two farthest frames it
+  is held at, by a weak soft term.
 
 Relative constraints in the target's space turn with the target: the target's heading at
 targetFrame is that of its edited path, found by re-solving (no refactoring) until it
@@ -42,6 +43,8 @@ import numpy as np
 from . import _solver, metrics
 
 HARD = np.inf
+#: Weight of the soft terms that keep free agents' turn and scale (see ComponentProblem).
+GAUGE_WEIGHT = 0.01
 #: Target-space links: re-solve until the target headings change less than this (radians).
 HEADING_TOLERANCE = 1e-12
 MAX_HEADING_ITERATIONS = 30
@@ -369,16 +372,19 @@ class ComponentProblem:
         kernel = set() if self._pinned_down(bodies) else self._similarity_kernel(bodies)
         if kernel:
             for body, anchor in zip(bodies, anchors):
-                if len(anchor) == 2 and any(i in kernel for i in body):
-                    a, b = anchor
+                if len(anchor) >= 2 and any(i in kernel for i in body):
+                    pts = self.rest[anchor]
+                    d = np.linalg.norm(pts[:, None] - pts[None], axis=-1)
+                    i, j = np.unravel_index(int(np.argmax(d)), d.shape)
+                    a, b = anchor[min(i, j)], anchor[max(i, j)]
                     self.extra_links.append((a, b, self.rest[a] - self.rest[b]))
             for a, b, offset in self.extra_links:
                 self.link_vertex = np.concatenate([self.link_vertex, np.array([[a, b]], np.int32)])
-                self.link_weight = np.append(self.link_weight, 1.0)
+                self.link_weight = np.append(self.link_weight, GAUGE_WEIGHT)
                 self.link_refs.append(None)
             if self.extra_links:
-                self.notes.append("the constraints leave some agents free to turn: each keeps the direction "
-                                  "between the two frames it is held at")
+                self.notes.append("the constraints leave some agents free to turn or scale: each keeps, as far "
+                                  "as it can, the direction and distance between the farthest frames it is held at")
             if self._similarity_kernel(bodies):
                 self.notes.append("the constraints leave some agents free to move; add a position constraint")
 
@@ -571,6 +577,9 @@ def edited_heading(a: AgentInput, g: np.ndarray, turn: np.ndarray, still: float 
     return _solver.tangent_headings(np.ascontiguousarray(g, dtype=np.float64), fixed, fallback, step)
 
 
-def shape_figures(a: AgentInput, g: np.ndarray) -> dict:
-    """Report figures of an edited path against its source."""
-    return {"lengthRatio": metrics.length_ratio(g, a.source), "shapeChange": metrics.shape_change(a.rest, g)}
+def shape_figures(a: AgentInput, g: np.ndarray, min_base: float) -> dict:
+    """Report figures of an edited path: its length over the source's, and the RMS change of
+    its local shape against the rest path (frames framed by less than ``min_base``, such
+    as a stand, carry no shape)."""
+    return {"lengthRatio": metrics.length_ratio(g, a.source),
+            "shapeChange": metrics.shape_change(a.rest, g, min_base=min_base)}

@@ -233,7 +233,7 @@ def _report(ctx: SolveContext, comp: _Component) -> None:
                 "prim": agent.path_curve, "kind": "path-curve", "agent": a.path, "frame": 0, "target": None,
                 "targetFrame": None, "hard": False, "residual": residual, "met": residual <= MET})
         entry = ctx.report.agent(a.path)
-        entry.update(path_edit.shape_figures(a, g))
+        entry.update(path_edit.shape_figures(a, g, ctx.data.info.metres(MIN_BASELINE_M)))
         r = res.agents[a.path]
         entry["solver"] = "translation only" if r.translate_only and res.solver not in ("none",) else res.solver
         if res.notes:
