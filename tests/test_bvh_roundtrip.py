@@ -88,8 +88,7 @@ def test_a_path_edit_moves_the_imported_walk_and_keeps_its_idle_rigid(tmp_path):
     np.testing.assert_allclose(hips_new[last, [0, 2]], [target[0], target[2]], atol=1e-3)
     np.testing.assert_allclose(hips_new[0, [0, 2]], hips_src[0, [0, 2]], atol=1e-3)
     # The tagged idle moves as one rigid piece: distances between its root positions keep.
-    a, b = Usd.Stage.Open(str(tmp_path / "edited.usda")).GetPrimAtPath("/walk/Skel/Anim") \
-        .GetAttribute("stationary:auto1:frames").Get()
+    a, b = edited.GetPrimAtPath("/walk/Skel/Anim").GetAttribute("stationary:auto1:frames").Get()
     span_src, span_new = hips_src[a:b + 1][:, [0, 2]], hips_new[a:b + 1][:, [0, 2]]
     d_src = np.linalg.norm(span_src[:, None] - span_src[None], axis=-1)
     d_new = np.linalg.norm(span_new[:, None] - span_new[None], axis=-1)

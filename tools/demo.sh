@@ -40,6 +40,20 @@ echo "== mocapedit preview demo.edited.usda"
 "$cli" preview "$out/demo.edited.usda" -o "$out/demo.top.exr" -q
 
 echo
+echo "== path edits: mocapedit solve path_edit.usda (a 10 m walk dragged 1 m sideways at its middle)"
+"$cli" solve "$out/path_edit.usda" -o "$out/path_edit.edits.usda" --composed "$out/path_edit.edited.usda" \
+  --report "$out/path_edit.report.json" -q
+"$py" - "$out" <<'PY'
+import json, sys
+report = json.load(open(f"{sys.argv[1]}/path_edit.report.json"))
+for c in report["constraints"]:
+    print(f"  {c['prim']}: {c['kind']} residual {c['residual']:.1e} ({'met' if c['met'] else 'not met'})")
+for path, a in sorted(report["agents"].items()):
+    if a.get("edited"):
+        print(f"  {path}: path length x{a['lengthRatio']:.4f}, solver {a['solver']}")
+PY
+
+echo
 echo "edits layer:    $out/demo.edits.usda"
 echo "composed stage: $out/demo.edited.usda   (open it in usdview; PXR_PLUGINPATH_NAME=\$($cli plugin-path))"
 echo "top view (EXR): $(cd "$out" && pwd)/demo.top.exr"

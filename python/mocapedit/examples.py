@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Iterable, Mapping, Sequence, Union
 
 import numpy as np
-from pxr import Gf, Sdf, Usd, Vt
+from pxr import Gf, Sdf, Usd, UsdGeom, Vt
 
 from mocapedit.walker import Clip, rest_local_matrices, rest_world_transforms
 
@@ -38,6 +38,9 @@ __all__ = [
     "add_position_constraint",
     "add_time_constraint",
     "add_sync_constraint",
+    "add_relative_constraint",
+    "add_group",
+    "add_path_curve",
     "tag_stationary",
 ]
 
@@ -341,6 +344,51 @@ def add_sync_constraint(stage: Usd.Stage, path: str | Sdf.Path, agent_path: str 
         attributes={"frame": (vt.Int, int(frame)), "targetFrame": (vt.Int, int(target_frame)),
                     "offset": (vt.Double, float(offset)), **_strength(strength, weight)},
         relationships={"agent": [agent_path], "target": [target_path]})
+
+
+def add_relative_constraint(stage: Usd.Stage, path: str | Sdf.Path, agent_path: str | Sdf.Path, frame: int,
+                            target_path: str | Sdf.Path, target_frame: int, offset: Sequence[float],
+                            space: str = "world", strength: str = "hard", weight: float = 1.0) -> Usd.Prim:
+    """Define a MocapRelativeConstraint: the agent's root at `frame` is the target's root at
+    `target_frame` plus `offset` (stage units; world axes, or the target's heading frame when
+    `space` is "target")."""
+    if space not in ("world", "target"):
+        raise ValueError(f"space must be 'world' or 'target', got {space!r}")
+    vt = Sdf.ValueTypeNames
+    return define_mocap_prim(
+        stage, path, "MocapRelativeConstraint",
+        attributes={"frame": (vt.Int, int(frame)), "targetFrame": (vt.Int, int(target_frame)),
+                    "offset": (vt.Vector3d, Gf.Vec3d(*(float(v) for v in offset))),
+                    "space": (vt.Token, space), **_strength(strength, weight)},
+        relationships={"agent": [agent_path], "target": [target_path]})
+
+
+def add_group(stage: Usd.Stage, path: str | Sdf.Path, members: Sequence[str | Sdf.Path],
+              stiffness: float = 1.0) -> Usd.Prim:
+    """Define a MocapAgentGroup of `members` that keeps its formation (`stiffness` weights it)."""
+    return define_mocap_prim(stage, path, "MocapAgentGroup",
+                             attributes={"stiffness": (Sdf.ValueTypeNames.Double, float(stiffness))},
+                             relationships={"members": list(members)})
+
+
+def add_path_curve(stage: Usd.Stage, path: str | Sdf.Path, points: Sequence[Sequence[float]],
+                   agents: Sequence[str | Sdf.Path] = (), basis: str = "catmullRom",
+                   curve_type: str = "cubic", wrap: str = "pinned") -> Usd.Prim:
+    """Define a BasisCurves path curve (world-space points, stage units) and point each
+    agent's ``mocap:pathCurve`` at it."""
+    curve = UsdGeom.BasisCurves.Define(stage, Sdf.Path(str(path)))
+    pts = [Gf.Vec3f(*(float(v) for v in p)) for p in points]
+    curve.CreatePointsAttr(Vt.Vec3fArray(pts))
+    curve.CreateCurveVertexCountsAttr(Vt.IntArray([len(pts)]))
+    curve.CreateTypeAttr(curve_type)
+    curve.CreateBasisAttr(basis)
+    curve.CreateWrapAttr(wrap)
+    curve.CreatePurposeAttr(UsdGeom.Tokens.guide)
+    for agent in agents:
+        prim = stage.GetPrimAtPath(Sdf.Path(str(agent)))
+        rel = prim.GetRelationship("mocap:pathCurve") or prim.CreateRelationship("mocap:pathCurve", False)
+        rel.SetTargets([curve.GetPath()])
+    return curve.GetPrim()
 
 
 def tag_stationary(anim: Usd.Prim | Sdf.PrimSpec, name: str, frames: Sequence[int]) -> None:

@@ -25,7 +25,7 @@ from . import ground as _ground
 __all__ = [
     "ground_axes", "to_ground", "from_ground",
     "path_length", "length_ratio", "position_residuals",
-    "local_coordinates", "shape_change", "rigidity_error",
+    "local_coordinates", "shape_change", "rigidity_error", "neighbour_distance_change",
     "Separation", "capsule_clearance", "min_separation",
     "time_intervals_positive",
     "joint_world_positions", "agent_root_positions", "default_foot_joints",
@@ -207,6 +207,32 @@ def rigidity_error(source, edited, ranges) -> np.ndarray:
         fitted = np.stack((c * sc[:, 0] - sn * sc[:, 1], sn * sc[:, 0] + c * sc[:, 1]), axis=1)
         out[k] = np.max(np.linalg.norm(fitted - ec, axis=1))
     return out
+
+
+def neighbour_distance_change(source, edited, neighbours: int = 3) -> np.ndarray:
+    """How much a group's formation changed: relative change of neighbour distances.
+
+    ``source`` and ``edited`` are ``(A, T, 2)`` ground positions of A agents at T shared times.
+    At each time, each agent's ``neighbours`` nearest agents in the source are its neighbours;
+    the result is ``(T, A, neighbours)`` of ``|d_edited - d_source| / d_source`` (take the mean
+    for the average change). Pairs that coincide in the source are NaN.
+    """
+    s = np.asarray(source, dtype=np.float64)
+    e = np.asarray(edited, dtype=np.float64)
+    if s.shape != e.shape or s.ndim != 3 or s.shape[2] != 2:
+        raise ValueError(f"source {s.shape} and edited {e.shape} must both be (agents, times, 2)")
+    k = min(int(neighbours), s.shape[0] - 1)
+    if k < 1:
+        return np.zeros((s.shape[1], s.shape[0], 0))
+    s, e = np.swapaxes(s, 0, 1), np.swapaxes(e, 0, 1)                  # (T, A, 2)
+    ds = np.linalg.norm(s[:, :, None] - s[:, None], axis=-1)             # (T, A, A)
+    de = np.linalg.norm(e[:, :, None] - e[:, None], axis=-1)
+    far = np.where(np.eye(s.shape[1], dtype=bool), np.inf, ds)
+    near = np.argsort(far, axis=2, kind="stable")[:, :, :k]
+    d0 = np.take_along_axis(ds, near, axis=2)
+    d1 = np.take_along_axis(de, near, axis=2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(d0 > 0, np.abs(d1 - d0) / np.where(d0 > 0, d0, 1.0), np.nan)
 
 
 def time_intervals_positive(time_map, min_interval: float = 0.0) -> bool:

@@ -180,7 +180,7 @@ class StageData:
     settings: SolveSettings = field(default_factory=SolveSettings)
     # Path curve prim -> {"type": "BasisCurves"|"NurbsCurves", "points": (K,3) local,
     # "local_to_world": (4,4), "counts": (C,), "basis": str, "curve_type": str, "wrap": str,
-    # "order": (C,) or None, "knots": (M,) or None}
+    # "order": (C,) or None, "knots": (M,) or None, "weights": (K,) or None (NurbsCurves pointWeights)}
     curves: dict[str, dict] = field(default_factory=dict)
 
     def clip_of(self, agent: Agent) -> Clip:

@@ -594,6 +594,7 @@ def write_png(scene: Scene, path: str, resolution=None, bounds: np.ndarray | Non
                fontsize=8.5 * scale, frameon=False, title="legend", title_fontsize=9.5 * scale,
                alignment="left")
     fig.canvas.draw()
+    ax.apply_aspect()   # the base canvas does not draw: settle the equal-aspect limits savefig will use
     affine = ax.transData.get_affine().get_matrix()       # [xd, yd, 1] = A @ [a, b, 1], origin bottom left
     flip = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, fig.bbox.height], [0.0, 0.0, 1.0]])
     to_pixel = (flip @ affine).T                           # row-vector convention, row 0 at the top

@@ -505,6 +505,8 @@ class StageReader:
         if type_name == "NurbsCurves":
             info["order"] = np.array(_get(prim, "order") or [4], dtype=np.int64)
             info["knots"] = np.array(_get(prim, "knots") or [], dtype=np.float64)
+            weights = _get(prim, "pointWeights")
+            info["weights"] = np.array(weights, dtype=np.float64) if weights is not None and len(weights) else None
         return info
 
     # ---- the whole stage -----------------------------------------------------------------

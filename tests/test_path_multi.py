@@ -1,0 +1,230 @@
+"""Several characters: relative constraints, groups, independent components (composed stage)."""
+from __future__ import annotations
+
+import importlib.util
+
+import numpy as np
+import pytest
+from pxr import Sdf, Usd
+
+from mocapedit import examples, ground, metrics, path_edit, trajectory, walker
+from mocapedit.errors import MocapEditError
+from mocapedit.processor import solve
+
+from conftest import REPO, world_joints
+
+CROWD = "/World/Crowd"
+FPS = 24.0
+
+
+@pytest.fixture(scope="module")
+def walk_clip():
+    return walker.walk(frames=121, fps=FPS, speed=1.25, name="walk5")   # 6 m along +Z
+
+
+def _stage(tmp_path, agents, name="shot.usda", **kw):
+    return examples.build_crowd_stage(tmp_path / name, agents, up_axis="Y", fps=FPS, clips_dir=tmp_path / "clips", **kw)
+
+
+def _solve(tmp_path, stage):
+    stage.GetRootLayer().Save()
+    src = stage.GetRootLayer().realPath
+    n = len(list(tmp_path.glob("out*.edits.usda")))
+    edits, composed = tmp_path / f"out{n}.edits.usda", tmp_path / f"out{n}.edited.usda"
+    result = solve(src, output=str(edits), composed=str(composed))
+    return result, Usd.Stage.Open(src), Usd.Stage.Open(str(composed))
+
+
+def _root(stage, agent, frames):
+    return ground.to_ground(world_joints(stage, f"{agent}/Skel", frames)[:, 0], "Y")
+
+
+def _relative_residual(out, c_agent, frame, target, target_frame, offset_ground):
+    a = _root(out, c_agent, [frame])[0]
+    t = _root(out, target, [target_frame])[0]
+    return float(np.linalg.norm(a - t - offset_ground))
+
+
+def test_a_relative_constraint_holds_and_follows_later_edits(tmp_path, walk_clip):
+    stage = _stage(tmp_path, [examples.AgentSpec("a", walk_clip), examples.AgentSpec("b", walk_clip, (3.0, 0.0, 1.0))])
+    a, b = f"{CROWD}/a", f"{CROWD}/b"
+    examples.add_position_constraint(stage, "/Edits/a_start", a, 0, (0.0, 0.0, 0.0))
+    examples.add_position_constraint(stage, "/Edits/b_start", b, 0, (3.0, 0.0, 1.0))
+    # B at frame 80 is 1 m to the +X side of A at frame 80 (world space).
+    examples.add_relative_constraint(stage, "/Edits/side", b, 80, a, 80, (1.0, 0.0, 0.0))
+    result, src, out = _solve(tmp_path, stage)
+    assert _relative_residual(out, b, 80, a, 80, [1.0, 0.0]) < 1e-6
+    entry = next(c for c in result.report.constraints if c["prim"] == "/Edits/side")
+    assert entry["kind"] == "relative" and entry["met"] and entry["target"] == a and entry["targetFrame"] == 80
+    assert result.layer.GetPrimAtPath("/MocapEdit/Guides/RelativeLinks")
+    # Figure 5.7: the target is edited later; the agent follows and the constraint holds.
+    examples.add_position_constraint(stage, "/Edits/a_drag", a, 120, (-2.0, 0.0, 5.5))
+    result, _, out = _solve(tmp_path, stage)
+    assert _relative_residual(out, b, 80, a, 80, [1.0, 0.0]) < 1e-6
+    np.testing.assert_allclose(_root(out, a, [120])[0], [-2.0, -5.5], atol=1e-6)
+    np.testing.assert_allclose(_root(out, b, [0])[0], [3.0, -1.0], atol=1e-6)
+    moved = _root(out, b, [80])[0] - _root(src, b, [80])[0]
+    assert np.linalg.norm(moved) > 0.5
+
+
+def test_target_space_offsets_turn_with_the_target(tmp_path, walk_clip):
+    stage = _stage(tmp_path, [examples.AgentSpec("host", walk_clip, (0, 0, 0), 30.0),
+                              examples.AgentSpec("guest", walk_clip, (4.0, 0.0, 0.0), 0.0)])
+    host, guest = f"{CROWD}/host", f"{CROWD}/guest"
+    examples.add_position_constraint(stage, "/Edits/h0", host, 0, (0.0, 0.0, 0.0))
+    examples.add_position_constraint(stage, "/Edits/h1", host, 120, (1.0, 0.0, 5.5))
+    examples.add_position_constraint(stage, "/Edits/g0", guest, 0, (4.0, 0.0, 0.0))
+    # 0.8 ahead of the host along its heading, 0.2 to its left (ground v is -z).
+    examples.add_relative_constraint(stage, "/Edits/meet", guest, 100, host, 60, (0.8, 0.0, -0.2), space="target")
+    result, src, out = _solve(tmp_path, stage)
+    g = _root(out, host, np.arange(121))
+    heading = trajectory.headings(g, [], 1.0)[60]
+    c, s = np.cos(heading), np.sin(heading)
+    offset = np.array([c * 0.8 - s * 0.2, s * 0.8 + c * 0.2])
+    assert _relative_residual(out, guest, 100, host, 60, offset) < 1e-6
+    # Not the world-space reading: the host's heading is far from zero.
+    assert _relative_residual(out, guest, 100, host, 60, [0.8, 0.2]) > 0.3
+    entry = next(c for c in result.report.constraints if c["prim"] == "/Edits/meet")
+    assert entry["residual"] < 1e-6
+
+
+def test_soft_relative_constraints_pull(tmp_path, walk_clip):
+    stage = _stage(tmp_path, [examples.AgentSpec("a", walk_clip), examples.AgentSpec("b", walk_clip, (3.0, 0.0, 0.0))])
+    a, b = f"{CROWD}/a", f"{CROWD}/b"
+    for agent, x in ((a, 0.0), (b, 3.0)):
+        examples.add_position_constraint(stage, f"/Edits/{agent[-1]}0", agent, 0, (x, 0.0, 0.0))
+        examples.add_position_constraint(stage, f"/Edits/{agent[-1]}1", agent, 120,
+                                         (x, 0.0, float(walk_clip.translations[120, 0, 2])))
+    examples.add_relative_constraint(stage, "/Edits/near", b, 60, a, 60, (1.0, 0.0, 0.0), strength="soft")
+    result, src, out = _solve(tmp_path, stage)
+    before = _relative_residual(src, b, 60, a, 60, [1.0, 0.0])
+    after = _relative_residual(out, b, 60, a, 60, [1.0, 0.0])
+    entry = next(c for c in result.report.constraints if c["prim"] == "/Edits/near")
+    assert not entry["hard"] and entry["residual"] == pytest.approx(after, abs=1e-6)
+    assert 1e-3 < after < 0.5 * before
+
+
+def test_independent_components_solve_alone_and_together(tmp_path, walk_clip):
+    """Agents in other components give exactly the result they give alone."""
+    specs = [examples.AgentSpec(n, walk_clip, (x, 0.0, 0.0)) for n, x in (("a", 0.0), ("b", 2.0), ("c", 5.0),
+                                                                             ("d", 8.0))]
+
+    def edits(stage, with_others):
+        examples.add_position_constraint(stage, "/Edits/a0", f"{CROWD}/a", 0, (0.0, 0.0, 0.0))
+        examples.add_position_constraint(stage, "/Edits/a1", f"{CROWD}/a", 90, (1.0, 0.0, 4.0))
+        examples.add_relative_constraint(stage, "/Edits/ab", f"{CROWD}/b", 60, f"{CROWD}/a", 60, (1.5, 0.0, 0.3))
+        if with_others:
+            examples.add_position_constraint(stage, "/Edits/c0", f"{CROWD}/c", 0, (5.0, 0.0, 0.0))
+            examples.add_position_constraint(stage, "/Edits/c1", f"{CROWD}/c", 120, (7.0, 0.0, 5.0))
+            examples.add_relative_constraint(stage, "/Edits/dc", f"{CROWD}/d", 30, f"{CROWD}/c", 40, (1.0, 0.0, 0.0))
+    alone = _stage(tmp_path, specs, "alone.usda")
+    edits(alone, False)
+    together = _stage(tmp_path, specs, "together.usda")
+    edits(together, True)
+    r1, _, out1 = _solve(tmp_path, alone)
+    r2, _, out2 = _solve(tmp_path, together)
+    assert r2.report.stats["pathComponents"] == 2 and r1.report.stats["pathComponents"] == 1
+    frames = np.arange(121)
+    for agent in ("a", "b"):
+        np.testing.assert_array_equal(world_joints(out1, f"{CROWD}/{agent}/Skel", frames),
+                                      world_joints(out2, f"{CROWD}/{agent}/Skel", frames))
+    assert r2.report.agents[f"{CROWD}/c"]["edited"]
+
+
+def _load_stages():
+    spec = importlib.util.spec_from_file_location("stages_path", REPO / "example_stages" / "stages_path.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_a_formation_turned_by_one_edit_keeps_its_neighbours(tmp_path):
+    _load_stages().path_formation(tmp_path)
+    result, src, out = _solve(tmp_path, Usd.Stage.Open(str(tmp_path / "path_formation.usda")))
+    names = sorted(a for a in result.data.agents)
+    assert len(names) == 14 and result.report.stats["pathComponents"] == 1
+    frames = np.arange(0, 193, 4)
+    s = np.array([_root(src, n, frames) for n in names])
+    e = np.array([_root(out, n, frames) for n in names])
+    # The leader's second half turned 90 degrees left...
+    lead, half = names.index(f"{CROWD}/m00"), 24
+    d0, d1 = s[lead, half] - s[lead, 0], e[lead, -1] - e[lead, half]
+    turn = np.degrees(np.arctan2(d1[1], d1[0]) - np.arctan2(d0[1], d0[0])) % 360
+    assert turn == pytest.approx(90.0, abs=1.0)
+    # ... and so did its neighbour in the front row (the rows behind follow it round the
+    # corner, the last ones reaching it after the clip ends).
+    front = names.index(f"{CROWD}/m01")
+    d2 = e[front, -1] - e[front, half]
+    assert 60 < np.degrees(np.arctan2(d2[1], d2[0]) - np.arctan2(d0[1], d0[0])) % 360 < 120
+    # ... and the neighbours stayed neighbours: distances change by under 5% on average.
+    change = metrics.neighbour_distance_change(s, e)
+    assert np.nanmean(change) < 0.05
+    assert all(result.report.agents[n]["edited"] for n in names)
+    assert result.layer.GetPrimAtPath("/MocapEdit/Guides/GroupLinks")
+
+
+def test_the_relay_holds_every_hand_over(tmp_path):
+    stages = _load_stages()
+    stages.path_relay(tmp_path)
+    result, src, out = _solve(tmp_path, Usd.Stage.Open(str(tmp_path / "path_relay.usda")))
+    relative = [c for c in result.report.constraints if c["kind"] == "relative"]
+    assert len(relative) == stages.RELAY_RUNNERS - 1 >= 50
+    assert max(c["residual"] for c in relative) < 1e-6
+    for k in (0, 25, 50):
+        a, b = f"{CROWD}/r{k:02d}", f"{CROWD}/r{k + 1:02d}"
+        ta, tb = (result.data.agents[x].sample_times for x in (a, b))   # frames play at offset times
+        assert ta[95] == tb[0]
+        hand = _root(out, a, [ta[95]])[0] - _root(out, b, [tb[0]])[0]
+        np.testing.assert_allclose(hand, [0.4, 0.0], atol=1e-6)
+    positions = [c for c in result.report.constraints if c["kind"] == "position"]
+    assert len(positions) == 3 and all(c["met"] for c in positions)
+
+
+def test_bad_multi_character_input(tmp_path, walk_clip):
+    specs = [examples.AgentSpec(n, walk_clip, (x, 0.0, 0.0)) for n, x in (("a", 0.0), ("b", 2.0), ("c", 4.0))]
+    a, b, c = (f"{CROWD}/{n}" for n in "abc")
+    stage = _stage(tmp_path, specs)
+    examples.add_relative_constraint(stage, "/Edits/self", a, 10, a, 10, (1.0, 0.0, 0.0))
+    stage.GetRootLayer().Save()
+    with pytest.raises(MocapEditError, match=r"</Edits/self>\.target.*itself"):
+        solve(stage.GetRootLayer().realPath)
+    # The same agent at another frame is fine.
+    stage.GetPrimAtPath("/Edits/self").GetAttribute("targetFrame").Set(20)
+    stage.GetRootLayer().Save()
+    solve(stage.GetRootLayer().realPath)
+    stage.RemovePrim("/Edits/self")
+
+    examples.add_group(stage, "/Edits/lonely", [a])
+    stage.GetRootLayer().Save()
+    with pytest.raises(MocapEditError, match=r"</Edits/lonely>\.members.*two members"):
+        solve(stage.GetRootLayer().realPath)
+    stage.RemovePrim("/Edits/lonely")
+
+    # A cycle of hard relative constraints whose offsets do not add up: named in full.
+    examples.add_position_constraint(stage, "/Edits/pin", a, 0, (0.0, 0.0, 0.0))
+    examples.add_relative_constraint(stage, "/Edits/ab", b, 50, a, 50, (1.0, 0.0, 0.0))
+    examples.add_relative_constraint(stage, "/Edits/bc", c, 50, b, 50, (1.0, 0.0, 0.0))
+    examples.add_relative_constraint(stage, "/Edits/ca", a, 50, c, 50, (-1.5, 0.0, 0.0))
+    stage.GetRootLayer().Save()
+    with pytest.raises(MocapEditError, match=r"</Edits/ab>, </Edits/bc>, </Edits/ca>.*0\.5"):
+        solve(stage.GetRootLayer().realPath)
+    stage.GetPrimAtPath("/Edits/ca").GetAttribute("offset").Set((-2.0, 0.0, 0.0))   # now it closes
+    stage.GetRootLayer().Save()
+    result = solve(stage.GetRootLayer().realPath)
+    assert max(e["residual"] for e in result.report.constraints if e["kind"] == "relative") < 1e-6
+
+
+def test_free_motions_are_resolved_without_drifting():
+    """Two agents tied by one relative constraint and nothing else: each moves half way,
+    by a translation (the gauge), and nothing turns."""
+    f = np.arange(50, dtype=float)
+    a = np.stack([f * 0.05, np.zeros(50)], axis=1)
+    b = a + [0.0, 3.0]
+    inputs = [path_edit.AgentInput(p, r, r, np.zeros(50), []) for p, r in (("a", a), ("b", b))]
+    link = path_edit.Link("b", 25, "a", 25, np.array([0.0, 1.0]), "world", np.inf, "/link")
+    settings = path_edit.Settings(min_baseline=0.01, rigid_min_extent=0.02, still=1e-5)
+    result = path_edit.ComponentProblem(inputs, [], [link], [], settings).solve()
+    da, db = result.agents["a"].ground - a, result.agents["b"].ground - b
+    np.testing.assert_allclose(da, np.tile([0.0, 1.0], (50, 1)), atol=1e-9)
+    np.testing.assert_allclose(db, np.tile([0.0, -1.0], (50, 1)), atol=1e-9)
+    assert result.agents["a"].translate_only
