@@ -90,9 +90,10 @@ def load_passes() -> None:
 def extract_trajectories(ctx: SolveContext) -> None:
     info = ctx.data.info
     task = ctx.progress.task("trajectories", len(ctx.data.agents))
+    cache: dict = {}
     for i, (path, agent) in enumerate(ctx.data.agents.items()):
         ctx.trajectories[path] = trajectory.extract(agent, ctx.data.clip_of(agent), info.up_axis,
-                                                    info.meters_per_unit)
+                                                    info.meters_per_unit, cache)
         task.update(i + 1)
     task.done()
 

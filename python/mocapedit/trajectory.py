@@ -32,7 +32,7 @@ class Trajectory:
     projected_hip: bool       # True when the root carries no motion and the hip is used
 
 
-def local_transforms(agent: Agent, clip: Clip, joints: np.ndarray | None = None) -> np.ndarray:
+def local_transforms(agent: Agent, clip: Clip) -> np.ndarray:
     """(F,J,4,4) joint-local matrices in skeleton order; joints the clip lacks take the rest pose."""
     f = clip.frame_count
     local = np.broadcast_to(agent.rest_transforms, (f,) + agent.rest_transforms.shape).copy()
@@ -42,22 +42,53 @@ def local_transforms(agent: Agent, clip: Clip, joints: np.ndarray | None = None)
     return local
 
 
+def joint_skel_space(agent: Agent, clip: Clip, joint: int) -> np.ndarray:
+    """(F,4,4) skeleton-space matrices of one joint, composing only its chain of parents."""
+    chain = []
+    j = joint
+    while j >= 0:
+        chain.append(j)
+        j = int(agent.parents[j])
+    skel_to_anim = {int(s): a for a, s in enumerate(agent.anim_to_skel) if s >= 0}
+    m = None
+    for j in chain:  # joint first, then its parents: skel = local_j @ local_parent @ ...
+        a = skel_to_anim.get(j)
+        if a is None:
+            local = np.broadcast_to(agent.rest_transforms[j], (clip.frame_count, 4, 4))
+        else:
+            local = kinematics.compose_trs(clip.translations[:, a], clip.rotations[:, a], clip.scales[:, a])
+        m = local if m is None else m @ local
+    return m
+
+
 def joint_world(agent: Agent, clip: Clip, joint: int) -> np.ndarray:
     """(F,4,4) world matrices of one joint at every source frame."""
-    local = local_transforms(agent, clip)
-    return kinematics.chain_to_skel(local, agent.parents, joint) @ agent.skel_to_world
+    return joint_skel_space(agent, clip, joint) @ agent.skel_to_world
 
 
-def extract(agent: Agent, clip: Clip, up_axis: str, meters_per_unit: float) -> Trajectory:
-    """The agent's ground trajectory, its heading and height at each source frame."""
-    local = local_transforms(agent, clip)
-    root = kinematics.chain_to_skel(local, agent.parents, agent.root_joint) @ agent.skel_to_world
+def extract(agent: Agent, clip: Clip, up_axis: str, meters_per_unit: float,
+            cache: dict | None = None) -> Trajectory:
+    """The agent's ground trajectory, its heading and height at each source frame.
+
+    ``cache`` (optional, shared across agents) keeps the skeleton-space chains of clips
+    that many agents play, so a crowd of re-used clips is composed once per clip.
+    """
+    def world(joint):
+        key = (agent.clip_key, tuple(agent.joints), joint)
+        skel = cache.get(key) if cache is not None else None
+        if skel is None:
+            skel = joint_skel_space(agent, clip, joint)
+            if cache is not None:
+                cache[key] = skel
+        return skel @ agent.skel_to_world
+
+    root = world(agent.root_joint)
     pos = root[:, 3, :3]
     uv = ground.to_ground(pos, up_axis)
     joint, projected = agent.root_joint, False
     travel = np.ptp(uv, axis=0).max() if len(uv) else 0.0
     if travel < STILL_ROOT_M / meters_per_unit and agent.hip_joint is not None:
-        hip = kinematics.chain_to_skel(local, agent.parents, agent.hip_joint) @ agent.skel_to_world
+        hip = world(agent.hip_joint)
         if np.ptp(ground.to_ground(hip[:, 3, :3], up_axis), axis=0).max() > travel:
             pos = hip[:, 3, :3]
             uv = ground.to_ground(pos, up_axis)
