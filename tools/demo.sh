@@ -31,5 +31,16 @@ for c in report["constraints"]:
     print(f"  {c.get('prim')}: residual {c.get('residual', 0.0):.2e}")
 PY
 echo
+echo "== mocapedit report demo.edits.usda"
+"$cli" report "$out/demo.edits.usda"
+
+echo
+echo "== mocapedit preview demo.edited.usda"
+"$cli" preview "$out/demo.edited.usda" -o "$out/demo.top.png"
+"$cli" preview "$out/demo.edited.usda" -o "$out/demo.top.exr" -q
+
+echo
 echo "edits layer:    $out/demo.edits.usda"
 echo "composed stage: $out/demo.edited.usda   (open it in usdview; PXR_PLUGINPATH_NAME=\$($cli plugin-path))"
+echo "top view (EXR): $(cd "$out" && pwd)/demo.top.exr"
+echo "top view (PNG): $(cd "$out" && pwd)/demo.top.png"

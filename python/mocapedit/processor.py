@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 from pxr import Sdf, Usd, Vt
 
-from . import animation, ground, reader, trajectory, writer
+from . import animation, guides, inspection, reader, trajectory, writer
 from .errors import MocapEditError
 from .model import StageData
 from .progress import Progress, Silent
@@ -156,19 +156,11 @@ def _with_parent(agent, parent_to_world):
     return dataclasses.replace(agent, agent_parent_to_world=parent_to_world)
 
 
-def source_path_guides(ctx: SolveContext) -> None:
-    if not ctx.options.guides:
-        return
-    up = ctx.data.info.up_axis
-    curves = [ground.from_ground(t.ground, 0.0, up) for _, t in sorted(ctx.trajectories.items())]
-    ctx.guides.append(writer.GuideCurves(
-        name="SourcePaths", curves=curves, color=(0.55, 0.55, 0.6),
-        width=ctx.data.info.metres(0.03), doc="Ground paths of the agents' source clips, one curve per agent."))
-    edited = [ground.from_ground(ctx.paths[p].ground, 0.0, up) for p in sorted(ctx.paths)]
-    if edited:
-        ctx.guides.append(writer.GuideCurves(
-            name="EditedPaths", curves=edited, color=(1.0, 0.55, 0.1),
-            width=ctx.data.info.metres(0.04), doc="Edited ground paths, one curve per edited agent."))
+def inspect(ctx: SolveContext) -> None:
+    """After every pass: the report figures no pass measured, and the guides."""
+    crowd = inspection.from_context(ctx)
+    remaining = inspection.complete_report(ctx, crowd)
+    guides.build(ctx, crowd, remaining)
 
 
 def content_hash(stage: Usd.Stage) -> str:
@@ -253,13 +245,16 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
         fn(ctx)
         timings[name] = time.perf_counter() - t
     compose_edits(ctx)
-    source_path_guides(ctx)
+    t = time.perf_counter()
+    inspect(ctx)
+    timings["inspect"] = time.perf_counter() - t
 
     constraint_count = sum(len(x) for x in (data.position_constraints, data.relative_constraints,
                                             data.time_constraints, data.sync_constraints))
-    report.stats = {"agents": len(data.agents), "editedAgents": len(ctx.edits), "clips": len(data.clips),
-                    "constraints": constraint_count, "groups": len(data.groups),
-                    "avoidRegions": len(data.avoid_regions), "animationLayers": len(data.layers)}
+    # The passes' own run-wide figures (collisionIterations, ...) are kept beside these.
+    report.stats.update({"agents": len(data.agents), "editedAgents": len(ctx.edits), "clips": len(data.clips),
+                         "constraints": constraint_count, "groups": len(data.groups),
+                         "avoidRegions": len(data.avoid_regions), "animationLayers": len(data.layers)})
     for path, traj in ctx.trajectories.items():
         entry = report.agent(path)
         entry.setdefault("frames", int(len(traj.ground)))
@@ -271,7 +266,7 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
     provenance = {"inputs": Vt.StringArray(input_layers(stage)), "contentHash": content_hash(stage)}
     layer = writer.build_layer(writer.LayerContent(
         info=data.info, agents=data.agents, edits=ctx.edits, guides=ctx.guides,
-        provenance=provenance, stats=report.stats))
+        provenance=provenance, stats=report.stats, report=report.to_layer_dict()))
     if output:
         writer.save_layer(layer, output)
         if composed:

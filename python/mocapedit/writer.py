@@ -9,21 +9,25 @@ UsdSkel and UsdGeom. Layout:
 - an agent whose joints changed (time warp, layering) gets a baked SkelAnimation under
   ``/MocapEdit/Animations`` bound to its skeleton with ``skel:animationSource``;
 - guide geometry goes under ``/MocapEdit/Guides`` with purpose ``guide``;
-- ``customLayerData["mocapedit"]`` records the version, the input layers, a content hash
-  and the solve statistics.
+- ``customLayerData["mocapedit"]`` records the version, the input layers, a content hash,
+  the solve statistics and the whole solve report (``report``: compact JSON text, sorted
+  keys, no timings, so the same input still gives the same bytes); ``mocapedit report``
+  reads it back.
 
 Prims and samples are authored in sorted order so the same input gives the same bytes.
 Files are written to a temporary name beside the target and renamed into place.
 """
 from __future__ import annotations
 
+import json
+import math
 import os
 import re
 import tempfile
 from dataclasses import dataclass, field
 
 import numpy as np
-from pxr import Gf, Sdf, Vt
+from pxr import Gf, Sdf, UsdGeom, Vt
 
 from . import __version__
 from .model import Agent, StageInfo
@@ -58,6 +62,7 @@ class GuideCurves:
     color: tuple[float, float, float]
     width: float                 # stage units
     doc: str = ""
+    colors: np.ndarray | None = None  # (C,3) one colour per curve, overrides color
 
 
 @dataclass
@@ -77,6 +82,7 @@ class LayerContent:
     guides: list = field(default_factory=list)
     provenance: dict = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
+    report: dict | None = None   # JSON-ready solve report, stored as compact JSON text
 
 
 def _safe_name(path: str, taken: set[str]) -> str:
@@ -145,54 +151,93 @@ def _author_animation(layer: Sdf.Layer, agent: Agent, anim: BakedAnimation, name
     rel.targetPathList.explicitItems = [path]
 
 
+def _colors(spec: Sdf.PrimSpec, colors: np.ndarray, interpolation: str) -> None:
+    _attr(spec, "primvars:displayColor", Sdf.ValueTypeNames.Color3fArray,
+          Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(colors, dtype=np.float32).reshape(-1, 3)))
+    spec.attributes["primvars:displayColor"].SetInfo("interpolation", interpolation)
+
+
 def _author_guides(layer: Sdf.Layer, guides: list) -> None:
+    taken: set[str] = set()
     for guide in guides:
-        path = GUIDES.AppendChild(guide.name)
-        if isinstance(guide, GuideCurves):
-            if not guide.curves:
-                continue
-            spec = _def(layer, path, "BasisCurves")
-            pts = np.concatenate(guide.curves).astype(np.float32)
+        is_curves = isinstance(guide, GuideCurves)
+        if len(guide.curves if is_curves else guide.points) == 0:
+            continue
+        path = GUIDES.AppendChild(_safe_name(guide.name, taken))
+        spec = _def(layer, path, "BasisCurves" if is_curves else "Points")
+        if is_curves:
+            # A curve needs two vertices: a single point becomes a zero-length segment.
+            curves = [np.repeat(c, 2, axis=0) if len(c) == 1 else c for c in guide.curves]
+            pts = np.concatenate(curves).astype(np.float32)
             _attr(spec, "type", Sdf.ValueTypeNames.Token, "linear", uniform=True)
             _attr(spec, "curveVertexCounts", Sdf.ValueTypeNames.IntArray,
-                  Vt.IntArray([int(len(c)) for c in guide.curves]))
-            _attr(spec, "points", Sdf.ValueTypeNames.Point3fArray, Vt.Vec3fArray.FromNumpy(pts))
-            _attr(spec, "widths", Sdf.ValueTypeNames.FloatArray, Vt.FloatArray([float(guide.width)]))
-            spec.attributes["widths"].SetInfo("interpolation", "constant")
-            _attr(spec, "primvars:displayColor", Sdf.ValueTypeNames.Color3fArray,
-                  Vt.Vec3fArray([Gf.Vec3f(*guide.color)]))
-            spec.attributes["primvars:displayColor"].SetInfo("interpolation", "constant")
+                  Vt.IntArray([int(len(c)) for c in curves]))
+            if guide.colors is not None:
+                _colors(spec, guide.colors, "uniform")
+            else:
+                _colors(spec, np.array([guide.color]), "constant")
         else:
-            if len(guide.points) == 0:
-                continue
-            spec = _def(layer, path, "Points")
-            _attr(spec, "points", Sdf.ValueTypeNames.Point3fArray,
-                  Vt.Vec3fArray.FromNumpy(np.asarray(guide.points, dtype=np.float32)))
-            _attr(spec, "widths", Sdf.ValueTypeNames.FloatArray, Vt.FloatArray([float(guide.width)]))
-            spec.attributes["widths"].SetInfo("interpolation", "constant")
-            _attr(spec, "primvars:displayColor", Sdf.ValueTypeNames.Color3fArray,
-                  Vt.Vec3fArray.FromNumpy(np.asarray(guide.colors, dtype=np.float32)))
-            spec.attributes["primvars:displayColor"].SetInfo("interpolation", "vertex")
+            pts = np.asarray(guide.points, dtype=np.float32).reshape(-1, 3)
+            _colors(spec, guide.colors, "vertex")
+        points = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(pts))
+        _attr(spec, "points", Sdf.ValueTypeNames.Point3fArray, points)
+        _attr(spec, "widths", Sdf.ValueTypeNames.FloatArray, Vt.FloatArray([float(guide.width)]))
+        spec.attributes["widths"].SetInfo("interpolation", "constant")
+        # Boundables carry their extent so every USD tool frames them without computing it.
+        compute = UsdGeom.Curves.ComputeExtent if is_curves else UsdGeom.Points.ComputeExtent
+        extent = compute(points, Vt.FloatArray([float(guide.width)] * len(pts)))
+        _attr(spec, "extent", Sdf.ValueTypeNames.Float3Array, extent)
         _attr(spec, "purpose", Sdf.ValueTypeNames.Token, "guide", uniform=True)
         if guide.doc:
             spec.documentation = guide.doc
 
 
-def build_layer(content: LayerContent) -> Sdf.Layer:
-    """An anonymous layer holding the edits; save it with :func:`save_layer`."""
-    layer = Sdf.Layer.CreateAnonymous(".usda")
-    info = content.info
+def report_text(report: dict) -> str:
+    """The report as stored in the layer: compact JSON, sorted keys, non-finite numbers as null."""
+    return json.dumps(_finite(report), sort_keys=True, separators=(",", ":"), allow_nan=False)
+
+
+def _finite(value):
+    if isinstance(value, dict):
+        return {str(k): _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _finite(value.tolist())
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def _set_time_metadata(layer: Sdf.Layer, info: StageInfo) -> None:
+    """The input's time codes per second and range: a layer whose rate differs from the
+    stage's would be rescaled when sub-layered."""
     layer.timeCodesPerSecond = info.time_codes_per_second
     layer.framesPerSecond = info.time_codes_per_second
     if info.start_time is not None:
         layer.startTimeCode = info.start_time
     if info.end_time is not None:
         layer.endTimeCode = info.end_time
+
+
+def build_layer(content: LayerContent) -> Sdf.Layer:
+    """An anonymous layer holding the edits; save it with :func:`save_layer`."""
+    layer = Sdf.Layer.CreateAnonymous(".usda")
+    info = content.info
+    _set_time_metadata(layer, info)
     layer.documentation = "mocapedit edits: place over the input stage (sublayer above it)."
+    # Opened on its own the layer still says what it is, in which units and up axis.
+    layer.defaultPrim = ROOT.name
+    layer.pseudoRoot.SetInfo("upAxis", info.up_axis)
+    layer.pseudoRoot.SetInfo("metersPerUnit", info.meters_per_unit)
     data = {"version": __version__}
     data.update(content.provenance)
     if content.stats:
         data["stats"] = content.stats
+    if content.report is not None:
+        data["report"] = report_text(content.report)
     layer.customLayerData = {"mocapedit": data}
     with Sdf.ChangeBlock():
         root = Sdf.PrimSpec(layer.pseudoRoot, ROOT.name, Sdf.SpecifierDef, "Scope")
@@ -243,12 +288,7 @@ def save_composed(path: str, edits_path: str, input_path: str, info: StageInfo,
     layer.subLayerPaths = [os.path.relpath(os.path.abspath(edits_path), here),
                            os.path.relpath(os.path.abspath(input_path), here)]
     # A root layer that only sub-layers others still sets the stage's time and units.
-    layer.timeCodesPerSecond = info.time_codes_per_second
-    layer.framesPerSecond = info.time_codes_per_second
-    if info.start_time is not None:
-        layer.startTimeCode = info.start_time
-    if info.end_time is not None:
-        layer.endTimeCode = info.end_time
+    _set_time_metadata(layer, info)
     layer.pseudoRoot.SetInfo("upAxis", info.up_axis)
     layer.pseudoRoot.SetInfo("metersPerUnit", info.meters_per_unit)
     if default_prim:
@@ -256,14 +296,21 @@ def save_composed(path: str, edits_path: str, input_path: str, info: StageInfo,
     save_layer(layer, path)
 
 
-def save_text(path: str, text: str) -> None:
-    """Writes a text file (a report) through a temporary file and a rename."""
+def save_with(path: str, write) -> None:
+    """Writes a file through ``write(temporary path)`` beside it and a rename into place."""
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     tmp = _temp_beside(path)
     try:
-        with open(tmp, "w", encoding="utf-8") as f:
-            f.write(text)
+        write(tmp)
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
+
+
+def save_text(path: str, text: str) -> None:
+    """Writes a text file (a report) through a temporary file and a rename."""
+    def write(tmp):
+        with open(tmp, "w", encoding="utf-8") as f:
+            f.write(text)
+    save_with(path, write)
