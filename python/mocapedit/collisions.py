@@ -90,11 +90,21 @@ def sample(agents: list[str], frame_times: dict[str, np.ndarray], paths: dict[st
     return Sampling(agents=list(agents), times=times, frames=frames, positions=positions)
 
 
-def resample(sampling: Sampling, paths: dict[str, np.ndarray], agents=None) -> None:
-    """Re-reads the positions of some agents (all by default) from new per-frame paths."""
-    for i, a in enumerate(sampling.agents):
-        if agents is None or a in agents:
-            sampling.positions[:, i] = positions_at(paths[a], sampling.frames[:, i])
+def resample(sampling: Sampling, paths: np.ndarray, starts: np.ndarray) -> None:
+    """Re-reads every agent's positions from new per-frame paths, concatenated.
+
+    Args:
+      paths: #V by 2 ground positions, agent i's frames at rows starts[i] .. starts[i+1]-1
+      starts: #A+1 first row of each agent (in sampling order), then #V
+    """
+    starts = np.asarray(starts, dtype=np.int64)
+    last = (starts[1:] - starts[:-1] - 1)[None, :]
+    f = np.clip(sampling.frames, 0.0, last)
+    i0 = np.floor(f).astype(np.int64)
+    i1 = np.minimum(i0 + 1, last)
+    a = (f - i0)[..., None]
+    base = starts[:-1][None, :]
+    sampling.positions[:] = paths[base + i0] * (1.0 - a) + paths[base + i1] * a
 
 
 @dataclass
@@ -109,6 +119,7 @@ class Collisions:
     min_clearance: np.ndarray    # (A,) each agent's smallest clearance, +inf if none within reach
     min_clearance_sample: np.ndarray  # (A,) sample of it, -1 if +inf
     colliding_samples: int       # (pair, sample) records below the wanted clearance
+    pair_tests: int = 0          # narrow-phase capsule tests the detection made
 
     def __len__(self) -> int:
         return int(self.agent_a.shape[0])

@@ -1,0 +1,536 @@
+"""Collision avoidance by path editing (chapter 6 of the deliverable), and avoid regions.
+
+The agents' ground paths are re-solved with the two-step Laplacian energy of the path
+editor (:class:`mocapedit._solver.SeparationSolver`: each agent factored once, rows that
+push points apart added per solve) until no two capsules overlap and no agent stands in
+an avoid region, or ``max_iterations`` is reached. Two strategies:
+
+``accumulate`` (the deliverable, sections 6.2 and 6.3)
+  At each iteration, every maximal collision (the deepest sample of each contiguous
+  collision interval of a pair) adds a mesh-based constraint joining the two colliding
+  points at capsule clearance plus margin, along the line between them; the paths are
+  re-solved with the previous iteration's result as the new source. The deliverable notes
+  that this accumulates deformation, since every iteration's source is already deformed.
+
+``relinearize`` (the default)
+  The source stays the input paths. Every separation ever needed is kept as a one-sided
+  constraint on the distance between the two points, linearised around the current result
+  at each iteration (only the component along the line between them is constrained, so
+  the agents may still slide past each other), with an active set: a constraint that
+  would pull two agents together is released, and near misses within ``buffer`` of the
+  clearance are watched and switched on the moment a push drives them into contact. Each
+  solve starts from the original source, so deformation does not accumulate.
+
+Artist constraints hold throughout: hard pins and links are hard rows of every solve,
+stationary ranges move rigidly. Pairs that hard constraints hold together are reported,
+not looped on.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import _solver, collisions
+
+STRATEGIES = ("relinearize", "accumulate")
+
+#: Softness of separation and region rows (1 / weight, relative to the shape terms): nearly
+#: hard, but two constraints that cannot both hold give way instead of failing.
+SEPARATION_SOFTNESS = 1e-5
+
+
+@dataclass
+class Pin:
+    """The agent's ground position at a frame: hard (softness 0) or soft (1 / weight)."""
+    agent: int
+    frame: int
+    position: np.ndarray          # (2,) ground, stage units
+    softness: float = 0.0
+    name: str = ""
+
+
+@dataclass
+class Link:
+    """Agent a at frame fa minus agent b at frame fb equals offset (hard)."""
+    a: int
+    fa: int
+    b: int
+    fb: int
+    offset: np.ndarray            # (2,) ground, stage units
+    name: str = ""
+
+
+@dataclass
+class Region:
+    """An avoid region: the listed agents stay outside its footprint by their clearance."""
+    name: str
+    footprint: object             # mocapedit._solver.GroundRegion
+    agents: np.ndarray            # (N,) agent indices
+    clearance: np.ndarray         # (N,) capsule radius plus margin, stage units
+
+
+@dataclass
+class Problem:
+    names: list[str]                    # (A,) agent paths
+    paths: list[np.ndarray]             # (F_a,2) ground path per source frame before avoidance
+    frame_times: list[np.ndarray]       # (F_a,) shot time of each source frame
+    radius: np.ndarray                  # (A,) capsule radius, stage units
+    height: np.ndarray                  # (A,) capsule height, stage units
+    margin: float = 0.0                 # extra clearance between capsules, stage units
+    sample_step: float = 1.0            # time codes between collision samples
+    rigid: list[tuple[int, int, int]] = field(default_factory=list)   # (agent, first, last) frames
+    pins: list[Pin] = field(default_factory=list)
+    links: list[Link] = field(default_factory=list)
+    regions: list[Region] = field(default_factory=list)
+    collide_agents: bool = True         # False: regions only
+
+
+@dataclass
+class Settings:
+    strategy: str = "relinearize"
+    max_iterations: int = 10
+    anchor_weight: float = 1e-3         # pull of every frame to its source (relative to shape terms)
+    overshoot: float = 0.03             # separations aim this fraction past the clearance
+    buffer_m: float = 0.3               # near misses watched by relinearize, metres
+    spread: int = 3                     # relinearize constrains every n-th sample of an interval
+    sweeps: int = 20                    # Gauss-Seidel sweeps per solve step (warm-started each iteration)
+    tolerance: float = 1e-3             # of the clearance: Gauss-Seidel stops when no row moves more
+    meters_per_unit: float = 1.0
+
+
+@dataclass
+class Iteration:
+    collisions: int                     # collision intervals (pair, contiguous samples)
+    colliding_samples: int
+    region_samples: int                 # frames inside an avoid region's clearance
+    deepest: float                      # largest overlap, stage units
+    rows: int = 0                       # separation and region rows of the solve that follows
+    solves: int = 0
+
+
+@dataclass
+class Outcome:
+    paths: list[np.ndarray]             # (F_a,2) edited ground paths
+    rigid_angles: np.ndarray            # per Problem.rigid: rotation of the range (radians, CCW)
+    iterations: list[Iteration]         # the state before each solve, then the final state
+    sampling: collisions.Sampling       # at the edited paths
+    remaining: collisions.Collisions    # collision intervals left
+    region_left: list[tuple[int, int, int, float]]  # (region, agent, frame, depth) inside still
+    blocked: list[tuple[int, int, float]]  # (agent a, agent b, shot time) held together by hard constraints
+    moved: np.ndarray                   # (A,) bool: the agent's path changed
+    solves: int = 0
+    seconds: float = 0.0
+
+    @property
+    def converged(self) -> bool:
+        return len(self.remaining) == 0 and not self.region_left
+
+
+class _Rows:
+    """Rows of a SeparationSolver solve, gathered as numpy arrays."""
+
+    def __init__(self):
+        self.direction, self.rhs, self.softness, self.kind, self.force = [], [], [], [], []
+        self.term_row, self.term_vertex, self.term_weight = [], [], []
+        self.count = 0
+
+    def add(self, direction, rhs, softness, vertices, weights, at_least=False, force=0.0):
+        """Rows in bulk: direction (R,2), rhs (R,), softness (R,), vertices/weights (R,T).
+
+        ``at_least``: one-sided rows (value >= rhs); ``force``: (R,) starting forces.
+        """
+        direction = np.asarray(direction, dtype=np.float64).reshape(-1, 2)
+        r = len(direction)
+        if r == 0:
+            return np.zeros(0, np.int64)
+        idx = self.count + np.arange(r)
+        self.direction.append(direction)
+        self.rhs.append(np.broadcast_to(np.asarray(rhs, dtype=np.float64), (r,)))
+        self.softness.append(np.broadcast_to(np.asarray(softness, dtype=np.float64), (r,)))
+        self.kind.append(np.full(r, 1 if at_least else 0, dtype=np.int32))
+        self.force.append(np.broadcast_to(np.asarray(force, dtype=np.float64), (r,)))
+        vertices = np.asarray(vertices).reshape(r, -1)
+        weights = np.asarray(weights, dtype=np.float64).reshape(r, -1)
+        self.term_row.append(np.repeat(idx, vertices.shape[1]))
+        self.term_vertex.append(vertices.ravel())
+        self.term_weight.append(weights.ravel())
+        self.count += r
+        return idx
+
+    def solve(self, solver, tolerance: float = 1e-6, max_sweeps: int = 500):
+        cat = lambda parts, shape, dtype: (np.concatenate(parts) if parts else np.zeros(shape)).astype(dtype)  # noqa: E731
+        return solver.solve(cat(self.direction, (0, 2), np.float64).reshape(-1, 2),
+                            cat(self.rhs, 0, np.float64), cat(self.softness, 0, np.float64),
+                            cat(self.term_row, 0, np.int32), cat(self.term_vertex, 0, np.int32),
+                            cat(self.term_weight, 0, np.float64), cat(self.kind, 0, np.int32),
+                            cat(self.force, 0, np.float64), tolerance, max_sweeps)
+
+
+class _State:
+    """The problem laid out for the solver: concatenated paths, samples, fixed rows."""
+
+    def __init__(self, problem: Problem, settings: Settings):
+        self.p = problem
+        self.s = settings
+        counts = np.array([len(g) for g in problem.paths], dtype=np.int64)
+        self.starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
+        self.rest = np.concatenate(problem.paths).astype(np.float64) if len(counts) else np.zeros((0, 2))
+        self.rigid = [(int(self.starts[a] + f), int(self.starts[a] + l)) for a, f, l in problem.rigid]
+        self.times = {i: t for i, t in enumerate(problem.frame_times)}
+        idx = list(range(len(problem.names)))
+        self.sampling = collisions.sample(idx, self.times, {i: g for i, g in enumerate(problem.paths)},
+                                          problem.sample_step)
+        pinned = np.zeros(len(self.rest), dtype=bool)
+        for pin in problem.pins:
+            if pin.softness == 0:
+                pinned[self.starts[pin.agent] + pin.frame] = True
+        self.pinned = pinned
+
+    def split(self, flat: np.ndarray) -> list[np.ndarray]:
+        return [flat[self.starts[a]:self.starts[a + 1]].copy() for a in range(len(self.starts) - 1)]
+
+    def sample_terms(self, agents: np.ndarray, samples: np.ndarray):
+        """Vertices (N,2) and weights (N,2) of agents' positions at samples (interpolated)."""
+        f = self.sampling.frames[samples, agents]
+        counts = self.starts[agents + 1] - self.starts[agents]
+        f = np.clip(f, 0.0, counts - 1)
+        i0 = np.floor(f).astype(np.int64)
+        i1 = np.minimum(i0 + 1, counts - 1)
+        w1 = f - i0
+        base = self.starts[agents]
+        return np.stack([base + i0, base + i1], axis=1), np.stack([1.0 - w1, w1], axis=1)
+
+    def held(self, a: np.ndarray, b: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """(N,) True where hard pins hold both agents' points at the samples (no push can move them)."""
+        va, wa = self.sample_terms(a, k)
+        vb, wb = self.sample_terms(b, k)
+        return np.all(self.pinned[va] | (wa == 0), axis=1) & np.all(self.pinned[vb] | (wb == 0), axis=1)
+
+    def fixed_rows(self, rows: _Rows, current: np.ndarray) -> None:
+        """Artist pins and links: every solve carries them."""
+        for pin in self.p.pins:
+            v = self.starts[pin.agent] + pin.frame
+            rows.add(np.eye(2), pin.position, pin.softness, [[v], [v]], [[1.0], [1.0]])
+        for link in self.p.links:
+            va, vb = self.starts[link.a] + link.fa, self.starts[link.b] + link.fb
+            rows.add(np.eye(2), link.offset, 0.0, [[va, vb], [va, vb]], [[1.0, -1.0], [1.0, -1.0]])
+
+    def detect(self, flat: np.ndarray, extra: float = 0.0) -> collisions.Collisions:
+        collisions.resample(self.sampling, flat, self.starts)
+        active = np.ones(len(self.p.names), dtype=bool) if self.p.collide_agents else np.zeros(len(self.p.names), bool)
+        return collisions.detect(self.sampling, self.p.radius, self.p.height, self.p.margin + extra,
+                                 report_distance=self.p.margin + extra, active=active)
+
+    def region_hits(self, flat: np.ndarray, extra: float = 0.0):
+        """Per region: (vertices, agent of each, push) of frames within clearance + extra."""
+        out = []
+        for k, region in enumerate(self.p.regions):
+            verts = [np.arange(self.starts[a], self.starts[a + 1]) for a in region.agents]
+            if not verts:
+                out.append(None)
+                continue
+            owner = np.concatenate([np.full(len(v), i) for i, v in enumerate(verts)])
+            verts = np.concatenate(verts)
+            clearance = region.clearance[owner] + extra
+            push = _solver.push_out_of_region(region.footprint, np.ascontiguousarray(flat[verts]), clearance)
+            out.append((verts[push["index"]], region.agents[owner[push["index"]]], push))
+        return out
+
+
+def _unit(d: np.ndarray, fallback: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(d, axis=1)
+    ok = n > 1e-12
+    out = np.where(ok[:, None], d / np.where(ok, n, 1.0)[:, None], fallback)
+    return out
+
+
+def _fallback_normals(state: _State, a: np.ndarray, b: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """Where two points coincide: sideways to their relative motion (or along x)."""
+    pos = state.sampling.positions
+    k1 = np.minimum(k + 1, len(state.sampling.times) - 1)
+    k0 = np.maximum(k - 1, 0)
+    rel = (pos[k1, a] - pos[k0, a]) - (pos[k1, b] - pos[k0, b])
+    side = np.stack([-rel[:, 1], rel[:, 0]], axis=1)
+    n = np.linalg.norm(side, axis=1)
+    return np.where((n > 1e-12)[:, None], side / np.where(n > 1e-12, n, 1.0)[:, None], [[1.0, 0.0]])
+
+
+def _clearance(state: _State, a, b) -> np.ndarray:
+    return state.p.radius[a] + state.p.radius[b] + state.p.margin
+
+
+def _iteration(state: _State, found: collisions.Collisions, hits) -> Iteration:
+    return Iteration(collisions=len(found), colliding_samples=int(found.colliding_samples),
+                     region_samples=int(sum(len(h[0]) for h in hits if h is not None)),
+                     deepest=float(max([found.depth.max(initial=0.0)] +
+                                       [h[2]["depth"].max(initial=0.0) for h in hits if h is not None])))
+
+
+def _expand(found: collisions.Collisions, spread: int, colliding_depth: float = 0.0):
+    """(a, b, sample) to constrain for each interval: its deepest sample, and, for intervals
+    deeper than ``colliding_depth``, every spread-th sample and the last one too."""
+    if len(found) == 0:
+        z = np.zeros(0, np.int64)
+        return z, z, z
+    deep = found.depth > colliding_depth
+    length = np.where(deep, (found.last - found.first) // spread + 2, 0)
+    rep = np.repeat(np.arange(len(found)), length)
+    offset = np.arange(int(length.sum())) - np.repeat(np.cumsum(length) - length, length)
+    k = np.minimum(found.first[rep] + offset * spread, found.last[rep])
+    a = np.concatenate([found.agent_a, found.agent_a[rep]])
+    b = np.concatenate([found.agent_b, found.agent_b[rep]])
+    k = np.concatenate([found.deepest, k])
+    return a.astype(np.int64), b.astype(np.int64), k.astype(np.int64)
+
+
+def resolve(problem: Problem, settings: Settings | None = None, progress=None) -> Outcome:
+    """Pushes the agents' paths apart and out of the regions; see the module doc."""
+    settings = settings or Settings()
+    if settings.strategy not in STRATEGIES:
+        raise ValueError(f"unknown collision strategy '{settings.strategy}' (use {' or '.join(STRATEGIES)})")
+    t0 = time.perf_counter()
+    state = _State(problem, settings)
+    run = _relinearize if settings.strategy == "relinearize" else _accumulate
+    flat, angles, iterations, blocked, solves = run(state, progress)
+    found = state.detect(flat)
+    hits = state.region_hits(flat)
+    region_left = []
+    for r, h in enumerate(hits):
+        if h is None:
+            continue
+        verts, agents, push = h
+        for v, a, d in zip(verts, agents, push["depth"]):
+            region_left.append((r, int(a), int(v - state.starts[a]), float(d)))
+    moved = np.array([not np.array_equal(flat[state.starts[a]:state.starts[a + 1]], problem.paths[a])
+                      for a in range(len(problem.names))], dtype=bool)
+    return Outcome(paths=state.split(flat), rigid_angles=angles, iterations=iterations,
+                   sampling=state.sampling, remaining=found, region_left=region_left, blocked=blocked,
+                   moved=moved, solves=solves, seconds=time.perf_counter() - t0)
+
+
+def _report(progress, task, it: int, found, hits) -> None:
+    if task is not None:
+        left = len(found) + sum(len(h[0]) for h in hits if h is not None)
+        task.update(it, f"{left} collision{'s' if left != 1 else ''} left")
+
+
+def _region_rows(state: _State, rows: _Rows, hits, current: np.ndarray, overshoot: float):
+    """Half-space rows keeping each frame out of its region: n . x >= n . target."""
+    for h in hits:
+        if h is None or len(h[0]) == 0:
+            continue
+        verts, _, push = h
+        normal = push["normal"]
+        target = push["target"] + normal * overshoot
+        rows.add(normal, np.sum(normal * target, axis=1), SEPARATION_SOFTNESS, verts[:, None],
+                 np.ones((len(verts), 1)))
+
+
+def _accumulate(state: _State, progress):
+    """The deliverable's scheme: each iteration re-solves from the previous result."""
+    p, s = state.p, state.s
+    flat = state.rest.copy()
+    angles = np.zeros(len(p.rigid))
+    iterations, solves = [], 0
+    task = progress.task("collision avoidance", s.max_iterations, "iterations") if progress else None
+    for it in range(s.max_iterations + 1):
+        found = state.detect(flat)
+        hits = state.region_hits(flat)
+        iterations.append(_iteration(state, found, hits))
+        _report(progress, task, it, found, hits)
+        if (len(found) == 0 and iterations[-1].region_samples == 0) or it == s.max_iterations:
+            break
+        solver = _solver.SeparationSolver(flat, state.starts, state.rigid, s.anchor_weight,
+                                          _still(s), 0)
+        rows = _Rows()
+        state.fixed_rows(rows, flat)
+        # A mesh-based constraint per maximal collision: the two colliding points joined by
+        # an edge of the clearance's length, along the line between them.
+        a, b, k = (found.agent_a.astype(np.int64), found.agent_b.astype(np.int64),
+                   found.deepest.astype(np.int64))
+        pa, pb = state.sampling.positions[k, a], state.sampling.positions[k, b]
+        n = _unit(pa - pb, _fallback_normals(state, a, b, k))
+        offset = n * (_clearance(state, a, b) * (1.0 + s.overshoot))[:, None]
+        va, wa = state.sample_terms(a, k)
+        vb, wb = state.sample_terms(b, k)
+        verts = np.concatenate([va, vb], axis=1)
+        weights = np.concatenate([wa, -wb], axis=1)
+        for axis in (0, 1):
+            direction = np.zeros((len(a), 2))
+            direction[:, axis] = 1.0
+            rows.add(direction, offset[:, axis], SEPARATION_SOFTNESS, verts, weights)
+        # Regions: each frame inside is pinned where it is pushed to.
+        for h in hits:
+            if h is None or len(h[0]) == 0:
+                continue
+            verts_r, _, push = h
+            target = push["target"] + push["normal"] * s.overshoot * state.p.radius.mean()
+            for axis in (0, 1):
+                direction = np.zeros((len(verts_r), 2))
+                direction[:, axis] = 1.0
+                rows.add(direction, target[:, axis], SEPARATION_SOFTNESS, verts_r[:, None],
+                         np.ones((len(verts_r), 1)))
+        iterations[-1].rows = rows.count
+        out = rows.solve(solver)
+        solves += 1
+        iterations[-1].solves = 1
+        flat = out["positions"]
+        angles = angles + out["rigid_angles"]
+    if task is not None:
+        task.done(f"{iterations[-1].collisions} collisions left")
+    return flat, angles, iterations, _blocked(state, flat), solves
+
+
+def _still(settings: Settings) -> float:
+    return 1e-5 / settings.meters_per_unit
+
+
+class _Candidates:
+    """Separation constraints of relinearize, one per (agent a, agent b, sample), kept
+    sorted by key (sample-major, so Gauss-Seidel sweeps them in time order)."""
+
+    def __init__(self, agents: int):
+        self.n = np.int64(max(agents, 1))
+        self.keys = np.zeros(0, np.int64)
+        self.force = np.zeros(0)          # last solve's force (warm start)
+        self.blocked = np.zeros(0, bool)  # hard constraints hold this pair together
+
+    def split(self):
+        n = self.n
+        return (self.keys // n) % n, self.keys % n, self.keys // (n * n)
+
+    def prune(self, state: _State, reach: float) -> None:
+        """Forgets watched samples that do not push and whose agents are now far apart."""
+        a, b, k = self.split()
+        gap = np.linalg.norm(state.sampling.positions[k, a] - state.sampling.positions[k, b], axis=1) \
+            - _clearance(state, a, b)
+        keep = (self.force > 0.0) | self.blocked | (gap < reach)
+        self.keys, self.force, self.blocked = self.keys[keep], self.force[keep], self.blocked[keep]
+
+    def add(self, a, b, k) -> None:
+        keys = np.unique((k * self.n + a) * self.n + b)
+        new = keys[~np.isin(keys, self.keys)]
+        if len(new) == 0:
+            return
+        merged = np.concatenate([self.keys, new])
+        order = np.argsort(merged, kind="stable")
+        self.keys = merged[order]
+        self.force = np.concatenate([self.force, np.zeros(len(new))])[order]
+        self.blocked = np.concatenate([self.blocked, np.zeros(len(new), bool)])[order]
+
+
+class _RegionCandidates:
+    """Frames watched near each avoid region: one-sided rows, re-linearised each iteration."""
+
+    def __init__(self):
+        self.region = np.zeros(0, np.int64)
+        self.vertex = np.zeros(0, np.int64)
+        self.clearance = np.zeros(0)
+        self.force = np.zeros(0)
+
+    def add(self, region: int, vertices: np.ndarray, clearance: np.ndarray) -> None:
+        known = self.vertex[self.region == region]
+        new = ~np.isin(vertices, known)
+        self.region = np.concatenate([self.region, np.full(int(new.sum()), region)])
+        self.vertex = np.concatenate([self.vertex, vertices[new]])
+        self.clearance = np.concatenate([self.clearance, clearance[new]])
+        self.force = np.concatenate([self.force, np.zeros(int(new.sum()))])
+
+    def linearise(self, state: _State, flat: np.ndarray):
+        """(normal (N,2), rhs (N,)) of n . x >= n . (nearest point at the clearance)."""
+        normal = np.zeros((len(self.vertex), 2))
+        rhs = np.zeros(len(self.vertex))
+        far = 1e30
+        for r, region in enumerate(state.p.regions):
+            sel = np.flatnonzero(self.region == r)
+            if len(sel) == 0:
+                continue
+            # A huge clearance returns every point with its nearest boundary point.
+            push = _solver.push_out_of_region(region.footprint, np.ascontiguousarray(flat[self.vertex[sel]]),
+                                              self.clearance[sel] + far)
+            nrm = push["normal"]
+            target = push["target"] - nrm * far
+            normal[sel] = nrm
+            rhs[sel] = np.sum(nrm * target, axis=1)
+        return normal, rhs
+
+
+def _relinearize(state: _State, progress):
+    p, s = state.p, state.s
+    solver = _solver.SeparationSolver(state.rest, state.starts, state.rigid, s.anchor_weight, _still(s), 0)
+    flat = state.rest.copy()
+    angles = np.zeros(len(p.rigid))
+    cands = _Candidates(len(p.names))
+    watched = _RegionCandidates()
+    buffer = s.buffer_m / s.meters_per_unit
+    fixed_force = None
+    iterations, solves = [], 0
+    task = progress.task("collision avoidance", s.max_iterations, "iterations") if progress else None
+    for it in range(s.max_iterations + 1):
+        found = state.detect(flat)
+        hits = state.region_hits(flat)
+        iterations.append(_iteration(state, found, hits))
+        _report(progress, task, it, found, hits)
+        if len(found) + iterations[-1].region_samples == 0 or it == s.max_iterations:
+            break
+        if it > 0 and _only_blocked(cands, found) and iterations[-1].region_samples == 0:
+            break
+        # Watch every near miss: each becomes a one-sided row that pushes only when needed.
+        if p.collide_agents:
+            cands.add(*_expand(state.detect(flat, buffer), max(1, s.spread), buffer))
+            cands.prune(state, 2.0 * buffer)
+        for r, h in enumerate(state.region_hits(flat, buffer)):
+            if h is not None and len(h[0]):
+                watched.add(r, h[0], p.regions[r].clearance[np.searchsorted(p.regions[r].agents, h[1])])
+        # Linearise every kept constraint at the current result.
+        ca, cb, ck = cands.split()
+        cands.blocked = state.held(ca, cb, ck)
+        normal = _unit(state.sampling.positions[ck, ca] - state.sampling.positions[ck, cb],
+                       _fallback_normals(state, ca, cb, ck))
+        need = _clearance(state, ca, cb)
+        va, wa = state.sample_terms(ca, ck)
+        vb, wb = state.sample_terms(cb, ck)
+        rows = _Rows()
+        state.fixed_rows(rows, flat)
+        if fixed_force is not None:
+            rows.force[:] = [fixed_force[:rows.count]]
+        on = ~cands.blocked
+        sep = rows.add(normal[on], need[on] * (1.0 + s.overshoot), SEPARATION_SOFTNESS,
+                       np.concatenate([va, vb], axis=1)[on], np.concatenate([wa, -wb], axis=1)[on],
+                       at_least=True, force=cands.force[on])
+        rnormal, rrhs = watched.linearise(state, flat)
+        reg = rows.add(rnormal, rrhs + rnormal.dot(np.zeros(2)) + watched.clearance * s.overshoot,
+                       SEPARATION_SOFTNESS, watched.vertex[:, None], np.ones((len(watched.vertex), 1)),
+                       at_least=True, force=watched.force)
+        iterations[-1].rows = rows.count
+        out = rows.solve(solver, tolerance=s.tolerance * float(np.min(need, initial=1.0)), max_sweeps=s.sweeps)
+        solves += 1
+        iterations[-1].solves = 1
+        force = out["forces"]
+        fixed_force = force[:sep[0]] if len(sep) else force[:rows.count - len(reg)]
+        cands.force[on] = force[sep]
+        watched.force = force[reg]
+        flat = out["positions"]
+        angles = out["rigid_angles"]
+    if task is not None:
+        task.done(f"{iterations[-1].collisions} collisions left")
+    return flat, angles, iterations, _blocked(state, flat), solves
+
+
+def _only_blocked(cands: _Candidates, found) -> bool:
+    """True when every collision left involves a pair hard constraints hold together."""
+    if len(found) == 0 or not cands.blocked.any():
+        return False
+    ca, cb, _ = cands.split()
+    held = set(zip(ca[cands.blocked].tolist(), cb[cands.blocked].tolist()))
+    return all((int(a), int(b)) in held for a, b in zip(found.agent_a, found.agent_b))
+
+
+def _blocked(state: _State, flat: np.ndarray) -> list[tuple[int, int, float]]:
+    """Overlaps left where hard pins hold both agents: (agent a, agent b, shot time)."""
+    found = state.detect(flat)
+    a, b, k = (found.agent_a.astype(np.int64), found.agent_b.astype(np.int64), found.deepest.astype(np.int64))
+    held = state.held(a, b, k)
+    return [(int(x), int(y), float(state.sampling.times[z])) for x, y, z in zip(a[held], b[held], k[held])]
