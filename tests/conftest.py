@@ -13,7 +13,8 @@ from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
 import mocapedit  # noqa: F401  (registers the schema plugin)
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED_MOCAP = REPO.parent / "shared" / "mocap"
+# The CMU clips, when present; MOCAPEDIT_MOCAP_DIR points elsewhere.
+SHARED_MOCAP = Path(os.environ.get("MOCAPEDIT_MOCAP_DIR", REPO.parent / "shared" / "mocap"))
 
 TOY_JOINTS = ["Root", "Root/Hips", "Root/Hips/LeftFoot", "Root/Hips/RightFoot"]
 

@@ -1,8 +1,9 @@
-"""Poses of a clip sampled at fractional frames, in the clip's own joint order (numpy).
+"""Poses of a clip sampled at fractional frames, in the clip's own joint order.
 
 A :class:`Pose` is what the time warp samples and the layering modifies before the
 writer bakes it: translations interpolate linearly, rotations by normalised
-shortest-arc slerp, scales linearly.
+shortest-arc slerp, scales linearly. The sampling runs in the solver
+(:func:`sample_pose`); :func:`sample_pose_numpy` is the same in numpy.
 """
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _solver
 from .model import Clip
 
 
@@ -38,8 +40,26 @@ def slerp(q0: np.ndarray, q1: np.ndarray, t: np.ndarray) -> np.ndarray:
     return out / np.linalg.norm(out, axis=-1, keepdims=True)
 
 
-def sample_pose(clip: Clip, frames: np.ndarray) -> Pose:
-    """The clip at fractional frame positions (clamped to the clip)."""
+def sample_pose(clip: Clip, frames: np.ndarray, loop: bool = False) -> Pose:
+    """The clip at fractional frame positions: clamped to the clip, or with ``loop`` taken
+    modulo the frame count, the last frame interpolating back to the first.
+
+    Sampled by the solver (``_solver.sample_clip``); whole frames keep their authored
+    values bit for bit.
+    """
+    frames = np.ascontiguousarray(frames, dtype=np.float64).reshape(-1)
+    arrays = (clip.translations, clip.rotations, clip.scales)
+    if loop:
+        n = clip.frame_count
+        frames = np.mod(frames, n)
+        frames = np.where(frames >= n, 0.0, frames)  # mod of a tiny negative number can round up to n
+        arrays = tuple(np.concatenate([a, a[:1]]) for a in arrays)  # frame n is frame 0 again
+    t, r, s = _solver.sample_clip(*arrays, frames)
+    return Pose(joints=list(clip.joints), translations=t, rotations=r, scales=s)
+
+
+def sample_pose_numpy(clip: Clip, frames: np.ndarray) -> Pose:
+    """:func:`sample_pose` in numpy: the reference the benchmark measures the solver against."""
     f = np.clip(np.asarray(frames, dtype=np.float64), 0, clip.frame_count - 1)
     i0 = np.floor(f).astype(np.int64)
     i1 = np.minimum(i0 + 1, clip.frame_count - 1)

@@ -36,6 +36,8 @@ __all__ = [
     "build_crowd_stage",
     "define_mocap_prim",
     "add_position_constraint",
+    "add_time_constraint",
+    "add_sync_constraint",
     "tag_stationary",
 ]
 
@@ -295,23 +297,50 @@ def define_mocap_prim(stage: Usd.Stage, path: str | Sdf.Path, type_name: str,
     return prim
 
 
+def _strength(strength: str, weight: float) -> dict:
+    if strength not in ("hard", "soft"):
+        raise ValueError(f"strength must be 'hard' or 'soft', got {strength!r}")
+    return {"strength": (Sdf.ValueTypeNames.Token, strength), "weight": (Sdf.ValueTypeNames.Double, float(weight))}
+
+
 def add_position_constraint(stage: Usd.Stage, path: str | Sdf.Path, agent_path: str | Sdf.Path,
                             frame: int, position: Sequence[float], strength: str = "hard",
                             weight: float = 1.0) -> Usd.Prim:
     """Define a MocapPositionConstraint: the agent's root is at `position`
     (world space, stage units) at `frame` of its clip."""
-    if strength not in ("hard", "soft"):
-        raise ValueError(f"strength must be 'hard' or 'soft', got {strength!r}")
     vt = Sdf.ValueTypeNames
     return define_mocap_prim(
         stage, path, "MocapPositionConstraint",
         attributes={
             "frame": (vt.Int, int(frame)),
             "position": (vt.Point3d, Gf.Vec3d(*(float(v) for v in position))),
-            "strength": (vt.Token, strength),
-            "weight": (vt.Double, float(weight)),
+            **_strength(strength, weight),
         },
         relationships={"agent": [agent_path]})
+
+
+def add_time_constraint(stage: Usd.Stage, path: str | Sdf.Path, agent_path: str | Sdf.Path,
+                        frame: int, time: float, strength: str = "hard", weight: float = 1.0) -> Usd.Prim:
+    """Define a MocapTimeConstraint: the agent's `frame` plays at shot time code `time`."""
+    vt = Sdf.ValueTypeNames
+    return define_mocap_prim(
+        stage, path, "MocapTimeConstraint",
+        attributes={"frame": (vt.Int, int(frame)), "time": (vt.Double, float(time)),
+                    **_strength(strength, weight)},
+        relationships={"agent": [agent_path]})
+
+
+def add_sync_constraint(stage: Usd.Stage, path: str | Sdf.Path, agent_path: str | Sdf.Path, frame: int,
+                        target_path: str | Sdf.Path, target_frame: int, offset: float = 0.0,
+                        strength: str = "hard", weight: float = 1.0) -> Usd.Prim:
+    """Define a MocapSyncConstraint: the agent's `frame` plays `offset` time codes after
+    the target's `target_frame`."""
+    vt = Sdf.ValueTypeNames
+    return define_mocap_prim(
+        stage, path, "MocapSyncConstraint",
+        attributes={"frame": (vt.Int, int(frame)), "targetFrame": (vt.Int, int(target_frame)),
+                    "offset": (vt.Double, float(offset)), **_strength(strength, weight)},
+        relationships={"agent": [agent_path], "target": [target_path]})
 
 
 def tag_stationary(anim: Usd.Prim | Sdf.PrimSpec, name: str, frames: Sequence[int]) -> None:

@@ -150,6 +150,7 @@ class AnimationLayer:
     time_offset: float
     wrap: str                         # "loop" | "clamp"
     reference_pose: str               # "firstFrame" | "restPose"
+    sample_times: np.ndarray | None = None  # (F,) stage time of each layer clip frame, as composed
 
 
 @dataclass

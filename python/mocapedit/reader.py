@@ -447,7 +447,11 @@ class StageReader:
         anim = self.stage.GetPrimAtPath(anims[0])
         if not anim or not anim.IsA(UsdSkel.Animation):
             raise prim_error(prim.GetPath(), f"targets <{anims[0]}>, which is not a SkelAnimation", "animation")
-        key, _ = self._clip(anim)
+        try:
+            key, times = self._clip(anim)
+        except MocapEditError as exc:
+            raise prim_error(prim.GetPath(), f"animation <{anim.GetPath()}> cannot be layered: {exc}",
+                             "animation") from None
         attr = prim.GetAttribute("weight")
         wt = np.asarray(attr.GetTimeSamples() if attr else [], dtype=np.float64)
         if wt.size:
@@ -466,7 +470,7 @@ class StageReader:
             path=str(prim.GetPath()), agents=agents, animation=str(anim.GetPath()), clip_key=key,
             joint=str(_get(prim, "joint", "") or ""), mode=tokens["mode"], weight_times=wt, weight_values=wv,
             time_offset=float(_get(prim, "timeOffset", 0.0)), wrap=tokens["wrap"],
-            reference_pose=tokens["referencePose"])
+            reference_pose=tokens["referencePose"], sample_times=times)
 
     def read_settings(self, prim):
         s = model.SolveSettings(path=str(prim.GetPath()))

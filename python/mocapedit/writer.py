@@ -7,7 +7,8 @@ UsdSkel and UsdGeom. Layout:
 - an edited agent gets ``xformOp:transform:mocapEdit`` (time-sampled) prepended to its
   ``xformOpOrder``: the rigid ground motion of its path edit;
 - an agent whose joints changed (time warp, layering) gets a baked SkelAnimation under
-  ``/MocapEdit/Animations`` bound to its skeleton with ``skel:animationSource``;
+  ``/MocapEdit/Animations`` bound to its skeleton with ``skel:animationSource``; agents
+  whose baked animations are identical share one;
 - guide geometry goes under ``/MocapEdit/Guides`` with purpose ``guide``;
 - ``customLayerData["mocapedit"]`` records the version, the input layers, a content hash,
   the solve statistics and the whole solve report (``report``: compact JSON text, sorted
@@ -19,6 +20,7 @@ Files are written to a temporary name beside the target and renamed into place.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
@@ -132,7 +134,30 @@ def _author_xform_op(layer: Sdf.Layer, agent: Agent, edit: AgentEdit) -> None:
         layer.SetTimeSample(attr.path, float(t), Gf.Matrix4d(m.tolist()))
 
 
-def _author_animation(layer: Sdf.Layer, agent: Agent, anim: BakedAnimation, name: str) -> None:
+def _animation_key(anim: BakedAnimation, digests: dict[int, bytes]) -> tuple:
+    """Identity of a baked animation's content; arrays shared by several agents (the same
+    objects) are hashed once."""
+    def digest(array) -> bytes:
+        if array is None:
+            return b""
+        d = digests.get(id(array))
+        if d is None:
+            data = np.ascontiguousarray(array, dtype=np.float32)
+            d = hashlib.blake2b(data.tobytes(), digest_size=20).digest() + repr(data.shape).encode()
+            digests[id(array)] = d
+        return d
+    return (tuple(anim.joints), np.asarray(anim.times, dtype=np.float64).tobytes(),
+            digest(anim.translations), digest(anim.rotations), digest(anim.scales))
+
+
+def _bind_animation(layer: Sdf.Layer, agent: Agent, path: Sdf.Path) -> None:
+    skel = _over_chain(layer, Sdf.Path(agent.skeleton_path))
+    skel.SetInfo("apiSchemas", Sdf.TokenListOp.Create(prependedItems=["SkelBindingAPI"]))
+    rel = Sdf.RelationshipSpec(skel, "skel:animationSource", custom=False)
+    rel.targetPathList.explicitItems = [path]
+
+
+def _author_animation(layer: Sdf.Layer, anim: BakedAnimation, name: str) -> Sdf.Path:
     path = ANIMATIONS.AppendChild(name)
     spec = _def(layer, path, "SkelAnimation")
     _attr(spec, "joints", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(anim.joints), uniform=True)
@@ -145,10 +170,7 @@ def _author_animation(layer: Sdf.Layer, agent: Agent, anim: BakedAnimation, name
         data = np.ascontiguousarray(data, dtype=np.float32)
         for t, frame in zip(anim.times, data):
             layer.SetTimeSample(attr.path, float(t), array_type.FromNumpy(frame))
-    skel = _over_chain(layer, Sdf.Path(agent.skeleton_path))
-    skel.SetInfo("apiSchemas", Sdf.TokenListOp.Create(prependedItems=["SkelBindingAPI"]))
-    rel = Sdf.RelationshipSpec(skel, "skel:animationSource", custom=False)
-    rel.targetPathList.explicitItems = [path]
+    return path
 
 
 def _colors(spec: Sdf.PrimSpec, colors: np.ndarray, interpolation: str) -> None:
@@ -262,12 +284,20 @@ def build_layer(content: LayerContent) -> Sdf.Layer:
         taken: set[str] = set()
         if any(e.animation is not None for e in content.edits.values()):
             Sdf.PrimSpec(root, ANIMATIONS.name, Sdf.SpecifierDef, "Scope")
+        # Agents whose baked animations are identical share one prim, named after the first.
+        authored: dict[tuple, Sdf.Path] = {}
+        digests: dict[int, bytes] = {}
         for agent_path in sorted(content.edits):
             edit, agent = content.edits[agent_path], content.agents[agent_path]
             if edit.xform_op is not None:
                 _author_xform_op(layer, agent, edit)
             if edit.animation is not None:
-                _author_animation(layer, agent, edit.animation, _safe_name(agent_path, taken))
+                key = _animation_key(edit.animation, digests)
+                path = authored.get(key)
+                if path is None:
+                    path = authored[key] = _author_animation(layer, edit.animation,
+                                                             _safe_name(agent_path, taken))
+                _bind_animation(layer, agent, path)
         _author_guides(layer, content.guides)
     return layer
 

@@ -32,6 +32,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="run collision avoidance even if MocapSolveSettings does not ask for it")
     p.add_argument("--no-collisions", dest="collisions", action="store_false",
                    help="skip collision avoidance even if MocapSolveSettings asks for it")
+    p.add_argument("--match-speed", dest="match_speed", action="store_true", default=None,
+                   help="re-time edited paths so each agent keeps its source speed along its new path "
+                        "(MocapSolveSettings.matchSpeed)")
+    p.add_argument("--no-match-speed", dest="match_speed", action="store_false",
+                   help="keep the source timing on edited paths even if MocapSolveSettings asks to match speed")
     p.add_argument("--report", metavar="JSON", help="also write the solve report as JSON")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(run=run)
@@ -43,8 +48,9 @@ def run(args) -> int:
     from ..writer import save_text
 
     progress = Progress(quiet=args.quiet)
+    overrides = {} if args.match_speed is None else {"match_speed": args.match_speed}
     result = solve(args.stage, output=args.output, composed=args.composed, guides=args.guides,
-                   collisions=args.collisions, progress=progress)
+                   collisions=args.collisions, progress=progress, **overrides)
     if args.report:
         save_text(args.report, result.report.to_json() + "\n")
     if not args.quiet:

@@ -1,0 +1,149 @@
+// Laplacian time warping of agents' time maps (section 5.4.2.6 of the deliverable; Kim et
+// al. 2009, "Synchronized multi-character motion editing").
+//
+// The time map of an agent is the shot time at which each of its source frames plays.
+// At rest it is the clip's own sample times. Time constraints make a frame play at a shot
+// time; sync constraints make one agent's frame play a fixed time after another agent's
+// frame. The warp keeps the *change of successive intervals* of each time map as close
+// to the rest map's as it can:
+//
+//   E(T) = sum_i ((d_i^rest - d_{i-1}^rest) - (d_i - d_{i-1}))^2,  d_i = T[i+1] - T[i]
+//
+// plus a tiny stretch term sum_i stretch_weight (d_i - d_i^rest)^2 that picks, among the
+// warps E cannot tell apart, the one that stretches least (so one time constraint alone
+// shifts a clip without stretching it), plus the squared residuals of soft constraints.
+// Hard constraints are met exactly, by eliminating variables. Every warped interval stays
+// at or above a minimum (a fraction of the source interval): time never runs backwards.
+// When the unconstrained minimiser breaks that, a primal active-set method solves the
+// bounded problem exactly and reports which agents sit at the minimum.
+//
+// Agents linked by sync constraints share one system; the agents are split into
+// independent components (union-find), each factored once. A component without any time
+// constraint is free to slide in time as a whole: tiny anchors on its synchronised frames
+// hold it near its rest timing (both sides of a handshake meet half way).
+//
+// Sparse problems follow the precompute / solve split: TimeWarpPrecompute builds and
+// factors every component from the constraint *structure* (which frames, hard or soft,
+// weights); TimeWarpSolve takes the constraint *values* (times, offsets) and is cheap to
+// repeat while a handle is dragged. A singular system (which the regularisers normally
+// prevent) falls back from LDLT to SPQR and says so.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Sparse>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace mocapedit {
+
+using FramePairs = Eigen::Matrix<int, Eigen::Dynamic, 2, Eigen::RowMajor>;  // (agent, frame)
+using FrameQuads = Eigen::Matrix<int, Eigen::Dynamic, 4, Eigen::RowMajor>;  // (agent, frame, target, targetFrame)
+using Flags = Eigen::Array<bool, Eigen::Dynamic, 1>;
+
+// The structure of a time-warp problem: everything but the constraint values.
+struct TimeWarpProblem {
+  // #A lists of #F_a strictly increasing shot times: each agent's time map at rest.
+  std::vector<Eigen::VectorXd> rest_times;
+  // #A lists of #F_a - 1 smallest allowed warped intervals (time codes, > 0). An empty
+  // list takes min_interval_fraction times the rest interval.
+  std::vector<Eigen::VectorXd> min_intervals;
+  double min_interval_fraction = 0.1;  // in (0, 1]
+
+  // #T by 2 list of (agent, frame) of the time constraints ("frame plays at a time").
+  FramePairs time_frames = FramePairs(0, 2);
+  Flags time_hard = Flags(0);                   // #T: met exactly (true) or weighted (false)
+  Eigen::VectorXd time_weights = Eigen::VectorXd(0);  // #T weights (>= 0) of the soft ones
+
+  // #S by 4 list of (agent, frame, target, targetFrame) of the sync constraints
+  // ("agent's frame plays offset time codes after target's targetFrame").
+  FrameQuads sync_frames = FrameQuads(0, 4);
+  Flags sync_hard = Flags(0);                   // #S
+  Eigen::VectorXd sync_weights = Eigen::VectorXd(0);  // #S
+
+  // Weight of the stretch term relative to the interval-change term (>= 0). Zero leaves
+  // the stretch of a clip with a single constraint undetermined (a singular system).
+  double stretch_weight = 1e-6;
+  // Weight of the anchors that hold a component without time constraints near its rest
+  // timing (> 0).
+  double anchor_weight = 1e-6;
+  // Cap on active-set iterations per component; < 0 means 10 * frames + 100.
+  int max_active_set_iterations = -1;
+};
+
+// Constraints that cannot all be met. TimeWarpSolve throws it; it is a bad-input error.
+class TimeWarpConflict : public std::invalid_argument {
+ public:
+  enum class Kind {
+    kCycle,     // hard constraints fix a frame's time (or two frames' difference) twice, differently
+    kBackwards  // hard constraints make time run backwards, or faster than the minimum interval allows
+  };
+  TimeWarpConflict(Kind kind, std::vector<int> time_constraints, std::vector<int> sync_constraints,
+                   double mismatch, int agent, int frame_a, int frame_b, double gap, double minimum,
+                   const std::string& what);
+  Kind kind;
+  std::vector<int> time_constraints;  // indices into TimeWarpProblem::time_frames
+  std::vector<int> sync_constraints;  // indices into TimeWarpProblem::sync_frames
+  double mismatch;                    // kCycle: how far the constraints disagree (time codes)
+  // kBackwards, when one agent's two frames are involved (else agent = -1): the frames,
+  // the time the constraints leave between them and the least the minimum interval allows.
+  int agent, frame_a, frame_b;
+  double gap, minimum;
+};
+
+struct TimeWarpComponent;  // one factored component (defined in time_warp.cpp)
+
+// Precomputed data: the component split and each component's factored system.
+struct TimeWarpData {
+  TimeWarpData();
+  ~TimeWarpData();
+  TimeWarpData(TimeWarpData&&) noexcept;
+  TimeWarpData& operator=(TimeWarpData&&) noexcept;
+
+  TimeWarpProblem problem;
+  int agents = 0;
+  int time_constraints = 0;
+  int sync_constraints = 0;
+  std::vector<int> agent_component;  // #A component of each agent, -1 if unconstrained
+  std::vector<std::unique_ptr<TimeWarpComponent>> components;
+};
+
+struct TimeWarpResult {
+  std::vector<Eigen::VectorXd> time_maps;  // #A lists of #F_a warped shot times
+  Eigen::VectorXd time_residuals;          // #T |T[frame] - time|
+  Eigen::VectorXd sync_residuals;          // #S |T_a[frame] - T_b[targetFrame] - offset|
+  Eigen::VectorXd min_interval;            // #A smallest warped interval (inf for one frame)
+  Eigen::VectorXi min_enforced;            // #A intervals held at their minimum by the active set
+  Eigen::VectorXi component;               // #A component index, -1 if unconstrained
+  std::vector<std::string> solver;         // #A "rest", "LDLT" or "SPQR fallback"
+  Eigen::VectorXi iterations;              // #C active-set iterations per component (0: none needed)
+};
+
+// Splits the agents into components and factors each one.
+//
+// Inputs:
+//   problem  the structure: rest time maps, constraint frames, hardness and weights
+// Outputs:
+//   data     the factored components, for TimeWarpSolve
+// Throws std::invalid_argument on bad shapes, indices, frames out of range, weights or
+// rest times that do not increase.
+void TimeWarpPrecompute(const TimeWarpProblem& problem, TimeWarpData& data);
+
+// Warps every time map to the constraint values.
+//
+// Inputs:
+//   data     from TimeWarpPrecompute
+//   times    #T shot times of the time constraints
+//   offsets  #S sync offsets (time codes)
+// Returns the warped time maps (agents without constraints keep their rest map) and the
+// figures to report. Throws TimeWarpConflict when hard constraints contradict each other
+// or the minimum interval, std::invalid_argument on bad shapes or non-finite values.
+TimeWarpResult TimeWarpSolve(const TimeWarpData& data, const Eigen::Ref<const Eigen::VectorXd>& times,
+                             const Eigen::Ref<const Eigen::VectorXd>& offsets);
+
+// Precompute and solve in one call.
+TimeWarpResult TimeWarp(const TimeWarpProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& times,
+                        const Eigen::Ref<const Eigen::VectorXd>& offsets);
+
+}  // namespace mocapedit
