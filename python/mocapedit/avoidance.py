@@ -257,6 +257,41 @@ def _fallback_normals(state: _State, a: np.ndarray, b: np.ndarray, k: np.ndarray
     return np.where((n > 1e-12)[:, None], side / np.where(n > 1e-12, n, 1.0)[:, None], [[1.0, 0.0]])
 
 
+def _separation_normals(state: _State, a: np.ndarray, b: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """Directions pushing agent a away from agent b at samples k, one pass side per pair.
+
+    Two agents passing each other must keep to one side over the whole encounter: the
+    line between their points swings from side to side with the sway of a walk, and
+    following it would push them alternately left and right. The side (of b as seen
+    along their relative motion) is voted once per pair, by the samples where they are
+    closest, and where they overlap they are pushed sideways to their relative motion, on
+    that side (a conservative linearisation of the distance). The vote is taken again at each
+    iteration (among the samples that still overlap), so a pair that other pushes moved to
+    the other side is not pulled back through.
+    """
+    pos = state.sampling.positions
+    rel = pos[k, a] - pos[k, b]
+    k1 = np.minimum(k + 1, len(state.sampling.times) - 1)
+    k0 = np.maximum(k - 1, 0)
+    motion = (pos[k1, a] - pos[k0, a]) - (pos[k1, b] - pos[k0, b])
+    speed = np.linalg.norm(motion, axis=1)
+    # Passing, not walking together: over two samples they move by a fair part of a clearance.
+    moving = speed > 0.05 * _clearance(state, a, b)
+    t = np.where(moving[:, None], motion / np.where(moving, speed, 1.0)[:, None], [[1.0, 0.0]])
+    perp = np.stack([-t[:, 1], t[:, 0]], axis=1)
+    along, across = np.sum(rel * t, axis=1), np.sum(rel * perp, axis=1)
+    pair = a * np.int64(len(state.p.names)) + b
+    close = moving & (np.linalg.norm(rel, axis=1) < _clearance(state, a, b))
+    uniq, inverse = np.unique(pair, return_inverse=True)
+    vote = np.bincount(inverse, weights=np.where(close, across, 0.0), minlength=len(uniq))
+    side = np.where(vote >= 0, 1.0, -1.0)[inverse]
+    # Where they overlap they pass side by side on the voted side; the line between the
+    # points would turn along their motion before and after the crossing and hold one
+    # back on each side of it. Apart, each sample keeps its own direction.
+    d = np.where(close[:, None], side[:, None] * perp, along[:, None] * t + across[:, None] * perp)
+    return _unit(d, np.where(moving[:, None], side[:, None] * perp, [[1.0, 0.0]]))
+
+
 def _clearance(state: _State, a, b) -> np.ndarray:
     return state.p.radius[a] + state.p.radius[b] + state.p.margin
 
@@ -487,8 +522,7 @@ def _relinearize(state: _State, progress):
         # Linearise every kept constraint at the current result.
         ca, cb, ck = cands.split()
         cands.blocked = state.held(ca, cb, ck)
-        normal = _unit(state.sampling.positions[ck, ca] - state.sampling.positions[ck, cb],
-                       _fallback_normals(state, ca, cb, ck))
+        normal = _separation_normals(state, ca, cb, ck)
         need = _clearance(state, ca, cb)
         va, wa = state.sample_terms(ca, ck)
         vb, wb = state.sample_terms(cb, ck)
@@ -534,3 +568,44 @@ def _blocked(state: _State, flat: np.ndarray) -> list[tuple[int, int, float]]:
     a, b, k = (found.agent_a.astype(np.int64), found.agent_b.astype(np.int64), found.deepest.astype(np.int64))
     held = state.held(a, b, k)
     return [(int(x), int(y), float(state.sampling.times[z])) for x, y, z in zip(a[held], b[held], k[held])]
+
+
+def _tangents(path: np.ndarray) -> np.ndarray:
+    t = np.zeros_like(path)
+    if len(path) > 1:
+        t[1:-1] = path[2:] - path[:-2]
+        t[0] = path[1] - path[0]
+        t[-1] = path[-1] - path[-2]
+    return t
+
+
+def heading_change(before: np.ndarray, after: np.ndarray, ranges, still: float) -> np.ndarray:
+    """(F,) turn (radians, CCW) of each frame's heading when a path goes from before to after.
+
+    Where the agent walks, the turn of its path tangent; in a rigid range, the range's own
+    rotation (one that stands still turns with the frames around it); where the agent
+    stands, or a push dominates its own motion, the turn of the nearest walking frames,
+    so standing agents that are pushed slide without spinning.
+
+    Args:
+      before, after: (F,2) ground paths
+      ranges: (first, last, angle) rigid ranges and the rotation the solve gave each
+      still: tangent length (stage units) below which a frame stands
+    """
+    d0, d1 = _tangents(np.asarray(before)), _tangents(np.asarray(after))
+    n0 = np.linalg.norm(d0, axis=1)
+    valid = (n0 > still) & (np.linalg.norm(d1, axis=1) > still) & (n0 > 2.0 * np.linalg.norm(d1 - d0, axis=1))
+    turn = np.arctan2(d0[:, 0] * d1[:, 1] - d0[:, 1] * d1[:, 0], np.sum(d0 * d1, axis=1))
+    fixed = np.zeros(len(turn), bool)
+    for first, last, angle in ranges:
+        valid[first:last + 1] = False
+        if np.ptp(np.asarray(before)[first:last + 1], axis=0).max(initial=0.0) > still:
+            turn[first:last + 1] = angle
+            fixed[first:last + 1] = True
+    known = valid | fixed
+    if not known.any():
+        return np.zeros(len(turn))
+    idx = np.flatnonzero(known)
+    out = np.interp(np.arange(len(turn)), idx, turn[idx])
+    out[known] = turn[known]
+    return out

@@ -214,3 +214,36 @@ def region_agents(region: AvoidRegion, agents: list[str]) -> list[str]:
         return list(agents)
     listed = set(region.agents)
     return [a for a in agents if a in listed]
+
+
+def push_out(footprint, points: np.ndarray, clearance) -> dict:
+    """Points of (N,2) closer to a footprint than their clearance ((N,) or scalar); see
+    :func:`mocapedit._solver.push_out_of_region`."""
+    c = np.atleast_1d(np.asarray(clearance, dtype=np.float64))
+    return _solver.push_out_of_region(footprint, np.ascontiguousarray(points, dtype=np.float64), c)
+
+
+def signed_distance(footprint, points: np.ndarray) -> np.ndarray:
+    """(N,) signed distances of (N,2) ground points to a footprint's boundary (negative inside)."""
+    return _solver.region_signed_distance(footprint, np.ascontiguousarray(points, dtype=np.float64))
+
+
+def outline(footprint, grow: float = 0.0, sides: int = 64) -> np.ndarray:
+    """(K,2) counter-clockwise outline of a footprint grown by ``grow`` (rounded corners)."""
+    if footprint.is_circle:
+        a = 2 * np.pi * np.arange(sides) / sides
+        return np.asarray(footprint.center) + (footprint.radius + grow) * np.stack([np.cos(a), np.sin(a)], 1)
+    poly = np.asarray(footprint.polygon)
+    if grow <= 0:
+        return poly.copy()
+    edges = np.roll(poly, -1, axis=0) - poly
+    normals = np.stack([edges[:, 1], -edges[:, 0]], 1) / np.linalg.norm(edges, axis=1)[:, None]
+    points = []
+    steps = max(2, sides // len(poly))
+    for i in range(len(poly)):
+        a0 = np.arctan2(*normals[i - 1][::-1])
+        a1 = np.arctan2(*normals[i][::-1])
+        a1 = a0 + (a1 - a0) % (2 * np.pi)
+        for t in np.linspace(a0, a1, steps):
+            points.append(poly[i] + grow * np.array([np.cos(t), np.sin(t)]))
+    return np.array(points)
