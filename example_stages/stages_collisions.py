@@ -96,7 +96,7 @@ def avoid_regions(out: Path) -> None:
     agents = []
     travel = SPEED * (FRAMES - 1) / FPS
     for k in range(24):
-        lane = (k % 12 - 5.5) * 0.9 + rng.uniform(-0.2, 0.2)
+        lane = (k % 12 - 5.5) * 1.2 + rng.uniform(-0.2, 0.2)
         if k < 12:   # westwards across the plaza, through the fountain and the ropes
             start, yaw = (travel / 2, 0.0, lane), -90.0
         else:        # northwards, through the kiosk

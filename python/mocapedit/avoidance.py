@@ -95,7 +95,8 @@ class Settings:
     overshoot: float = 0.03             # separations aim this fraction past the clearance
     buffer_m: float = 0.3               # near misses watched by relinearize, metres
     spread: int = 3                     # relinearize constrains every n-th sample of an interval
-    sweeps: int = 20                    # Gauss-Seidel sweeps per solve step (warm-started each iteration)
+    sweeps: int = 20                    # Gauss-Seidel sweeps per solve step at least (warm-started)
+    sweep_budget: float = 1e6           # rows x sweeps per step allowed beyond that (up to 10x sweeps)
     tolerance: float = 1e-3             # of the clearance: Gauss-Seidel stops when no row moves more
     meters_per_unit: float = 1.0
 
@@ -474,22 +475,79 @@ class _RegionCandidates:
         self.force = np.concatenate([self.force, np.zeros(int(new.sum()))])
 
     def linearise(self, state: _State, flat: np.ndarray):
-        """(normal (N,2), rhs (N,)) of n . x >= n . (nearest point at the clearance)."""
+        """(normal (N,2), rhs (N,)) of one-sided rows n . x >= rhs keeping frames out.
+
+        A frame outside the region grown by its clearance keeps to the tangent line at its
+        nearest point. A frame inside goes round the region: sideways to the agent's
+        motion, on the side of the region's centre its path already passes, to where that
+        sideways line leaves the grown region (the tangent line there). Pushing each frame
+        to its nearest boundary point would instead hold a walker back before the middle
+        of the region and throw it forward after it.
+        """
         normal = np.zeros((len(self.vertex), 2))
         rhs = np.zeros(len(self.vertex))
-        far = 1e30
+        owner = np.searchsorted(state.starts, self.vertex, side="right") - 1
         for r, region in enumerate(state.p.regions):
             sel = np.flatnonzero(self.region == r)
             if len(sel) == 0:
                 continue
-            # A huge clearance returns every point with its nearest boundary point.
-            push = _solver.push_out_of_region(region.footprint, np.ascontiguousarray(flat[self.vertex[sel]]),
-                                              self.clearance[sel] + far)
-            nrm = push["normal"]
-            target = push["target"] - nrm * far
+            v, c = self.vertex[sel], self.clearance[sel]
+            pts = flat[v]
+            near = _solver.nearest_on_region(region.footprint, np.ascontiguousarray(pts))
+            nrm = near["normal"].copy()
+            target = near["boundary"] + nrm * c[:, None]
+            inside = near["distance"] < c
+            if inside.any():
+                t = _path_tangents(state, flat, v[inside])
+                moving = np.linalg.norm(t, axis=1) > 1e-12
+                left = np.stack([-t[:, 1], t[:, 0]], axis=1)
+                centre = _centre(region.footprint)
+                cross = np.sum(left * (centre - pts[inside]), axis=1)   # > 0: centre on the left
+                agents = owner[sel][inside]
+                uniq, inv = np.unique(agents, return_inverse=True)
+                side = np.where(np.bincount(inv, weights=cross, minlength=len(uniq)) > 0, -1.0, 1.0)[inv]
+                way = side[:, None] * left
+                exit_pt = _exit(region.footprint, pts[inside], way, c[inside])
+                exit_near = _solver.nearest_on_region(region.footprint, np.ascontiguousarray(exit_pt))
+                go = moving & (np.sum(exit_near["normal"] * way, axis=1) > 0)
+                idx = np.flatnonzero(inside)[go]
+                nrm[idx] = exit_near["normal"][go]
+                target[idx] = exit_near["boundary"][go] + nrm[idx] * c[inside][go, None]
             normal[sel] = nrm
             rhs[sel] = np.sum(nrm * target, axis=1)
         return normal, rhs
+
+
+def _path_tangents(state: _State, flat: np.ndarray, vertices: np.ndarray) -> np.ndarray:
+    """(N,2) central-difference tangents of the paths at global vertices (one-sided at ends)."""
+    owner = np.searchsorted(state.starts, vertices, side="right") - 1
+    lo, hi = state.starts[owner], state.starts[owner + 1] - 1
+    return flat[np.minimum(vertices + 1, hi)] - flat[np.maximum(vertices - 1, lo)]
+
+
+def _centre(footprint) -> np.ndarray:
+    return np.asarray(footprint.center) if footprint.is_circle else np.asarray(footprint.polygon).mean(axis=0)
+
+
+def _exit(footprint, points: np.ndarray, way: np.ndarray, clearance: np.ndarray) -> np.ndarray:
+    """Where rays from points along unit directions leave a convex footprint grown by clearance."""
+    if footprint.is_circle:
+        d = points - np.asarray(footprint.center)
+        reach = footprint.radius + clearance
+        b = np.sum(d * way, axis=1)
+        s = -b + np.sqrt(np.maximum(b * b - np.sum(d * d, axis=1) + reach * reach, 0.0))
+        return points + s[:, None] * way
+    poly = np.asarray(footprint.polygon)
+    hi = np.full(len(points), 2.0 * np.ptp(poly, axis=0).max() + 2.0 * clearance.max(initial=0.0)
+                 + np.linalg.norm(points - poly.mean(axis=0), axis=1).max(initial=0.0))
+    lo = np.zeros(len(points))
+    for _ in range(48):   # the distance grows monotonically along a ray leaving a convex region
+        mid = 0.5 * (lo + hi)
+        d = _solver.region_signed_distance(footprint, np.ascontiguousarray(points + mid[:, None] * way))
+        out = d >= clearance
+        hi = np.where(out, mid, hi)
+        lo = np.where(out, lo, mid)
+    return points + hi[:, None] * way
 
 
 def _relinearize(state: _State, progress):
@@ -539,7 +597,10 @@ def _relinearize(state: _State, progress):
                        SEPARATION_SOFTNESS, watched.vertex[:, None], np.ones((len(watched.vertex), 1)),
                        at_least=True, force=watched.force)
         iterations[-1].rows = rows.count
-        out = rows.solve(solver, tolerance=s.tolerance * float(np.min(need, initial=1.0)), max_sweeps=s.sweeps)
+        # Small problems afford a converged Gauss-Seidel; big ones carry it on from iteration
+        # to iteration (warm start) within a budget of row updates.
+        sweeps = int(np.clip(s.sweep_budget / max(rows.count, 1), s.sweeps, 10 * s.sweeps))
+        out = rows.solve(solver, tolerance=s.tolerance * float(np.min(need, initial=1.0)), max_sweeps=sweeps)
         solves += 1
         iterations[-1].solves = 1
         force = out["forces"]

@@ -111,6 +111,23 @@ MOCAPEDIT_BINDINGS(BindCollisions) {
       },
       py::arg("region"), py::arg("points"), "(N,) signed distances of (N, 2) ground points; negative inside.");
   m.def(
+      "nearest_on_region",
+      [](const mocapedit::GroundRegion& region, const Eigen::Ref<const Trajectory2>& points) {
+        mocapedit::RegionNearest nearest;
+        {
+          py::gil_scoped_release release;
+          nearest = mocapedit::NearestOnRegion(region, points);
+        }
+        py::dict d;
+        d["boundary"] = nearest.boundary;
+        d["normal"] = nearest.normal;
+        d["distance"] = nearest.distance;
+        return d;
+      },
+      py::arg("region"), py::arg("points"),
+      "For (N, 2) ground points, a dict: boundary (N, 2) nearest boundary points, normal (N, 2) unit\n"
+      "outward normals there, distance (N,) signed distances (negative inside).");
+  m.def(
       "push_out_of_region",
       [](const mocapedit::GroundRegion& region, const Eigen::Ref<const Trajectory2>& points,
          const Eigen::VectorXd& clearance) {

@@ -113,6 +113,37 @@ Eigen::VectorXd RegionSignedDistance(const GroundRegion& region,
   return out;
 }
 
+RegionNearest NearestOnRegion(const GroundRegion& region, const Eigen::Ref<const Trajectory2>& points) {
+  CheckFinite(points, "NearestOnRegion");
+  if (!region.is_circle && region.polygon.rows() < 3)
+    throw std::invalid_argument("NearestOnRegion: the region's polygon has fewer than three corners");
+  RegionNearest out;
+  const Eigen::Index n = points.rows();
+  out.boundary.resize(n, 2);
+  out.normal.resize(n, 2);
+  out.distance.resize(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Eigen::Vector2d p = points.row(i).transpose();
+    Eigen::Vector2d boundary, normal;
+    if (region.is_circle) {
+      const Eigen::Vector2d d = p - region.center;
+      const double len = d.norm();
+      normal = len > 0.0 ? Eigen::Vector2d(d / len) : Eigen::Vector2d(1.0, 0.0);
+      boundary = region.center + region.radius * normal;
+      out.distance[i] = len - region.radius;
+    } else {
+      Eigen::Vector2d edge_normal;
+      const double d = NearestOnBoundary(region.polygon, p, &boundary, &edge_normal);
+      const bool inside = Inside(region.polygon, p);
+      out.distance[i] = inside ? -d : d;
+      normal = d > 0.0 ? Eigen::Vector2d((inside ? boundary - p : p - boundary) / d) : edge_normal;
+    }
+    out.boundary.row(i) = boundary.transpose();
+    out.normal.row(i) = normal.transpose();
+  }
+  return out;
+}
+
 RegionPush PushOutOfRegion(const GroundRegion& region, const Eigen::Ref<const Trajectory2>& points,
                            const Eigen::Ref<const Eigen::VectorXd>& clearance) {
   CheckFinite(points, "PushOutOfRegion");

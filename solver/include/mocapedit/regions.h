@@ -37,6 +37,15 @@ GroundRegion HullRegion(const Eigen::Ref<const Trajectory2>& points);
 Eigen::VectorXd RegionSignedDistance(const GroundRegion& region,
                                      const Eigen::Ref<const Trajectory2>& points);
 
+// The nearest boundary point of every point, and the outward normal there.
+struct RegionNearest {
+  Trajectory2 boundary;         // #N by 2 nearest points on the boundary
+  Trajectory2 normal;           // #N by 2 unit outward normals (for a point on the boundary: its edge's)
+  Eigen::VectorXd distance;     // #N signed distances, negative inside
+};
+
+RegionNearest NearestOnRegion(const GroundRegion& region, const Eigen::Ref<const Trajectory2>& points);
+
 // Points closer to the region than their clearance, and where they go.
 struct RegionPush {
   Eigen::VectorXi index;  // #P indices into the points, ascending
