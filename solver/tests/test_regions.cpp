@@ -87,3 +87,23 @@ TEST(Regions, PushOutGoesToTheNearestPointAtTheClearance) {
   EXPECT_NEAR(cp.target(0, 1), 1.25, 1e-12);
   EXPECT_NEAR(cp.target.row(1).norm(), 1.5, 1e-12);  // the centre itself goes some fixed way
 }
+
+TEST(Regions, NearestOnRegionGivesBoundaryPointsAndNormals) {
+  Trajectory2 corners(4, 2);
+  corners << -1, -2, 1, -2, 1, 2, -1, 2;
+  const GroundRegion box = mocapedit::HullRegion(corners);
+  Trajectory2 p(3, 2);
+  p << 0.5, 0.0, 3.0, 0.0, 2.0, 3.0;
+  const auto near = mocapedit::NearestOnRegion(box, p);
+  EXPECT_NEAR(near.distance[0], -0.5, 1e-12);
+  EXPECT_NEAR(near.boundary(0, 0), 1.0, 1e-12);
+  EXPECT_NEAR(near.normal(0, 0), 1.0, 1e-12);
+  EXPECT_NEAR(near.distance[1], 2.0, 1e-12);
+  EXPECT_NEAR(near.normal(1, 0), 1.0, 1e-12);
+  EXPECT_NEAR(near.distance[2], std::sqrt(2.0), 1e-12);
+  EXPECT_NEAR(near.normal(2, 0), std::sqrt(0.5), 1e-12);
+  const GroundRegion circle = mocapedit::CircleRegion(Eigen::Vector2d(1, 0), 2.0);
+  const auto c = mocapedit::NearestOnRegion(circle, p);
+  EXPECT_NEAR(c.distance[0], -1.5, 1e-12);
+  EXPECT_NEAR(c.normal(0, 0), -1.0, 1e-12);
+}
