@@ -91,7 +91,7 @@ class Problem:
 class Settings:
     strategy: str = "relinearize"
     max_iterations: int = 10
-    anchor_weight: float = 1e-3         # pull of every frame to its source (relative to shape terms)
+    anchor_weight: float = 1e-4         # pull of every frame to its source (relative to shape terms)
     overshoot: float = 0.03             # separations aim this fraction past the clearance
     buffer_m: float = 0.3               # near misses watched by relinearize, metres
     spread: int = 3                     # relinearize constrains every n-th sample of an interval
