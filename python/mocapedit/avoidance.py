@@ -209,14 +209,17 @@ class _State:
         vb, wb = self.sample_terms(b, k)
         return np.all(self.pinned[va] | (wa == 0), axis=1) & np.all(self.pinned[vb] | (wb == 0), axis=1)
 
-    def fixed_rows(self, rows: _Rows, current: np.ndarray) -> None:
-        """Artist pins and links: every solve carries them."""
-        for pin in self.p.pins:
+    def fixed_rows(self, rows: _Rows, forces: np.ndarray | None = None) -> None:
+        """Artist pins and links, two rows each: every solve carries them (``forces``: the
+        last solve's, to start from)."""
+        count = len(self.p.pins) + len(self.p.links)
+        start = np.zeros((count, 2)) if forces is None or len(forces) != 2 * count else forces.reshape(-1, 2)
+        for i, pin in enumerate(self.p.pins):
             v = self.starts[pin.agent] + pin.frame
-            rows.add(np.eye(2), pin.position, pin.softness, [[v], [v]], [[1.0], [1.0]])
-        for link in self.p.links:
+            rows.add(np.eye(2), pin.position, pin.softness, [[v], [v]], [[1.0], [1.0]], force=start[i])
+        for i, link in enumerate(self.p.links, len(self.p.pins)):
             va, vb = self.starts[link.a] + link.fa, self.starts[link.b] + link.fb
-            rows.add(np.eye(2), link.offset, 0.0, [[va, vb], [va, vb]], [[1.0, -1.0], [1.0, -1.0]])
+            rows.add(np.eye(2), link.offset, 0.0, [[va, vb], [va, vb]], [[1.0, -1.0], [1.0, -1.0]], force=start[i])
 
     def detect(self, flat: np.ndarray, extra: float = 0.0) -> collisions.Collisions:
         collisions.resample(self.sampling, flat, self.starts)
@@ -328,10 +331,9 @@ def resolve(problem: Problem, settings: Settings | None = None, progress=None) -
         raise ValueError(f"unknown collision strategy '{settings.strategy}' (use {' or '.join(STRATEGIES)})")
     t0 = time.perf_counter()
     state = _State(problem, settings)
-    run = _relinearize if settings.strategy == "relinearize" else _accumulate
-    flat, angles, iterations, blocked, solves = run(state, progress)
-    found = state.detect(flat)
-    hits = state.region_hits(flat)
+    run = _Run(state, progress)
+    flat, angles = (_relinearize if settings.strategy == "relinearize" else _accumulate)(state, run)
+    found, hits = run.found, run.hits
     region_left = []
     for r, h in enumerate(hits):
         if h is None:
@@ -341,82 +343,84 @@ def resolve(problem: Problem, settings: Settings | None = None, progress=None) -
             region_left.append((r, int(a), int(v - state.starts[a]), float(d)))
     moved = np.array([not np.array_equal(flat[state.starts[a]:state.starts[a + 1]], problem.paths[a])
                       for a in range(len(problem.names))], dtype=bool)
-    return Outcome(paths=state.split(flat), rigid_angles=angles, iterations=iterations,
-                   sampling=state.sampling, remaining=found, region_left=region_left, blocked=blocked,
-                   moved=moved, solves=solves, seconds=time.perf_counter() - t0)
+    return Outcome(paths=state.split(flat), rigid_angles=angles, iterations=run.iterations,
+                   sampling=state.sampling, remaining=found, region_left=region_left,
+                   blocked=_blocked(state, found), moved=moved, solves=run.solves,
+                   seconds=time.perf_counter() - t0)
 
 
-def _report(progress, task, it: int, found, hits) -> None:
-    if task is not None:
-        left = len(found) + sum(len(h[0]) for h in hits if h is not None)
-        task.update(it, f"{left} collision{'s' if left != 1 else ''} left")
+class _Run:
+    """What both strategies share: the detection before each solve, its record, progress."""
+
+    def __init__(self, state: _State, progress):
+        self.state = state
+        self.iterations: list[Iteration] = []
+        self.solves = 0
+        self.found = None
+        self.hits = None
+        self.task = progress.task("collision avoidance", state.s.max_iterations, "iterations") if progress else None
+
+    def observe(self, flat: np.ndarray, it: int) -> bool:
+        """Detects at the current paths; True when there is nothing (more) to solve."""
+        state = self.state
+        self.found = state.detect(flat)
+        self.hits = state.region_hits(flat)
+        record = _iteration(state, self.found, self.hits)
+        self.iterations.append(record)
+        left = record.collisions + record.region_samples
+        last = left == 0 or it == state.s.max_iterations
+        if self.task is not None:
+            if last:
+                self.task.done(f"{left} collision{'s' if left != 1 else ''} left after {it} iteration"
+                               f"{'s' if it != 1 else ''}")
+            else:
+                self.task.update(it, f"{left} collision{'s' if left != 1 else ''} left")
+        return last
+
+    def solved(self, rows: "_Rows", out: dict) -> None:
+        self.solves += 1
+        self.iterations[-1].rows = rows.count
+        self.iterations[-1].solves = 1
 
 
-def _region_rows(state: _State, rows: _Rows, hits, current: np.ndarray, overshoot: float):
-    """Half-space rows keeping each frame out of its region: n . x >= n . target."""
-    for h in hits:
-        if h is None or len(h[0]) == 0:
-            continue
-        verts, _, push = h
-        normal = push["normal"]
-        target = push["target"] + normal * overshoot
-        rows.add(normal, np.sum(normal * target, axis=1), SEPARATION_SOFTNESS, verts[:, None],
-                 np.ones((len(verts), 1)))
-
-
-def _accumulate(state: _State, progress):
+def _accumulate(state: _State, run: _Run):
     """The deliverable's scheme: each iteration re-solves from the previous result."""
     p, s = state.p, state.s
     flat = state.rest.copy()
     angles = np.zeros(len(p.rigid))
-    iterations, solves = [], 0
-    task = progress.task("collision avoidance", s.max_iterations, "iterations") if progress else None
     for it in range(s.max_iterations + 1):
-        found = state.detect(flat)
-        hits = state.region_hits(flat)
-        iterations.append(_iteration(state, found, hits))
-        _report(progress, task, it, found, hits)
-        if (len(found) == 0 and iterations[-1].region_samples == 0) or it == s.max_iterations:
+        if run.observe(flat, it):
             break
-        solver = _solver.SeparationSolver(flat, state.starts, state.rigid, s.anchor_weight,
-                                          _still(s), 0)
+        found = run.found
+        solver = _solver.SeparationSolver(flat, state.starts, state.rigid, s.anchor_weight, _still(s), 0)
         rows = _Rows()
-        state.fixed_rows(rows, flat)
+        state.fixed_rows(rows)
         # A mesh-based constraint per maximal collision: the two colliding points joined by
         # an edge of the clearance's length, along the line between them.
         a, b, k = (found.agent_a.astype(np.int64), found.agent_b.astype(np.int64),
                    found.deepest.astype(np.int64))
         pa, pb = state.sampling.positions[k, a], state.sampling.positions[k, b]
-        n = _unit(pa - pb, _fallback_normals(state, a, b, k))
-        offset = n * (_clearance(state, a, b) * (1.0 + s.overshoot))[:, None]
+        offset = _unit(pa - pb, _fallback_normals(state, a, b, k)) * \
+            (_clearance(state, a, b) * (1.0 + s.overshoot))[:, None]
         va, wa = state.sample_terms(a, k)
         vb, wb = state.sample_terms(b, k)
-        verts = np.concatenate([va, vb], axis=1)
-        weights = np.concatenate([wa, -wb], axis=1)
+        verts, weights = np.concatenate([va, vb], axis=1), np.concatenate([wa, -wb], axis=1)
         for axis in (0, 1):
-            direction = np.zeros((len(a), 2))
-            direction[:, axis] = 1.0
-            rows.add(direction, offset[:, axis], SEPARATION_SOFTNESS, verts, weights)
+            rows.add(np.eye(2)[[axis] * len(a)], offset[:, axis], SEPARATION_SOFTNESS, verts, weights)
         # Regions: each frame inside is pinned where it is pushed to.
-        for h in hits:
+        for h in run.hits:
             if h is None or len(h[0]) == 0:
                 continue
-            verts_r, _, push = h
-            target = push["target"] + push["normal"] * s.overshoot * state.p.radius.mean()
+            verts_r, agents_r, push = h
+            target = push["target"] + push["normal"] * (s.overshoot * p.radius[agents_r])[:, None]
             for axis in (0, 1):
-                direction = np.zeros((len(verts_r), 2))
-                direction[:, axis] = 1.0
-                rows.add(direction, target[:, axis], SEPARATION_SOFTNESS, verts_r[:, None],
-                         np.ones((len(verts_r), 1)))
-        iterations[-1].rows = rows.count
+                rows.add(np.eye(2)[[axis] * len(verts_r)], target[:, axis], SEPARATION_SOFTNESS,
+                         verts_r[:, None], np.ones((len(verts_r), 1)))
         out = rows.solve(solver)
-        solves += 1
-        iterations[-1].solves = 1
+        run.solved(rows, out)
         flat = out["positions"]
         angles = angles + out["rigid_angles"]
-    if task is not None:
-        task.done(f"{iterations[-1].collisions} collisions left")
-    return flat, angles, iterations, _blocked(state, flat), solves
+    return flat, angles
 
 
 def _still(settings: Settings) -> float:
@@ -550,7 +554,7 @@ def _exit(footprint, points: np.ndarray, way: np.ndarray, clearance: np.ndarray)
     return points + hi[:, None] * way
 
 
-def _relinearize(state: _State, progress):
+def _relinearize(state: _State, run: _Run):
     p, s = state.p, state.s
     solver = _solver.SeparationSolver(state.rest, state.starts, state.rigid, s.anchor_weight, _still(s), 0)
     flat = state.rest.copy()
@@ -558,17 +562,11 @@ def _relinearize(state: _State, progress):
     cands = _Candidates(len(p.names))
     watched = _RegionCandidates()
     buffer = s.buffer_m / s.meters_per_unit
-    fixed_force = None
-    iterations, solves = [], 0
-    task = progress.task("collision avoidance", s.max_iterations, "iterations") if progress else None
+    fixed_force = np.zeros(0)
     for it in range(s.max_iterations + 1):
-        found = state.detect(flat)
-        hits = state.region_hits(flat)
-        iterations.append(_iteration(state, found, hits))
-        _report(progress, task, it, found, hits)
-        if len(found) + iterations[-1].region_samples == 0 or it == s.max_iterations:
+        if run.observe(flat, it):
             break
-        if it > 0 and _only_blocked(cands, found) and iterations[-1].region_samples == 0:
+        if it > 0 and _only_blocked(cands, run.found) and run.iterations[-1].region_samples == 0:
             break
         # Watch every near miss: each becomes a one-sided row that pushes only when needed.
         if p.collide_agents:
@@ -585,33 +583,28 @@ def _relinearize(state: _State, progress):
         va, wa = state.sample_terms(ca, ck)
         vb, wb = state.sample_terms(cb, ck)
         rows = _Rows()
-        state.fixed_rows(rows, flat)
-        if fixed_force is not None:
-            rows.force[:] = [fixed_force[:rows.count]]
+        state.fixed_rows(rows, fixed_force)
+        fixed = rows.count
         on = ~cands.blocked
         sep = rows.add(normal[on], need[on] * (1.0 + s.overshoot), SEPARATION_SOFTNESS,
                        np.concatenate([va, vb], axis=1)[on], np.concatenate([wa, -wb], axis=1)[on],
                        at_least=True, force=cands.force[on])
         rnormal, rrhs = watched.linearise(state, flat)
-        reg = rows.add(rnormal, rrhs + rnormal.dot(np.zeros(2)) + watched.clearance * s.overshoot,
-                       SEPARATION_SOFTNESS, watched.vertex[:, None], np.ones((len(watched.vertex), 1)),
-                       at_least=True, force=watched.force)
-        iterations[-1].rows = rows.count
+        reg = rows.add(rnormal, rrhs + watched.clearance * s.overshoot, SEPARATION_SOFTNESS,
+                       watched.vertex[:, None], np.ones((len(watched.vertex), 1)), at_least=True,
+                       force=watched.force)
         # Small problems afford a converged Gauss-Seidel; big ones carry it on from iteration
         # to iteration (warm start) within a budget of row updates.
         sweeps = int(np.clip(s.sweep_budget / max(rows.count, 1), s.sweeps, 10 * s.sweeps))
         out = rows.solve(solver, tolerance=s.tolerance * float(np.min(need, initial=1.0)), max_sweeps=sweeps)
-        solves += 1
-        iterations[-1].solves = 1
+        run.solved(rows, out)
         force = out["forces"]
-        fixed_force = force[:sep[0]] if len(sep) else force[:rows.count - len(reg)]
+        fixed_force = force[:fixed]
         cands.force[on] = force[sep]
         watched.force = force[reg]
         flat = out["positions"]
         angles = out["rigid_angles"]
-    if task is not None:
-        task.done(f"{iterations[-1].collisions} collisions left")
-    return flat, angles, iterations, _blocked(state, flat), solves
+    return flat, angles
 
 
 def _only_blocked(cands: _Candidates, found) -> bool:
@@ -623,9 +616,8 @@ def _only_blocked(cands: _Candidates, found) -> bool:
     return all((int(a), int(b)) in held for a, b in zip(found.agent_a, found.agent_b))
 
 
-def _blocked(state: _State, flat: np.ndarray) -> list[tuple[int, int, float]]:
+def _blocked(state: _State, found: collisions.Collisions) -> list[tuple[int, int, float]]:
     """Overlaps left where hard pins hold both agents: (agent a, agent b, shot time)."""
-    found = state.detect(flat)
     a, b, k = (found.agent_a.astype(np.int64), found.agent_b.astype(np.int64), found.deepest.astype(np.int64))
     held = state.held(a, b, k)
     return [(int(x), int(y), float(state.sampling.times[z])) for x, y, z in zip(a[held], b[held], k[held])]
