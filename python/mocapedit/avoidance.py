@@ -13,13 +13,15 @@ an avoid region, or ``max_iterations`` is reached. Two strategies:
   that this accumulates deformation, since every iteration's source is already deformed.
 
 ``relinearize`` (the default)
-  The source stays the input paths. Every separation ever needed is kept as a one-sided
-  constraint on the distance between the two points, linearised around the current result
-  at each iteration (only the component along the line between them is constrained, so
-  the agents may still slide past each other), with an active set: a constraint that
-  would pull two agents together is released, and near misses within ``buffer`` of the
-  clearance are watched and switched on the moment a push drives them into contact. Each
-  solve starts from the original source, so deformation does not accumulate.
+  The source stays the input paths, factored once. Every sample where two agents have
+  overlapped or come within ``buffer_m`` of it stays a one-sided row ("at least the
+  clearance apart along this direction"), re-linearised around the latest result at each
+  iteration; each solve finds the row forces of that complementarity problem (a row
+  pushes or stays idle, it never pulls), so near misses switch on by themselves when a
+  push drives them into contact. Where two agents overlap they are pushed sideways to
+  their relative motion, on one side per pair, so a walker steps round the other instead
+  of being held back before the crossing and thrown forward after it. Each solve starts
+  from the original source, so deformation does not accumulate.
 
 Artist constraints hold throughout: hard pins and links are hard rows of every solve,
 stationary ranges move rigidly. Pairs that hard constraints hold together are reported,
