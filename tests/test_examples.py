@@ -354,7 +354,10 @@ def _layer_values(layer: Sdf.Layer) -> dict:
             values[(str(path), "target")] = True
             return
         for key in spec.ListInfoKeys():
-            values[(str(path), key)] = spec.GetInfo(key)
+            if key == "subLayerOffsets":  # no Python converter for the vector of offsets
+                values[(str(path), key)] = [(o.offset, o.scale) for o in layer.subLayerOffsets]
+            else:
+                values[(str(path), key)] = spec.GetInfo(key)
         if path.IsPropertyPath() and layer.GetNumTimeSamplesForPath(path):
             for t in layer.ListTimeSamplesForPath(path):
                 values[(str(path), f"sample {t}")] = layer.QueryTimeSample(path, t)

@@ -10,9 +10,11 @@ mkdir -p "$out"
 echo "== generating the example stages into $out"
 "$py" "$here/example_stages/make_stages.py" --out "$out"
 
-stage="$out/${DEMO_STAGE:-crowd_zup_cm.usda}"
+stage="$out/${DEMO_STAGE:-demo_shot.usda}"
 echo
 echo "== mocapedit solve $(basename "$stage")"
+echo "   (a Z-up centimetre crowd: one walk bent 30 degrees by a pinned last frame, another held"
+echo "    at its start, collision avoidance on; see example_stages/stages_demo.py)"
 "$cli" solve "$stage" -o "$out/demo.edits.usda" --composed "$out/demo.edited.usda" \
   --report "$out/demo.report.json"
 

@@ -463,6 +463,10 @@ def write_png(scene: Scene, path: str, resolution=None, bounds: np.ndarray | Non
             w = max(w, int(0.6 * h))
     dpi = 100.0
     fig = Figure(figsize=(w / dpi, h / dpi), dpi=dpi)
+    # Draw on the canvas savefig uses, so the limits the aspect fixes at the draw below are
+    # the ones saved (a narrow view has one axis widened, and the matrix must know it).
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    FigureCanvasAgg(fig)
     scale = max(min(w, h) / 900.0, 0.6)       # fonts and strokes follow the image size
     ax = fig.add_axes((margin, margin, 1.0 - legend_frac - margin, 1.0 - 2 * margin))
     ax.set_aspect("equal", adjustable="datalim")

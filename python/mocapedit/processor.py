@@ -139,7 +139,11 @@ def compose_edits(ctx: SolveContext) -> None:
                 animation.interp_frames(traj.ground, frames), animation.interp_frames(traj.heading, frames),
                 animation.interp_frames(edited.ground, frames), animation.interp_frames(edited.heading, frames),
                 up)
-            if not np.allclose(motion, np.eye(4), atol=1e-12):
+            # A path moved by less than a nanometre (numerical noise of a solve that had nothing
+            # to do) is not an edit: the agent is not written.
+            still = 1e-9 / ctx.data.info.meters_per_unit
+            if (np.abs(edited.ground - traj.ground).max(initial=0.0) > still
+                    or np.abs(edited.heading - traj.heading).max(initial=0.0) > 1e-9):
                 edit.times = times
                 parent = agent.agent_parent_to_world
                 if parent.shape[0] > 1:  # a moving parent, sampled per source frame

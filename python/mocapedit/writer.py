@@ -219,6 +219,23 @@ def report_text(report: dict) -> str:
     return json.dumps(_finite(report), sort_keys=True, separators=(",", ":"), allow_nan=False)
 
 
+def _layer_data(value):
+    """A value made fit for customLayerData: lists of numbers or strings become Vt arrays."""
+    if isinstance(value, dict):
+        return {str(k): _layer_data(v) for k, v in value.items()}
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if isinstance(value, (list, tuple)):
+        if all(isinstance(v, str) for v in value):
+            return Vt.StringArray(list(value))
+        if all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in value):
+            return Vt.IntArray([int(v) for v in value])
+        return Vt.DoubleArray([float(v) for v in value])
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
 def _finite(value):
     if isinstance(value, dict):
         return {str(k): _finite(v) for k, v in value.items()}
@@ -257,7 +274,7 @@ def build_layer(content: LayerContent) -> Sdf.Layer:
     data = {"version": __version__}
     data.update(content.provenance)
     if content.stats:
-        data["stats"] = content.stats
+        data["stats"] = _layer_data(content.stats)
     if content.report is not None:
         data["report"] = report_text(content.report)
     layer.customLayerData = {"mocapedit": data}

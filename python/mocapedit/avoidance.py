@@ -1,0 +1,666 @@
+"""Collision avoidance by path editing (chapter 6 of the deliverable), and avoid regions.
+
+The agents' ground paths are re-solved with the two-step Laplacian energy of the path
+editor (:class:`mocapedit._solver.SeparationSolver`: each agent factored once, rows that
+push points apart added per solve) until no two capsules overlap and no agent stands in
+an avoid region, or ``max_iterations`` is reached. Two strategies:
+
+``accumulate`` (the deliverable, sections 6.2 and 6.3)
+  At each iteration, every maximal collision (the deepest sample of each contiguous
+  collision interval of a pair) adds a mesh-based constraint joining the two colliding
+  points at capsule clearance plus margin, along the line between them; the paths are
+  re-solved with the previous iteration's result as the new source. The deliverable notes
+  that this accumulates deformation, since every iteration's source is already deformed.
+
+``relinearize`` (the default)
+  The source stays the input paths, factored once. Every sample where two agents have
+  overlapped or come within ``buffer_m`` of it stays a one-sided row ("at least the
+  clearance apart along this direction"), re-linearised around the latest result at each
+  iteration; each solve finds the row forces of that complementarity problem (a row
+  pushes or stays idle, it never pulls), so near misses switch on by themselves when a
+  push drives them into contact. Where two agents overlap they are pushed sideways to
+  their relative motion, on one side per pair, so a walker steps round the other instead
+  of being held back before the crossing and thrown forward after it. Each solve starts
+  from the original source, so deformation does not accumulate.
+
+Artist constraints hold throughout: hard pins and links are hard rows of every solve,
+stationary ranges move rigidly. Pairs that hard constraints hold together are reported,
+not looped on.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import _solver, collisions
+
+STRATEGIES = ("relinearize", "accumulate")
+
+#: Softness of separation and region rows (1 / weight, relative to the shape terms): nearly
+#: hard, but two constraints that cannot both hold give way instead of failing.
+SEPARATION_SOFTNESS = 1e-5
+
+
+@dataclass
+class Pin:
+    """The agent's ground position at a frame: hard (softness 0) or soft (1 / weight)."""
+    agent: int
+    frame: int
+    position: np.ndarray          # (2,) ground, stage units
+    softness: float = 0.0
+    name: str = ""
+
+
+@dataclass
+class Link:
+    """Agent a at frame fa minus agent b at frame fb equals offset (hard)."""
+    a: int
+    fa: int
+    b: int
+    fb: int
+    offset: np.ndarray            # (2,) ground, stage units
+    name: str = ""
+
+
+@dataclass
+class Region:
+    """An avoid region: the listed agents stay outside its footprint by their clearance."""
+    name: str
+    footprint: object             # mocapedit._solver.GroundRegion
+    agents: np.ndarray            # (N,) agent indices
+    clearance: np.ndarray         # (N,) capsule radius plus margin, stage units
+
+
+@dataclass
+class Problem:
+    names: list[str]                    # (A,) agent paths
+    paths: list[np.ndarray]             # (F_a,2) ground path per source frame before avoidance
+    frame_times: list[np.ndarray]       # (F_a,) shot time of each source frame
+    radius: np.ndarray                  # (A,) capsule radius, stage units
+    height: np.ndarray                  # (A,) capsule height, stage units
+    margin: float = 0.0                 # extra clearance between capsules, stage units
+    sample_step: float = 1.0            # time codes between collision samples
+    rigid: list[tuple[int, int, int]] = field(default_factory=list)   # (agent, first, last) frames
+    pins: list[Pin] = field(default_factory=list)
+    links: list[Link] = field(default_factory=list)
+    regions: list[Region] = field(default_factory=list)
+    collide_agents: bool = True         # False: regions only
+
+
+@dataclass
+class Settings:
+    strategy: str = "relinearize"
+    max_iterations: int = 10
+    anchor_weight: float = 1e-4         # pull of every frame to its source (relative to shape terms)
+    overshoot: float = 0.03             # separations aim this fraction past the clearance
+    buffer_m: float = 0.3               # near misses watched by relinearize, metres
+    spread: int = 3                     # relinearize constrains every n-th sample of an interval
+    sweeps: int = 20                    # Gauss-Seidel sweeps per solve step at least (warm-started)
+    sweep_budget: float = 1e6           # rows x sweeps per step allowed beyond that (up to 10x sweeps)
+    tolerance: float = 1e-3             # of the clearance: Gauss-Seidel stops when no row moves more
+    meters_per_unit: float = 1.0
+
+
+@dataclass
+class Iteration:
+    collisions: int                     # collision intervals (pair, contiguous samples)
+    colliding_samples: int
+    region_samples: int                 # frames inside an avoid region's clearance
+    deepest: float                      # largest overlap, stage units
+    rows: int = 0                       # separation and region rows of the solve that follows
+    solves: int = 0
+
+
+@dataclass
+class Outcome:
+    paths: list[np.ndarray]             # (F_a,2) edited ground paths
+    rigid_angles: np.ndarray            # per Problem.rigid: rotation of the range (radians, CCW)
+    iterations: list[Iteration]         # the state before each solve, then the final state
+    sampling: collisions.Sampling       # at the edited paths
+    remaining: collisions.Collisions    # collision intervals left
+    region_left: list[tuple[int, int, int, float]]  # (region, agent, frame, depth) inside still
+    blocked: list[tuple[int, int, float]]  # (agent a, agent b, shot time) held together by hard constraints
+    moved: np.ndarray                   # (A,) bool: the agent's path changed
+    solves: int = 0
+    seconds: float = 0.0
+
+    @property
+    def converged(self) -> bool:
+        return len(self.remaining) == 0 and not self.region_left
+
+
+class _Rows:
+    """Rows of a SeparationSolver solve, gathered as numpy arrays."""
+
+    def __init__(self):
+        self.direction, self.rhs, self.softness, self.kind, self.force = [], [], [], [], []
+        self.term_row, self.term_vertex, self.term_weight = [], [], []
+        self.count = 0
+
+    def add(self, direction, rhs, softness, vertices, weights, at_least=False, force=0.0):
+        """Rows in bulk: direction (R,2), rhs (R,), softness (R,), vertices/weights (R,T).
+
+        ``at_least``: one-sided rows (value >= rhs); ``force``: (R,) starting forces.
+        """
+        direction = np.asarray(direction, dtype=np.float64).reshape(-1, 2)
+        r = len(direction)
+        if r == 0:
+            return np.zeros(0, np.int64)
+        idx = self.count + np.arange(r)
+        self.direction.append(direction)
+        self.rhs.append(np.broadcast_to(np.asarray(rhs, dtype=np.float64), (r,)))
+        self.softness.append(np.broadcast_to(np.asarray(softness, dtype=np.float64), (r,)))
+        self.kind.append(np.full(r, 1 if at_least else 0, dtype=np.int32))
+        self.force.append(np.broadcast_to(np.asarray(force, dtype=np.float64), (r,)))
+        vertices = np.asarray(vertices).reshape(r, -1)
+        weights = np.asarray(weights, dtype=np.float64).reshape(r, -1)
+        self.term_row.append(np.repeat(idx, vertices.shape[1]))
+        self.term_vertex.append(vertices.ravel())
+        self.term_weight.append(weights.ravel())
+        self.count += r
+        return idx
+
+    def solve(self, solver, tolerance: float = 1e-6, max_sweeps: int = 500):
+        cat = lambda parts, shape, dtype: (np.concatenate(parts) if parts else np.zeros(shape)).astype(dtype)  # noqa: E731
+        return solver.solve(cat(self.direction, (0, 2), np.float64).reshape(-1, 2),
+                            cat(self.rhs, 0, np.float64), cat(self.softness, 0, np.float64),
+                            cat(self.term_row, 0, np.int32), cat(self.term_vertex, 0, np.int32),
+                            cat(self.term_weight, 0, np.float64), cat(self.kind, 0, np.int32),
+                            cat(self.force, 0, np.float64), tolerance, max_sweeps)
+
+
+class _State:
+    """The problem laid out for the solver: concatenated paths, samples, fixed rows."""
+
+    def __init__(self, problem: Problem, settings: Settings):
+        self.p = problem
+        self.s = settings
+        counts = np.array([len(g) for g in problem.paths], dtype=np.int64)
+        self.starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
+        self.rest = np.concatenate(problem.paths).astype(np.float64) if len(counts) else np.zeros((0, 2))
+        self.rigid = [(int(self.starts[a] + f), int(self.starts[a] + l)) for a, f, l in problem.rigid]
+        self.times = {i: t for i, t in enumerate(problem.frame_times)}
+        idx = list(range(len(problem.names)))
+        self.sampling = collisions.sample(idx, self.times, {i: g for i, g in enumerate(problem.paths)},
+                                          problem.sample_step)
+        pinned = np.zeros(len(self.rest), dtype=bool)
+        for pin in problem.pins:
+            if pin.softness == 0:
+                pinned[self.starts[pin.agent] + pin.frame] = True
+        self.pinned = pinned
+
+    def split(self, flat: np.ndarray) -> list[np.ndarray]:
+        return [flat[self.starts[a]:self.starts[a + 1]].copy() for a in range(len(self.starts) - 1)]
+
+    def sample_terms(self, agents: np.ndarray, samples: np.ndarray):
+        """Vertices (N,2) and weights (N,2) of agents' positions at samples (interpolated)."""
+        f = self.sampling.frames[samples, agents]
+        counts = self.starts[agents + 1] - self.starts[agents]
+        f = np.clip(f, 0.0, counts - 1)
+        i0 = np.floor(f).astype(np.int64)
+        i1 = np.minimum(i0 + 1, counts - 1)
+        w1 = f - i0
+        base = self.starts[agents]
+        return np.stack([base + i0, base + i1], axis=1), np.stack([1.0 - w1, w1], axis=1)
+
+    def held(self, a: np.ndarray, b: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """(N,) True where hard pins hold both agents' points at the samples (no push can move them)."""
+        va, wa = self.sample_terms(a, k)
+        vb, wb = self.sample_terms(b, k)
+        return np.all(self.pinned[va] | (wa == 0), axis=1) & np.all(self.pinned[vb] | (wb == 0), axis=1)
+
+    def fixed_rows(self, rows: _Rows, forces: np.ndarray | None = None) -> None:
+        """Artist pins and links, two rows each: every solve carries them (``forces``: the
+        last solve's, to start from)."""
+        count = len(self.p.pins) + len(self.p.links)
+        start = np.zeros((count, 2)) if forces is None or len(forces) != 2 * count else forces.reshape(-1, 2)
+        for i, pin in enumerate(self.p.pins):
+            v = self.starts[pin.agent] + pin.frame
+            rows.add(np.eye(2), pin.position, pin.softness, [[v], [v]], [[1.0], [1.0]], force=start[i])
+        for i, link in enumerate(self.p.links, len(self.p.pins)):
+            va, vb = self.starts[link.a] + link.fa, self.starts[link.b] + link.fb
+            rows.add(np.eye(2), link.offset, 0.0, [[va, vb], [va, vb]], [[1.0, -1.0], [1.0, -1.0]], force=start[i])
+
+    def detect(self, flat: np.ndarray, extra: float = 0.0) -> collisions.Collisions:
+        collisions.resample(self.sampling, flat, self.starts)
+        active = np.ones(len(self.p.names), dtype=bool) if self.p.collide_agents else np.zeros(len(self.p.names), bool)
+        return collisions.detect(self.sampling, self.p.radius, self.p.height, self.p.margin + extra,
+                                 report_distance=self.p.margin + extra, active=active)
+
+    def region_hits(self, flat: np.ndarray, extra: float = 0.0):
+        """Per region: (vertices, agent of each, push) of frames within clearance + extra."""
+        out = []
+        for k, region in enumerate(self.p.regions):
+            verts = [np.arange(self.starts[a], self.starts[a + 1]) for a in region.agents]
+            if not verts:
+                out.append(None)
+                continue
+            owner = np.concatenate([np.full(len(v), i) for i, v in enumerate(verts)])
+            verts = np.concatenate(verts)
+            clearance = region.clearance[owner] + extra
+            push = _solver.push_out_of_region(region.footprint, np.ascontiguousarray(flat[verts]), clearance)
+            out.append((verts[push["index"]], region.agents[owner[push["index"]]], push))
+        return out
+
+
+def _unit(d: np.ndarray, fallback: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(d, axis=1)
+    ok = n > 1e-12
+    out = np.where(ok[:, None], d / np.where(ok, n, 1.0)[:, None], fallback)
+    return out
+
+
+def _fallback_normals(state: _State, a: np.ndarray, b: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """Where two points coincide: sideways to their relative motion (or along x)."""
+    pos = state.sampling.positions
+    k1 = np.minimum(k + 1, len(state.sampling.times) - 1)
+    k0 = np.maximum(k - 1, 0)
+    rel = (pos[k1, a] - pos[k0, a]) - (pos[k1, b] - pos[k0, b])
+    side = np.stack([-rel[:, 1], rel[:, 0]], axis=1)
+    n = np.linalg.norm(side, axis=1)
+    return np.where((n > 1e-12)[:, None], side / np.where(n > 1e-12, n, 1.0)[:, None], [[1.0, 0.0]])
+
+
+def _separation_normals(state: _State, a: np.ndarray, b: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """Directions pushing agent a away from agent b at samples k, one pass side per pair.
+
+    Two agents passing each other must keep to one side over the whole encounter: the
+    line between their points swings from side to side with the sway of a walk, and
+    following it would push them alternately left and right. The side (of b as seen
+    along their relative motion) is voted once per pair, by the samples where they are
+    closest, and where they overlap they are pushed sideways to their relative motion, on
+    that side (a conservative linearisation of the distance). The vote is taken again at each
+    iteration (among the samples that still overlap), so a pair that other pushes moved to
+    the other side is not pulled back through.
+    """
+    pos = state.sampling.positions
+    rel = pos[k, a] - pos[k, b]
+    k1 = np.minimum(k + 1, len(state.sampling.times) - 1)
+    k0 = np.maximum(k - 1, 0)
+    motion = (pos[k1, a] - pos[k0, a]) - (pos[k1, b] - pos[k0, b])
+    speed = np.linalg.norm(motion, axis=1)
+    # Passing, not walking together: over two samples they move by a fair part of a clearance.
+    moving = speed > 0.05 * _clearance(state, a, b)
+    t = np.where(moving[:, None], motion / np.where(moving, speed, 1.0)[:, None], [[1.0, 0.0]])
+    perp = np.stack([-t[:, 1], t[:, 0]], axis=1)
+    along, across = np.sum(rel * t, axis=1), np.sum(rel * perp, axis=1)
+    pair = a * np.int64(len(state.p.names)) + b
+    close = moving & (np.linalg.norm(rel, axis=1) < _clearance(state, a, b))
+    uniq, inverse = np.unique(pair, return_inverse=True)
+    vote = np.bincount(inverse, weights=np.where(close, across, 0.0), minlength=len(uniq))
+    side = np.where(vote >= 0, 1.0, -1.0)[inverse]
+    # Where they overlap they pass side by side on the voted side; the line between the
+    # points would turn along their motion before and after the crossing and hold one
+    # back on each side of it. Apart, each sample keeps its own direction.
+    d = np.where(close[:, None], side[:, None] * perp, along[:, None] * t + across[:, None] * perp)
+    return _unit(d, np.where(moving[:, None], side[:, None] * perp, [[1.0, 0.0]]))
+
+
+def _clearance(state: _State, a, b) -> np.ndarray:
+    return state.p.radius[a] + state.p.radius[b] + state.p.margin
+
+
+def _iteration(state: _State, found: collisions.Collisions, hits) -> Iteration:
+    return Iteration(collisions=len(found), colliding_samples=int(found.colliding_samples),
+                     region_samples=int(sum(len(h[0]) for h in hits if h is not None)),
+                     deepest=float(max([found.depth.max(initial=0.0)] +
+                                       [h[2]["depth"].max(initial=0.0) for h in hits if h is not None])))
+
+
+def _expand(found: collisions.Collisions, spread: int, colliding_depth: float = 0.0):
+    """(a, b, sample) to constrain for each interval: its deepest sample, and, for intervals
+    deeper than ``colliding_depth``, every spread-th sample and the last one too."""
+    if len(found) == 0:
+        z = np.zeros(0, np.int64)
+        return z, z, z
+    deep = found.depth > colliding_depth
+    length = np.where(deep, (found.last - found.first) // spread + 2, 0)
+    rep = np.repeat(np.arange(len(found)), length)
+    offset = np.arange(int(length.sum())) - np.repeat(np.cumsum(length) - length, length)
+    k = np.minimum(found.first[rep] + offset * spread, found.last[rep])
+    a = np.concatenate([found.agent_a, found.agent_a[rep]])
+    b = np.concatenate([found.agent_b, found.agent_b[rep]])
+    k = np.concatenate([found.deepest, k])
+    return a.astype(np.int64), b.astype(np.int64), k.astype(np.int64)
+
+
+def resolve(problem: Problem, settings: Settings | None = None, progress=None) -> Outcome:
+    """Pushes the agents' paths apart and out of the regions; see the module doc."""
+    settings = settings or Settings()
+    if settings.strategy not in STRATEGIES:
+        raise ValueError(f"unknown collision strategy '{settings.strategy}' (use {' or '.join(STRATEGIES)})")
+    t0 = time.perf_counter()
+    state = _State(problem, settings)
+    run = _Run(state, progress)
+    flat, angles = (_relinearize if settings.strategy == "relinearize" else _accumulate)(state, run)
+    found, hits = run.found, run.hits
+    region_left = []
+    for r, h in enumerate(hits):
+        if h is None:
+            continue
+        verts, agents, push = h
+        for v, a, d in zip(verts, agents, push["depth"]):
+            region_left.append((r, int(a), int(v - state.starts[a]), float(d)))
+    moved = np.array([not np.array_equal(flat[state.starts[a]:state.starts[a + 1]], problem.paths[a])
+                      for a in range(len(problem.names))], dtype=bool)
+    return Outcome(paths=state.split(flat), rigid_angles=angles, iterations=run.iterations,
+                   sampling=state.sampling, remaining=found, region_left=region_left,
+                   blocked=_blocked(state, found), moved=moved, solves=run.solves,
+                   seconds=time.perf_counter() - t0)
+
+
+class _Run:
+    """What both strategies share: the detection before each solve, its record, progress."""
+
+    def __init__(self, state: _State, progress):
+        self.state = state
+        self.iterations: list[Iteration] = []
+        self.solves = 0
+        self.found = None
+        self.hits = None
+        self.task = progress.task("collision avoidance", state.s.max_iterations, "iterations") if progress else None
+
+    def observe(self, flat: np.ndarray, it: int) -> bool:
+        """Detects at the current paths; True when there is nothing (more) to solve."""
+        state = self.state
+        self.found = state.detect(flat)
+        self.hits = state.region_hits(flat)
+        record = _iteration(state, self.found, self.hits)
+        self.iterations.append(record)
+        left = record.collisions + record.region_samples
+        last = left == 0 or it == state.s.max_iterations
+        if self.task is not None:
+            if last:
+                self.task.done(f"{left} collision{'s' if left != 1 else ''} left after {it} iteration"
+                               f"{'s' if it != 1 else ''}")
+            else:
+                self.task.update(it, f"{left} collision{'s' if left != 1 else ''} left")
+        return last
+
+    def solved(self, rows: "_Rows", out: dict) -> None:
+        self.solves += 1
+        self.iterations[-1].rows = rows.count
+        self.iterations[-1].solves = 1
+
+
+def _accumulate(state: _State, run: _Run):
+    """The deliverable's scheme: each iteration re-solves from the previous result."""
+    p, s = state.p, state.s
+    flat = state.rest.copy()
+    angles = np.zeros(len(p.rigid))
+    for it in range(s.max_iterations + 1):
+        if run.observe(flat, it):
+            break
+        found = run.found
+        solver = _solver.SeparationSolver(flat, state.starts, state.rigid, s.anchor_weight, _still(s), 0)
+        rows = _Rows()
+        state.fixed_rows(rows)
+        # A mesh-based constraint per maximal collision: the two colliding points joined by
+        # an edge of the clearance's length, along the line between them.
+        a, b, k = (found.agent_a.astype(np.int64), found.agent_b.astype(np.int64),
+                   found.deepest.astype(np.int64))
+        pa, pb = state.sampling.positions[k, a], state.sampling.positions[k, b]
+        offset = _unit(pa - pb, _fallback_normals(state, a, b, k)) * \
+            (_clearance(state, a, b) * (1.0 + s.overshoot))[:, None]
+        va, wa = state.sample_terms(a, k)
+        vb, wb = state.sample_terms(b, k)
+        verts, weights = np.concatenate([va, vb], axis=1), np.concatenate([wa, -wb], axis=1)
+        for axis in (0, 1):
+            rows.add(np.eye(2)[[axis] * len(a)], offset[:, axis], SEPARATION_SOFTNESS, verts, weights)
+        # Regions: each frame inside is pinned where it is pushed to.
+        for h in run.hits:
+            if h is None or len(h[0]) == 0:
+                continue
+            verts_r, agents_r, push = h
+            target = push["target"] + push["normal"] * (s.overshoot * p.radius[agents_r])[:, None]
+            for axis in (0, 1):
+                rows.add(np.eye(2)[[axis] * len(verts_r)], target[:, axis], SEPARATION_SOFTNESS,
+                         verts_r[:, None], np.ones((len(verts_r), 1)))
+        out = rows.solve(solver)
+        run.solved(rows, out)
+        flat = out["positions"]
+        angles = angles + out["rigid_angles"]
+    return flat, angles
+
+
+def _still(settings: Settings) -> float:
+    return 1e-5 / settings.meters_per_unit
+
+
+class _Candidates:
+    """Separation constraints of relinearize, one per (agent a, agent b, sample), kept
+    sorted by key (sample-major, so Gauss-Seidel sweeps them in time order)."""
+
+    def __init__(self, agents: int):
+        self.n = np.int64(max(agents, 1))
+        self.keys = np.zeros(0, np.int64)
+        self.force = np.zeros(0)          # last solve's force (warm start)
+        self.blocked = np.zeros(0, bool)  # hard constraints hold this pair together
+
+    def split(self):
+        n = self.n
+        return (self.keys // n) % n, self.keys % n, self.keys // (n * n)
+
+    def prune(self, state: _State, reach: float) -> None:
+        """Forgets watched samples that do not push and whose agents are now far apart."""
+        a, b, k = self.split()
+        gap = np.linalg.norm(state.sampling.positions[k, a] - state.sampling.positions[k, b], axis=1) \
+            - _clearance(state, a, b)
+        keep = (self.force > 0.0) | self.blocked | (gap < reach)
+        self.keys, self.force, self.blocked = self.keys[keep], self.force[keep], self.blocked[keep]
+
+    def add(self, a, b, k) -> None:
+        keys = np.unique((k * self.n + a) * self.n + b)
+        new = keys[~np.isin(keys, self.keys)]
+        if len(new) == 0:
+            return
+        merged = np.concatenate([self.keys, new])
+        order = np.argsort(merged, kind="stable")
+        self.keys = merged[order]
+        self.force = np.concatenate([self.force, np.zeros(len(new))])[order]
+        self.blocked = np.concatenate([self.blocked, np.zeros(len(new), bool)])[order]
+
+
+class _RegionCandidates:
+    """Frames watched near each avoid region: one-sided rows, re-linearised each iteration."""
+
+    def __init__(self):
+        self.region = np.zeros(0, np.int64)
+        self.vertex = np.zeros(0, np.int64)
+        self.clearance = np.zeros(0)
+        self.force = np.zeros(0)
+
+    def add(self, region: int, vertices: np.ndarray, clearance: np.ndarray) -> None:
+        known = self.vertex[self.region == region]
+        new = ~np.isin(vertices, known)
+        self.region = np.concatenate([self.region, np.full(int(new.sum()), region)])
+        self.vertex = np.concatenate([self.vertex, vertices[new]])
+        self.clearance = np.concatenate([self.clearance, clearance[new]])
+        self.force = np.concatenate([self.force, np.zeros(int(new.sum()))])
+
+    def linearise(self, state: _State, flat: np.ndarray):
+        """(normal (N,2), rhs (N,)) of one-sided rows n . x >= rhs keeping frames out.
+
+        A frame outside the region grown by its clearance keeps to the tangent line at its
+        nearest point. A frame inside goes round the region: sideways to the agent's
+        motion, on the side of the region's centre its path already passes, to where that
+        sideways line leaves the grown region (the tangent line there). Pushing each frame
+        to its nearest boundary point would instead hold a walker back before the middle
+        of the region and throw it forward after it.
+        """
+        normal = np.zeros((len(self.vertex), 2))
+        rhs = np.zeros(len(self.vertex))
+        owner = np.searchsorted(state.starts, self.vertex, side="right") - 1
+        for r, region in enumerate(state.p.regions):
+            sel = np.flatnonzero(self.region == r)
+            if len(sel) == 0:
+                continue
+            v, c = self.vertex[sel], self.clearance[sel]
+            pts = flat[v]
+            near = _solver.nearest_on_region(region.footprint, np.ascontiguousarray(pts))
+            nrm = near["normal"].copy()
+            target = near["boundary"] + nrm * c[:, None]
+            inside = near["distance"] < c
+            if inside.any():
+                t = _path_tangents(state, flat, v[inside])
+                moving = np.linalg.norm(t, axis=1) > 1e-12
+                left = np.stack([-t[:, 1], t[:, 0]], axis=1)
+                centre = _centre(region.footprint)
+                cross = np.sum(left * (centre - pts[inside]), axis=1)   # > 0: centre on the left
+                agents = owner[sel][inside]
+                uniq, inv = np.unique(agents, return_inverse=True)
+                side = np.where(np.bincount(inv, weights=cross, minlength=len(uniq)) > 0, -1.0, 1.0)[inv]
+                way = side[:, None] * left
+                exit_pt = _exit(region.footprint, pts[inside], way, c[inside])
+                exit_near = _solver.nearest_on_region(region.footprint, np.ascontiguousarray(exit_pt))
+                go = moving & (np.sum(exit_near["normal"] * way, axis=1) > 0)
+                idx = np.flatnonzero(inside)[go]
+                nrm[idx] = exit_near["normal"][go]
+                target[idx] = exit_near["boundary"][go] + nrm[idx] * c[inside][go, None]
+            normal[sel] = nrm
+            rhs[sel] = np.sum(nrm * target, axis=1)
+        return normal, rhs
+
+
+def _path_tangents(state: _State, flat: np.ndarray, vertices: np.ndarray) -> np.ndarray:
+    """(N,2) central-difference tangents of the paths at global vertices (one-sided at ends)."""
+    owner = np.searchsorted(state.starts, vertices, side="right") - 1
+    lo, hi = state.starts[owner], state.starts[owner + 1] - 1
+    return flat[np.minimum(vertices + 1, hi)] - flat[np.maximum(vertices - 1, lo)]
+
+
+def _centre(footprint) -> np.ndarray:
+    return np.asarray(footprint.center) if footprint.is_circle else np.asarray(footprint.polygon).mean(axis=0)
+
+
+def _exit(footprint, points: np.ndarray, way: np.ndarray, clearance: np.ndarray) -> np.ndarray:
+    """Where rays from points along unit directions leave a convex footprint grown by clearance."""
+    if footprint.is_circle:
+        d = points - np.asarray(footprint.center)
+        reach = footprint.radius + clearance
+        b = np.sum(d * way, axis=1)
+        s = -b + np.sqrt(np.maximum(b * b - np.sum(d * d, axis=1) + reach * reach, 0.0))
+        return points + s[:, None] * way
+    poly = np.asarray(footprint.polygon)
+    hi = np.full(len(points), 2.0 * np.ptp(poly, axis=0).max() + 2.0 * clearance.max(initial=0.0)
+                 + np.linalg.norm(points - poly.mean(axis=0), axis=1).max(initial=0.0))
+    lo = np.zeros(len(points))
+    for _ in range(48):   # the distance grows monotonically along a ray leaving a convex region
+        mid = 0.5 * (lo + hi)
+        d = _solver.region_signed_distance(footprint, np.ascontiguousarray(points + mid[:, None] * way))
+        out = d >= clearance
+        hi = np.where(out, mid, hi)
+        lo = np.where(out, lo, mid)
+    return points + hi[:, None] * way
+
+
+def _relinearize(state: _State, run: _Run):
+    p, s = state.p, state.s
+    solver = _solver.SeparationSolver(state.rest, state.starts, state.rigid, s.anchor_weight, _still(s), 0)
+    flat = state.rest.copy()
+    angles = np.zeros(len(p.rigid))
+    cands = _Candidates(len(p.names))
+    watched = _RegionCandidates()
+    buffer = s.buffer_m / s.meters_per_unit
+    fixed_force = np.zeros(0)
+    for it in range(s.max_iterations + 1):
+        if run.observe(flat, it):
+            break
+        if it > 0 and _only_blocked(cands, run.found) and run.iterations[-1].region_samples == 0:
+            break
+        # Watch every near miss: each becomes a one-sided row that pushes only when needed.
+        if p.collide_agents:
+            cands.add(*_expand(state.detect(flat, buffer), max(1, s.spread), buffer))
+            cands.prune(state, 2.0 * buffer)
+        for r, h in enumerate(state.region_hits(flat, buffer)):
+            if h is not None and len(h[0]):
+                watched.add(r, h[0], p.regions[r].clearance[np.searchsorted(p.regions[r].agents, h[1])])
+        # Linearise every kept constraint at the current result.
+        ca, cb, ck = cands.split()
+        cands.blocked = state.held(ca, cb, ck)
+        normal = _separation_normals(state, ca, cb, ck)
+        need = _clearance(state, ca, cb)
+        va, wa = state.sample_terms(ca, ck)
+        vb, wb = state.sample_terms(cb, ck)
+        rows = _Rows()
+        state.fixed_rows(rows, fixed_force)
+        fixed = rows.count
+        on = ~cands.blocked
+        sep = rows.add(normal[on], need[on] * (1.0 + s.overshoot), SEPARATION_SOFTNESS,
+                       np.concatenate([va, vb], axis=1)[on], np.concatenate([wa, -wb], axis=1)[on],
+                       at_least=True, force=cands.force[on])
+        rnormal, rrhs = watched.linearise(state, flat)
+        reg = rows.add(rnormal, rrhs + watched.clearance * s.overshoot, SEPARATION_SOFTNESS,
+                       watched.vertex[:, None], np.ones((len(watched.vertex), 1)), at_least=True,
+                       force=watched.force)
+        # Small problems afford a converged Gauss-Seidel; big ones carry it on from iteration
+        # to iteration (warm start) within a budget of row updates.
+        sweeps = int(np.clip(s.sweep_budget / max(rows.count, 1), s.sweeps, 10 * s.sweeps))
+        out = rows.solve(solver, tolerance=s.tolerance * float(np.min(need, initial=1.0)), max_sweeps=sweeps)
+        run.solved(rows, out)
+        force = out["forces"]
+        fixed_force = force[:fixed]
+        cands.force[on] = force[sep]
+        watched.force = force[reg]
+        flat = out["positions"]
+        angles = out["rigid_angles"]
+    return flat, angles
+
+
+def _only_blocked(cands: _Candidates, found) -> bool:
+    """True when every collision left involves a pair hard constraints hold together."""
+    if len(found) == 0 or not cands.blocked.any():
+        return False
+    ca, cb, _ = cands.split()
+    held = set(zip(ca[cands.blocked].tolist(), cb[cands.blocked].tolist()))
+    return all((int(a), int(b)) in held for a, b in zip(found.agent_a, found.agent_b))
+
+
+def _blocked(state: _State, found: collisions.Collisions) -> list[tuple[int, int, float]]:
+    """Overlaps left where hard pins hold both agents: (agent a, agent b, shot time)."""
+    a, b, k = (found.agent_a.astype(np.int64), found.agent_b.astype(np.int64), found.deepest.astype(np.int64))
+    held = state.held(a, b, k)
+    return [(int(x), int(y), float(state.sampling.times[z])) for x, y, z in zip(a[held], b[held], k[held])]
+
+
+def _tangents(path: np.ndarray) -> np.ndarray:
+    t = np.zeros_like(path)
+    if len(path) > 1:
+        t[1:-1] = path[2:] - path[:-2]
+        t[0] = path[1] - path[0]
+        t[-1] = path[-1] - path[-2]
+    return t
+
+
+def heading_change(before: np.ndarray, after: np.ndarray, ranges, still: float) -> np.ndarray:
+    """(F,) turn (radians, CCW) of each frame's heading when a path goes from before to after.
+
+    Where the agent walks, the turn of its path tangent; in a rigid range, the range's own
+    rotation (one that stands still turns with the frames around it); where the agent
+    stands, or a push dominates its own motion, the turn of the nearest walking frames,
+    so standing agents that are pushed slide without spinning.
+
+    Args:
+      before, after: (F,2) ground paths
+      ranges: (first, last, angle) rigid ranges and the rotation the solve gave each
+      still: tangent length (stage units) below which a frame stands
+    """
+    d0, d1 = _tangents(np.asarray(before)), _tangents(np.asarray(after))
+    n0 = np.linalg.norm(d0, axis=1)
+    valid = (n0 > still) & (np.linalg.norm(d1, axis=1) > still) & (n0 > 2.0 * np.linalg.norm(d1 - d0, axis=1))
+    turn = np.arctan2(d0[:, 0] * d1[:, 1] - d0[:, 1] * d1[:, 0], np.sum(d0 * d1, axis=1))
+    fixed = np.zeros(len(turn), bool)
+    for first, last, angle in ranges:
+        valid[first:last + 1] = False
+        if np.ptp(np.asarray(before)[first:last + 1], axis=0).max(initial=0.0) > still:
+            turn[first:last + 1] = angle
+            fixed[first:last + 1] = True
+    known = valid | fixed
+    if not known.any():
+        return np.zeros(len(turn))
+    idx = np.flatnonzero(known)
+    out = np.interp(np.arange(len(turn)), idx, turn[idx])
+    out[known] = turn[known]
+    return out

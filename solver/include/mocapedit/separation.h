@@ -1,0 +1,112 @@
+// The solve behind collision avoidance: many agents' paths, each kept close to its rest
+// path by the two-step Laplacian energy of the deliverable (section 5.2: step 1 keeps the
+// local shape of every frame in the frame of its neighbours, step 2 the length of every
+// step), coupled by linear equality rows on the ground positions (section 6.2: the
+// constraints joining colliding points; also artist pins and links, and the push-out of
+// avoid regions).
+//
+// Each agent's energy is factored once (SeparationPrecompute). The rows change from solve
+// to solve (collision avoidance adds, re-linearises and drops them), so they are not part
+// of the factorization: each solve forms each agent's block of the Schur complement of its
+// rows (S = C K^-1 C^T, one back-substitution per row), finds the row forces and adds each
+// agent's response. Rows are equalities or one-sided ("at least"): the forces solve the
+// complementarity problem on S by projected Gauss-Seidel (a one-sided row pushes, never
+// pulls), then the equality rows are met exactly by a direct solve. The Schur complement
+// of a dense crowd fills in badly when factored, so it is never factored whole; the cost
+// of a solve grows with the rows per agent, not with the crowd.
+//
+// Every frame is also pulled weakly towards its rest position (anchor_weight, relative to
+// the shape terms): it keeps agents without any pin in place and makes a push a local
+// detour rather than a shift of the whole path. A detour spreads over roughly
+// anchor_weight^(-1/4) frames on each side.
+//
+// Stationary ranges move rigidly in both steps (section 5.4.2.5): the range's frames are
+// replaced by one similarity in step 1 (translation and a complex scale) and by one
+// translation turned by step 1's rotation in step 2. Ranges whose rest positions stand
+// within still_extent of each other only translate.
+//
+// Positions are ground-plane coordinates in stage units; agents' paths are concatenated
+// into one #V by 2 list, agent a owning vertices starts[a] .. starts[a+1]-1 (one per frame).
+#pragma once
+
+#include <Eigen/Core>
+#include <memory>
+#include <vector>
+
+#include "mocapedit/trajectory.h"
+
+namespace mocapedit {
+
+struct SeparationProblem {
+  Trajectory2 rest;            // #V by 2 rest positions, agents concatenated
+  Eigen::VectorXi starts;      // #A+1 first vertex of each agent, then #V (non-decreasing)
+  std::vector<FrameRange> rigid;  // inclusive global vertex ranges, each inside one agent, disjoint
+  double anchor_weight = 1e-3;    // > 0
+  double still_extent = 1e-9;     // stage units, >= 0
+  int threads = 0;                // 0: hardware, at most 2
+};
+
+// #R linear rows on ground positions, each sum_t weight_t * dot(direction_r, x[vertex_t])
+// = rhs_r. A pin is two rows (directions (1,0) and (0,1)); a separation is one row along
+// the normal between two agents' points (weights +1 and -1, or interpolation weights).
+struct SeparationRows {
+  Trajectory2 direction;       // #R by 2 (unit or not: the row is scaled with it)
+  Eigen::VectorXd rhs;         // #R
+  Eigen::VectorXd softness;    // #R: 0 = hard, else 1 / weight relative to the shape terms
+  Eigen::VectorXi kind;        // #R: 0 equality, 1 at least (value >= rhs); empty: all equalities
+  Eigen::VectorXd initial_forces;  // #R starting forces (a previous solve's), or empty
+  Eigen::VectorXi term_row;    // #T row of each term
+  Eigen::VectorXi term_vertex; // #T global vertex of each term
+  Eigen::VectorXd term_weight; // #T
+};
+
+struct SeparationSettings {
+  double tolerance = 1e-6;     // stage units: Gauss-Seidel stops when no row value moves more
+  int max_sweeps = 500;        // Gauss-Seidel sweeps per step at most
+  double relaxation = 1.0;     // over-relaxation factor of the sweeps, in (0, 2)
+};
+
+struct SeparationResult {
+  Trajectory2 positions;        // #V by 2 after step 2 (agents no row touches keep rest)
+  Trajectory2 shape;            // #V by 2 after step 1
+  Eigen::VectorXd forces;       // #R step-2 row forces: > 0 pushes the row value up
+  Eigen::VectorXd residuals;    // #R row value minus rhs after step 2
+  Eigen::VectorXd rigid_angles; // #rigid rotation of each range (radians, CCW) in step 2
+  int moved_agents = 0;         // agents some row touched
+  int sweeps = 0;               // Gauss-Seidel sweeps, both steps
+  bool converged = true;        // both steps met the tolerance within max_sweeps
+  bool regularized = false;     // the hard equality rows were dependent: a tiny softness was added
+};
+
+struct SeparationData;  // opaque: every agent's factored steps
+
+// Builds and factors each agent's two steps.
+// Throws std::invalid_argument on bad shapes, starts or ranges, non-finite rest positions,
+// or a non-positive anchor weight.
+void SeparationPrecompute(const SeparationProblem& problem, std::shared_ptr<SeparationData>& data);
+
+// Solves both steps under the rows. Const on data; may run from several threads.
+// Throws std::invalid_argument on bad shapes, vertices out of range, a row without terms,
+// negative softness or non-finite values; std::runtime_error when the equality rows
+// cannot be solved even regularized.
+void SeparationSolve(const SeparationData& data, const SeparationRows& rows, const SeparationSettings& settings,
+                     SeparationResult& result);
+
+// Entries of each agent's inverse energy that earlier solves needed, kept for the next
+// solve on the same data (rows that persist from solve to solve then cost no
+// back-substitution). Use one cache per SeparationData, from one thread at a time.
+struct SeparationCache;
+struct SeparationCacheDeleter {
+  void operator()(SeparationCache* cache) const;
+};
+std::unique_ptr<SeparationCache, SeparationCacheDeleter> SeparationNewCache();
+
+// As above, reusing and growing `cache`.
+void SeparationSolve(const SeparationData& data, const SeparationRows& rows, const SeparationSettings& settings,
+                     SeparationCache& cache, SeparationResult& result);
+
+// Number of agents and vertices of a precomputed problem.
+int SeparationAgentCount(const SeparationData& data);
+int SeparationVertexCount(const SeparationData& data);
+
+}  // namespace mocapedit

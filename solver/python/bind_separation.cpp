@@ -1,0 +1,102 @@
+#include <pybind11/eigen.h>
+#include <pybind11/stl.h>
+
+#include <memory>
+
+#include "mocapedit/separation.h"
+#include "registry.h"
+
+namespace py = pybind11;
+
+namespace {
+
+using mocapedit::Trajectory2;
+
+class SeparationSolver {
+ public:
+  SeparationSolver(const Eigen::Ref<const Trajectory2>& rest, const Eigen::VectorXi& starts,
+                   const std::vector<mocapedit::FrameRange>& rigid, double anchor_weight, double still_extent,
+                   int threads) {
+    mocapedit::SeparationProblem problem;
+    problem.rest = rest;
+    problem.starts = starts;
+    problem.rigid = rigid;
+    problem.anchor_weight = anchor_weight;
+    problem.still_extent = still_extent;
+    problem.threads = threads;
+    py::gil_scoped_release release;
+    mocapedit::SeparationPrecompute(problem, data_);
+    cache_ = mocapedit::SeparationNewCache();
+  }
+
+  py::dict Solve(const Eigen::Ref<const Trajectory2>& direction, const Eigen::VectorXd& rhs,
+                 const Eigen::VectorXd& softness, const Eigen::VectorXi& term_row, const Eigen::VectorXi& term_vertex,
+                 const Eigen::VectorXd& term_weight, const Eigen::VectorXi& kind,
+                 const Eigen::VectorXd& initial_forces, double tolerance, int max_sweeps) {
+    mocapedit::SeparationRows rows;
+    rows.direction = direction;
+    rows.rhs = rhs;
+    rows.softness = softness;
+    rows.kind = kind;
+    rows.initial_forces = initial_forces;
+    mocapedit::SeparationSettings settings;
+    settings.tolerance = tolerance;
+    settings.max_sweeps = max_sweeps;
+    rows.term_row = term_row;
+    rows.term_vertex = term_vertex;
+    rows.term_weight = term_weight;
+    mocapedit::SeparationResult result;
+    {
+      py::gil_scoped_release release;
+      mocapedit::SeparationSolve(*data_, rows, settings, *cache_, result);
+    }
+    py::dict d;
+    d["positions"] = result.positions;
+    d["shape"] = result.shape;
+    d["forces"] = result.forces;
+    d["residuals"] = result.residuals;
+    d["rigid_angles"] = result.rigid_angles;
+    d["moved_agents"] = result.moved_agents;
+    d["sweeps"] = result.sweeps;
+    d["converged"] = result.converged;
+    d["regularized"] = result.regularized;
+    return d;
+  }
+
+  int agents() const { return mocapedit::SeparationAgentCount(*data_); }
+  int vertices() const { return mocapedit::SeparationVertexCount(*data_); }
+
+ private:
+  std::shared_ptr<mocapedit::SeparationData> data_;
+  std::unique_ptr<mocapedit::SeparationCache, mocapedit::SeparationCacheDeleter> cache_;
+};
+
+}  // namespace
+
+MOCAPEDIT_BINDINGS(BindSeparation) {
+  py::class_<SeparationSolver>(
+      m, "SeparationSolver",
+      "Agents' paths kept by the two-step Laplacian energy (factored once), coupled by linear\n"
+      "rows on ground positions that change from solve to solve (collision avoidance).\n\n"
+      "rest: (V, 2) agents' paths concatenated; starts: (A+1,) first vertex of each agent, then V;\n"
+      "rigid: inclusive global vertex ranges that move rigidly (stationary ranges);\n"
+      "anchor_weight: pull of every frame towards its rest position, relative to the shape terms;\n"
+      "still_extent: ranges whose rest positions lie this close (stage units) only translate.")
+      .def(py::init<const Eigen::Ref<const Trajectory2>&, const Eigen::VectorXi&,
+                    const std::vector<mocapedit::FrameRange>&, double, double, int>(),
+           py::arg("rest"), py::arg("starts"), py::arg("rigid") = std::vector<mocapedit::FrameRange>{},
+           py::arg("anchor_weight") = 1e-3, py::arg("still_extent") = 1e-9, py::arg("threads") = 0)
+      .def("solve", &SeparationSolver::Solve, py::arg("direction"), py::arg("rhs"), py::arg("softness"),
+           py::arg("term_row"), py::arg("term_vertex"), py::arg("term_weight"),
+           py::arg("kind") = Eigen::VectorXi(), py::arg("initial_forces") = Eigen::VectorXd(),
+           py::arg("tolerance") = 1e-6, py::arg("max_sweeps") = 500,
+           "Solves both steps under R rows, each sum_t term_weight[t] * dot(direction[row], x[term_vertex[t]])\n"
+           "= rhs[row] (kind 0), or >= rhs[row] (kind 1: a one-sided row, it only pushes); softness 0 = hard,\n"
+           "else 1 / weight relative to the shape terms. initial_forces: a previous solve's forces (warm start);\n"
+           "tolerance (stage units) and max_sweeps bound the Gauss-Seidel on one-sided rows.\n"
+           "Returns a dict: positions (V, 2) after step 2, shape (V, 2) after step 1, forces (R,) (> 0 pushes\n"
+           "the row value up), residuals (R,), rigid_angles (one per rigid range, radians CCW), moved_agents,\n"
+           "sweeps, converged, regularized.")
+      .def_property_readonly("agents", &SeparationSolver::agents)
+      .def_property_readonly("vertices", &SeparationSolver::vertices);
+}

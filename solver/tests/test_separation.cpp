@@ -1,0 +1,226 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "mocapedit/separation.h"
+
+using mocapedit::SeparationProblem;
+using mocapedit::SeparationResult;
+using mocapedit::SeparationRows;
+using mocapedit::SeparationSettings;
+using mocapedit::Trajectory2;
+
+namespace {
+
+// Two agents of n frames walking at each other along x, 0.1 per frame, one 0.02 to the side.
+SeparationProblem HeadOn(int n = 81) {
+  SeparationProblem p;
+  p.rest.resize(2 * n, 2);
+  for (int i = 0; i < n; ++i) {
+    p.rest.row(i) << -4.0 + 0.1 * i, 0.0;
+    p.rest.row(n + i) << 4.0 - 0.1 * i, 0.02;
+  }
+  p.starts.resize(3);
+  p.starts << 0, n, 2 * n;
+  return p;
+}
+
+struct RowBuilder {
+  SeparationRows rows;
+  std::vector<double> dir_x, dir_y, rhs, soft;
+  std::vector<int> kind, term_row, term_vertex;
+  std::vector<double> term_weight;
+
+  void Add(double dx, double dy, double value, double softness, int k, std::vector<std::pair<int, double>> terms) {
+    const int r = static_cast<int>(rhs.size());
+    dir_x.push_back(dx);
+    dir_y.push_back(dy);
+    rhs.push_back(value);
+    soft.push_back(softness);
+    kind.push_back(k);
+    for (auto [v, w] : terms) {
+      term_row.push_back(r);
+      term_vertex.push_back(v);
+      term_weight.push_back(w);
+    }
+  }
+
+  SeparationRows Build() {
+    SeparationRows out;
+    const int r = static_cast<int>(rhs.size());
+    out.direction.resize(r, 2);
+    for (int i = 0; i < r; ++i) out.direction.row(i) << dir_x[i], dir_y[i];
+    out.rhs = Eigen::Map<Eigen::VectorXd>(rhs.data(), r);
+    out.softness = Eigen::Map<Eigen::VectorXd>(soft.data(), r);
+    out.kind = Eigen::Map<Eigen::VectorXi>(kind.data(), r);
+    const int t = static_cast<int>(term_row.size());
+    out.term_row = Eigen::Map<Eigen::VectorXi>(term_row.data(), t);
+    out.term_vertex = Eigen::Map<Eigen::VectorXi>(term_vertex.data(), t);
+    out.term_weight = Eigen::Map<Eigen::VectorXd>(term_weight.data(), t);
+    return out;
+  }
+};
+
+SeparationResult Solve(const SeparationProblem& p, const SeparationRows& rows, int sweeps = 500) {
+  std::shared_ptr<mocapedit::SeparationData> data;
+  mocapedit::SeparationPrecompute(p, data);
+  SeparationSettings settings;
+  settings.max_sweeps = sweeps;
+  settings.tolerance = 1e-9;
+  SeparationResult result;
+  mocapedit::SeparationSolve(*data, rows, settings, result);
+  return result;
+}
+
+}  // namespace
+
+TEST(Separation, ValidityRejectsBadInput) {
+  {
+    SeparationProblem p = HeadOn();
+    p.starts[2] = 5;
+    std::shared_ptr<mocapedit::SeparationData> data;
+    EXPECT_THROW(mocapedit::SeparationPrecompute(p, data), std::invalid_argument);
+  }
+  {
+    SeparationProblem p = HeadOn();
+    p.anchor_weight = 0.0;
+    std::shared_ptr<mocapedit::SeparationData> data;
+    EXPECT_THROW(mocapedit::SeparationPrecompute(p, data), std::invalid_argument);
+  }
+  {
+    SeparationProblem p = HeadOn();
+    p.rigid = {{70, 90}};  // spans both agents
+    std::shared_ptr<mocapedit::SeparationData> data;
+    EXPECT_THROW(mocapedit::SeparationPrecompute(p, data), std::invalid_argument);
+  }
+  {
+    SeparationProblem p = HeadOn();
+    p.rigid = {{10, 20}, {15, 30}};
+    std::shared_ptr<mocapedit::SeparationData> data;
+    EXPECT_THROW(mocapedit::SeparationPrecompute(p, data), std::invalid_argument);
+  }
+  std::shared_ptr<mocapedit::SeparationData> data;
+  mocapedit::SeparationPrecompute(HeadOn(), data);
+  SeparationResult result;
+  {
+    RowBuilder b;
+    b.Add(1, 0, 0, 0, 0, {{500, 1.0}});  // vertex out of range
+    EXPECT_THROW(mocapedit::SeparationSolve(*data, b.Build(), SeparationSettings{}, result), std::invalid_argument);
+  }
+  {
+    RowBuilder b;
+    b.Add(1, 0, 0, -1.0, 0, {{5, 1.0}});  // negative softness
+    EXPECT_THROW(mocapedit::SeparationSolve(*data, b.Build(), SeparationSettings{}, result), std::invalid_argument);
+  }
+  {
+    RowBuilder b;
+    b.Add(1, 0, 0, 0, 0, {{5, 0.0}});  // a row that touches nothing
+    EXPECT_THROW(mocapedit::SeparationSolve(*data, b.Build(), SeparationSettings{}, result), std::invalid_argument);
+  }
+}
+
+TEST(Separation, NoRowsKeepsTheRestPaths) {
+  const SeparationProblem p = HeadOn();
+  const SeparationResult r = Solve(p, RowBuilder().Build());
+  EXPECT_EQ(r.moved_agents, 0);
+  EXPECT_NEAR((r.positions - p.rest).cwiseAbs().maxCoeff(), 0.0, 1e-15);
+}
+
+TEST(Separation, AHardSeparationIsMetAndSpreadsSmoothly) {
+  const int n = 81;
+  const SeparationProblem p = HeadOn(n);
+  RowBuilder b;
+  // Agent 0 at least 0.7 above agent 1 (y) at the crossing frame 40.
+  b.Add(0, -1, 0.7, 0, 0, {{40, -1.0}, {n + 40, 1.0}});
+  // Pins at both agents' first frames.
+  b.Add(1, 0, p.rest(0, 0), 0, 0, {{0, 1.0}});
+  b.Add(0, 1, p.rest(0, 1), 0, 0, {{0, 1.0}});
+  const SeparationResult r = Solve(p, b.Build());
+  EXPECT_EQ(r.moved_agents, 2);
+  EXPECT_NEAR(r.residuals[0], 0.0, 1e-9);
+  EXPECT_NEAR(r.residuals[1], 0.0, 1e-12);
+  EXPECT_NEAR(r.residuals[2], 0.0, 1e-12);
+  EXPECT_GT(r.forces[0], 0.0);
+  // The detour is local and smooth: far frames barely move, no frame jumps.
+  EXPECT_LT((r.positions.row(n - 1) - p.rest.row(n - 1)).norm(), 0.05);  // a push of 0.35 each
+  for (int i = 1; i < 2 * n; ++i) {
+    if (i == n) continue;
+    EXPECT_LT((r.positions.row(i) - r.positions.row(i - 1)).norm(), 0.2) << "frame " << i;
+  }
+  // Step 2 keeps the length of each step (the agents go round, not faster).
+  double rest_length = 0, length = 0;
+  for (int i = 1; i < n; ++i) {
+    rest_length += (p.rest.row(i) - p.rest.row(i - 1)).norm();
+    length += (r.positions.row(i) - r.positions.row(i - 1)).norm();
+  }
+  EXPECT_NEAR(length / rest_length, 1.0, 0.05);
+}
+
+TEST(Separation, OneSidedRowsPushButNeverPull) {
+  const int n = 81;
+  const SeparationProblem p = HeadOn(n);
+  RowBuilder b;
+  // Already satisfied: agent 0's frame 0 is 8 away along x from agent 1's frame 0.
+  b.Add(-1, 0, 1.0, 0, 1, {{0, 1.0}, {n, -1.0}});
+  // Violated: must be 0.7 apart along y at the crossing.
+  b.Add(0, -1, 0.7, 0, 1, {{40, -1.0}, {n + 40, 1.0}});
+  const SeparationResult r = Solve(p, b.Build());
+  EXPECT_TRUE(r.converged);
+  EXPECT_EQ(r.forces[0], 0.0);
+  EXPECT_GE(r.residuals[0], 0.0);
+  EXPECT_GT(r.forces[1], 0.0);
+  EXPECT_NEAR(r.residuals[1], 0.0, 1e-6);
+  // As an equality the first row would pull the agents together to 1.0.
+  RowBuilder eq;
+  eq.Add(-1, 0, 1.0, 0, 0, {{0, 1.0}, {n, -1.0}});
+  const SeparationResult pulled = Solve(p, eq.Build());
+  EXPECT_NEAR(pulled.residuals[0], 0.0, 1e-9);
+}
+
+TEST(Separation, StationaryRangesMoveRigidly) {
+  const int n = 81;
+  SeparationProblem p = HeadOn(n);
+  // Agent 0 stands still on frames 30..50 (all at one spot), agent 1 turns in place rigidly
+  // along a small arc on frames 35..45.
+  for (int i = 30; i <= 50; ++i) p.rest.row(i) << -1.0, 0.0;
+  p.rigid = {{30, 50}, {n + 35, n + 45}};
+  RowBuilder b;
+  b.Add(0, -1, 0.7, 0, 0, {{40, -1.0}, {n + 40, 1.0}});
+  const SeparationResult r = Solve(p, b.Build());
+  EXPECT_NEAR(r.residuals[0], 0.0, 1e-9);
+  for (int i = 31; i <= 50; ++i) EXPECT_NEAR((r.positions.row(i) - r.positions.row(30)).norm(), 0.0, 1e-9);
+  EXPECT_GT((r.positions.row(30) - p.rest.row(30)).norm(), 0.01);
+  // Agent 1's range keeps its pairwise distances.
+  for (int i = n + 35; i <= n + 45; ++i)
+    for (int j = n + 35; j <= n + 45; ++j)
+      EXPECT_NEAR((r.positions.row(i) - r.positions.row(j)).norm(), (p.rest.row(i) - p.rest.row(j)).norm(), 1e-9);
+}
+
+TEST(Separation, ContradictingHardRowsAreRegularized) {
+  const SeparationProblem p = HeadOn();
+  RowBuilder b;
+  b.Add(1, 0, 0.0, 0, 0, {{10, 1.0}});
+  b.Add(1, 0, 0.5, 0, 0, {{10, 1.0}});  // the same vertex, elsewhere
+  const SeparationResult r = Solve(p, b.Build());
+  EXPECT_TRUE(r.regularized);
+  EXPECT_TRUE(r.positions.allFinite());
+}
+
+TEST(Separation, TheCacheGivesTheSameAnswer) {
+  const int n = 81;
+  const SeparationProblem p = HeadOn(n);
+  std::shared_ptr<mocapedit::SeparationData> data;
+  mocapedit::SeparationPrecompute(p, data);
+  auto cache = mocapedit::SeparationNewCache();
+  SeparationSettings settings;
+  settings.tolerance = 1e-10;
+  for (int round = 0; round < 3; ++round) {
+    RowBuilder b;
+    for (int k = 0; k <= round; ++k) b.Add(0, -1, 0.7, 0, 1, {{38 + 2 * k, -1.0}, {n + 38 + 2 * k, 1.0}});
+    const SeparationRows rows = b.Build();
+    SeparationResult cached, fresh;
+    mocapedit::SeparationSolve(*data, rows, settings, *cache, cached);
+    mocapedit::SeparationSolve(*data, rows, settings, fresh);
+    EXPECT_NEAR((cached.positions - fresh.positions).cwiseAbs().maxCoeff(), 0.0, 1e-12) << "round " << round;
+  }
+}

@@ -1,0 +1,391 @@
+"""Collision avoidance and avoid regions (issue: chapter 6 and section 4.3.2 of the deliverable).
+
+Quality is measured on the composed stage: root positions by UsdSkel forward kinematics,
+capsule clearance by mocapedit.metrics.
+"""
+from __future__ import annotations
+
+import importlib.util
+import io
+
+import numpy as np
+import pytest
+from pxr import Gf, Sdf, Usd, UsdGeom
+
+from mocapedit import _solver, collisions, examples, metrics, walker
+from mocapedit.errors import MocapEditError
+from mocapedit.processor import solve
+from mocapedit.progress import Progress
+
+from conftest import REPO, run_cli
+
+FPS = 24.0
+
+
+def _stage_module():
+    spec = importlib.util.spec_from_file_location("mocapedit_stages_collisions",
+                                                  REPO / "example_stages" / "stages_collisions.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+STAGES = _stage_module()
+
+
+def _solve(tmp_path, stage_path, **kw):
+    edits, composed = tmp_path / f"{stage_path.stem}.edits.usda", tmp_path / f"{stage_path.stem}.out.usda"
+    result = solve(str(stage_path), output=str(edits), composed=str(composed), **kw)
+    return result, Usd.Stage.Open(str(composed))
+
+
+def _agents(stage):
+    return sorted(str(p.GetPath()) for p in stage.Traverse() if "MocapAgentAPI" in p.GetAppliedSchemas())
+
+
+def _ground_roots(stage, agents, times):
+    """(A, T, 3) world root positions with the up coordinate set to the ground (capsule bases)."""
+    pos = metrics.agent_root_positions(stage, agents, times)
+    pos[..., metrics.ground_axes(UsdGeom.GetStageUpAxis(stage))[0]] = 0.0
+    return pos
+
+
+def _shot_times(stage):
+    return np.arange(stage.GetStartTimeCode(), stage.GetEndTimeCode() + 1.0)
+
+
+def _separation(stage, agents, margin=0.0, radius=0.3, height=1.8):
+    times = _shot_times(stage)
+    sep = metrics.min_separation(_ground_roots(stage, agents, times), radius, height, UsdGeom.GetStageUpAxis(stage))
+    return sep.clearance - margin, sep
+
+
+def _walker_stage(path, specs, frames=120, settings=None, stationary=None):
+    """A Y-up metre stage of walkers: specs are (name, clip, position, yaw, time offset)."""
+    agents = [examples.AgentSpec(n, c, p, y, o) for n, c, p, y, o in specs]
+    stage = examples.build_crowd_stage(path, agents, up_axis="Y", meters_per_unit=1.0, fps=FPS,
+                                       clips_dir=path.parent / "clips", stationary=stationary)
+    vt = Sdf.ValueTypeNames
+    attrs = {"collisionAvoidance": (vt.Bool, True), "margin": (vt.Double, 0.05)}
+    attrs.update(settings or {})
+    examples.define_mocap_prim(stage, "/World/Settings", "MocapSolveSettings", attributes=attrs)
+    stage.GetRootLayer().Save()
+    return stage
+
+
+def _walk(name="walk_t", frames=120, phase=0.0):
+    return walker.walk(frames=frames, fps=FPS, speed=1.4, up="Y", meters_per_unit=1.0, phase=phase, name=name)
+
+
+# ---- the two example scenes ------------------------------------------------------------------
+
+def test_head_on_pair_ends_apart_within_ten_iterations(tmp_path):
+    STAGES.head_on(tmp_path)
+    src = Usd.Stage.Open(str(tmp_path / "collisions_head_on.usda"))
+    agents = _agents(src)
+    before, _ = _separation(src, agents)
+    assert before < -0.5, "the walkers must meet head-on in the source"
+    result, out = _solve(tmp_path, tmp_path / "collisions_head_on.usda")
+    stats = result.report.stats
+    assert stats["remainingOverlaps"] == 0 and stats["collisionIterations"] <= 10
+    assert stats["collisionsPerIteration"][0] >= 1 and stats["collisionsPerIteration"][-1] == 0
+    after, _ = _separation(out, agents, margin=0.05)
+    assert after >= -1e-6
+    # A sidestep, not a shove: each walker moves less than a metre and keeps its pace.
+    for a in agents:
+        figures = result.report.agents[a]
+        assert figures["maxDisplacement"] < 1.0
+        assert abs(figures["lengthRatio"] - 1.0) < 0.05
+        assert figures["minSeparation"] >= 0.05 - 1e-6
+
+
+def test_dense_crossing_of_128_walkers_ends_apart_and_keeps_the_marks(tmp_path):
+    STAGES.crossing(tmp_path)
+    stage_path = tmp_path / "collisions_crossing.usda"
+    src = Usd.Stage.Open(str(stage_path))
+    agents = _agents(src)
+    assert len(agents) >= 100
+    before, sep = _separation(src, agents)
+    assert before < 0 and sep.overlaps > 100
+    result, out = _solve(tmp_path, stage_path)
+    assert result.report.stats["remainingOverlaps"] == 0
+    assert result.report.stats["collisionIterations"] <= 10
+    after, _ = _separation(out, agents, margin=0.05)
+    assert after >= -1e-6
+    # Every artist mark (hard position constraint) still holds on the composed stage.
+    marks = [p for p in src.Traverse() if p.GetTypeName() == "MocapPositionConstraint"]
+    assert len(marks) == 8
+    for mark in marks:
+        agent = str(mark.GetRelationship("agent").GetTargets()[0])
+        frame = mark.GetAttribute("frame").Get()
+        want = np.array(mark.GetAttribute("position").Get())
+        got = metrics.agent_root_positions(out, agent, [float(frame)])[0]
+        was = metrics.agent_root_positions(src, agent, [float(frame)])[0]
+        assert np.linalg.norm((got - was)[[0, 2]]) < 1e-6, mark.GetPath()
+        assert np.linalg.norm((got - want)[[0, 2]]) < 1e-6, mark.GetPath()
+    assert result.report.stats["editedAgents"] > 50
+
+
+def test_avoid_regions_end_with_no_agent_inside(tmp_path):
+    STAGES.avoid_regions(tmp_path)
+    stage_path = tmp_path / "avoid_regions.usda"
+    src = Usd.Stage.Open(str(stage_path))
+    result, out = _solve(tmp_path, stage_path)
+    data = result.data
+    agents = _agents(src)
+    times = _shot_times(out)
+    roots = {}
+    for a, pos in zip(agents, metrics.agent_root_positions(out, agents, times)):
+        roots[a] = metrics.to_ground(pos, "Y")
+    src_roots = dict(zip(agents, (metrics.to_ground(p, "Y") for p in metrics.agent_root_positions(src, agents, times))))
+    entered = 0
+    for region in data.avoid_regions:
+        footprint = collisions.region_footprint(region, "Y")
+        for a in agents:
+            clearance = data.agents[a].collision_radius + region.margin
+            d = collisions.signed_distance(footprint, roots[a])
+            assert d.min() >= clearance - 1e-4, f"{a} inside {region.path} by {clearance - d.min():g}"
+            entered += collisions.signed_distance(footprint, src_roots[a]).min() < clearance
+    assert entered >= 6, "the source walks must cross the regions"
+    stats = result.report.stats
+    assert stats["regionFramesLeft"] == 0 and stats["remainingOverlaps"] == 0
+    entries = [c for c in result.report.constraints if c["kind"] == "avoid-region"]
+    assert len(entries) >= entered and all(c["met"] for c in entries)
+    assert out.GetPrimAtPath("/MocapEdit/Guides/AvoidRegions")
+
+
+# ---- artist constraints, stationary tags, what cannot be separated ---------------------------
+
+def test_stationary_range_moves_rigidly_and_pins_hold(tmp_path):
+    """A walker standing still in the path of another is nudged as one piece."""
+    stop_go, pause = walker.walk_idle_walk(frames=160, fps=FPS, speed=1.4, stop_frame=50, idle_frames=50,
+                                           up="Y", meters_per_unit=1.0, name="stop_go_t")
+    walk = _walk(frames=160)
+    # agent_0001 crosses agent_0000's standing spot while it stands (frames 50..99).
+    stand = stop_go.translations[75, 0].astype(np.float64)
+    specs = [("agent_0000", stop_go, (0.0, 0.0, 0.0), 0.0, 0.0),
+             ("agent_0001", walk, (stand[0] - 1.4 * 75 / FPS, 0.0, stand[2] + 0.1), 90.0, 0.0)]
+    stage = _walker_stage(tmp_path / "s.usda", specs, stationary={"stop_go_t": {"pause": pause}})
+    examples.add_position_constraint(stage, "/World/Marks/start", "/World/Crowd/agent_0000", 0, (0.0, 0.0, 0.0))
+    first = walk.translations[0, 0].astype(np.float64)
+    examples.add_position_constraint(stage, "/World/Marks/walker", "/World/Crowd/agent_0001", 10,
+                                     (float(stand[0] - 1.4 * 75 / FPS + walk.translations[10, 0, 2]), 0.0,
+                                      float(stand[2] + 0.1 - walk.translations[10, 0, 0])))
+    stage.GetRootLayer().Save()
+    del first
+    result, out = _solve(tmp_path, tmp_path / "s.usda")
+    assert result.report.stats["remainingOverlaps"] == 0
+    src = Usd.Stage.Open(str(tmp_path / "s.usda"))
+    frames = np.arange(160.0)
+    a_src = metrics.to_ground(metrics.agent_root_positions(src, "/World/Crowd/agent_0000", frames), "Y")
+    a_out = metrics.to_ground(metrics.agent_root_positions(out, "/World/Crowd/agent_0000", frames), "Y")
+    assert metrics.rigidity_error(a_src, a_out, [pause])[0] < 1e-6
+    for c in result.data.position_constraints:
+        root = metrics.agent_root_positions(out, c.agent, [float(c.frame)])[0]
+        assert np.linalg.norm((root - c.position)[[0, 2]]) < 1e-6, c.path
+    moved = np.abs(a_out - a_src).max() + np.abs(
+        metrics.agent_root_positions(out, "/World/Crowd/agent_0001", frames) -
+        metrics.agent_root_positions(src, "/World/Crowd/agent_0001", frames)).max()
+    assert moved > 0.1
+
+
+def test_agents_held_together_by_hard_constraints_are_named_not_looped(tmp_path):
+    walk = _walk()
+    specs = [("agent_0000", walk, (0.0, 0.0, -4.0), 0.0, 0.0), ("agent_0001", walk, (0.0, 0.0, 4.0), 180.0, 0.0)]
+    stage = _walker_stage(tmp_path / "s.usda", specs)
+    data = None
+    from mocapedit import reader
+    data = reader.read_stage(stage)
+    from mocapedit import trajectory
+    traj = {a: trajectory.extract(data.agents[a], data.clip_of(data.agents[a]), "Y", 1.0) for a in data.agents}
+    # Both are pinned where they are at the frame they meet: they cannot be separated then.
+    g0, g1 = traj["/World/Crowd/agent_0000"].ground, traj["/World/Crowd/agent_0001"].ground
+    k = int(np.argmin(np.linalg.norm(g0 - g1, axis=1)))
+    for name, g in (("agent_0000", g0), ("agent_0001", g1)):
+        examples.add_position_constraint(stage, f"/World/Marks/{name}", f"/World/Crowd/{name}", k,
+                                         (float(g[k, 0]), 0.0, float(-g[k, 1])))
+    stage.GetRootLayer().Save()
+    result, _ = _solve(tmp_path, tmp_path / "s.usda")
+    stats = result.report.stats
+    assert stats["remainingOverlaps"] >= 1
+    assert stats["collisionIterations"] < 10, "stops once only held pairs are left"
+    notes = " ".join(result.report.notes)
+    assert "/World/Crowd/agent_0000" in notes and "/World/Crowd/agent_0001" in notes and "cannot be separated" in notes
+    held = [c for c in result.report.constraints if c["kind"] == "collision"]
+    assert held and all(c["heldByConstraints"] for c in held)
+    assert all(c["agent"] == "/World/Crowd/agent_0000" and c["target"] == "/World/Crowd/agent_0001" for c in held)
+
+
+def test_collide_false_agents_are_neither_moved_nor_obstacles(tmp_path):
+    STAGES.head_on(tmp_path)
+    stage = Usd.Stage.Open(str(tmp_path / "collisions_head_on.usda"))
+    stage.GetPrimAtPath("/World/Crowd/agent_0001").CreateAttribute(
+        "mocap:collide", Sdf.ValueTypeNames.Bool, False, Sdf.VariabilityUniform).Set(False)
+    stage.GetRootLayer().Save()
+    result, _ = _solve(tmp_path, tmp_path / "collisions_head_on.usda")
+    assert result.report.stats["editedAgents"] == 0
+    assert "remainingOverlaps" not in result.report.stats or result.report.stats["remainingOverlaps"] == 0
+
+
+# ---- strategies, switches, progress, report, guides ------------------------------------------
+
+def test_both_strategies_run_and_relinearize_does_better(tmp_path):
+    STAGES.crossing(tmp_path)
+    stage_path = tmp_path / "collisions_crossing.usda"
+    figures = {}
+    for strategy in ("relinearize", "accumulate"):
+        result, _ = _solve(tmp_path, stage_path, collision_strategy=strategy, guides=False)
+        stats = result.report.stats
+        assert stats["collisionStrategy"] == strategy
+        per = stats["collisionsPerIteration"]
+        assert per[-1] < per[0] / 4, strategy
+        moved = [a for a in result.report.agents.values() if a.get("edited")]
+        figures[strategy] = (per, np.mean([a["meanDisplacement"] for a in moved]))
+    # The deliverable's scheme re-solves from its last result and needs more iterations.
+    assert figures["relinearize"][0][-1] == 0
+    assert len(figures["relinearize"][0]) < len(figures["accumulate"][0]) or figures["accumulate"][0][-1] > 0
+
+
+def test_switches_and_progress(tmp_path):
+    STAGES.head_on(tmp_path)
+    stage = tmp_path / "collisions_head_on.usda"
+    off, _ = _solve(tmp_path, stage, collisions=False)
+    assert off.report.stats["editedAgents"] == 0 and "collisionIterations" not in off.report.stats
+    layer = Sdf.Layer.FindOrOpen(str(stage))
+    layer.GetPrimAtPath("/World/MocapSettings").attributes["collisionAvoidance"].default = False
+    layer.Save()
+    assert _solve(tmp_path, stage)[0].report.stats["editedAgents"] == 0
+    stream = io.StringIO()
+    on = solve(str(stage), collisions=True, progress=Progress(stream=stream, interval=0.0))
+    assert on.report.stats["remainingOverlaps"] == 0
+    text = stream.getvalue()
+    assert "collision avoidance" in text and "collisions left" in text
+    # The command line flag does the same.
+    proc = run_cli("solve", stage, "-o", tmp_path / "cli.usda", "--collisions", "--report", tmp_path / "r.json")
+    assert proc.returncode == 0, proc.stderr
+    assert "collisions left" in proc.stderr
+
+
+def test_detection_only_reports_overlaps_pairs_times_and_guides(tmp_path):
+    STAGES.head_on(tmp_path)
+    result, out = _solve(tmp_path, tmp_path / "collisions_head_on.usda", max_iterations=0)
+    stats = result.report.stats
+    assert stats["collisionIterations"] == 0 and stats["remainingOverlaps"] == 1
+    assert stats["minSeparation"] < 0
+    (entry,) = [c for c in result.report.constraints if c["kind"] == "collision"]
+    assert (entry["agent"], entry["target"]) == ("/World/Crowd/agent_0000", "/World/Crowd/agent_0001")
+    assert 60 <= entry["time"] <= 76 and not entry["met"] and entry["residual"] > 0.5
+    points = out.GetPrimAtPath("/MocapEdit/Guides/Collisions").GetAttribute("points").Get()
+    assert len(points) == 1
+    np.testing.assert_allclose(np.array(points[0])[[0, 2]], np.array(entry["position"])[[0, 2]], atol=1e-5)
+    assert result.report.agents["/World/Crowd/agent_0000"]["minSeparation"] < 0
+
+
+def test_detection_samples_after_the_time_warp(tmp_path):
+    """A time constraint that delays one walker moves the meeting point: sampling follows it."""
+    STAGES.head_on(tmp_path)
+    stage_path = tmp_path / "collisions_head_on.usda"
+    stage = Usd.Stage.Open(str(stage_path))
+    vt = Sdf.ValueTypeNames
+    examples.define_mocap_prim(stage, "/World/Later", "MocapTimeConstraint", attributes={
+        "frame": (vt.Int, 0), "time": (vt.Double, 30.0)}, relationships={"agent": ["/World/Crowd/agent_0001"]})
+    examples.define_mocap_prim(stage, "/World/Later2", "MocapTimeConstraint", attributes={
+        "frame": (vt.Int, 119), "time": (vt.Double, 149.0)}, relationships={"agent": ["/World/Crowd/agent_0001"]})
+    stage.GetRootLayer().Save()
+    result, _ = _solve(tmp_path, stage_path, max_iterations=0)
+    (entry,) = [c for c in result.report.constraints if c["kind"] == "collision"]
+    # Unwarped they meet at frame 68 of both; agent_0001 now starts 30 later, so they meet
+    # 15 frames later in shot time, agent_0001 at an earlier frame of its clip.
+    assert 80 <= entry["time"] <= 86
+    assert entry["targetFrame"] < entry["frame"] - 20
+
+
+# ---- bad input -------------------------------------------------------------------------------
+
+def test_non_positive_radius_is_an_error_naming_the_agent(tmp_path):
+    STAGES.head_on(tmp_path)
+    stage_path = tmp_path / "collisions_head_on.usda"
+    stage = Usd.Stage.Open(str(stage_path))
+    stage.GetPrimAtPath("/World/Crowd/agent_0001").CreateAttribute(
+        "mocap:collisionRadius", Sdf.ValueTypeNames.Float, False, Sdf.VariabilityUniform).Set(0.0)
+    stage.GetRootLayer().Save()
+    with pytest.raises(MocapEditError, match=r"<?/World/Crowd/agent_0001>?.mocap:collisionRadius"):
+        solve(str(stage_path))
+    out = tmp_path / "never.usda"
+    proc = run_cli("solve", stage_path, "-o", out)
+    assert proc.returncode == 1 and "agent_0001" in proc.stderr and not out.exists()
+
+
+@pytest.mark.parametrize("prop,value,match", [
+    ("radius", 0.0, "radius must be positive"),
+    ("radius", -2.0, "radius must be positive"),
+    ("size", (1.0, 0.0, 1.0), "size must be positive"),
+    ("margin", -0.1, "margin must not be negative"),
+])
+def test_a_degenerate_region_is_an_error_naming_it(tmp_path, prop, value, match):
+    STAGES.head_on(tmp_path)
+    stage_path = tmp_path / "collisions_head_on.usda"
+    stage = Usd.Stage.Open(str(stage_path))
+    vt = Sdf.ValueTypeNames
+    attrs = {"shape": (vt.Token, "box" if prop == "size" else "circle")}
+    attrs[prop] = (vt.Double3, Gf.Vec3d(*value)) if prop == "size" else (vt.Double, value)
+    examples.define_mocap_prim(stage, "/World/Regions/bad", "MocapAvoidRegion", attributes=attrs)
+    stage.GetRootLayer().Save()
+    with pytest.raises(MocapEditError, match=match) as err:
+        solve(str(stage_path))
+    assert "</World/Regions/bad>" in str(err.value) and f".{prop}" in str(err.value)
+
+
+def test_an_unknown_strategy_is_an_error(tmp_path):
+    STAGES.head_on(tmp_path)
+    with pytest.raises(MocapEditError, match="collisionStrategy"):
+        solve(str(tmp_path / "collisions_head_on.usda"), collision_strategy="shove")
+
+
+# ---- the numeric pieces ----------------------------------------------------------------------
+
+def test_grid_detection_equals_all_pairs_and_sampling_interpolates():
+    rng = np.random.default_rng(4)
+    paths = {i: rng.uniform(0, 10, (1, 2)) + np.cumsum(rng.normal(0, 0.05, (60, 2)), axis=0) for i in range(80)}
+    times = {i: np.arange(60.0) * (0.5 if i % 2 else 1.0) + i % 5 for i in range(80)}
+    s = collisions.sample(list(range(80)), times, paths, 1.0)
+    assert s.times[0] == 0.0 and s.times[-1] == pytest.approx(63.0)
+    # Agent 1 plays twice as fast from time 1: at shot time 11 it is at frame 20.
+    k = int(np.searchsorted(s.times, 11.0))
+    np.testing.assert_allclose(s.positions[k, 1], paths[1][20], atol=1e-12)
+    radius, height = rng.uniform(0.2, 0.4, 80), np.full(80, 1.8)
+    grid = collisions.detect(s, radius, height, 0.05, report_distance=0.5)
+    brute = collisions.detect(s, radius, height, 0.05, report_distance=0.5, brute_force=True)
+    assert len(grid) == len(brute) > 5
+    for name in ("agent_a", "agent_b", "first", "last", "deepest", "depth", "min_clearance"):
+        np.testing.assert_array_equal(getattr(grid, name), getattr(brute, name))
+
+
+def test_region_footprints_follow_the_transform(tmp_path):
+    stage = Usd.Stage.CreateNew(str(tmp_path / "r.usda"))
+    UsdGeom.SetStageUpAxis(stage, "Z")
+    vt = Sdf.ValueTypeNames
+    circle = examples.define_mocap_prim(stage, "/C", "MocapAvoidRegion", attributes={"radius": (vt.Double, 2.0)})
+    xf = UsdGeom.Xformable(circle)
+    xf.AddTranslateOp().Set(Gf.Vec3d(5, 1, 0))
+    xf.AddScaleOp().Set(Gf.Vec3f(3, 3, 1))
+    ellipse = examples.define_mocap_prim(stage, "/E", "MocapAvoidRegion", attributes={"radius": (vt.Double, 1.0)})
+    UsdGeom.Xformable(ellipse).AddScaleOp().Set(Gf.Vec3f(2, 1, 1))
+    box = examples.define_mocap_prim(stage, "/B", "MocapAvoidRegion", attributes={
+        "shape": (vt.Token, "box"), "size": (vt.Double3, Gf.Vec3d(2, 4, 1))})
+    UsdGeom.Xformable(box).AddRotateZOp().Set(90.0)
+    from mocapedit import reader
+    data = reader.read_stage(stage)
+    regions = {r.path: collisions.region_footprint(r, "Z") for r in data.avoid_regions}
+    c = regions["/C"]
+    assert c.is_circle and c.radius == pytest.approx(6.0) and np.allclose(c.center, (5, 1))
+    e = regions["/E"]
+    assert not e.is_circle
+    d = collisions.signed_distance(e, np.array([[2.0, 0.0], [0.0, 1.0], [1.9, 0.0], [0.0, 1.1]]))
+    assert d[0] == pytest.approx(0.0, abs=0.01) and d[1] == pytest.approx(0.0, abs=0.01)
+    assert d[2] < 0 < d[3]
+    b = regions["/B"]
+    d = collisions.signed_distance(b, np.array([[2.0, 0.0], [0.0, 1.0], [2.1, 0.0], [0.0, 1.1]]))
+    np.testing.assert_allclose(d[:2], 0.0, atol=1e-9)
+    assert d[2] > 0 and d[3] > 0
+    assert isinstance(c, _solver.GroundRegion)
