@@ -40,6 +40,7 @@ from typing import Iterator
 import numpy as np
 
 from .errors import MocapEditError
+from .names import unique_identifier
 
 #: Frames parsed per chunk when streaming.
 CHUNK_FRAMES = 4096
@@ -118,7 +119,6 @@ class BvhMotion:
 
 # ---- names ------------------------------------------------------------------------------
 
-_IDENT = re.compile(r"[^A-Za-z0-9_]")
 _WHOLE = re.compile(r"[0-9]+")
 
 
@@ -130,18 +130,7 @@ def joint_tokens(names: list[str]) -> list[str]:
     named by its last path element alone.
     """
     taken: set[str] = set()
-    out = []
-    for name in names:
-        base = _IDENT.sub("_", name.strip()) or "joint"
-        if base[0].isdigit():
-            base = "_" + base
-        token, k = base, 1
-        while token in taken:
-            k += 1
-            token = f"{base}_{k}"
-        taken.add(token)
-        out.append(token)
-    return out
+    return [unique_identifier(name.strip(), taken, "joint") for name in names]
 
 
 def joint_paths(tokens: list[str], parents: np.ndarray) -> list[str]:
@@ -351,31 +340,32 @@ _FRAMES = re.compile(r"^frames\s*:\s*(\S+)$", re.IGNORECASE)
 _FRAME_TIME = re.compile(r"^frame\s+time\s*:\s*(\S+)$", re.IGNORECASE)
 
 
+def _header_line(path: str, lines: _Lines, pattern: re.Pattern, what: str) -> tuple[int, str]:
+    """The value of one MOTION header line (``Frames:`` or ``Frame Time:``) and its line number."""
+    got = lines.next()
+    if got is None:
+        raise _error(path, lines.number + 1, f"file ends before '{what}:' (truncated)")
+    number, tokens = got
+    m = pattern.match(" ".join(tokens))
+    if not m:
+        raise _error(path, number, f"expected '{what}: <{'count' if what == 'Frames' else 'seconds'}>', "
+                     f"found '{' '.join(tokens)[:40]}'")
+    return number, m.group(1)
+
+
 def _parse_motion_header(path: str, lines: _Lines, skeleton: BvhSkeleton) -> None:
-    got = lines.next()
-    if got is None:
-        raise _error(path, lines.number + 1, "file ends before 'Frames:' (truncated)")
-    number, tokens = got
-    m = _FRAMES.match(" ".join(tokens))
-    if not m:
-        raise _error(path, number, f"expected 'Frames: <count>', found '{' '.join(tokens)[:40]}'")
-    if not _WHOLE.fullmatch(m.group(1)):
-        raise _error(path, number, f"frame count '{m.group(1)[:20]}' is not a whole number")
-    skeleton.frame_count = int(m.group(1))
+    number, value = _header_line(path, lines, _FRAMES, "Frames")
+    if not _WHOLE.fullmatch(value):
+        raise _error(path, number, f"frame count '{value[:20]}' is not a whole number")
+    skeleton.frame_count = int(value)
     skeleton.frames_line = number
-    got = lines.next()
-    if got is None:
-        raise _error(path, lines.number + 1, "file ends before 'Frame Time:' (truncated)")
-    number, tokens = got
-    m = _FRAME_TIME.match(" ".join(tokens))
-    if not m:
-        raise _error(path, number, f"expected 'Frame Time: <seconds>', found '{' '.join(tokens)[:40]}'")
+    number, value = _header_line(path, lines, _FRAME_TIME, "Frame Time")
     try:
-        frame_time = float(m.group(1))
+        frame_time = float(value)
     except ValueError:
-        raise _error(path, number, f"frame time '{m.group(1)[:20]}' is not a number") from None
+        raise _error(path, number, f"frame time '{value[:20]}' is not a number") from None
     if not (math.isfinite(frame_time) and frame_time > 0):
-        raise _error(path, number, f"frame time must be a positive number of seconds, got {m.group(1)[:20]}")
+        raise _error(path, number, f"frame time must be a positive number of seconds, got {value[:20]}")
     skeleton.frame_time = frame_time
 
 

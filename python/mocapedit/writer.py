@@ -33,6 +33,7 @@ from pxr import Gf, Sdf, UsdGeom, Vt
 
 from . import __version__
 from .model import Agent, StageInfo
+from .names import unique_identifier
 
 EDIT_OP = "xformOp:transform:mocapEdit"
 ROOT = Sdf.Path("/MocapEdit")
@@ -88,15 +89,7 @@ class LayerContent:
 
 
 def _safe_name(path: str, taken: set[str]) -> str:
-    name = re.sub(r"[^A-Za-z0-9_]", "_", path.strip("/")) or "agent"
-    if name[0].isdigit():
-        name = "_" + name
-    base, i = name, 1
-    while name in taken:
-        i += 1
-        name = f"{base}_{i}"
-    taken.add(name)
-    return name
+    return unique_identifier(path.strip("/"), taken, "agent")
 
 
 def _over_chain(layer: Sdf.Layer, path: Sdf.Path) -> Sdf.PrimSpec:
