@@ -11,6 +11,8 @@
 #include <numeric>
 #include <sstream>
 
+#include "mocapedit/skyline_ldlt.h"
+
 namespace mocapedit {
 namespace {
 
@@ -32,10 +34,12 @@ constexpr double kConsistencyAbsolute = 1e-7;
 constexpr double kConsistencyRelative = 1e-12;
 // Rigid-motion shortcut: constraints met by one rigid motion to this relative tolerance.
 constexpr double kRigidTolerance = 1e-11;
-// Normal matrices whose bandwidth is at most this are factored in their natural order
-// (a simplicial LDLT); larger wide ones (group meshes) by CHOLMOD's supernodal Cholesky,
-// which orders them better and factors dense blocks with BLAS.
-constexpr int kNaturalBandwidth = 24;
+// Normal matrices whose envelope LDLT (natural column order) costs at most this many
+// multiply-adds per column are factored that way (single paths, chains of agents tied end
+// to start); others in AMD order by a simplicial LDLT, or, when the AMD factor has dense
+// fronts (group meshes), by CHOLMOD's supernodal Cholesky, which factors them with BLAS.
+constexpr int64_t kSkylineCostPerColumn = 64;
+constexpr int64_t kSkylineProfilePerColumn = 64;
 constexpr int kSupernodalColumns = 2000;
 constexpr int kSupernodalFill = 100;  // factor entries per column above which fronts are dense
 // LDLT pivots below this fraction of the largest mean a singular system.
@@ -136,18 +140,19 @@ struct StepSystem {
   using Sparse = Eigen::SparseMatrix<Scalar, Eigen::ColMajor, int>;
   using Vector = Eigen::Matrix<Scalar, Eigen::Dynamic, 1>;
   int rows = 0, cols = 0;
-  // Rectangular system after elimination, CSR: A u - c. a_val + a_low is a_ext to about
-  // 2^-106; the normal matrix uses a_val, residuals use the extended values.
+  // Rectangular system after elimination, CSR: A u - c. a_val + a_low is the coefficient
+  // in extended precision (exactly: a_low is its rounding error); the normal matrix uses
+  // a_val, residuals use the extended values.
   std::vector<int> a_ptr{0};
   std::vector<int> a_col;
   std::vector<Scalar> a_val, a_low;
-  std::vector<LCplx> a_ext;
   // Rows whose constant part depends on beta (they touch tied or fixed vertices).
   std::vector<int> beta_rows;
-  Sparse normal;  // lower triangle of A^H A
-  Ldlt<Sparse, Eigen::NaturalOrdering<int>> natural;
+  Sparse normal;  // lower triangle of A^H A (not built when use_skyline)
+  SkylineLdlt<Scalar> skyline;
+  bool use_skyline = false;
+  double gershgorin = 0;  // bound on the largest eigenvalue of A^H A
   Ldlt<Sparse, Eigen::AMDOrdering<int>> amd;
-  bool use_amd = false;
   bool use_qr = false;
   std::unique_ptr<Eigen::CholmodSupernodalLLT<Sparse, Eigen::Lower>> supernodal;
   std::string solver = "none";
@@ -167,12 +172,16 @@ struct StepSystem {
       m = supernodal->solve(b);
       return;
     }
-    const auto& l = use_amd ? amd.matrixL().nestedExpression() : natural.matrixL().nestedExpression();
-    const auto& dg = use_amd ? amd.vectorD() : natural.vectorD();
+    if (use_skyline) {
+      skyline.Solve(x, k);
+      return;
+    }
+    const auto& l = amd.matrixL().nestedExpression();
+    const auto& dg = amd.vectorD();
     const int n = cols;
     std::vector<T> tmp;
     T* y = x;
-    if (use_amd) {  // y = P x
+    {  // y = P x
       tmp.resize(static_cast<size_t>(n) * k);
       const auto& perm = amd.permutationP().indices();
       for (int i = 0; i < n; ++i)
@@ -190,7 +199,7 @@ struct StepSystem {
     for (int j = n - 1; j >= 0; --j)  // L^H y = y
       for (int p = outer[j]; p < outer[j + 1]; ++p)
         for (int c = 0; c < k; ++c) y[static_cast<size_t>(j) * k + c] -= Conj(val[p]) * y[static_cast<size_t>(inner[p]) * k + c];
-    if (use_amd) {  // x = P^-1 y
+    {  // x = P^-1 y
       const auto& perm = amd.permutationP().indices();
       for (int i = 0; i < n; ++i)
         for (int c = 0; c < k; ++c) x[static_cast<size_t>(i) * k + c] = y[static_cast<size_t>(perm[i]) * k + c];
@@ -523,20 +532,47 @@ Cplx Cast<Cplx>(const Cplx& c) { return c; }
 template <>
 double Cast<double>(const Cplx& c) { return c.real(); }
 
+// When the envelope of A^H A in the natural column order is cheap to factor, assembles
+// A^H A straight into the envelope factorization and returns true.
+template <typename Scalar>
+bool AssembleSkyline(StepSystem<Scalar>& s) {
+  const int n = s.cols;
+  std::vector<int> first(n);
+  std::iota(first.begin(), first.end(), 0);
+  for (int r = 0; r < s.rows; ++r) {
+    if (s.a_ptr[r] == s.a_ptr[r + 1]) continue;
+    const int lo = s.a_col[s.a_ptr[r]];  // columns are sorted within a row
+    for (int p = s.a_ptr[r] + 1; p < s.a_ptr[r + 1]; ++p) first[s.a_col[p]] = std::min(first[s.a_col[p]], lo);
+  }
+  int64_t profile = 0;
+  for (int i = 0; i < n; ++i) profile += i - first[i];
+  if (profile > kSkylineProfilePerColumn * n) return false;
+  if (SkylineLdlt<Scalar>::FactorCost(first) > kSkylineCostPerColumn * n) return false;
+  s.use_skyline = true;
+  s.skyline.Reset(first);
+  // Entry (i, j), i >= j, of A^H A is sum_r conj(a_ri) a_rj.
+  for (int r = 0; r < s.rows; ++r)
+    for (int p = s.a_ptr[r]; p < s.a_ptr[r + 1]; ++p) {
+      const Scalar conj_i = Conj(s.a_val[p]);
+      const int i = s.a_col[p];
+      for (int q = s.a_ptr[r]; q <= p; ++q) s.skyline.Add(i, s.a_col[q], conj_i * s.a_val[q]);
+    }
+  s.gershgorin = s.skyline.GershgorinBound();
+  return true;
+}
+
 // The eliminated rows A (CSR, extended and double precision) and the lower triangle of
-// A^H A, by Gustavson's column-by-column product.
+// A^H A, by Gustavson's column-by-column product (or its envelope factorization).
 template <typename Scalar>
 void AssembleStep(const Rows& rows, const Elimination& e, StepSystem<Scalar>& s) {
   s.cols = e.columns;
   s.rows = rows.size();
   s.a_ptr.assign(1, 0);
   s.a_col.clear();
-  s.a_ext.clear();
   s.a_val.clear();
   s.a_low.clear();
   const size_t reserve = rows.vertex.size() * 2;
   s.a_col.reserve(reserve);
-  s.a_ext.reserve(reserve);
   s.a_val.reserve(reserve);
   s.a_low.reserve(reserve);
   constexpr int kMax = 16;
@@ -566,13 +602,13 @@ void AssembleStep(const Rows& rows, const Elimination& e, StepSystem<Scalar>& s)
       }
     for (int k = 0; k < m; ++k) {
       s.a_col.push_back(cols[k]);
-      s.a_ext.push_back(vals[k]);
       const Scalar hi = Cast<Scalar>(Cplx(vals[k]));
       s.a_val.push_back(hi);
       s.a_low.push_back(Cast<Scalar>(Cplx(vals[k] - LCplx(hi))));
     }
     s.a_ptr.push_back(static_cast<int>(s.a_col.size()));
   }
+  if (AssembleSkyline(s)) return;
   // Columns of A: which rows touch each unknown.
   const int n = s.cols;
   std::vector<int> cptr(n + 1, 0);
@@ -592,7 +628,6 @@ void AssembleStep(const Rows& rows, const Elimination& e, StepSystem<Scalar>& s)
   std::vector<double> acc(static_cast<size_t>(n) * W);
   inner.reserve(s.a_col.size() * 2);
   values.reserve(s.a_col.size() * 2);
-  int bandwidth = 0;
   for (int j = 0; j < n; ++j) {
     const size_t start = inner.size();
     for (int k = cptr[j]; k < cptr[j + 1]; ++k) {
@@ -626,7 +661,6 @@ void AssembleStep(const Rows& rows, const Elimination& e, StepSystem<Scalar>& s)
       else
         values.push_back(v[0]);
     }
-    if (inner.size() > start) bandwidth = std::max(bandwidth, inner.back() - j);
     outer[j + 1] = static_cast<int>(inner.size());
   }
   s.normal.resize(n, n);
@@ -634,20 +668,24 @@ void AssembleStep(const Rows& rows, const Elimination& e, StepSystem<Scalar>& s)
   std::copy(outer.begin(), outer.end(), s.normal.outerIndexPtr());
   std::copy(inner.begin(), inner.end(), s.normal.innerIndexPtr());
   std::copy(values.begin(), values.end(), s.normal.valuePtr());
-  s.use_amd = bandwidth > kNaturalBandwidth;
+  double lmax = 0;  // Gershgorin
+  {
+    std::vector<double> rowsum(n, 0.0);
+    for (int j = 0; j < n; ++j)
+      for (int p = outer[j]; p < outer[j + 1]; ++p) {
+        const double a = std::abs(std::real(values[p])) + std::abs(std::imag(values[p]));  // >= |value|
+        rowsum[j] += a;
+        if (inner[p] != j) rowsum[inner[p]] += a;
+      }
+    for (double r : rowsum) lmax = std::max(lmax, r);
+  }
+  s.gershgorin = lmax;
 }
 
 // Estimate of cond(A^H A): Gershgorin's bound over inverse iteration with the factor.
 template <typename Scalar>
 double EstimateCondition(const StepSystem<Scalar>& s) {
-  Eigen::VectorXd rowsum = Eigen::VectorXd::Zero(s.cols);
-  for (int j = 0; j < s.cols; ++j)
-    for (typename StepSystem<Scalar>::Sparse::InnerIterator it(s.normal, j); it; ++it) {
-      const double a = std::abs(std::real(it.value())) + std::abs(std::imag(it.value()));  // >= |value|
-      rowsum[j] += a;
-      if (it.row() != j) rowsum[it.row()] += a;
-    }
-  const double lmax = rowsum.maxCoeff();
+  const double lmax = s.gershgorin;
   typename StepSystem<Scalar>::Vector v(s.cols);
   for (int j = 0; j < s.cols; ++j) v[j] = Scalar(1.0 + 0.1 * ((j * 7919) % 13) / 13.0);
   // Inverse iteration from a smooth vector, whose component along the lowest (smoothest)
@@ -672,21 +710,23 @@ void Factor(StepSystem<Scalar>& s, bool force_qr) {
   }
   bool ok;
   Eigen::VectorXd diag;
-  if (s.use_amd) s.amd.analyzePattern(s.normal);
-  if (s.use_amd && s.cols >= kSupernodalColumns && s.amd.FactorNonZeros() > kSupernodalFill * s.cols) {
+  if (s.use_skyline) {
+    ok = s.skyline.Factor();
+    if (ok) diag = Eigen::Map<const Eigen::VectorXd>(s.skyline.D().data(), s.cols);
+  } else {
+    s.amd.analyzePattern(s.normal);
+  }
+  if (s.use_skyline) {
+  } else if (s.cols >= kSupernodalColumns && s.amd.FactorNonZeros() > kSupernodalFill * s.cols) {
     s.supernodal = std::make_unique<Eigen::CholmodSupernodalLLT<typename StepSystem<Scalar>::Sparse, Eigen::Lower>>();
     s.supernodal->compute(s.normal);
     ok = s.supernodal->info() == Eigen::Success;   // CHOLMOD fails unless positive definite
     if (ok) diag = Eigen::VectorXd::Ones(1);
     if (!ok) s.supernodal.reset();
-  } else if (s.use_amd) {
+  } else {
     s.amd.factorize(s.normal);
     ok = s.amd.info() == Eigen::Success;
     if (ok) diag = s.amd.vectorD().real();
-  } else {
-    s.natural.compute(s.normal);
-    ok = s.natural.info() == Eigen::Success;
-    if (ok) diag = s.natural.vectorD().real();
   }
   if (ok) {
     const double dmax = diag.maxCoeff(), dmin = diag.minCoeff();
@@ -701,7 +741,7 @@ void Factor(StepSystem<Scalar>& s, bool force_qr) {
   }
   s.condition = EstimateCondition(s);
   s.extended = s.condition * kEps > 1e-9;
-  s.solver = s.supernodal ? "CHOLMOD supernodal" : s.use_amd ? "LDLT (AMD)" : "LDLT";
+  s.solver = s.supernodal ? "CHOLMOD supernodal" : s.use_skyline ? "LDLT" : "LDLT (AMD)";
   if (force_qr || s.condition * kEps > kLdltTrust) {
     s.use_qr = true;
     s.solver = force_qr ? "SPQR" : "SPQR (ill-conditioned)";
@@ -729,7 +769,7 @@ void Correction(const StepSystem<Scalar>& s, const std::vector<T>& c, const CVec
   } else for (int r = 0; r < s.rows; ++r) {
     long double re = c[r].real(), im = c[r].imag();
     for (int p = s.a_ptr[r]; p < s.a_ptr[r + 1]; ++p) {
-      const LCplx& a = s.a_ext[p];
+      const LCplx a = LCplx(s.a_val[p]) + LCplx(s.a_low[p]);
       const long double ur = u[s.a_col[p]].real(), ui = u[s.a_col[p]].imag();
       re -= a.real() * ur - a.imag() * ui;
       im -= a.real() * ui + a.imag() * ur;

@@ -58,14 +58,14 @@ class SkylineLdlt {
       val_[static_cast<size_t>(ptr_[i] + (j - first_[i]))] += value;
   }
 
-  // Row sums of |entries| of the full (Hermitian) matrix: a Gershgorin bound on its largest
-  // eigenvalue is their maximum. Call before Factor().
+  // Gershgorin bound on the largest eigenvalue: the largest row sum of the full (Hermitian)
+  // matrix, each entry counted as |re| + |im| (>= its modulus). Call before Factor().
   double GershgorinBound() const {
     const int n = size();
     std::vector<double> sum(d_.begin(), d_.end());
     for (int i = 0; i < n; ++i) {
       for (int64_t p = ptr_[i]; p < ptr_[i + 1]; ++p) {
-        const double a = std::abs(val_[p]);
+        const double a = std::abs(std::real(val_[p])) + std::abs(std::imag(val_[p]));
         sum[i] += a;
         sum[first_[i] + (p - ptr_[i])] += a;
       }
