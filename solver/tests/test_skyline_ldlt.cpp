@@ -94,6 +94,11 @@ TEST(SkylineLdlt, RealMatrixSolvesComplexRightHandSides) {
   Eigen::VectorXcd b = Eigen::VectorXcd::Random(30), x = b;
   f.Solve(x.data(), 1);
   EXPECT_LT((a.cast<Cplx>() * x - b).cwiseAbs().maxCoeff(), 1e-12);
+  // Three interleaved right-hand sides (the general path).
+  Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> b3 = Eigen::Matrix<double, Eigen::Dynamic, 3>::Random(30, 3);
+  Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> x3 = b3;
+  f.Solve(x3.data(), 3);
+  EXPECT_LT((a * x3 - b3).cwiseAbs().maxCoeff(), 1e-12);
 }
 
 TEST(SkylineLdlt, CostAndProfileCountTheEnvelope) {

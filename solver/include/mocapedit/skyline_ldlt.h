@@ -113,32 +113,64 @@ class SkylineLdlt {
   // Scalar is double (a real matrix applied to complex right-hand sides).
   template <typename T>
   void Solve(T* x, int k) const {
+    if (k == 1)
+      SolveK<T, 1>(x);
+    else if (k == 2)
+      SolveK<T, 2>(x);
+    else
+      for (int c = 0; c < k; ++c) SolveStrided(x + c, k);
+  }
+
+ private:
+  // K right-hand sides, interleaved (K known at compile time).
+  template <typename T, int K>
+  void SolveK(T* x) const {
     const int n = size();
     const Scalar* val = val_.data();
     for (int i = 0; i < n; ++i) {  // L y = b, row by row
       const Scalar* li = val + ptr_[i];
-      const int fi = first_[i];
-      for (int c = 0; c < k; ++c) {
-        T s = x[static_cast<size_t>(i) * k + c];
-        for (int p = 0; p < i - fi; ++p) s -= li[p] * x[static_cast<size_t>(fi + p) * k + c];
-        x[static_cast<size_t>(i) * k + c] = s;
-      }
+      const int m = i - first_[i];
+      const T* y = x + static_cast<size_t>(first_[i]) * K;
+      T s[K];
+      for (int c = 0; c < K; ++c) s[c] = x[static_cast<size_t>(i) * K + c];
+      for (int p = 0; p < m; ++p)
+        for (int c = 0; c < K; ++c) s[c] -= li[p] * y[p * K + c];
+      for (int c = 0; c < K; ++c) x[static_cast<size_t>(i) * K + c] = s[c];
     }
-    for (int i = 0; i < n; ++i) {
+    for (int i = 0; i < n; ++i) {  // D
       const double inv = 1.0 / d_[i];
-      for (int c = 0; c < k; ++c) x[static_cast<size_t>(i) * k + c] *= inv;
+      for (int c = 0; c < K; ++c) x[static_cast<size_t>(i) * K + c] *= inv;
     }
-    for (int i = n - 1; i >= 0; --i) {  // L^H x = y, column i of L^H is row i of L
+    for (int i = n - 1; i >= 0; --i) {  // L^H x = y: column i of L^H is row i of L
       const Scalar* li = val + ptr_[i];
-      const int fi = first_[i];
-      for (int c = 0; c < k; ++c) {
-        const T xi = x[static_cast<size_t>(i) * k + c];
-        for (int p = 0; p < i - fi; ++p) x[static_cast<size_t>(fi + p) * k + c] -= Conj(li[p]) * xi;
+      const int m = i - first_[i];
+      T* y = x + static_cast<size_t>(first_[i]) * K;
+      T xi[K];
+      for (int c = 0; c < K; ++c) xi[c] = x[static_cast<size_t>(i) * K + c];
+      for (int p = 0; p < m; ++p) {
+        const Scalar l = Conj(li[p]);
+        for (int c = 0; c < K; ++c) y[p * K + c] -= l * xi[c];
       }
     }
   }
+  // One right-hand side at stride k.
+  template <typename T>
+  void SolveStrided(T* x, int k) const {
+    const int n = size();
+    auto at = [&](int i) -> T& { return x[static_cast<size_t>(i) * k]; };
+    for (int i = 0; i < n; ++i) {
+      const Scalar* li = val_.data() + ptr_[i];
+      T s = at(i);
+      for (int p = 0; p < i - first_[i]; ++p) s -= li[p] * at(first_[i] + p);
+      at(i) = s;
+    }
+    for (int i = 0; i < n; ++i) at(i) /= d_[i];
+    for (int i = n - 1; i >= 0; --i) {
+      const Scalar* li = val_.data() + ptr_[i];
+      for (int p = 0; p < i - first_[i]; ++p) at(first_[i] + p) -= Conj(li[p]) * at(i);
+    }
+  }
 
- private:
   static double Norm(double a) { return a * a; }
   static double Norm(const std::complex<double>& a) { return a.real() * a.real() + a.imag() * a.imag(); }
   static double Conj(double a) { return a; }
