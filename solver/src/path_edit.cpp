@@ -44,9 +44,11 @@ constexpr int64_t kSkylineCostPerColumn = 64;
 constexpr int64_t kSkylineProfilePerColumn = 64;
 constexpr int kSupernodalColumns = 2000;
 // CHOLMOD's flop count per factor entry above which its fronts are dense enough for the
-// supernodal factorization to beat the simplicial one (group meshes: 262 for step 1 of 100
-// agents x 43 key frames, supernodal 3.5x faster; 93 for its step 2, simplicial 1.7x faster).
-constexpr double kSupernodalFlopsPerEntry = 150;
+// supernodal factorization (BLAS on dense blocks) to beat the simplicial one; CHOLMOD's own
+// default. Group of 100 agents x 43 key frames: step 1 has 262 flops per entry (supernodal
+// 3.5x faster than simplicial), step 2 has 93 (supernodal 1.7x faster than CHOLMOD's
+// simplicial, 1.6x faster than Eigen's AMD LDLT with its analysis).
+constexpr double kSupernodalFlopsPerEntry = 40;
 // LDLT pivots below this fraction of the largest mean a singular system.
 constexpr double kSingularPivot = 1e-13;
 
@@ -825,14 +827,16 @@ struct Work {
 };
 
 // The correction for the residual of u: QR of the rectangular system, or the factored
-// normal equations. Row residuals are accumulated in extended precision.
+// normal equations. Row residuals are accumulated in extended precision when T is, unless
+// `coarse` (a first pass from a start far from the solution, whose correction only needs
+// to be accurate to about cond * eps, as any pass's is).
 template <typename Scalar, typename T>
 void Correction(const StepSystem<Scalar>& s, const std::vector<T>& c, const CVec& u, Work& w,
-                bool qr, CVec& delta) {
+                bool qr, bool coarse, CVec& delta) {
   w.rr.resize(s.rows);
-  if constexpr (std::is_same<T, Cplx>::value) {  // well conditioned: double residuals are enough
+  if (std::is_same<T, Cplx>::value || coarse) {  // double residuals are enough
     for (int r = 0; r < s.rows; ++r) {
-      Cplx acc = c[r];
+      Cplx acc = Cplx(c[r]);
       for (int p = s.a_ptr[r]; p < s.a_ptr[r + 1]; ++p) acc -= s.a_val[p] * u[s.a_col[p]];
       w.rr[r] = acc;
     }
@@ -891,14 +895,17 @@ bool Refine(const StepSystem<Scalar>& s, const std::vector<T>& c, double scale, 
   double previous = kInf;
   info.refinements = 0;
   for (int it = 0; it < kMaxRefinements; ++it) {
-    Correction(s, c, u, w, qr, delta);
+    // Extended residuals: the first pass in double precision, the others extended (and
+    // at least one of them).
+    const bool coarse = std::is_same<T, LCplx>::value && it == 0;
+    Correction(s, c, u, w, qr, coarse, delta);
     u += delta;
     const double size = delta.size() ? std::sqrt(delta.cwiseAbs2().maxCoeff()) : 0.0;
     info.refinements = it + 1;
     info.correction = size;
     if (!std::isfinite(size)) return false;
     // The error left is about rate * size: stop when that is below the tolerance.
-    if (10 * rate * size <= tol || size <= tol) return true;
+    if (!coarse && (10 * rate * size <= tol || size <= tol)) return true;
     if (it >= 1 && size > 0.5 * previous) return size <= 1e-9 * scale;  // stagnation
     previous = size;
   }
