@@ -97,6 +97,29 @@ struct Rows {
       coeff.push_back(hi);
       coeff_low.push_back(Cplx(c - LCplx(hi)));
     }
+    Close(kind, index, s);
+  }
+  // A row of unit weight whose coefficients are exact in double precision.
+  void AddExact(std::initializer_list<std::pair<int, double>> entries, TargetKind kind, int index) {
+    for (const auto& e : entries) {
+      vertex.push_back(e.first);
+      coeff.push_back(e.second);
+      coeff_low.push_back(0.0);
+    }
+    Close(kind, index, 1.0L);
+  }
+  // The shape row of triangle t of unit weight: x_i + (c - 1) x_j - c x_k.
+  void AddTriangle(int i, int j, int k, const LCplx& c, int index) {
+    const LCplx cj = c - 1.0L, ck = -c;
+    const Cplx hj(cj), hk(ck);
+    vertex.insert(vertex.end(), {i, j, k});
+    coeff.insert(coeff.end(), {Cplx(1.0), hj, hk});
+    coeff_low.insert(coeff_low.end(), {Cplx(0.0), Cplx(cj - LCplx(hj)), Cplx(ck - LCplx(hk))});
+    Close(TargetKind::kZero, index, 1.0L);
+  }
+
+ private:
+  void Close(TargetKind kind, int index, long double s) {
     ptr.push_back(static_cast<int>(vertex.size()));
     target.push_back(kind);
     target_index.push_back(index);
@@ -246,7 +269,7 @@ struct PathEditData {
   Trajectory2 rest;
   double scale = 1;  // largest rest coordinate, at least 1
   std::vector<Cplx> z;
-  std::vector<LCplx> zl;
+  LCplx zl(int v) const { return LCplx(z[v]); }  // exact
   // Inputs kept for the solve.
   Eigen::VectorXi handles;
   Eigen::VectorXd handle_weights;
@@ -285,8 +308,8 @@ void Require(bool ok, const std::string& what) {
   if (!ok) throw std::invalid_argument("PathEdit: " + what);
 }
 
-void CheckIndex(int v, int n, const char* what, Eigen::Index i) {
-  if (v < 0 || v >= n) {
+inline void CheckIndex(int v, int n, const char* what, Eigen::Index i) {
+  if (__builtin_expect(static_cast<unsigned>(v) >= static_cast<unsigned>(n), 0)) {
     std::ostringstream s;
     s << what << " " << i << " refers to vertex " << v << ", outside 0.." << n - 1;
     Require(false, s.str());
@@ -319,14 +342,14 @@ void BuildElimination(const PathEditData& d, bool step1, Elimination& e) {
   if (step1) {
     for (size_t r = 0; r < d.rigid.size(); ++r) {
       if (d.rigid[r].mode != RigidMode::kRotate || d.degenerate[r]) continue;
-      const LCplx z1 = d.zl[d.master1[r]], z2 = d.zl[d.master2[r]];
+      const LCplx z1 = d.zl(d.master1[r]), z2 = d.zl(d.master2[r]);
       for (int v : d.rigid[r].vertices) {
         if (v == d.master1[r] || v == d.master2[r]) continue;
         dependent[v] = 1;
         e.dep_vertex.push_back(v);
         e.dep_m1.push_back(d.master1[r]);
         e.dep_m2.push_back(d.master2[r]);
-        e.dep_gamma.push_back((d.zl[v] - z1) / (z2 - z1));
+        e.dep_gamma.push_back((d.zl(v) - z1) / (z2 - z1));
       }
     }
   }
@@ -342,7 +365,7 @@ void BuildElimination(const PathEditData& d, bool step1, Elimination& e) {
     for (int v : range.vertices)
       if (v != m)
         e.ties.push_back({v, m, translate ? TieKind::kRest : TieKind::kRotated, static_cast<int>(r),
-                          d.zl[v] - d.zl[m]});
+                          d.zl(v) - d.zl(m)});
   }
   // Ties at each vertex, CSR.
   std::vector<int> adj_ptr(n + 1, 0), adj(2 * e.ties.size());
@@ -610,13 +633,20 @@ void AssembleStep(const Rows& rows, const Elimination& e, StepSystem<Scalar>& s)
     for (int p = rows.ptr[r]; p < rows.ptr[r + 1]; ++p) plain = plain && e.plain_col[rows.vertex[p]] >= 0;
     if (plain) {
       const int p0 = rows.ptr[r], count = rows.ptr[r + 1] - p0;
-      int order[3] = {0, 1, 2};
       if (count <= 3) {
-        for (int a = 1; a < count; ++a)
-          for (int b = a; b > 0 && e.plain_col[rows.vertex[p0 + order[b - 1]]] > e.plain_col[rows.vertex[p0 + order[b]]]; --b)
-            std::swap(order[b - 1], order[b]);
+        // Sort by column without branches (keys: column * 4 + entry).
+        int64_t key[3] = {INT64_MAX, INT64_MAX, INT64_MAX};
+        for (int k = 0; k < count; ++k) key[k] = int64_t{e.plain_col[rows.vertex[p0 + k]]} * 4 + k;
+        auto order = [&](int a, int b) {
+          const int64_t lo = std::min(key[a], key[b]), hi = std::max(key[a], key[b]);
+          key[a] = lo;
+          key[b] = hi;
+        };
+        order(0, 1);
+        order(1, 2);
+        order(0, 1);
         for (int k = 0; k < count; ++k) {
-          const int p = p0 + order[k];
+          const int p = p0 + static_cast<int>(key[k] & 3);
           s.a_col.push_back(e.plain_col[rows.vertex[p]]);
           s.a_val.push_back(Cast<Scalar>(rows.coeff[p]));
           s.a_low.push_back(Cast<Scalar>(rows.coeff_low[p]));
@@ -1040,11 +1070,9 @@ void PathEditPrecompute(const PathEditProblem& p, std::shared_ptr<PathEditData>&
   d->rest = p.rest;
   Require(p.rest.allFinite(), "rest positions must be finite");
   d->z.resize(n);
-  d->zl.resize(n);
   d->scale = 1.0;
   for (int v = 0; v < n; ++v) {
     d->z[v] = C(p.rest, v);
-    d->zl[v] = LCplx(d->z[v]);
     d->scale = std::max({d->scale, std::abs(p.rest(v, 0)), std::abs(p.rest(v, 1))});
   }
   const Eigen::VectorXd tw = Weights(p.triangle_weights, p.triangles.rows(), "triangle", false);
@@ -1109,8 +1137,11 @@ void PathEditPrecompute(const PathEditProblem& p, std::shared_ptr<PathEditData>&
       Require(false, s.str());
     }
     if (tw[t] == 0 || same_range({i, j, k})) continue;
-    const LCplx c = (d->zl[i] - d->zl[j]) / (d->zl[k] - d->zl[j]);
-    d->rows1.Add({{i, 1.0L}, {j, c - 1.0L}, {k, -c}}, TargetKind::kZero, static_cast<int>(t), tw[t]);
+    const LCplx c = (d->zl(i) - d->zl(j)) / (d->zl(k) - d->zl(j));
+    if (tw[t] == 1.0)
+      d->rows1.AddTriangle(i, j, k, c, static_cast<int>(t));
+    else
+      d->rows1.Add({{i, 1.0L}, {j, c - 1.0L}, {k, -c}}, TargetKind::kZero, static_cast<int>(t), tw[t]);
   }
   AddSoftRows(p, *d, d->rows1);
   // Step 2 rows: edges, then soft handles and links.
@@ -1122,7 +1153,10 @@ void PathEditPrecompute(const PathEditProblem& p, std::shared_ptr<PathEditData>&
       if (rk >= 0) d->boundary_edges[rk].push_back(static_cast<int>(e));
     }
     if (ew[e] == 0 || j == k || same_range({j, k})) continue;
-    d->rows2.Add({{k, 1.0L}, {j, -1.0L}}, TargetKind::kEdge, static_cast<int>(e), ew[e]);
+    if (ew[e] == 1.0)
+      d->rows2.AddExact({{k, 1.0}, {j, -1.0}}, TargetKind::kEdge, static_cast<int>(e));
+    else
+      d->rows2.Add({{k, 1.0L}, {j, -1.0L}}, TargetKind::kEdge, static_cast<int>(e), ew[e]);
   }
   AddSoftRows(p, *d, d->rows2);
 
@@ -1355,13 +1389,20 @@ void PathEditSolve(const PathEditData& d, const Eigen::Ref<const Trajectory2>& h
       ComputeBeta(d, d.elim1, handle_positions, offset, beta);
       CheckConsistency(d, d.elim1, handle_positions, offset, beta);
     }
-    x1 = d.response_base;
-    auto add = [&](const std::vector<Cplx>& resp, Cplx value) {
-      if (value == Cplx(0.0)) return;
-      for (int i = 0; i < n; ++i) x1[i] += resp[i] * value;
-    };
-    for (Eigen::Index h = 0; h < d.handles.size(); ++h) add(d.handle_response[h], C(handle_positions, h));
-    for (Eigen::Index l = 0; l < d.links.rows(); ++l) add(d.link_response[l], C(link_offsets, l));
+    // x1 = base + sum of each response times its handle position or link offset, in one pass.
+    std::vector<const Cplx*> resp;
+    std::vector<Cplx> value;
+    for (Eigen::Index h = 0; h < d.handles.size(); ++h)
+      if (C(handle_positions, h) != Cplx(0.0)) resp.push_back(d.handle_response[h].data()), value.push_back(C(handle_positions, h));
+    for (Eigen::Index l = 0; l < d.links.rows(); ++l)
+      if (C(link_offsets, l) != Cplx(0.0)) resp.push_back(d.link_response[l].data()), value.push_back(C(link_offsets, l));
+    x1.resize(n);
+    const size_t m = resp.size();
+    for (int i = 0; i < n; ++i) {
+      Cplx acc = d.response_base[i];
+      for (size_t k = 0; k < m; ++k) acc += resp[k][i] * value[k];
+      x1[i] = acc;
+    }
     result.step1 = d.response_info;
     result.step1.solver += " (precomputed responses)";
   } else {
@@ -1376,11 +1417,11 @@ void PathEditSolve(const PathEditData& d, const Eigen::Ref<const Trajectory2>& h
     if (d.rigid[r].mode != RigidMode::kRotate) continue;
     LCplx q = 0;
     if (!d.degenerate[r]) {
-      q = (LCplx(x1[d.master2[r]]) - LCplx(x1[d.master1[r]])) / (d.zl[d.master2[r]] - d.zl[d.master1[r]]);
+      q = (LCplx(x1[d.master2[r]]) - LCplx(x1[d.master1[r]])) / (d.zl(d.master2[r]) - d.zl(d.master1[r]));
     } else {
       for (int e : d.boundary_edges[r]) {
         const int j = d.edges(e, 0), k = d.edges(e, 1);
-        q += (LCplx(x1[k]) - LCplx(x1[j])) * std::conj(d.zl[k] - d.zl[j]);
+        q += (LCplx(x1[k]) - LCplx(x1[j])) * std::conj(d.zl(k) - d.zl(j));
       }
     }
     const long double len = std::sqrt(std::norm(q));
@@ -1409,12 +1450,10 @@ void PathEditSolve(const PathEditData& d, const Eigen::Ref<const Trajectory2>& h
   Solve(d, d.elim2, d.rows2, d.step2, handle_positions, link_offsets, offset2, edge_targets, true, scale,
         Start(d.elim2, d.z, 1.0, 0.0, &x1), x2, result.step2);
 
-  result.positions.resize(n, 2);
-  result.shape.resize(n, 2);
-  for (int v = 0; v < n; ++v) {
-    result.positions.row(v) << x2[v].real(), x2[v].imag();
-    result.shape.row(v) << x1[v].real(), x1[v].imag();
-  }
+  // std::complex<double> is two doubles, real first: the same layout as a row of Trajectory2.
+  using Rows2 = Eigen::Map<const Trajectory2>;
+  result.positions = Rows2(reinterpret_cast<const double*>(x2.data()), n, 2);
+  result.shape = Rows2(reinterpret_cast<const double*>(x1.data()), n, 2);
 }
 
 std::pair<double, double> PathEditConditionEstimate(const PathEditData& d) {

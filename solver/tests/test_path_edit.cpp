@@ -391,6 +391,57 @@ TEST(PathEdit, QRAndResponsesAgreeWithTheDirectSolve) {
   EXPECT_LE((r.shape - direct.shape).cwiseAbs().maxCoeff(), 1e-8);
 }
 
+TEST(PathEdit, ChainsOfAgentsWithLongRangeTermsUseTheEnvelopeFactorAndAgreeWithQR) {
+  // Six agents of 60 frames, each handing over to the next at its last frame (hard links),
+  // each with a soft link between its own first and last frames: the bandwidth is a whole
+  // agent, the envelope stays narrow, so both steps take the envelope LDLT.
+  const int agents = 6, frames = 60;
+  Trajectory2 z(agents * frames, 2);
+  for (int a = 0; a < agents; ++a)
+    for (int f = 0; f < frames; ++f)
+      z.row(a * frames + f) << 0.5 * std::sin(0.7 * a) + 3.0 * std::sin(f / 5.0), (a * (frames - 1) + f) * 5.0 + a;
+  PathEditProblem p;
+  p.rest = z;
+  p.triangles.resize(0, 3);
+  p.edges.resize(0, 2);
+  for (int a = 0; a < agents; ++a) mocapedit::AppendChainTerms(z, a * frames, frames, 1e-6, p.triangles, p.edges);
+  p.links.resize(2 * agents - 1, 2);
+  p.link_weights.resize(2 * agents - 1);
+  Trajectory2 offsets(2 * agents - 1, 2);
+  for (int a = 0; a + 1 < agents; ++a) {
+    p.links.row(a) << a * frames + frames - 1, (a + 1) * frames;
+    p.link_weights[a] = kHard;
+    offsets.row(a) << 0.4, -1.0;
+  }
+  for (int a = 0; a < agents; ++a) {
+    const int l = agents - 1 + a, first = a * frames, last = first + frames - 1;
+    p.links.row(l) << first, last;
+    p.link_weights[l] = 0.01;
+    offsets.row(l) = z.row(first) - z.row(last);
+  }
+  SetHandles(p, {0, agents * frames - 1, 3 * frames + 20});
+  Trajectory2 h = Rows(z, p.handles);
+  h.row(1) += Eigen::RowVector2d(30.0, -20.0);
+  h.row(2) += Eigen::RowVector2d(15.0, 0.0);
+  const PathEditResult r = Solve(p, h, offsets);
+  EXPECT_EQ(r.step1.solver, "LDLT");
+  EXPECT_EQ(r.step2.solver, "LDLT");
+  // An exact factor converges in two passes (one from the start, one to confirm); a
+  // slightly wrong one still converges to the same answer, in more passes.
+  EXPECT_LE(r.step1.refinements, 2);
+  EXPECT_LE(r.step2.refinements, 2);
+  PathEditProblem q = p;
+  q.force_qr = true;
+  const PathEditResult qr = Solve(q, h, offsets);
+  EXPECT_LE((r.positions - qr.positions).cwiseAbs().maxCoeff(), 1e-8);
+  EXPECT_LE((r.shape - qr.shape).cwiseAbs().maxCoeff(), 1e-8);
+  EXPECT_LE((Rows(r.positions, p.handles) - h).cwiseAbs().maxCoeff(), 1e-9);
+  for (int a = 0; a + 1 < agents; ++a) {
+    const Eigen::RowVector2d gap = r.positions.row(a * frames + frames - 1) - r.positions.row((a + 1) * frames);
+    EXPECT_LE((gap - offsets.row(a)).cwiseAbs().maxCoeff(), 1e-9);
+  }
+}
+
 TEST(PathEdit, SolvesFromSeveralThreadsAgree) {
   const Trajectory2 z = Walk(500);
   PathEditProblem p = Chain(z);

@@ -133,8 +133,12 @@ class SkylineLdlt {
       const T* y = x + static_cast<size_t>(first_[i]) * K;
       T s[K];
       for (int c = 0; c < K; ++c) s[c] = x[static_cast<size_t>(i) * K + c];
-      for (int p = 0; p < m; ++p)
-        for (int c = 0; c < K; ++c) s[c] -= li[p] * y[p * K + c];
+      if (m == 1) {  // chains: most rows hold one entry left of the diagonal
+        for (int c = 0; c < K; ++c) s[c] -= li[0] * y[c];
+      } else {
+        for (int p = 0; p < m; ++p)
+          for (int c = 0; c < K; ++c) s[c] -= li[p] * y[p * K + c];
+      }
       for (int c = 0; c < K; ++c) x[static_cast<size_t>(i) * K + c] = s[c];
     }
     for (int i = 0; i < n; ++i) {  // D
@@ -147,9 +151,14 @@ class SkylineLdlt {
       T* y = x + static_cast<size_t>(first_[i]) * K;
       T xi[K];
       for (int c = 0; c < K; ++c) xi[c] = x[static_cast<size_t>(i) * K + c];
-      for (int p = 0; p < m; ++p) {
-        const Scalar l = Conj(li[p]);
-        for (int c = 0; c < K; ++c) y[p * K + c] -= l * xi[c];
+      if (m == 1) {
+        const Scalar l = Conj(li[0]);
+        for (int c = 0; c < K; ++c) y[c] -= l * xi[c];
+      } else {
+        for (int p = 0; p < m; ++p) {
+          const Scalar l = Conj(li[p]);
+          for (int c = 0; c < K; ++c) y[p * K + c] -= l * xi[c];
+        }
       }
     }
   }
