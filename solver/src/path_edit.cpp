@@ -77,54 +77,66 @@ struct Rows {
   std::vector<int> target_index;  // handle, link or edge index
   std::vector<long double> sqrt_weight;
 
-  int size() const { return static_cast<int>(target.size()); }
+  int size() const { return rows_; }
+  // Room for at most n rows of `entries` entries in all; Finish() trims to what was added.
   void Reserve(Eigen::Index n, Eigen::Index entries) {
-    ptr.reserve(static_cast<size_t>(n) + 1);
-    target.reserve(static_cast<size_t>(n));
-    target_index.reserve(static_cast<size_t>(n));
-    sqrt_weight.reserve(static_cast<size_t>(n));
-    vertex.reserve(static_cast<size_t>(entries));
-    coeff.reserve(static_cast<size_t>(entries));
-    coeff_low.reserve(static_cast<size_t>(entries));
+    ptr.resize(static_cast<size_t>(n) + 1);
+    target.resize(static_cast<size_t>(n));
+    target_index.resize(static_cast<size_t>(n));
+    sqrt_weight.resize(static_cast<size_t>(n));
+    vertex.resize(static_cast<size_t>(entries));
+    coeff.resize(static_cast<size_t>(entries));
+    coeff_low.resize(static_cast<size_t>(entries));
+    ptr[0] = rows_ = entries_ = 0;
+  }
+  void Finish() {
+    ptr.resize(static_cast<size_t>(rows_) + 1);
+    target.resize(static_cast<size_t>(rows_));
+    target_index.resize(static_cast<size_t>(rows_));
+    sqrt_weight.resize(static_cast<size_t>(rows_));
+    vertex.resize(static_cast<size_t>(entries_));
+    coeff.resize(static_cast<size_t>(entries_));
+    coeff_low.resize(static_cast<size_t>(entries_));
   }
   LCplx Extended(int p) const { return LCplx(coeff[p]) + LCplx(coeff_low[p]); }
   void Add(std::initializer_list<std::pair<int, LCplx>> entries, TargetKind kind, int index, double weight) {
     const long double s = weight == 1.0 ? 1.0L : std::sqrt(static_cast<long double>(weight));
-    for (const auto& e : entries) {
-      vertex.push_back(e.first);
-      const LCplx c = weight == 1.0 ? e.second : e.second * s;
-      const Cplx hi(c);
-      coeff.push_back(hi);
-      coeff_low.push_back(Cplx(c - LCplx(hi)));
-    }
+    for (const auto& e : entries) Entry(e.first, weight == 1.0 ? e.second : e.second * s);
     Close(kind, index, s);
   }
   // A row of unit weight whose coefficients are exact in double precision.
   void AddExact(std::initializer_list<std::pair<int, double>> entries, TargetKind kind, int index) {
     for (const auto& e : entries) {
-      vertex.push_back(e.first);
-      coeff.push_back(e.second);
-      coeff_low.push_back(0.0);
+      vertex[entries_] = e.first;
+      coeff[entries_] = e.second;
+      coeff_low[entries_++] = 0.0;
     }
     Close(kind, index, 1.0L);
   }
-  // The shape row of triangle t of unit weight: x_i + (c - 1) x_j - c x_k.
+  // The shape row of a triangle of unit weight: x_i + (c - 1) x_j - c x_k.
   void AddTriangle(int i, int j, int k, const LCplx& c, int index) {
-    const LCplx cj = c - 1.0L, ck = -c;
-    const Cplx hj(cj), hk(ck);
-    vertex.insert(vertex.end(), {i, j, k});
-    coeff.insert(coeff.end(), {Cplx(1.0), hj, hk});
-    coeff_low.insert(coeff_low.end(), {Cplx(0.0), Cplx(cj - LCplx(hj)), Cplx(ck - LCplx(hk))});
+    vertex[entries_] = i;
+    coeff[entries_] = 1.0;
+    coeff_low[entries_++] = 0.0;
+    Entry(j, c - 1.0L);
+    Entry(k, -c);
     Close(TargetKind::kZero, index, 1.0L);
   }
 
  private:
-  void Close(TargetKind kind, int index, long double s) {
-    ptr.push_back(static_cast<int>(vertex.size()));
-    target.push_back(kind);
-    target_index.push_back(index);
-    sqrt_weight.push_back(s);
+  void Entry(int v, const LCplx& c) {
+    const Cplx hi(c);
+    vertex[entries_] = v;
+    coeff[entries_] = hi;
+    coeff_low[entries_++] = Cplx(c - LCplx(hi));
   }
+  void Close(TargetKind kind, int index, long double s) {
+    ptr[rows_ + 1] = entries_;
+    target[rows_] = kind;
+    target_index[rows_] = index;
+    sqrt_weight[rows_++] = s;
+  }
+  int rows_ = 0, entries_ = 0;
 };
 
 // ---------------------------------------------------------------------------------------
@@ -383,7 +395,8 @@ void BuildElimination(const PathEditData& d, bool step1, Elimination& e) {
   e.parent_tie.assign(n, -1);
   e.depth.assign(n, 0);
   std::vector<char> seen(n, 0), tree_tie(e.ties.size(), 0);
-  e.order.clear();
+  e.order.resize(n);
+  size_t members = 0;  // written to order
   for (int s = 0; s < n; ++s) {
     if (dependent[s]) {
       e.root[s] = -1;
@@ -391,10 +404,10 @@ void BuildElimination(const PathEditData& d, bool step1, Elimination& e) {
     }
     if (seen[s]) continue;
     seen[s] = 1;
-    size_t head = e.order.size();
-    e.order.push_back(s);
+    size_t head = members;
+    e.order[members++] = s;
     e.root[s] = s;
-    while (head < e.order.size()) {
+    while (head < members) {
       const int v = e.order[head++];
       for (int k = adj_ptr[v]; k < adj_ptr[v + 1]; ++k) {
         const int t = adj[k];
@@ -406,10 +419,11 @@ void BuildElimination(const PathEditData& d, bool step1, Elimination& e) {
         e.parent_tie[w] = t;
         e.depth[w] = e.depth[v] + 1;
         e.root[w] = s;
-        e.order.push_back(w);
+        e.order[members++] = w;
       }
     }
   }
+  e.order.resize(members);
   for (size_t t = 0; t < e.ties.size(); ++t)
     if (!tree_tie[t]) e.extra_ties.push_back(static_cast<int>(t));
   // Hard handles fix their class.
@@ -430,39 +444,40 @@ void BuildElimination(const PathEditData& d, bool step1, Elimination& e) {
   // Vertex expressions: a member of a class with a column is that column; a dependent is
   // built from its masters (never dependents themselves).
   e.e_ptr.assign(n + 1, 0);
-  e.e_col.clear();
-  e.e_coeff.clear();
-  e.e_col.reserve(static_cast<size_t>(n) + e.dep_vertex.size());
-  e.e_coeff.reserve(static_cast<size_t>(n) + e.dep_vertex.size());
   std::vector<int> dep_of;
   if (!e.dep_vertex.empty()) {
     dep_of.assign(n, -1);
     for (size_t k = 0; k < e.dep_vertex.size(); ++k) dep_of[e.dep_vertex[k]] = static_cast<int>(k);
   }
+  e.e_col.resize(static_cast<size_t>(n) + e.dep_vertex.size());
+  e.e_coeff.resize(static_cast<size_t>(n) + e.dep_vertex.size());
+  int terms = 0;  // written to e_col, e_coeff
   for (int v = 0; v < n; ++v) {
     if (dependent[v]) {
       const int k = dep_of[v];
       const LCplx g = e.dep_gamma[k];
-      const size_t at = e.e_col.size();
+      const int at = terms;
       auto add = [&](int master, LCplx c) {
         const int col = e.col[e.root[master]];
         if (col < 0) return;
-        for (size_t q = at; q < e.e_col.size(); ++q)
+        for (int q = at; q < terms; ++q)
           if (e.e_col[q] == col) {
             e.e_coeff[q] += c;
             return;
           }
-        e.e_col.push_back(col);
-        e.e_coeff.push_back(c);
+        e.e_col[terms] = col;
+        e.e_coeff[terms++] = c;
       };
       add(e.dep_m1[k], 1.0L - g);
       add(e.dep_m2[k], g);
     } else if (e.col[e.root[v]] >= 0) {
-      e.e_col.push_back(e.col[e.root[v]]);
-      e.e_coeff.push_back(1.0L);
+      e.e_col[terms] = e.col[e.root[v]];
+      e.e_coeff[terms++] = 1.0L;
     }
-    e.e_ptr[v + 1] = static_cast<int>(e.e_col.size());
+    e.e_ptr[v + 1] = terms;
   }
+  e.e_col.resize(terms);
+  e.e_coeff.resize(terms);
   {
     std::vector<int> size(n, 0);
     for (int v : e.order) ++size[e.root[v]];
@@ -616,14 +631,14 @@ template <typename Scalar>
 void AssembleStep(const Rows& rows, const Elimination& e, StepSystem<Scalar>& s) {
   s.cols = e.columns;
   s.rows = rows.size();
-  s.a_ptr.assign(1, 0);
-  s.a_col.clear();
-  s.a_val.clear();
-  s.a_low.clear();
-  const size_t reserve = rows.vertex.size() * 2;
-  s.a_col.reserve(reserve);
-  s.a_val.reserve(reserve);
-  s.a_low.reserve(reserve);
+  // Each vertex of a row expands to at most two unknowns.
+  const size_t most = rows.vertex.size() * 2;
+  s.a_ptr.resize(static_cast<size_t>(s.rows) + 1);
+  s.a_col.resize(most);
+  s.a_val.resize(most);
+  s.a_low.resize(most);
+  s.a_ptr[0] = 0;
+  int na = 0;  // entries written
   constexpr int kMax = 16;
   int cols[kMax];
   LCplx vals[kMax];
@@ -647,11 +662,11 @@ void AssembleStep(const Rows& rows, const Elimination& e, StepSystem<Scalar>& s)
         order(0, 1);
         for (int k = 0; k < count; ++k) {
           const int p = p0 + static_cast<int>(key[k] & 3);
-          s.a_col.push_back(e.plain_col[rows.vertex[p]]);
-          s.a_val.push_back(Cast<Scalar>(rows.coeff[p]));
-          s.a_low.push_back(Cast<Scalar>(rows.coeff_low[p]));
+          s.a_col[na] = e.plain_col[rows.vertex[p]];
+          s.a_val[na] = Cast<Scalar>(rows.coeff[p]);
+          s.a_low[na++] = Cast<Scalar>(rows.coeff_low[p]);
         }
-        s.a_ptr.push_back(static_cast<int>(s.a_col.size()));
+        s.a_ptr[r + 1] = na;
         continue;
       }
     }
@@ -676,13 +691,16 @@ void AssembleStep(const Rows& rows, const Elimination& e, StepSystem<Scalar>& s)
         std::swap(vals[b - 1], vals[b]);
       }
     for (int k = 0; k < m; ++k) {
-      s.a_col.push_back(cols[k]);
+      s.a_col[na] = cols[k];
       const Scalar hi = Cast<Scalar>(Cplx(vals[k]));
-      s.a_val.push_back(hi);
-      s.a_low.push_back(Cast<Scalar>(Cplx(vals[k] - LCplx(hi))));
+      s.a_val[na] = hi;
+      s.a_low[na++] = Cast<Scalar>(Cplx(vals[k] - LCplx(hi)));
     }
-    s.a_ptr.push_back(static_cast<int>(s.a_col.size()));
+    s.a_ptr[r + 1] = na;
   }
+  s.a_col.resize(na);
+  s.a_val.resize(na);
+  s.a_low.resize(na);
   if (AssembleSkyline(s)) return;
   // Columns of A: which rows touch each unknown.
   const int n = s.cols;
@@ -1024,6 +1042,7 @@ void AppendChainTerms(const Eigen::Ref<const Trajectory2>& rest, int first, int 
   Require(first >= 0 && count >= 0 && first + count <= rest.rows(), "chain vertices outside the rest positions");
   Require(min_baseline >= 0 && std::isfinite(min_baseline), "min_baseline must be a finite value >= 0");
   std::vector<std::array<int, 3>> tri;
+  tri.reserve(static_cast<size_t>(std::max(count - 2, 0)));
   for (int i = 1; i + 1 < count; ++i) {
     int a = i - 1, b = i + 1;
     const auto at = [&](int k) { return rest.row(first + k); };
@@ -1144,6 +1163,7 @@ void PathEditPrecompute(const PathEditProblem& p, std::shared_ptr<PathEditData>&
       d->rows1.Add({{i, 1.0L}, {j, c - 1.0L}, {k, -c}}, TargetKind::kZero, static_cast<int>(t), tw[t]);
   }
   AddSoftRows(p, *d, d->rows1);
+  d->rows1.Finish();
   // Step 2 rows: edges, then soft handles and links.
   for (Eigen::Index e = 0; e < p.edges.rows(); ++e) {
     const int j = p.edges(e, 0), k = p.edges(e, 1);
@@ -1159,6 +1179,7 @@ void PathEditPrecompute(const PathEditProblem& p, std::shared_ptr<PathEditData>&
       d->rows2.Add({{k, 1.0L}, {j, -1.0L}}, TargetKind::kEdge, static_cast<int>(e), ew[e]);
   }
   AddSoftRows(p, *d, d->rows2);
+  d->rows2.Finish();
 
   BuildElimination(*d, true, d->elim1);
   BuildElimination(*d, false, d->elim2);
