@@ -168,7 +168,8 @@ struct Elimination {
   std::vector<int> dep_vertex, dep_m1, dep_m2;
   std::vector<LCplx> dep_gamma;
   int columns = 0;
-  // Per vertex expression x_v = sum e_coeff * u[e_col] + beta_v, at most two terms.
+  // Per vertex expression x_v = sum e_coeff * u[e_col] + beta_v, at most two terms; empty
+  // for plain vertices (below), which are u[plain_col] alone.
   std::vector<int> e_ptr;
   std::vector<int> e_col;
   std::vector<LCplx> e_coeff;
@@ -441,8 +442,16 @@ void BuildElimination(const PathEditData& d, bool step1, Elimination& e) {
   e.columns = 0;
   for (int v = 0; v < n; ++v)
     if (e.root[v] == v && e.fix_handle[v] < 0) e.col[v] = e.columns++;
-  // Vertex expressions: a member of a class with a column is that column; a dependent is
-  // built from its masters (never dependents themselves).
+  // Plain vertices: a class of one free vertex.
+  {
+    std::vector<int> size(n, 0);
+    for (int v : e.order) ++size[e.root[v]];
+    e.plain_col.assign(n, -1);
+    for (int v : e.order)
+      if (e.root[v] == v && size[v] == 1 && e.fix_handle[v] < 0) e.plain_col[v] = e.col[v];
+  }
+  // Vertex expressions of the others: a member of a class with a column is that column; a
+  // dependent is built from its masters (never dependents themselves).
   e.e_ptr.assign(n + 1, 0);
   std::vector<int> dep_of;
   if (!e.dep_vertex.empty()) {
@@ -470,7 +479,7 @@ void BuildElimination(const PathEditData& d, bool step1, Elimination& e) {
       };
       add(e.dep_m1[k], 1.0L - g);
       add(e.dep_m2[k], g);
-    } else if (e.col[e.root[v]] >= 0) {
+    } else if (e.plain_col[v] < 0 && e.col[e.root[v]] >= 0) {
       e.e_col[terms] = e.col[e.root[v]];
       e.e_coeff[terms++] = 1.0L;
     }
@@ -478,13 +487,6 @@ void BuildElimination(const PathEditData& d, bool step1, Elimination& e) {
   }
   e.e_col.resize(terms);
   e.e_coeff.resize(terms);
-  {
-    std::vector<int> size(n, 0);
-    for (int v : e.order) ++size[e.root[v]];
-    e.plain_col.assign(n, -1);
-    for (int v : e.order)
-      if (e.root[v] == v && size[v] == 1 && e.fix_handle[v] < 0) e.plain_col[v] = e.col[v];
-  }
 }
 
 // The tie path between two members of one tree, as constraint references.
@@ -670,20 +672,22 @@ void AssembleStep(const Rows& rows, const Elimination& e, StepSystem<Scalar>& s)
         continue;
       }
     }
+    auto term = [&](int col, const LCplx& c) {
+      int k = 0;
+      while (k < m && cols[k] != col) ++k;
+      if (k < m) {
+        vals[k] += c;
+      } else {
+        if (m == kMax) throw std::logic_error("PathEdit: row with too many unknowns");
+        cols[m] = col;
+        vals[m++] = c;
+      }
+    };
     for (int p = rows.ptr[r]; p < rows.ptr[r + 1]; ++p) {
       const int v = rows.vertex[p];
-      for (int q = e.e_ptr[v]; q < e.e_ptr[v + 1]; ++q) {
-        const LCplx c = e.e_coeff[q] == 1.0L ? rows.Extended(p) : rows.Extended(p) * e.e_coeff[q];
-        int k = 0;
-        while (k < m && cols[k] != e.e_col[q]) ++k;
-        if (k < m) {
-          vals[k] += c;
-        } else {
-          if (m == kMax) throw std::logic_error("PathEdit: row with too many unknowns");
-          cols[m] = e.e_col[q];
-          vals[m++] = c;
-        }
-      }
+      if (e.plain_col[v] >= 0) term(e.plain_col[v], rows.Extended(p));
+      for (int q = e.e_ptr[v]; q < e.e_ptr[v + 1]; ++q)
+        term(e.e_col[q], e.e_coeff[q] == 1.0L ? rows.Extended(p) : rows.Extended(p) * e.e_coeff[q]);
     }
     for (int a = 1; a < m; ++a)  // insertion sort by column
       for (int b = a; b > 0 && cols[b - 1] > cols[b]; --b) {
