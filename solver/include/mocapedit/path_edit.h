@@ -32,19 +32,35 @@
 // offsets change (dragging a handle, re-linearised collision links). Solve is const on the
 // data and may run from several threads at once.
 //
-// Factorizations, chosen by measurement (bench/bench_path.py): each step's normal matrix is
-// factored by a simplicial LDLT, in its natural order when it is banded (single paths),
-// AMD order otherwise (agents tied by links); when the AMD factor has dense fronts (group
-// meshes) by CHOLMOD's supernodal Cholesky. UMFPACK LU and CHOLMOD on single paths measured
-// 5 to 30 times slower than the simplicial LDLT and are not used.
+// Factorizations, chosen by measurement (bench/bench_path.py, on a shared 2-core machine):
+//  - Envelope LDLT (mocapedit/skyline_ldlt.h) in the natural column order, assembled
+//    straight from the rows, when its work is at most 64 multiply-adds per column: single
+//    paths (a band of 2 to a few columns) and chains of agents tied end to start (the
+//    relay: each agent's soft link between its first and last frames makes the bandwidth
+//    a whole agent, but the envelope only one extra entry per column, and fills nothing
+//    else). 1,000 frames: precompute and solve 0.70 -> 0.33 ms; relay of 78 agents x 500
+//    frames (39,000 unknowns): precompute 60 -> 18 ms (AMD ordering alone took 23 ms).
+//  - Otherwise CHOLMOD analyses the matrix with its AMD (several times faster than
+//    Eigen's); when its factor has at least 40 flops per entry (dense fronts: group meshes)
+//    CHOLMOD's supernodal Cholesky factors it with BLAS, its OpenMP regions kept on the
+//    calling thread (its four threads on two busy cores measured 1.3 to 2 times slower).
+//    Group of 100 agents x 43 key frames (4,298 unknowns): precompute 120 -> 45 ms, of
+//    which step 1's factorization is about 30 ms: it is flop-bound (1.4e8 flops, complex,
+//    in OpenBLAS's zgemm). METIS or CHOLMOD's nested dissection halve the flops but their
+//    ordering costs as much as they save (20 to 35 ms); a reverse Cuthill-McKee band or a
+//    level-set dissection costs more flops than AMD.
+//  - Else Eigen's simplicial LDLT in AMD order (small components with scattered links).
+// UMFPACK LU and CHOLMOD on single paths measured 5 to 30 times slower than a banded LDLT.
 //
 // Accuracy. Step 1's normal equations have a condition number growing like L^4 for a
 // stretch of L frames between constraints (about 1e15 for 20,000 frames), so a plain
 // Cholesky solve of a long clip is wrong in its leading digits. The solve starts from the
 // rest path moved by the best similarity to the handles (so it solves for a small
 // deformation), then refines with residuals accumulated in extended precision (with the
-// shape coefficients themselves kept in extended precision): each pass divides the error
-// by about cond * 1e-16. When the estimated condition makes that ratio too large, when
+// shape coefficients themselves kept in extended precision, as a double and its rounding
+// error): each pass divides the error by about cond * 1e-16. The first pass, far from the
+// solution, uses double residuals (its correction is only good to cond * 1e-16 anyway);
+// the extended ones follow, at least one of them. When the estimated condition makes that ratio too large, when
 // refinement does not converge, or when the factorization is singular, the step uses sparse
 // QR (SPQR) of the rectangular system instead, whose error grows only like L^2, refined the
 // same way; PathEditResult says which. A 20,000-frame clip comes out within 1e-14 of its
