@@ -1,0 +1,298 @@
+#include "mocapedit/path_terms.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <utility>
+
+namespace mocapedit {
+
+namespace {
+
+void Check(bool ok, const std::string& what) {
+  if (!ok) throw std::invalid_argument(what);
+}
+
+void CheckOffsets(const Eigen::Ref<const Eigen::VectorXi>& offsets, Eigen::Index total, const char* what) {
+  Check(offsets.size() >= 1 && offsets[0] == 0 && offsets[offsets.size() - 1] == total,
+        std::string(what) + ": offsets must start at 0 and end at " + std::to_string(total));
+  for (Eigen::Index a = 1; a < offsets.size(); ++a)
+    Check(offsets[a] >= offsets[a - 1], std::string(what) + ": offsets must not decrease");
+}
+
+// Distance as numpy's norm computes it (sqrt of the summed squares), so that ties and
+// thresholds decide exactly as the reference implementation does.
+double Distance(const Eigen::Ref<const Trajectory2>& p, Eigen::Index a, Eigen::Index b) {
+  const double dx = p(a, 0) - p(b, 0), dy = p(a, 1) - p(b, 1);
+  return std::sqrt(dx * dx + dy * dy);
+}
+
+}  // namespace
+
+void ComponentChainTerms(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& offsets,
+                         double min_baseline, IndexTriples& triangles, IndexPairs& edges) {
+  CheckOffsets(offsets, rest.rows(), "ComponentChainTerms");
+  triangles.resize(0, 3);
+  edges.resize(0, 2);
+  for (Eigen::Index a = 0; a + 1 < offsets.size(); ++a)
+    AppendChainTerms(rest, offsets[a], offsets[a + 1] - offsets[a], min_baseline, triangles, edges);
+}
+
+void GroupSampleFrames(const Eigen::Ref<const Eigen::VectorXd>& sample_times,
+                       const Eigen::Ref<const Eigen::VectorXi>& offsets, const Eigen::Ref<const Eigen::VectorXd>& times,
+                       Eigen::Matrix<int, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& frames) {
+  CheckOffsets(offsets, sample_times.size(), "GroupSampleFrames");
+  const Eigen::Index members = offsets.size() - 1;
+  frames.resize(members, times.size());
+  for (Eigen::Index m = 0; m < members; ++m) {
+    const double* first = sample_times.data() + offsets[m];
+    const double* last = sample_times.data() + offsets[m + 1];
+    Check(last > first, "GroupSampleFrames: member " + std::to_string(m) + " has no frame");
+    const Eigen::Index count = last - first;
+    for (Eigen::Index t = 0; t < times.size(); ++t) {
+      const Eigen::Index f =
+          std::min<Eigen::Index>(std::lower_bound(first, last, times[t] - 1e-9) - first, count - 1);
+      frames(m, t) = std::abs(first[f] - times[t]) < 1e-6 ? static_cast<int>(f) : -1;
+    }
+  }
+}
+
+void FramePartners(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& offsets,
+                   double min_baseline, Eigen::VectorXi& partner) {
+  CheckOffsets(offsets, rest.rows(), "FramePartners");
+  partner.setConstant(rest.rows(), -1);
+  for (Eigen::Index a = 0; a + 1 < offsets.size(); ++a) {
+    const int lo = offsets[a], count = offsets[a + 1] - offsets[a];
+    if (count == 0) continue;
+    const auto block = rest.middleRows(lo, count);
+    const Eigen::VectorXd arc = CumulativeArcLength(block);
+    const double* begin = arc.data();
+    const double* end = arc.data() + count;
+    for (int i = 0; i < count; ++i) {
+      const std::array<Eigen::Index, 2> candidates = {
+          std::lower_bound(begin, end, arc[i] + min_baseline) - begin,   // the nearest later frame
+          std::upper_bound(begin, end, arc[i] - min_baseline) - begin - 1};  // else an earlier one
+      for (const Eigen::Index cand : candidates) {
+        if (cand < 0 || cand >= count || cand == i) continue;
+        if (Distance(block, cand, i) >= min_baseline) {
+          partner[lo + i] = lo + static_cast<int>(cand);
+          break;
+        }
+      }
+    }
+  }
+}
+
+void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
+                    const Eigen::Ref<const Eigen::Matrix<int, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>& members,
+                    int neighbours, const Eigen::Ref<const Eigen::VectorXi>& partner, IndexTriples& triangles,
+                    IndexPairs& edges) {
+  const Eigen::Index m = members.rows(), times = members.cols(), n = rest.rows();
+  Check(partner.size() == n, "GroupMeshTerms: one partner per vertex is needed");
+  Check(neighbours >= 0 && (m == 0 || neighbours < m),
+        "GroupMeshTerms: neighbours must be at least 0 and less than the member count");
+  for (Eigen::Index i = 0; i < members.size(); ++i)
+    Check(members.data()[i] >= 0 && members.data()[i] < n, "GroupMeshTerms: member vertex out of range");
+  for (Eigen::Index v = 0; v < n; ++v)
+    Check(partner[v] >= -1 && partner[v] < n, "GroupMeshTerms: partner out of range");
+
+  std::vector<std::pair<int, int>> pairs;
+  pairs.reserve(static_cast<size_t>(m * times * neighbours));
+  std::vector<double> d(static_cast<size_t>(m * m));
+  std::vector<double> near_d(static_cast<size_t>(neighbours) + 1);
+  std::vector<int> near(static_cast<size_t>(neighbours) + 1);
+  for (Eigen::Index t = 0; t < times; ++t) {
+    for (Eigen::Index a = 0; a < m; ++a) {
+      d[a * m + a] = std::numeric_limits<double>::infinity();
+      for (Eigen::Index b = a + 1; b < m; ++b)
+        d[a * m + b] = d[b * m + a] = Distance(rest, members(a, t), members(b, t));
+    }
+    if (neighbours == 0) continue;
+    for (Eigen::Index a = 0; a < m; ++a) {
+      // The k nearest, ties to the earlier member (a stable sort's first k): members are
+      // visited in order, and one only displaces those strictly farther.
+      const double* row = d.data() + a * m;
+      int count = 0;
+      for (int b = 0; b < m; ++b) {
+        const double db = row[b];
+        if (count == neighbours && !(db < near_d[count - 1])) continue;
+        int at = count < neighbours ? count++ : count - 1;
+        for (; at > 0 && db < near_d[at - 1]; --at) near_d[at] = near_d[at - 1], near[at] = near[at - 1];
+        near_d[at] = db, near[at] = b;
+      }
+      for (int k = 0; k < neighbours; ++k) {
+        const int va = members(a, t), vb = members(near[k], t);
+        pairs.emplace_back(std::min(va, vb), std::max(va, vb));
+      }
+    }
+  }
+  std::sort(pairs.begin(), pairs.end());
+  pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+
+  edges.resize(static_cast<Eigen::Index>(pairs.size()), 2);
+  for (size_t e = 0; e < pairs.size(); ++e) edges.row(static_cast<Eigen::Index>(e)) << pairs[e].first, pairs[e].second;
+  std::vector<std::array<int, 3>> tri;
+  tri.reserve(2 * pairs.size());
+  for (int side = 0; side < 2; ++side)
+    for (const auto& [a, b] : pairs) {
+      const int v = side == 0 ? a : b, w = side == 0 ? b : a;
+      if (partner[w] >= 0 && Distance(rest, v, w) > 0) tri.push_back({v, w, partner[w]});
+    }
+  triangles.resize(static_cast<Eigen::Index>(tri.size()), 3);
+  for (size_t k = 0; k < tri.size(); ++k)
+    triangles.row(static_cast<Eigen::Index>(k)) << tri[k][0], tri[k][1], tri[k][2];
+}
+
+void BlockTangentHeadings(const Eigen::Ref<const Trajectory2>& points, const Eigen::Ref<const IndexPairs>& blocks,
+                          const Eigen::Ref<const IndexTriples>& fixed, const Eigen::Ref<const Eigen::VectorXd>& fallback,
+                          double min_step, Eigen::VectorXd& headings) {
+  Check(fixed.rows() == fallback.size(), "BlockTangentHeadings: one fallback heading is needed per fixed range");
+  headings.setZero(points.rows());
+  Eigen::Index r = 0;
+  std::vector<FrameRange> ranges;
+  for (Eigen::Index b = 0; b < blocks.rows(); ++b) {
+    const int begin = blocks(b, 0), end = blocks(b, 1);
+    Check(0 <= begin && begin <= end && end <= points.rows(), "BlockTangentHeadings: block out of range");
+    ranges.clear();
+    const Eigen::Index first = r;
+    for (; r < fixed.rows() && fixed(r, 0) == b; ++r) ranges.emplace_back(fixed(r, 1), fixed(r, 2));
+    headings.segment(begin, end - begin) =
+        TangentHeadings(points.middleRows(begin, end - begin), ranges, fallback.segment(first, r - first), min_step);
+  }
+  Check(r == fixed.rows(), "BlockTangentHeadings: fixed ranges must be grouped by block, in block order");
+}
+
+namespace {
+
+using Complex = std::complex<double>;
+using SparseRow = std::vector<std::pair<int, Complex>>;  // sorted by column
+
+const Complex* Find(const SparseRow& row, int col) {
+  const auto it = std::lower_bound(row.begin(), row.end(), col, [](const auto& e, int c) { return e.first < c; });
+  return it != row.end() && it->first == col ? &it->second : nullptr;
+}
+
+// Unit-magnitude pseudo-random value k of sequence `stream` (splitmix64; deterministic).
+Complex Phase(uint64_t stream, uint64_t k) {
+  uint64_t z = stream * 0x9E3779B97F4A7C15ull + k + 1;
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  z ^= z >> 31;
+  return std::polar(1.0, 2.0 * M_PI * static_cast<double>(z >> 11) * 0x1.0p-53);
+}
+
+}  // namespace
+
+std::vector<char> NullSpaceSupport(const Eigen::Ref<const Eigen::VectorXi>& rows,
+                                   const Eigen::Ref<const Eigen::VectorXi>& cols,
+                                   const Eigen::Ref<const Eigen::VectorXcd>& values, int num_rows, int num_cols,
+                                   double tolerance) {
+  Check(num_rows >= 0 && num_cols >= 0, "NullSpaceSupport: negative size");
+  Check(rows.size() == cols.size() && rows.size() == values.size(),
+        "NullSpaceSupport: rows, cols and values must have one entry each");
+  Check(tolerance > 0 && std::isfinite(tolerance), "NullSpaceSupport: tolerance must be finite and > 0");
+  std::vector<char> used(static_cast<size_t>(num_cols), 1);
+  if (num_rows == 0) return used;
+
+  // Rows as sorted sparse vectors, repeated positions summed; columns scaled to unit max.
+  std::vector<std::array<int, 2>> at(static_cast<size_t>(rows.size()));
+  for (Eigen::Index e = 0; e < rows.size(); ++e) {
+    Check(rows[e] >= 0 && rows[e] < num_rows && cols[e] >= 0 && cols[e] < num_cols,
+          "NullSpaceSupport: entry out of range");
+    Check(std::isfinite(values[e].real()) && std::isfinite(values[e].imag()), "NullSpaceSupport: entries must be finite");
+    at[static_cast<size_t>(e)] = {rows[e], cols[e]};
+  }
+  std::vector<int> perm(at.size());
+  for (size_t e = 0; e < perm.size(); ++e) perm[e] = static_cast<int>(e);
+  std::stable_sort(perm.begin(), perm.end(), [&](int x, int y) { return at[x] < at[y]; });
+  std::vector<SparseRow> a(static_cast<size_t>(num_rows));
+  for (const int e : perm) {
+    SparseRow& row = a[static_cast<size_t>(at[e][0])];
+    if (!row.empty() && row.back().first == at[e][1])
+      row.back().second += values[e];
+    else
+      row.emplace_back(at[e][1], values[e]);
+  }
+  std::vector<double> scale(static_cast<size_t>(num_cols), 0.0);
+  for (const auto& row : a)
+    for (const auto& [c, v] : row) scale[c] = std::max(scale[c], std::abs(v));
+  std::vector<std::vector<int>> holders(static_cast<size_t>(num_cols));  // rows that may hold a column
+  for (int r = 0; r < num_rows; ++r)
+    for (auto& [c, v] : a[r]) {
+      if (scale[c] > 0) v /= scale[c];
+      holders[c].push_back(r);
+    }
+
+  // Row echelon form, column by column.
+  std::vector<char> active(static_cast<size_t>(num_rows), 1);
+  std::vector<int> pivot_row(static_cast<size_t>(num_cols), -1);
+  std::vector<int> seen(static_cast<size_t>(num_rows), -1);
+  SparseRow merged;
+  for (int c = 0; c < num_cols; ++c) {
+    int best = -1;
+    double best_abs = 0;
+    std::vector<int> holding;
+    for (const int r : holders[c]) {
+      if (!active[r] || seen[r] == c) continue;
+      seen[r] = c;
+      const Complex* v = Find(a[r], c);
+      if (!v || *v == Complex(0)) continue;
+      holding.push_back(r);
+      if (std::abs(*v) > best_abs) best_abs = std::abs(*v), best = r;
+    }
+    holders[c].clear();
+    if (best < 0 || best_abs <= tolerance) continue;  // a free column
+    pivot_row[c] = best;
+    active[best] = 0;
+    const SparseRow& p = a[best];
+    const Complex pv = *Find(p, c);
+    for (const int r : holding) {
+      if (r == best) continue;
+      SparseRow& row = a[r];
+      const Complex f = *Find(row, c) / pv;
+      merged.clear();
+      size_t i = 0, j = 0;
+      while (i < row.size() || j < p.size()) {
+        if (j == p.size() || (i < row.size() && row[i].first < p[j].first)) {
+          merged.push_back(row[i++]);
+        } else if (i == row.size() || p[j].first < row[i].first) {
+          merged.emplace_back(p[j].first, -f * p[j].second);
+          holders[p[j].first].push_back(r);
+          ++j;
+        } else {
+          if (row[i].first != c) merged.emplace_back(row[i].first, row[i].second - f * p[j].second);
+          ++i, ++j;
+        }
+      }
+      row.swap(merged);
+    }
+  }
+
+  // Back-substitute two pseudo-random null vectors; pivot rows hold no earlier pivot column.
+  std::vector<double> reach(static_cast<size_t>(num_cols), 0.0);
+  std::vector<Complex> x(static_cast<size_t>(num_cols));
+  for (uint64_t stream = 1; stream <= 2; ++stream) {
+    for (int c = 0; c < num_cols; ++c)
+      if (pivot_row[c] < 0) x[c] = Phase(stream, static_cast<uint64_t>(c));
+    for (int c = num_cols - 1; c >= 0; --c) {
+      if (pivot_row[c] < 0) continue;
+      Complex sum = 0, pivot = 0;
+      for (const auto& [j, v] : a[pivot_row[c]]) {
+        if (j == c)
+          pivot = v;
+        else
+          sum += v * x[j];
+      }
+      x[c] = -sum / pivot;
+      reach[c] = std::max(reach[c], std::abs(x[c]));
+    }
+  }
+  for (int c = 0; c < num_cols; ++c) used[c] = pivot_row[c] < 0 || reach[c] > tolerance;
+  return used;
+}
+
+}  // namespace mocapedit
