@@ -355,7 +355,7 @@ class ComponentProblem:
                 held[body_of[self.index[k.agent]]].add(a)
                 held[body_of[self.index[k.target]]].add(b)
         anchors = [sorted(x) for x in held]
-        self._anchor_places = places = [self._places(x) for x in held]
+        self._anchor_places = places = self._count_places(anchors)
         ro = self._red_offset
         self.translate_only = set()
         self.rigid, self.rigid_refs = [], []
@@ -377,13 +377,12 @@ class ComponentProblem:
             self._append_handle(self.pinned, self.rest[self.pinned], HARD, None)
         kernel = set() if self._pinned_down(bodies, held) else self._similarity_kernel(bodies)
         if kernel:
-            for body, anchor in zip(bodies, anchors):
-                if len(anchor) >= 2 and any(i in kernel for i in body):
-                    pts = self.rest[anchor]
-                    d = np.linalg.norm(pts[:, None] - pts[None], axis=-1)
-                    i, j = np.unravel_index(int(np.argmax(d)), d.shape)
-                    a, b = anchor[min(i, j)], anchor[max(i, j)]
-                    self.extra_links.append((a, b, self.rest[a] - self.rest[b]))
+            gauged = [k for k, (body, anchor) in enumerate(zip(bodies, anchors))
+                      if len(anchor) >= 2 and any(i in kernel for i in body)]
+            ends = self._farthest_anchors([anchors[k] for k in gauged])
+            if len(ends):
+                offsets = self.rest[ends[:, 0]] - self.rest[ends[:, 1]]
+                self.extra_links = [(a, b, o) for (a, b), o in zip(ends.tolist(), offsets)]
             if self.extra_links:
                 self.link_vertex = np.concatenate([self.link_vertex,
                                                    np.array([(a, b) for a, b, _ in self.extra_links], np.int32)])
@@ -393,6 +392,42 @@ class ComponentProblem:
                                   "as it can, the direction and distance between the farthest frames it is held at")
             if self._similarity_kernel(bodies):
                 self.notes.append("the constraints leave some agents free to move; add a position constraint")
+
+    def _count_places(self, sets: list[list[int]]) -> list[int]:
+        """How many distinct rest positions each list of vertices has."""
+        many = [k for k, verts in enumerate(sets) if len(verts) > 1]
+        if len(many) < 8:
+            return [self._places(verts) for verts in sets]
+        out = [len(verts) for verts in sets]
+        sizes = [len(sets[k]) for k in many]
+        owner = np.repeat(np.arange(len(many)), sizes)
+        pts = self.rest[np.fromiter(chain.from_iterable(sets[k] for k in many), np.int64, sum(sizes))]
+        order = np.lexsort((pts[:, 1], pts[:, 0], owner))
+        owner, pts = owner[order], pts[order]
+        new = np.ones(len(owner), bool)
+        new[1:] = (owner[1:] != owner[:-1]) | (pts[1:] != pts[:-1]).any(axis=1)
+        for k, n in zip(many, np.bincount(owner[new], minlength=len(many)).tolist()):
+            out[k] = n
+        return out
+
+    def _farthest_anchors(self, sets: list[list[int]]) -> np.ndarray:
+        """(S,2) per list of two or more vertices (sorted): the two farthest apart at rest, the
+        earlier listed first (the first such pair in row order; a vertex twice when all
+        coincide)."""
+        out = np.zeros((len(sets), 2), np.int64)
+        pairs = [k for k, verts in enumerate(sets) if len(verts) == 2]
+        if pairs:
+            ends = np.array([sets[k] for k in pairs], np.int64)
+            apart = np.linalg.norm(self.rest[ends[:, 0]] - self.rest[ends[:, 1]], axis=1) > 0
+            out[pairs, 0] = ends[:, 0]
+            out[pairs, 1] = np.where(apart, ends[:, 1], ends[:, 0])
+        for k, verts in enumerate(sets):
+            if len(verts) > 2:
+                pts = self.rest[verts]
+                d = np.linalg.norm(pts[:, None] - pts[None], axis=-1)
+                i, j = np.unravel_index(int(np.argmax(d)), d.shape)
+                out[k] = verts[min(i, j)], verts[max(i, j)]
+        return out
 
     def _pinned_down(self, bodies: list[list[int]], held: list[set[int]]) -> bool:
         """True when every body carries hard handles at two or more places and no link ties

@@ -36,10 +36,24 @@ double Distance(const Eigen::Ref<const Trajectory2>& p, Eigen::Index a, Eigen::I
 void ComponentChainTerms(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& offsets,
                          double min_baseline, IndexTriples& triangles, IndexPairs& edges) {
   CheckOffsets(offsets, rest.rows(), "ComponentChainTerms");
-  triangles.resize(0, 3);
-  edges.resize(0, 2);
-  for (Eigen::Index a = 0; a + 1 < offsets.size(); ++a)
-    AppendChainTerms(rest, offsets[a], offsets[a + 1] - offsets[a], min_baseline, triangles, edges);
+  // Each agent's terms on their own, then one copy: appending to the whole list would
+  // reallocate it once per agent.
+  const Eigen::Index agents = offsets.size() - 1;
+  std::vector<IndexTriples> tri(static_cast<size_t>(agents), IndexTriples(0, 3));
+  std::vector<IndexPairs> edg(static_cast<size_t>(agents), IndexPairs(0, 2));
+  Eigen::Index t = 0, e = 0;
+  for (Eigen::Index a = 0; a < agents; ++a) {
+    AppendChainTerms(rest, offsets[a], offsets[a + 1] - offsets[a], min_baseline, tri[a], edg[a]);
+    t += tri[a].rows(), e += edg[a].rows();
+  }
+  triangles.resize(t, 3);
+  edges.resize(e, 2);
+  t = e = 0;
+  for (Eigen::Index a = 0; a < agents; ++a) {
+    triangles.middleRows(t, tri[a].rows()) = tri[a];
+    edges.middleRows(e, edg[a].rows()) = edg[a];
+    t += tri[a].rows(), e += edg[a].rows();
+  }
 }
 
 void GroupSampleFrames(const Eigen::Ref<const Eigen::VectorXd>& sample_times,
@@ -95,38 +109,50 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
   Check(partner.size() == n, "GroupMeshTerms: one partner per vertex is needed");
   Check(neighbours >= 0 && (m == 0 || neighbours < m),
         "GroupMeshTerms: neighbours must be at least 0 and less than the member count");
-  for (Eigen::Index i = 0; i < members.size(); ++i)
-    Check(members.data()[i] >= 0 && members.data()[i] < n, "GroupMeshTerms: member vertex out of range");
+  Check(members.size() == 0 || (members.minCoeff() >= 0 && members.maxCoeff() < n),
+        "GroupMeshTerms: member vertex out of range");
   for (Eigen::Index v = 0; v < n; ++v)
     Check(partner[v] >= -1 && partner[v] < n, "GroupMeshTerms: partner out of range");
 
-  std::vector<std::pair<int, int>> pairs;
+  // Pairs packed as (min << 32 | max): sorting integers is cheaper than sorting pairs.
+  std::vector<uint64_t> pairs;
   pairs.reserve(static_cast<size_t>(m * times * neighbours));
-  std::vector<double> d(static_cast<size_t>(m * m));
-  std::vector<double> near_d(static_cast<size_t>(neighbours) + 1);
-  std::vector<int> near(static_cast<size_t>(neighbours) + 1);
-  for (Eigen::Index t = 0; t < times; ++t) {
+  std::vector<double> x(static_cast<size_t>(m)), y(static_cast<size_t>(m)), sq(static_cast<size_t>(m));
+  std::vector<std::pair<double, int>> near(static_cast<size_t>(neighbours) + 1), close;
+  for (Eigen::Index t = 0; t < times && neighbours > 0; ++t) {
+    for (Eigen::Index a = 0; a < m; ++a) x[a] = rest(members(a, t), 0), y[a] = rest(members(a, t), 1);
     for (Eigen::Index a = 0; a < m; ++a) {
-      d[a * m + a] = std::numeric_limits<double>::infinity();
-      for (Eigen::Index b = a + 1; b < m; ++b)
-        d[a * m + b] = d[b * m + a] = Distance(rest, members(a, t), members(b, t));
-    }
-    if (neighbours == 0) continue;
-    for (Eigen::Index a = 0; a < m; ++a) {
-      // The k nearest, ties to the earlier member (a stable sort's first k): members are
-      // visited in order, and one only displaces those strictly farther.
-      const double* row = d.data() + a * m;
+      const double xa = x[a], ya = y[a];
+      for (Eigen::Index b = 0; b < m; ++b) {
+        const double dx = xa - x[b], dy = ya - y[b];
+        sq[b] = dx * dx + dy * dy;
+      }
+      sq[a] = std::numeric_limits<double>::infinity();
+      // The k+1 smallest squared distances (ties to the earlier member)...
+      const int keep = neighbours + 1;
       int count = 0;
       for (int b = 0; b < m; ++b) {
-        const double db = row[b];
-        if (count == neighbours && !(db < near_d[count - 1])) continue;
-        int at = count < neighbours ? count++ : count - 1;
-        for (; at > 0 && db < near_d[at - 1]; --at) near_d[at] = near_d[at - 1], near[at] = near[at - 1];
-        near_d[at] = db, near[at] = b;
+        const double s = sq[b];
+        if (count == keep && !(s < near[count - 1].first)) continue;
+        int at = count < keep ? count++ : count - 1;
+        for (; at > 0 && s < near[at - 1].first; --at) near[at] = near[at - 1];
+        near[at] = {s, b};
+      }
+      // ... and the k nearest as a stable sort of the distances themselves would rank them:
+      // two squared distances may differ and their square roots not, so when the next one
+      // is that close to the k-th, every member whose distance may equal the k-th is
+      // ranked by (distance, member).
+      const double bound = near[neighbours - 1].first * (1 + 1e-14);
+      close.assign(near.begin(), near.begin() + neighbours);
+      if (count > neighbours && near[neighbours].first <= bound) {
+        close.clear();
+        for (int b = 0; b < m; ++b)
+          if (sq[b] <= bound) close.emplace_back(std::sqrt(sq[b]), b);
+        std::partial_sort(close.begin(), close.begin() + neighbours, close.end());
       }
       for (int k = 0; k < neighbours; ++k) {
-        const int va = members(a, t), vb = members(near[k], t);
-        pairs.emplace_back(std::min(va, vb), std::max(va, vb));
+        const uint64_t va = static_cast<uint32_t>(members(a, t)), vb = static_cast<uint32_t>(members(close[k].second, t));
+        pairs.push_back(std::min(va, vb) << 32 | std::max(va, vb));
       }
     }
   }
@@ -134,11 +160,13 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
   pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
 
   edges.resize(static_cast<Eigen::Index>(pairs.size()), 2);
-  for (size_t e = 0; e < pairs.size(); ++e) edges.row(static_cast<Eigen::Index>(e)) << pairs[e].first, pairs[e].second;
+  for (size_t e = 0; e < pairs.size(); ++e)
+    edges.row(static_cast<Eigen::Index>(e)) << static_cast<int>(pairs[e] >> 32), static_cast<int>(pairs[e] & 0xffffffffu);
   std::vector<std::array<int, 3>> tri;
   tri.reserve(2 * pairs.size());
   for (int side = 0; side < 2; ++side)
-    for (const auto& [a, b] : pairs) {
+    for (const uint64_t pair : pairs) {
+      const int a = static_cast<int>(pair >> 32), b = static_cast<int>(pair & 0xffffffffu);
       const int v = side == 0 ? a : b, w = side == 0 ? b : a;
       if (partner[w] >= 0 && Distance(rest, v, w) > 0) tri.push_back({v, w, partner[w]});
     }
