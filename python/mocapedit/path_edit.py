@@ -270,7 +270,9 @@ class ComponentProblem:
         s = self.settings
         self._offsets32 = np.array(self._red_offset, dtype=np.int32)
         tri, edg = _solver.component_chain_terms(self.rest, self._offsets32, s.min_baseline)
-        tw, ew = [np.ones(len(tri))], [np.ones(len(edg))]
+        tw, ew = [np.empty(len(tri)), np.empty(len(edg))]
+        tw.fill(1.0), ew.fill(1.0)
+        tw, ew = [tw], [ew]
         tri, edg = [tri], [edg]
         for n, g in enumerate(self.groups):
             t, e, w = self._group_terms(n, g)
@@ -289,8 +291,11 @@ class ComponentProblem:
         self.handle_vertex = np.array(self._hv, dtype=np.int32)
         self.handle_weight = np.array([h.weight for h in self.handles], dtype=np.float64)
         self.handle_refs = [h.ref for h in self.handles]
-        self.link_vertex = np.array(self._lv, dtype=np.int32).reshape(-1, 2)
-        self.link_weight = np.array([k.weight for k in self.links], dtype=np.float64)
+        if self.links:
+            self.link_vertex = np.array(self._lv, dtype=np.int32)
+            self.link_weight = np.array([k.weight for k in self.links], dtype=np.float64)
+        else:
+            self.link_vertex, self.link_weight = np.zeros((0, 2), np.int32), np.zeros(0)
         self.link_refs = [k.ref for k in self.links]
         self.extra_links: list[tuple[int, int, np.ndarray]] = []   # gauge terms: (a, b, offset)
         self.extra_handle_positions: list[np.ndarray] = []          # gauge pins
@@ -337,25 +342,31 @@ class ComponentProblem:
         """How many distinct rest positions the vertices have."""
         if len(verts) < 2:
             return len(verts)
-        return len(set(map(tuple, self.rest[np.fromiter(verts, np.int64, len(verts))].tolist())))
+        at = self.rest.item
+        return len({(at(v, 0), at(v, 1)) for v in verts})
 
     def _resolve_freedom(self) -> None:
-        bodies = self._bodies()
+        bodies, index = self._bodies(), self.index
         self._body_of = body_of = [0] * len(self.order)
         for b, body in enumerate(bodies):
             for i in body:
                 body_of[i] = b
-        # Anchors: the vertices each body is held at by a handle or a link.
-        held = [set() for _ in bodies]
+        # Anchors: the vertices each body is held at by a handle or a link; by a hard handle.
+        held, hard = [set() for _ in bodies], [set() for _ in bodies]
+        handled = False
         for h, v in zip(self.handles, self._hv):
             if h.weight > 0:
-                held[body_of[self.index[h.agent]]].add(v)
+                handled = True
+                b = body_of[index[h.agent]]
+                held[b].add(v)
+                if h.weight == HARD:
+                    hard[b].add(v)
         for k, (a, b) in zip(self.links, self._lv):
             if k.weight > 0:
-                held[body_of[self.index[k.agent]]].add(a)
-                held[body_of[self.index[k.target]]].add(b)
+                held[body_of[index[k.agent]]].add(a)
+                held[body_of[index[k.target]]].add(b)
         anchors = [sorted(x) for x in held]
-        self._anchor_places = places = self._count_places(anchors)
+        places = self._count_places(anchors)
         ro = self._red_offset
         self.translate_only = set()
         self.rigid, self.rigid_refs = [], []
@@ -372,10 +383,10 @@ class ComponentProblem:
                 self.rigid_refs.append(("stationary", self.order[i], r))
         # No position constraint: pin one link end; the solve is shifted back afterwards.
         self.pinned = None
-        if not any(h.weight > 0 for h in self.handles) and len(self.links):
+        if not handled and self.links:
             self.pinned = self._lv[0][0]
             self._append_handle(self.pinned, self.rest[self.pinned], HARD, None)
-        kernel = set() if self._pinned_down(bodies, held) else self._similarity_kernel(bodies)
+        kernel = set() if self._pinned_down(held, hard, places) else self._similarity_kernel(bodies)
         if kernel:
             gauged = [k for k, (body, anchor) in enumerate(zip(bodies, anchors))
                       if len(anchor) >= 2 and any(i in kernel for i in body)]
@@ -429,18 +440,15 @@ class ComponentProblem:
                 out[k] = verts[min(i, j)], verts[max(i, j)]
         return out
 
-    def _pinned_down(self, bodies: list[list[int]], held: list[set[int]]) -> bool:
+    def _pinned_down(self, held: list[set[int]], hard: list[set[int]], places: list[int]) -> bool:
         """True when every body carries hard handles at two or more places and no link ties
         bodies together: nothing is left free (the common case, decided without analysis).
-        ``held``: each body's anchors (whose places are counted already)."""
+        Per body: ``held`` its anchors (at ``places`` distinct places), ``hard`` its hard
+        handles' vertices."""
         if len(self.link_vertex):
             return False
-        hard = [set() for _ in bodies]
-        for v, h in zip(self._hv, self.handles):
-            if h.weight == HARD:
-                hard[self._body_of[self.index[h.agent]]].add(v)
         return all((n if verts == anchors else self._places(verts)) >= 2
-                   for verts, anchors, n in zip(hard, held, self._anchor_places))
+                   for verts, anchors, n in zip(hard, held, places))
 
     def _append_handle(self, v: int, position: np.ndarray, weight: float, ref) -> None:
         self.handle_vertex = np.append(self.handle_vertex, np.int32(v)).astype(np.int32)
@@ -585,8 +593,11 @@ class ComponentProblem:
                 tangent.append(i)
         if tangent:
             blocks = np.array([(fo[i], fo[i + 1]) for i in tangent], dtype=np.int32)
-            h = _solver.block_tangent_headings(ground, blocks, np.array(fixed, dtype=np.int32).reshape(-1, 3),
-                                               np.array(fallback, dtype=np.float64), self.settings.still)
+            if fixed:
+                fixed, fallback = np.array(fixed, dtype=np.int32), np.array(fallback, dtype=np.float64)
+            else:
+                fixed, fallback = np.zeros((0, 3), np.int32), np.zeros(0)
+            h = _solver.block_tangent_headings(ground, blocks, fixed, fallback, self.settings.still)
             for i, (begin, end) in zip(tangent, blocks.tolist()):
                 out[i] = h[begin:end]
         return out

@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <iterator>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -117,26 +118,71 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
   // Pairs packed as (min << 32 | max): sorting integers is cheaper than sorting pairs.
   std::vector<uint64_t> pairs;
   pairs.reserve(static_cast<size_t>(m * times * neighbours));
-  std::vector<double> x(static_cast<size_t>(m)), y(static_cast<size_t>(m)), sq(static_cast<size_t>(m));
-  std::vector<std::pair<double, int>> near(static_cast<size_t>(neighbours) + 1), close;
+  std::vector<double> x(static_cast<size_t>(m)), y(static_cast<size_t>(m));
+  const int keep = neighbours + 1;
+  std::vector<std::pair<double, int>> near(static_cast<size_t>(keep)), close, met;
+  const auto squared = [&](int a, int b) {  // as Distance, squared
+    const double dx = x[a] - x[b], dy = y[a] - y[b];
+    return dx * dx + dy * dy;
+  };
+  // Members bucketed in a grid of about one member per cell; each one's candidates are met
+  // ring by ring around its cell, until the next ring is farther than the (k+1)-th nearest.
+  std::vector<int> cell_of(static_cast<size_t>(m)), start, items(static_cast<size_t>(m));
   for (Eigen::Index t = 0; t < times && neighbours > 0; ++t) {
-    for (Eigen::Index a = 0; a < m; ++a) x[a] = rest(members(a, t), 0), y[a] = rest(members(a, t), 1);
+    double x0 = std::numeric_limits<double>::infinity(), y0 = x0, x1 = -x0, y1 = -x0;
     for (Eigen::Index a = 0; a < m; ++a) {
-      const double xa = x[a], ya = y[a];
-      for (Eigen::Index b = 0; b < m; ++b) {
-        const double dx = xa - x[b], dy = ya - y[b];
-        sq[b] = dx * dx + dy * dy;
-      }
-      sq[a] = std::numeric_limits<double>::infinity();
-      // The k+1 smallest squared distances (ties to the earlier member)...
-      const int keep = neighbours + 1;
+      x[a] = rest(members(a, t), 0), y[a] = rest(members(a, t), 1);
+      Check(std::isfinite(x[a]) && std::isfinite(y[a]), "GroupMeshTerms: rest positions must be finite");
+      x0 = std::min(x0, x[a]), x1 = std::max(x1, x[a]), y0 = std::min(y0, y[a]), y1 = std::max(y1, y[a]);
+    }
+    const double extent = std::max(x1 - x0, y1 - y0);
+    const double h = extent > 0 ? std::max(extent / std::ceil(std::sqrt(static_cast<double>(m))), extent * 1e-6) : 1.0;
+    const int nx = static_cast<int>((x1 - x0) / h) + 1, ny = static_cast<int>((y1 - y0) / h) + 1;
+    start.assign(static_cast<size_t>(nx) * ny + 1, 0);
+    for (int a = 0; a < m; ++a) {
+      const int cx = std::min(static_cast<int>((x[a] - x0) / h), nx - 1);
+      const int cy = std::min(static_cast<int>((y[a] - y0) / h), ny - 1);
+      cell_of[a] = cy * nx + cx;
+      ++start[cell_of[a] + 1];
+    }
+    for (size_t c = 1; c < start.size(); ++c) start[c] += start[c - 1];
+    {
+      std::vector<int> next(start.begin(), start.end() - 1);
+      for (int a = 0; a < m; ++a) items[next[cell_of[a]]++] = a;
+    }
+    for (int a = 0; a < m; ++a) {
+      // The k+1 smallest squared distances, ties to the earlier member...
       int count = 0;
-      for (int b = 0; b < m; ++b) {
-        const double s = sq[b];
-        if (count == keep && !(s < near[count - 1].first)) continue;
-        int at = count < keep ? count++ : count - 1;
-        for (; at > 0 && s < near[at - 1].first; --at) near[at] = near[at - 1];
-        near[at] = {s, b};
+      met.clear();
+      const int ax = cell_of[a] % nx, ay = cell_of[a] / nx;
+      for (int ring = 0;; ++ring) {
+        // Members outside the rings so far are at least (ring - 1) cells away along x or y.
+        // (Margins: the cells are found in rounded arithmetic, and the ties below must all
+        // have been met.)
+        const double reach = (ring - 1) * h * (1 - 1e-9);
+        if (ring > 0 && count == keep && reach > 0 && reach * reach > near[keep - 1].first * (1 + 1e-13)) break;
+        if (ax - ring < 0 && ay - ring < 0 && ax + ring >= nx && ay + ring >= ny) break;
+        const auto visit = [&](int cx, int cy) {
+          const int c = cy * nx + cx;
+          for (int i = start[c]; i < start[c + 1]; ++i) {
+            const int b = items[i];
+            if (b == a) continue;
+            const std::pair<double, int> e{squared(a, b), b};
+            met.push_back(e);
+            if (count == keep && !(e < near[count - 1])) continue;
+            int at = count < keep ? count++ : count - 1;
+            for (; at > 0 && e < near[at - 1]; --at) near[at] = near[at - 1];
+            near[at] = e;
+          }
+        };
+        for (int cy = std::max(ay - ring, 0); cy <= std::min(ay + ring, ny - 1); ++cy) {
+          if (cy == ay - ring || cy == ay + ring) {
+            for (int cx = std::max(ax - ring, 0); cx <= std::min(ax + ring, nx - 1); ++cx) visit(cx, cy);
+          } else {
+            if (ax - ring >= 0) visit(ax - ring, cy);
+            if (ax + ring < nx) visit(ax + ring, cy);
+          }
+        }
       }
       // ... and the k nearest as a stable sort of the distances themselves would rank them:
       // two squared distances may differ and their square roots not, so when the next one
@@ -146,8 +192,8 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
       close.assign(near.begin(), near.begin() + neighbours);
       if (count > neighbours && near[neighbours].first <= bound) {
         close.clear();
-        for (int b = 0; b < m; ++b)
-          if (sq[b] <= bound) close.emplace_back(std::sqrt(sq[b]), b);
+        for (const auto& [sq, b] : met)
+          if (sq <= bound) close.emplace_back(std::sqrt(sq), b);
         std::partial_sort(close.begin(), close.begin() + neighbours, close.end());
       }
       for (int k = 0; k < neighbours; ++k) {
@@ -156,8 +202,22 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
       }
     }
   }
-  std::sort(pairs.begin(), pairs.end());
-  pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+  // Sorted and unique: bucketed by first vertex (vertex indices are bounded), each bucket
+  // (a few pairs) sorted on its own.
+  {
+    std::vector<int> first(static_cast<size_t>(n) + 1, 0);
+    for (const uint64_t pair : pairs) ++first[(pair >> 32) + 1];
+    for (Eigen::Index v = 0; v < n; ++v) first[v + 1] += first[v];
+    std::vector<uint64_t> sorted(pairs.size());
+    std::vector<int> next(first.begin(), first.end() - 1);
+    for (const uint64_t pair : pairs) sorted[next[pair >> 32]++] = pair;
+    pairs.clear();
+    for (Eigen::Index v = 0; v < n; ++v) {
+      const auto begin = sorted.begin() + first[v], end = sorted.begin() + first[v + 1];
+      std::sort(begin, end);
+      std::unique_copy(begin, end, std::back_inserter(pairs));
+    }
+  }
 
   edges.resize(static_cast<Eigen::Index>(pairs.size()), 2);
   for (size_t e = 0; e < pairs.size(); ++e)
