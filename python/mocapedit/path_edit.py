@@ -169,25 +169,24 @@ class ComponentProblem:
         Kwon et al. build the group mesh on sampled frames too; here the frames between two
         keys follow them as one similarity, so they keep their shape and their sway.
 
-        Sets ``keys`` (member path -> its key frames), ``rest``/``offset`` (the solve's
-        vertices) and, when there are members, the maps between frames and vertices."""
+        Sets ``rest``/``offset`` (the solve's vertices) and, when there are members, the maps
+        between frames and vertices (``keys`` gives each member's key frames)."""
         s, fo = self.settings, self._full_offset
-        self.keys: dict[str, np.ndarray] = {}
-        self._samples: dict[int, np.ndarray] = {}   # group -> (M,T) full vertex of each member, -1 none
-        self._sel = None                             # (V,) full vertex of each solve vertex
+        self._samples: dict[int, np.ndarray] = {}   # group -> (M,T) frame of each member, -1 none
+        self._sel = None                             # (V,) frame of each solve vertex
+        self._red_stationary = [a.stationary for a in self._inputs]
         active = [(n, g, [self.index[m] for m in g.members if m in self.index])
                   for n, g in enumerate(self.groups) if g.stiffness > 0]
         members = sorted({i for _, _, ids in active for i in ids})
+        self._members = members
         if not members:
             self.rest = self._rest_full
             self._red_offset = fo
-            self._red_stationary = [a.stationary for a in self._inputs]
             self.offset = np.array(fo, dtype=np.int64)
             return
-        counts = np.diff(np.array(fo, dtype=np.int64))
-        is_member = np.zeros(len(self._inputs), bool)
-        is_member[members] = True
-        key = np.repeat(~is_member, counts)
+        is_member = np.zeros(len(self._inputs), np.int32)
+        is_member[members] = 1
+        forced = []
         for n, g, ids in active:
             if not ids:
                 continue
@@ -200,48 +199,38 @@ class ComponentProblem:
                 np.cumsum([0] + [len(t) for t in times], dtype=np.int32),
                 np.arange(start, end + 1e-9, s.group_step))
             vert = np.where(frames >= 0, frames + np.array([fo[i] for i in ids])[:, None], -1)
-            key[vert[vert >= 0]] = True
+            forced.append(vert[vert >= 0])
             self._samples[n] = vert
+        marks = []
         for i in members:
-            key[fo[i]] = key[fo[i + 1] - 1] = True
+            marks += (fo[i], fo[i + 1] - 1)
             for first, last in self._inputs[i].stationary:
-                key[fo[i] + max(first - 1, 0):fo[i] + min(last + 2, fo[i + 1] - fo[i])] = True
+                marks.extend(range(fo[i] + max(first - 1, 0), fo[i] + min(last + 2, fo[i + 1] - fo[i])))
         for h in self.handles:
             if h.weight > 0 and is_member[self.index[h.agent]]:
-                key[fo[self.index[h.agent]] + h.frame] = True
+                marks.append(fo[self.index[h.agent]] + h.frame)
         for k in self.links:
             if k.weight > 0:
                 for agent, frame in ((k.agent, k.frame), (k.target, k.target_frame)):
                     if is_member[self.index[agent]]:
-                        key[fo[self.index[agent]] + frame] = True
-        # A stretch between two keys framed by less than min_baseline keeps every frame.
-        member_vertex = np.repeat(is_member, counts)
-        at = np.flatnonzero(key & member_vertex)
-        owner = np.repeat(np.arange(len(counts)), counts)[at]
-        short = (owner[1:] == owner[:-1]) & \
-            (np.linalg.norm(self._rest_full[at[1:]] - self._rest_full[at[:-1]], axis=1) < s.min_baseline)
-        if short.any():
-            cover = np.cumsum(np.bincount(at[:-1][short], minlength=len(key) + 1) -
-                              np.bincount(at[1:][short], minlength=len(key) + 1))[:-1]
-            key |= cover > 0
-        self._sel = sel = np.flatnonzero(key)
-        self._before = before = np.cumsum(key) - key   # solve vertex of each key; of the next key otherwise
-        self.rest = self._rest_full[sel]
-        ro = [int(before[f]) for f in fo[:-1]] + [len(sel)]
+                        marks.append(fo[self.index[agent]] + frame)
+        forced.append(np.array(marks, dtype=np.int64))
+        self._sel, self._before = _solver.key_frames(self._rest_full, np.array(fo, dtype=np.int32), is_member,
+                                                     np.concatenate(forced).astype(np.int32), s.min_baseline)
+        self.rest = self._rest_full[self._sel]
+        before = self._before
+        ro = [int(before[f]) for f in fo[:-1]] + [len(self._sel)]
         self._red_offset = ro
         self.offset = np.array(ro, dtype=np.int64)
-        self._red_stationary = [a.stationary for a in self._inputs]
         for i in members:
-            a = self._inputs[i]
-            self.keys[a.path] = sel[ro[i]:ro[i + 1]] - fo[i]
             self._red_stationary[i] = [(int(before[fo[i] + f]) - ro[i], int(before[fo[i] + l]) - ro[i])
-                                       for f, l in a.stationary]
-        # Frames between keys: the keys around them, and where they sit between their rests.
-        self._between = between = np.flatnonzero(~key)
-        self._hi = before[between]
-        z = self._rest_full[:, 0] + 1j * self._rest_full[:, 1]
-        lo, hi = sel[self._hi - 1], sel[self._hi]
-        self._gamma = (z[between] - z[lo]) / (z[hi] - z[lo])
+                                       for f, l in self._inputs[i].stationary]
+
+    @property
+    def keys(self) -> dict[str, np.ndarray]:
+        """Group member path -> its key frames (the frames it is solved on)."""
+        fo, ro = self._full_offset, self._red_offset
+        return {self.order[i]: self._sel[ro[i]:ro[i + 1]] - fo[i] for i in self._members}
 
     def _expand(self, positions: np.ndarray) -> np.ndarray:
         """(F,2) paths of every agent, concatenated, from the solve's vertices: each frame
@@ -249,20 +238,13 @@ class ComponentProblem:
         to their new ones."""
         if self._sel is None:
             return positions.copy()
-        out = np.empty_like(self._rest_full)
-        out[self._sel] = positions
-        x = positions[:, 0] + 1j * positions[:, 1]
-        lo, hi = x[self._hi - 1], x[self._hi]
-        x = lo + self._gamma * (hi - lo)
-        out[self._between, 0] = x.real
-        out[self._between, 1] = x.imag
-        return out
+        return _solver.expand_key_frames(self._rest_full, self._sel, np.ascontiguousarray(positions))
 
     # ---- structure ---------------------------------------------------------------------
 
     def vertex(self, agent: str, frame: int) -> int:
         i = self.index[agent]
-        if self._sel is not None and agent in self.keys:
+        if self._sel is not None:
             return int(self._before[self._full_offset[i] + int(frame)])
         return self._red_offset[i] + int(frame)
 
@@ -281,8 +263,8 @@ class ComponentProblem:
         if len(tri) == 1:
             self.triangles, self.edges, self.triangle_weights, self.edge_weights = tri[0], edg[0], tw[0], ew[0]
         else:
-            self.triangles = np.concatenate(tri).astype(np.int32)
-            self.edges = np.concatenate(edg).astype(np.int32)
+            self.triangles = np.concatenate(tri).astype(np.int32, copy=False)
+            self.edges = np.concatenate(edg).astype(np.int32, copy=False)
             self.triangle_weights = np.concatenate(tw)
             self.edge_weights = np.concatenate(ew)
         # Handles and links, in input order (the solver reports contradictions by index).
@@ -308,11 +290,11 @@ class ComponentProblem:
         if g.stiffness <= 0 or count < 2 or n not in self._samples:
             return np.zeros((0, 3), np.int32), np.zeros((0, 2), np.int32), 0.0
         vert = self._samples[n]
-        vert = self._before[vert[:, (vert >= 0).all(axis=0)]]
+        vert = self._before[vert[:, (vert >= 0).all(axis=0)]]   # their solve vertices
         if not hasattr(self, "_partner"):
             self._partner = _solver.frame_partners(self.rest, self._offsets32, self.settings.min_baseline)
         k = min(self.settings.group_neighbours, count - 1)
-        tri, edg = _solver.group_mesh_terms(self.rest, vert.astype(np.int32), k, self._partner)
+        tri, edg = _solver.group_mesh_terms(self.rest, vert, k, self._partner)
         return tri, edg, g.stiffness
 
     # ---- the freedom the constraints leave -------------------------------------------

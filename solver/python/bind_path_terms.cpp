@@ -25,6 +25,32 @@ MOCAPEDIT_BINDINGS(BindPathTerms) {
       "(triangles (T,3), edges (V-A,2)) shape terms of every agent: rest (V,2) concatenated,\n"
       "offsets (A+1,) int32 first vertex of each agent then V. chain_terms for each agent in order.");
   m.def(
+      "key_frames",
+      [](const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& offsets,
+         const Eigen::Ref<const Eigen::VectorXi>& keyed, const Eigen::Ref<const Eigen::VectorXi>& forced,
+         double min_baseline) {
+        Eigen::VectorXi keys, before;
+        mocapedit::KeyFrames(rest, offsets, keyed, forced, min_baseline, keys, before);
+        return py::make_tuple(keys, before);
+      },
+      py::arg("rest"), py::arg("offsets"), py::arg("keyed"), py::arg("forced"), py::arg("min_baseline"),
+      "(keys (K,), before (V,)) int32: key frames of agents solved on keys (keyed (A,) int32 flags),\n"
+      "forced (N,) int32 frames that must be keys, and per frame how many keys precede it.");
+  m.def(
+      "expand_key_frames",
+      [](const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& keys,
+         const Eigen::Ref<const Trajectory2>& positions) {
+        Trajectory2 out;
+        {
+          py::gil_scoped_release release;
+          mocapedit::ExpandKeyFrames(rest, keys, positions, out);
+        }
+        return out;
+      },
+      py::arg("rest"), py::arg("keys"), py::arg("positions"),
+      "(V,2) every frame from the (K,2) solved positions of the keys (K,) int32: frames between\n"
+      "two keys follow the similarity taking the keys' rest positions to their solved ones.");
+  m.def(
       "group_sample_frames",
       [](const Eigen::Ref<const Eigen::VectorXd>& sample_times, const Eigen::Ref<const Eigen::VectorXi>& offsets,
          const Eigen::Ref<const Eigen::VectorXd>& times) {

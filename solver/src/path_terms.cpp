@@ -57,6 +57,64 @@ void ComponentChainTerms(const Eigen::Ref<const Trajectory2>& rest, const Eigen:
   }
 }
 
+void KeyFrames(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& offsets,
+               const Eigen::Ref<const Eigen::VectorXi>& keyed, const Eigen::Ref<const Eigen::VectorXi>& forced,
+               double min_baseline, Eigen::VectorXi& keys, Eigen::VectorXi& before) {
+  const Eigen::Index n = rest.rows();
+  CheckOffsets(offsets, n, "KeyFrames");
+  Check(keyed.size() == offsets.size() - 1, "KeyFrames: one keyed flag per agent is needed");
+  std::vector<char> key(static_cast<size_t>(n), 0);
+  for (Eigen::Index a = 0; a < keyed.size(); ++a)
+    if (!keyed[a]) std::fill(key.begin() + offsets[a], key.begin() + offsets[a + 1], 1);
+  for (Eigen::Index i = 0; i < forced.size(); ++i) {
+    Check(forced[i] >= 0 && forced[i] < n, "KeyFrames: forced frame out of range");
+    key[forced[i]] = 1;
+  }
+  // Keys of one agent closer than min_baseline: every frame between them is a key too
+  // (decided on the keys given, not on those this adds).
+  for (Eigen::Index a = 0; a < keyed.size(); ++a) {
+    if (!keyed[a]) continue;
+    int last = -1;
+    for (int f = offsets[a]; f < offsets[a + 1]; ++f) {
+      if (!key[f]) continue;
+      if (last >= 0 && f > last + 1 && Distance(rest, last, f) < min_baseline)
+        std::fill(key.begin() + last + 1, key.begin() + f, 2);
+      last = f;
+    }
+  }
+  before.resize(n);
+  int count = 0;
+  for (Eigen::Index f = 0; f < n; ++f) {
+    before[f] = count;
+    count += key[f] != 0;
+  }
+  keys.resize(count);
+  for (Eigen::Index f = 0, k = 0; f < n; ++f)
+    if (key[f]) keys[k++] = static_cast<int>(f);
+}
+
+void ExpandKeyFrames(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& keys,
+                     const Eigen::Ref<const Trajectory2>& positions, Trajectory2& out) {
+  const Eigen::Index n = rest.rows(), k = keys.size();
+  Check(positions.rows() == k, "ExpandKeyFrames: one position per key is needed");
+  Check(n == 0 || (k >= 1 && keys[0] == 0 && keys[k - 1] == n - 1),
+        "ExpandKeyFrames: the first and last frames must be keys");
+  out.resize(n, 2);
+  for (Eigen::Index j = 0; j < k; ++j) {
+    Check(j == 0 || keys[j] > keys[j - 1], "ExpandKeyFrames: keys must increase");
+    out.row(keys[j]) = positions.row(j);
+    if (j == 0 || keys[j] == keys[j - 1] + 1) continue;
+    const int f0 = keys[j - 1], f1 = keys[j];
+    const std::complex<double> z0(rest(f0, 0), rest(f0, 1)), dz = std::complex<double>(rest(f1, 0), rest(f1, 1)) - z0;
+    const std::complex<double> x0(positions(j - 1, 0), positions(j - 1, 1));
+    const std::complex<double> dx = std::complex<double>(positions(j, 0), positions(j, 1)) - x0;
+    for (int f = f0 + 1; f < f1; ++f) {
+      const std::complex<double> x = x0 + (std::complex<double>(rest(f, 0), rest(f, 1)) - z0) / dz * dx;
+      out(f, 0) = x.real(), out(f, 1) = x.imag();
+    }
+  }
+}
+
 void GroupSampleFrames(const Eigen::Ref<const Eigen::VectorXd>& sample_times,
                        const Eigen::Ref<const Eigen::VectorXi>& offsets, const Eigen::Ref<const Eigen::VectorXd>& times,
                        Eigen::Matrix<int, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& frames) {

@@ -34,6 +34,40 @@ namespace mocapedit {
 void ComponentChainTerms(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& offsets,
                          double min_baseline, IndexTriples& triangles, IndexPairs& edges);
 
+// Key frames of a component's agents: group members are solved on key frames only, and
+// the frames between two keys follow them (ExpandKeyFrames).
+//
+// Inputs:
+//   rest          #V by 2 rest positions of every frame of every agent, concatenated
+//   offsets       #A+1 first frame of each agent, then #V
+//   keyed         #A 1 for agents solved on key frames (group members), 0 for agents
+//                 that keep every frame
+//   forced        #N frames (indices into rest) that must be keys; any order, repeats
+//   min_baseline  stage units: two consecutive keys of an agent closer than this keep
+//                 every frame between them (a stretch too short to interpolate across)
+// Outputs:
+//   keys          #K increasing frame indices of the keys (every frame of unkeyed agents)
+//   before        #V per frame, how many keys come before it: the solve's vertex of a key,
+//                 and of the next key for other frames
+// Throws std::invalid_argument on bad offsets or forced frames out of range.
+void KeyFrames(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& offsets,
+               const Eigen::Ref<const Eigen::VectorXi>& keyed, const Eigen::Ref<const Eigen::VectorXi>& forced,
+               double min_baseline, Eigen::VectorXi& keys, Eigen::VectorXi& before);
+
+// Every frame's position from the key frames' solved positions: a frame between keys j0
+// and j1 is carried by the similarity that takes their rest positions to their solved
+// ones, x = x0 + (z - z0) / (z1 - z0) * (x1 - x0) in complex numbers.
+//
+// Inputs:
+//   rest       #V by 2 rest positions of every frame
+//   keys       #K increasing frame indices, the first and last frame among them
+//   positions  #K by 2 solved positions of the keys
+// Outputs:
+//   out        #V by 2
+// Throws std::invalid_argument on bad sizes or keys.
+void ExpandKeyFrames(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& keys,
+                     const Eigen::Ref<const Trajectory2>& positions, Trajectory2& out);
+
 // The frame of each member at each sampled time of a group.
 //
 // Inputs:
