@@ -180,3 +180,43 @@ TEST(PathTerms, BlockHeadingsAreEachBlocksTangentHeadings) {
   EXPECT_EQ(h.segment(0, 20), second);
   EXPECT_TRUE((h.segment(40, 20).array() == 0).all());
 }
+
+TEST(PathTerms, KeyFramesKeepShortStretchesAndUnkeyedAgents) {
+  Trajectory2 rest(10, 2);
+  // Agent 0 (frames 0-6) walks, then stands from frame 3 to 5; agent 1 (frames 7-9).
+  rest << 0, 0, 1, 0, 2, 0, 3, 0, 3, 0, 3.005, 0, 4, 0, 9, 9, 9, 9, 9, 9;
+  Eigen::VectorXi offsets(3), keyed(2), forced(4);
+  offsets << 0, 7, 10;
+  keyed << 1, 0;
+  forced << 6, 0, 3, 5;  // any order
+  Eigen::VectorXi keys, before;
+  mocapedit::KeyFrames(rest, offsets, keyed, forced, 0.01, keys, before);
+  // 3 -> 5 is 0.005 apart: frame 4 between them is kept; 0 -> 3 and 5 -> 6 are not short.
+  Eigen::VectorXi expected_keys(8), expected_before(10);
+  expected_keys << 0, 3, 4, 5, 6, 7, 8, 9;
+  expected_before << 0, 1, 1, 1, 2, 3, 4, 5, 6, 7;
+  EXPECT_EQ(keys, expected_keys);
+  EXPECT_EQ(before, expected_before);
+  forced[0] = 10;
+  EXPECT_THROW(mocapedit::KeyFrames(rest, offsets, keyed, forced, 0.01, keys, before), std::invalid_argument);
+}
+
+TEST(PathTerms, ExpandedFramesFollowTheSimilarityOfTheirKeys) {
+  Trajectory2 rest(6, 2);
+  rest << 0, 0, 1, 0.2, 2, -0.1, 3, 0, 4, 0.3, 5, 0;
+  Eigen::VectorXi keys(3);
+  keys << 0, 3, 5;
+  // Keys moved by one similarity (turned by 0.5 rad, scaled by 1.2, moved): so is every frame.
+  const std::complex<double> s = std::polar(1.2, 0.5), t(2.0, -1.0);
+  const auto move = [&](int f) { return s * std::complex<double>(rest(f, 0), rest(f, 1)) + t; };
+  Trajectory2 positions(3, 2);
+  for (int j = 0; j < 3; ++j) positions.row(j) << move(keys[j]).real(), move(keys[j]).imag();
+  Trajectory2 out;
+  mocapedit::ExpandKeyFrames(rest, keys, positions, out);
+  for (int f = 0; f < 6; ++f) {
+    EXPECT_NEAR(out(f, 0), move(f).real(), 1e-12) << "frame " << f;
+    EXPECT_NEAR(out(f, 1), move(f).imag(), 1e-12) << "frame " << f;
+  }
+  keys[2] = 4;  // the last frame must be a key
+  EXPECT_THROW(mocapedit::ExpandKeyFrames(rest, keys, positions, out), std::invalid_argument);
+}
