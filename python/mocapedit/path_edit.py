@@ -329,6 +329,7 @@ class ComponentProblem:
 
     def _resolve_freedom(self) -> None:
         bodies, index = self._bodies(), self.index
+        self._centre = None
         self._body_of = body_of = [0] * len(self.order)
         for b, body in enumerate(bodies):
             for i in body:
@@ -448,12 +449,12 @@ class ComponentProblem:
         nb = len(bodies)
         similar = np.array([body[0] not in self.translate_only for body in bodies])
         start = np.concatenate([[0], np.cumsum(np.where(similar, 2, 1))])
-        counts = np.diff(self.offset)
-        body_of_vertex = np.repeat(np.array(self._body_of, dtype=np.int64), counts)
-        sums = np.zeros((nb, 2))
-        np.add.at(sums, self._body_of, np.add.reduceat(self.rest, self.offset[:-1]) if len(self.rest) else 0.0)
-        sizes = np.bincount(self._body_of, weights=counts, minlength=nb)
-        centre = sums / sizes[:, None]
+        body_of = np.array(self._body_of, dtype=np.int64)
+        if self._centre is None:   # of each body's rest vertices
+            sums = np.zeros((nb, 2))
+            np.add.at(sums, body_of, np.add.reduceat(self.rest, self.offset[:-1]))
+            self._centre = sums / np.bincount(body_of, weights=np.diff(self.offset), minlength=nb)[:, None]
+        centre = self._centre
         hv, hw = self.handle_vertex, self.handle_weight
         lv, lw = self.link_vertex, self.link_weight
         hv, lv = hv[hw > 0], lv[lw > 0]
@@ -463,18 +464,15 @@ class ComponentProblem:
         verts = np.concatenate([hv, lv[:, 0], lv[:, 1]]).astype(np.int64)
         rows = np.concatenate([np.arange(nh), nh + np.arange(nl), nh + np.arange(nl)])
         sign = np.concatenate([np.ones(nh + nl), -np.ones(nl)])
-        b = body_of_vertex[verts]
+        b = body_of[np.searchsorted(self.offset, verts, side="right") - 1]
         d = self.rest[verts] - centre[b]
         two = similar[b]
         values = np.concatenate([sign + 0j, sign[two] * (d[two, 0] + 1j * d[two, 1])])
         used = _solver.null_space_support(np.concatenate([rows, rows[two]]).astype(np.int32),
                                           np.concatenate([start[b], start[b][two] + 1]).astype(np.int32),
                                           values, nh + nl, int(start[-1]))
-        free = set()
-        for k, body in enumerate(bodies):
-            if used[start[k]:start[k + 1]].any():
-                free.update(body)
-        return free
+        moved = np.logical_or.reduceat(used, start[:-1]).tolist()
+        return {i for body, m in zip(bodies, moved) if m for i in body}
 
     # ---- solving -----------------------------------------------------------------------
 
