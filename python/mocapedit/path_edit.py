@@ -330,10 +330,13 @@ class ComponentProblem:
     def _resolve_freedom(self) -> None:
         bodies, index = self._bodies(), self.index
         self._centre = None
-        self._body_of = body_of = [0] * len(self.order)
-        for b, body in enumerate(bodies):
-            for i in body:
-                body_of[i] = b
+        if len(bodies) == len(self.order):   # every agent its own body, in order
+            self._body_of = body_of = list(range(len(bodies)))
+        else:
+            self._body_of = body_of = [0] * len(self.order)
+            for b, body in enumerate(bodies):
+                for i in body:
+                    body_of[i] = b
         # Anchors: the vertices each body is held at by a handle or a link; by a hard handle.
         held, hard = [set() for _ in bodies], [set() for _ in bodies]
         handled = False
