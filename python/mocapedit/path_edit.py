@@ -251,11 +251,11 @@ class ComponentProblem:
     def _build_terms(self) -> None:
         s = self.settings
         self._offsets32 = np.array(self._red_offset, dtype=np.int32)
+        self._partner = None   # frame partners, for group triangles
         tri, edg = _solver.component_chain_terms(self.rest, self._offsets32, s.min_baseline)
-        tw, ew = [np.empty(len(tri)), np.empty(len(edg))]
-        tw.fill(1.0), ew.fill(1.0)
-        tw, ew = [tw], [ew]
-        tri, edg = [tri], [edg]
+        tw, ew = np.empty(len(tri)), np.empty(len(edg))
+        tw.fill(1.0), ew.fill(1.0)   # as np.ones, without its Python-level wrapper
+        tri, edg, tw, ew = [tri], [edg], [tw], [ew]
         for n, g in enumerate(self.groups):
             t, e, w = self._group_terms(n, g)
             tri.append(t), edg.append(e)
@@ -291,7 +291,7 @@ class ComponentProblem:
             return np.zeros((0, 3), np.int32), np.zeros((0, 2), np.int32), 0.0
         vert = self._samples[n]
         vert = self._before[vert[:, (vert >= 0).all(axis=0)]]   # their solve vertices
-        if not hasattr(self, "_partner"):
+        if self._partner is None:
             self._partner = _solver.frame_partners(self.rest, self._offsets32, self.settings.min_baseline)
         k = min(self.settings.group_neighbours, count - 1)
         tri, edg = _solver.group_mesh_terms(self.rest, vert, k, self._partner)
