@@ -80,24 +80,10 @@ struct Rows {
   int size() const { return rows_; }
   // Room for at most n rows of `entries` entries in all; Finish() trims to what was added.
   void Reserve(Eigen::Index n, Eigen::Index entries) {
-    ptr.resize(static_cast<size_t>(n) + 1);
-    target.resize(static_cast<size_t>(n));
-    target_index.resize(static_cast<size_t>(n));
-    sqrt_weight.resize(static_cast<size_t>(n));
-    vertex.resize(static_cast<size_t>(entries));
-    coeff.resize(static_cast<size_t>(entries));
-    coeff_low.resize(static_cast<size_t>(entries));
+    Resize(static_cast<size_t>(n), static_cast<size_t>(entries));
     ptr[0] = rows_ = entries_ = 0;
   }
-  void Finish() {
-    ptr.resize(static_cast<size_t>(rows_) + 1);
-    target.resize(static_cast<size_t>(rows_));
-    target_index.resize(static_cast<size_t>(rows_));
-    sqrt_weight.resize(static_cast<size_t>(rows_));
-    vertex.resize(static_cast<size_t>(entries_));
-    coeff.resize(static_cast<size_t>(entries_));
-    coeff_low.resize(static_cast<size_t>(entries_));
-  }
+  void Finish() { Resize(static_cast<size_t>(rows_), static_cast<size_t>(entries_)); }
   LCplx Extended(int p) const { return LCplx(coeff[p]) + LCplx(coeff_low[p]); }
   void Add(std::initializer_list<std::pair<int, LCplx>> entries, TargetKind kind, int index, double weight) {
     const long double s = weight == 1.0 ? 1.0L : std::sqrt(static_cast<long double>(weight));
@@ -124,6 +110,15 @@ struct Rows {
   }
 
  private:
+  void Resize(size_t n, size_t entries) {
+    ptr.resize(n + 1);
+    target.resize(n);
+    target_index.resize(n);
+    sqrt_weight.resize(n);
+    vertex.resize(entries);
+    coeff.resize(entries);
+    coeff_low.resize(entries);
+  }
   void Entry(int v, const LCplx& c) {
     const Cplx hi(c);
     vertex[entries_] = v;
