@@ -13,6 +13,7 @@
 #include <numeric>
 #include <sstream>
 
+#include "mocapedit/blas_lock.h"
 #include "mocapedit/skyline_ldlt.h"
 
 namespace mocapedit {
@@ -216,6 +217,7 @@ struct StepSystem {
     if (supernodal) {
       Eigen::Map<Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> m(x, cols, k);
       Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic> b = m;
+      std::lock_guard<std::mutex> lock(BlasMutex());
       m = supernodal->solve(b);
       return;
     }
@@ -263,6 +265,7 @@ struct StepSystem {
       a.setFromTriplets(t.begin(), t.end());
       a.makeCompressed();
       qr = std::make_unique<Eigen::SPQR<Sparse>>();
+      std::lock_guard<std::mutex> lock(BlasMutex());
       qr->compute(a);
       if (qr->info() != Eigen::Success) throw std::runtime_error("PathEdit: sparse QR failed");
     });
@@ -833,6 +836,7 @@ void Factor(StepSystem<Scalar>& s, bool force_qr) {
     s.supernodal->analyzePattern(s.normal);
     if (s.supernodal->info() == Eigen::Success && c.fl >= kSupernodalFlopsPerEntry * c.lnz) {
       simplicial = false;
+      std::lock_guard<std::mutex> lock(BlasMutex());
       s.supernodal->factorize(s.normal);
       ok = s.supernodal->info() == Eigen::Success;  // CHOLMOD fails unless positive definite
       if (ok) diag = Eigen::VectorXd::Ones(1);
@@ -902,7 +906,9 @@ void Correction(const StepSystem<Scalar>& s, const std::vector<T>& c, const CVec
     if (qr) {
       Eigen::MatrixX2d b(s.rows, 2);
       for (int r = 0; r < s.rows; ++r) b.row(r) << w.rr[r].real(), w.rr[r].imag();
-      const Eigen::MatrixX2d x = s.QR().solve(b);
+      const auto& qr = s.QR();
+      std::lock_guard<std::mutex> lock(BlasMutex());
+      const Eigen::MatrixX2d x = qr.solve(b);
       for (int j = 0; j < s.cols; ++j) delta[j] = Cplx(x(j, 0), x(j, 1));
       return;
     }
@@ -919,7 +925,9 @@ void Correction(const StepSystem<Scalar>& s, const std::vector<T>& c, const CVec
   } else {
     if (qr) {
       Eigen::Map<const CVec> b(w.rr.data(), s.rows);
-      delta = s.QR().solve(CVec(b));
+      const auto& qr = s.QR();
+      std::lock_guard<std::mutex> lock(BlasMutex());
+      delta = qr.solve(CVec(b));
       return;
     }
     delta.setZero();
