@@ -456,8 +456,10 @@ void BuildElimination(const PathEditData& d, bool step1, Elimination& e) {
     dep_of.assign(n, -1);
     for (size_t k = 0; k < e.dep_vertex.size(); ++k) dep_of[e.dep_vertex[k]] = static_cast<int>(k);
   }
-  e.e_col.resize(static_cast<size_t>(n) + e.dep_vertex.size());
-  e.e_coeff.resize(static_cast<size_t>(n) + e.dep_vertex.size());
+  size_t most = 2 * e.dep_vertex.size();  // terms: two per dependent, one per other vertex
+  for (int v = 0; v < n; ++v) most += !dependent[v] && e.plain_col[v] < 0;
+  e.e_col.resize(most);
+  e.e_coeff.resize(most);
   int terms = 0;  // written to e_col, e_coeff
   for (int v = 0; v < n; ++v) {
     if (dependent[v]) {
@@ -1277,7 +1279,9 @@ void SolveWith(const PathEditData& d, const Elimination& e, const Rows& rows, co
                const Eigen::Ref<const Trajectory2>& handle_positions, const Eigen::Ref<const Trajectory2>& link_offsets,
                TieOffset offset, const std::vector<Cplx>& edge_targets, bool check, double scale, CVec u,
                std::vector<Cplx>& x, StepInfo& info) {
-  std::vector<T> beta, c;
+  // Scratch kept per thread: the row constants are all written below, and resizing a
+  // vector of extended complex values to the size it had costs nothing.
+  thread_local std::vector<T> beta, c;
   ComputeBeta(d, e, handle_positions, offset, beta);
   if (check) CheckConsistency(d, e, handle_positions, offset, beta);
   RowConstants(rows, s, beta, handle_positions, link_offsets, edge_targets, c);
