@@ -38,17 +38,19 @@
 //    paths (a band of 2 to a few columns) and chains of agents tied end to start (the
 //    relay: each agent's soft link between its first and last frames makes the bandwidth
 //    a whole agent, but the envelope only one extra entry per column, and fills nothing
-//    else). 1,000 frames: precompute and solve 0.70 -> 0.33 ms; relay of 78 agents x 500
-//    frames (39,000 unknowns): precompute 60 -> 18 ms (AMD ordering alone took 23 ms).
+//    else). 1,000 frames: precompute and solve 0.70 -> 0.31 ms; relay of 78 agents x 500
+//    frames (39,000 unknowns): precompute 57-69 -> 14-16 ms (Eigen's AMD took 23 ms).
 //  - Otherwise CHOLMOD analyses the matrix with its AMD (several times faster than
 //    Eigen's); when its factor has at least 40 flops per entry (dense fronts: group meshes)
 //    CHOLMOD's supernodal Cholesky factors it with BLAS, its OpenMP regions kept on the
 //    calling thread (its four threads on two busy cores measured 1.3 to 2 times slower).
-//    Group of 100 agents x 43 key frames (4,298 unknowns): precompute 120 -> 45 ms, of
-//    which step 1's factorization is about 30 ms: it is flop-bound (1.4e8 flops, complex,
+//    Group of 100 agents x 43 key frames (4,298 unknowns): precompute 75-120 -> 42-58
+//    ms, of which step 1's factorization is 25-30 ms: it is flop-bound (1.4e8 flops, complex,
 //    in OpenBLAS's zgemm). METIS or CHOLMOD's nested dissection halve the flops but their
 //    ordering costs as much as they save (20 to 35 ms); a reverse Cuthill-McKee band or a
-//    level-set dissection costs more flops than AMD.
+//    level-set dissection costs more flops than AMD; AMD started from a reverse
+//    Cuthill-McKee order saves a quarter of the flops but only 8% of the time. Calls
+//    into BLAS hold the lock of mocapedit/blas_lock.h.
 //  - Else Eigen's simplicial LDLT in AMD order (small components with scattered links).
 // UMFPACK LU and CHOLMOD on single paths measured 5 to 30 times slower than a banded LDLT.
 //
