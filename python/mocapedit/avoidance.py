@@ -135,14 +135,15 @@ class _Rows:
     """Rows of a SeparationSolver solve, gathered as numpy arrays."""
 
     def __init__(self):
-        self.direction, self.rhs, self.softness, self.kind, self.force = [], [], [], [], []
+        self.direction, self.rhs, self.softness, self.kind, self.force, self.force1 = [], [], [], [], [], []
         self.term_row, self.term_vertex, self.term_weight = [], [], []
         self.count = 0
 
-    def add(self, direction, rhs, softness, vertices, weights, at_least=False, force=0.0):
+    def add(self, direction, rhs, softness, vertices, weights, at_least=False, force=0.0, force1=None):
         """Rows in bulk: direction (R,2), rhs (R,), softness (R,), vertices/weights (R,T).
 
-        ``at_least``: one-sided rows (value >= rhs); ``force``: (R,) starting forces.
+        ``at_least``: one-sided rows (value >= rhs); ``force``, ``force1``: (R,) starting forces
+        of step 2 and step 1 (``force1`` defaults to ``force``).
         """
         direction = np.asarray(direction, dtype=np.float64).reshape(-1, 2)
         r = len(direction)
@@ -154,6 +155,7 @@ class _Rows:
         self.softness.append(np.broadcast_to(np.asarray(softness, dtype=np.float64), (r,)))
         self.kind.append(np.full(r, 1 if at_least else 0, dtype=np.int32))
         self.force.append(np.broadcast_to(np.asarray(force, dtype=np.float64), (r,)))
+        self.force1.append(np.broadcast_to(np.asarray(force if force1 is None else force1, dtype=np.float64), (r,)))
         vertices = np.asarray(vertices).reshape(r, -1)
         weights = np.asarray(weights, dtype=np.float64).reshape(r, -1)
         self.term_row.append(np.repeat(idx, vertices.shape[1]))
@@ -168,7 +170,8 @@ class _Rows:
                             cat(self.rhs, 0, np.float64), cat(self.softness, 0, np.float64),
                             cat(self.term_row, 0, np.int32), cat(self.term_vertex, 0, np.int32),
                             cat(self.term_weight, 0, np.float64), cat(self.kind, 0, np.int32),
-                            cat(self.force, 0, np.float64), tolerance, max_sweeps)
+                            cat(self.force, 0, np.float64), tolerance, max_sweeps,
+                            cat(self.force1, 0, np.float64))
 
 
 class _State:
@@ -185,6 +188,7 @@ class _State:
         idx = list(range(len(problem.names)))
         self.sampling = collisions.sample(idx, self.times, {i: g for i, g in enumerate(problem.paths)},
                                           problem.sample_step)
+        self.resample = collisions.Resampler(self.sampling, self.starts)
         pinned = np.zeros(len(self.rest), dtype=bool)
         for pin in problem.pins:
             if pin.softness == 0:
@@ -211,23 +215,31 @@ class _State:
         vb, wb = self.sample_terms(b, k)
         return np.all(self.pinned[va] | (wa == 0), axis=1) & np.all(self.pinned[vb] | (wb == 0), axis=1)
 
-    def fixed_rows(self, rows: _Rows, forces: np.ndarray | None = None) -> None:
-        """Artist pins and links, two rows each: every solve carries them (``forces``: the
-        last solve's, to start from)."""
+    def fixed_rows(self, rows: _Rows, forces: np.ndarray | None = None, forces1: np.ndarray | None = None) -> None:
+        """Artist pins and links, two rows each: every solve carries them (``forces``,
+        ``forces1``: the last solve's step-2 and step-1 forces, to start from)."""
         count = len(self.p.pins) + len(self.p.links)
-        start = np.zeros((count, 2)) if forces is None or len(forces) != 2 * count else forces.reshape(-1, 2)
+
+        def start(f):
+            return np.zeros((count, 2)) if f is None or len(f) != 2 * count else f.reshape(-1, 2)
+
+        f2, f1 = start(forces), start(forces1)
         for i, pin in enumerate(self.p.pins):
             v = self.starts[pin.agent] + pin.frame
-            rows.add(np.eye(2), pin.position, pin.softness, [[v], [v]], [[1.0], [1.0]], force=start[i])
+            rows.add(np.eye(2), pin.position, pin.softness, [[v], [v]], [[1.0], [1.0]], force=f2[i], force1=f1[i])
         for i, link in enumerate(self.p.links, len(self.p.pins)):
             va, vb = self.starts[link.a] + link.fa, self.starts[link.b] + link.fb
-            rows.add(np.eye(2), link.offset, 0.0, [[va, vb], [va, vb]], [[1.0, -1.0], [1.0, -1.0]], force=start[i])
+            rows.add(np.eye(2), link.offset, 0.0, [[va, vb], [va, vb]], [[1.0, -1.0], [1.0, -1.0]],
+                     force=f2[i], force1=f1[i])
 
-    def detect(self, flat: np.ndarray, extra: float = 0.0) -> collisions.Collisions:
-        collisions.resample(self.sampling, flat, self.starts)
+    def detect(self, flat: np.ndarray, extra: float = 0.0, watch: float | None = None) -> collisions.Collisions:
+        """Collisions at the paths ``flat`` closer than margin + ``extra``; with ``watch``, also
+        the near misses closer than margin + ``watch`` (as ``near``), in the same pass."""
+        self.resample(flat)
         active = np.ones(len(self.p.names), dtype=bool) if self.p.collide_agents else np.zeros(len(self.p.names), bool)
         return collisions.detect(self.sampling, self.p.radius, self.p.height, self.p.margin + extra,
-                                 report_distance=self.p.margin + extra, active=active)
+                                 report_distance=self.p.margin + extra, active=active,
+                                 watch=None if watch is None else self.p.margin + watch)
 
     def region_hits(self, flat: np.ndarray, extra: float = 0.0):
         """Per region: (vertices, agent of each, push) of frames within clearance + extra."""
@@ -333,7 +345,8 @@ def resolve(problem: Problem, settings: Settings | None = None, progress=None) -
         raise ValueError(f"unknown collision strategy '{settings.strategy}' (use {' or '.join(STRATEGIES)})")
     t0 = time.perf_counter()
     state = _State(problem, settings)
-    run = _Run(state, progress)
+    watch = settings.buffer_m / settings.meters_per_unit if settings.strategy == "relinearize" else None
+    run = _Run(state, progress, watch)
     flat, angles = (_relinearize if settings.strategy == "relinearize" else _accumulate)(state, run)
     found, hits = run.found, run.hits
     region_left = []
@@ -354,8 +367,9 @@ def resolve(problem: Problem, settings: Settings | None = None, progress=None) -
 class _Run:
     """What both strategies share: the detection before each solve, its record, progress."""
 
-    def __init__(self, state: _State, progress):
+    def __init__(self, state: _State, progress, watch: float | None = None):
         self.state = state
+        self.watch = watch              # near misses gathered by each detection (stage units)
         self.iterations: list[Iteration] = []
         self.solves = 0
         self.found = None
@@ -365,7 +379,7 @@ class _Run:
     def observe(self, flat: np.ndarray, it: int) -> bool:
         """Detects at the current paths; True when there is nothing (more) to solve."""
         state = self.state
-        self.found = state.detect(flat)
+        self.found = state.detect(flat, watch=self.watch)
         self.hits = state.region_hits(flat)
         record = _iteration(state, self.found, self.hits)
         self.iterations.append(record)
@@ -436,7 +450,8 @@ class _Candidates:
     def __init__(self, agents: int):
         self.n = np.int64(max(agents, 1))
         self.keys = np.zeros(0, np.int64)
-        self.force = np.zeros(0)          # last solve's force (warm start)
+        self.force = np.zeros(0)          # last solve's step-2 force (warm start)
+        self.force1 = np.zeros(0)         # and its step-1 force
         self.blocked = np.zeros(0, bool)  # hard constraints hold this pair together
 
     def split(self):
@@ -448,8 +463,9 @@ class _Candidates:
         a, b, k = self.split()
         gap = np.linalg.norm(state.sampling.positions[k, a] - state.sampling.positions[k, b], axis=1) \
             - _clearance(state, a, b)
-        keep = (self.force > 0.0) | self.blocked | (gap < reach)
-        self.keys, self.force, self.blocked = self.keys[keep], self.force[keep], self.blocked[keep]
+        keep = (self.force > 0.0) | (self.force1 > 0.0) | self.blocked | (gap < reach)
+        self.keys, self.force, self.force1, self.blocked = (self.keys[keep], self.force[keep], self.force1[keep],
+                                                            self.blocked[keep])
 
     def add(self, a, b, k) -> None:
         keys = np.unique((k * self.n + a) * self.n + b)
@@ -460,6 +476,7 @@ class _Candidates:
         order = np.argsort(merged, kind="stable")
         self.keys = merged[order]
         self.force = np.concatenate([self.force, np.zeros(len(new))])[order]
+        self.force1 = np.concatenate([self.force1, np.zeros(len(new))])[order]
         self.blocked = np.concatenate([self.blocked, np.zeros(len(new), bool)])[order]
 
 
@@ -471,6 +488,7 @@ class _RegionCandidates:
         self.vertex = np.zeros(0, np.int64)
         self.clearance = np.zeros(0)
         self.force = np.zeros(0)
+        self.force1 = np.zeros(0)
 
     def add(self, region: int, vertices: np.ndarray, clearance: np.ndarray) -> None:
         known = self.vertex[self.region == region]
@@ -479,6 +497,7 @@ class _RegionCandidates:
         self.vertex = np.concatenate([self.vertex, vertices[new]])
         self.clearance = np.concatenate([self.clearance, clearance[new]])
         self.force = np.concatenate([self.force, np.zeros(int(new.sum()))])
+        self.force1 = np.concatenate([self.force1, np.zeros(int(new.sum()))])
 
     def linearise(self, state: _State, flat: np.ndarray):
         """(normal (N,2), rhs (N,)) of one-sided rows n . x >= rhs keeping frames out.
@@ -564,7 +583,7 @@ def _relinearize(state: _State, run: _Run):
     cands = _Candidates(len(p.names))
     watched = _RegionCandidates()
     buffer = s.buffer_m / s.meters_per_unit
-    fixed_force = np.zeros(0)
+    fixed_force, fixed_force1 = np.zeros(0), np.zeros(0)
     for it in range(s.max_iterations + 1):
         if run.observe(flat, it):
             break
@@ -572,7 +591,7 @@ def _relinearize(state: _State, run: _Run):
             break
         # Watch every near miss: each becomes a one-sided row that pushes only when needed.
         if p.collide_agents:
-            cands.add(*_expand(state.detect(flat, buffer), max(1, s.spread), buffer))
+            cands.add(*_expand(run.found.near, max(1, s.spread), buffer))
             cands.prune(state, 2.0 * buffer)
         for r, h in enumerate(state.region_hits(flat, buffer)):
             if h is not None and len(h[0]):
@@ -585,25 +604,25 @@ def _relinearize(state: _State, run: _Run):
         va, wa = state.sample_terms(ca, ck)
         vb, wb = state.sample_terms(cb, ck)
         rows = _Rows()
-        state.fixed_rows(rows, fixed_force)
+        state.fixed_rows(rows, fixed_force, fixed_force1)
         fixed = rows.count
         on = ~cands.blocked
         sep = rows.add(normal[on], need[on] * (1.0 + s.overshoot), SEPARATION_SOFTNESS,
                        np.concatenate([va, vb], axis=1)[on], np.concatenate([wa, -wb], axis=1)[on],
-                       at_least=True, force=cands.force[on])
+                       at_least=True, force=cands.force[on], force1=cands.force1[on])
         rnormal, rrhs = watched.linearise(state, flat)
         reg = rows.add(rnormal, rrhs + watched.clearance * s.overshoot, SEPARATION_SOFTNESS,
                        watched.vertex[:, None], np.ones((len(watched.vertex), 1)), at_least=True,
-                       force=watched.force)
+                       force=watched.force, force1=watched.force1)
         # Small problems afford a converged Gauss-Seidel; big ones carry it on from iteration
         # to iteration (warm start) within a budget of row updates.
         sweeps = int(np.clip(s.sweep_budget / max(rows.count, 1), s.sweeps, 10 * s.sweeps))
         out = rows.solve(solver, tolerance=s.tolerance * float(np.min(need, initial=1.0)), max_sweeps=sweeps)
         run.solved(rows, out)
-        force = out["forces"]
-        fixed_force = force[:fixed]
-        cands.force[on] = force[sep]
-        watched.force = force[reg]
+        force, force1 = out["forces"], out["shape_forces"]
+        fixed_force, fixed_force1 = force[:fixed], force1[:fixed]
+        cands.force[on], cands.force1[on] = force[sep], force1[sep]
+        watched.force, watched.force1 = force[reg], force1[reg]
         flat = out["positions"]
         angles = out["rigid_angles"]
     return flat, angles

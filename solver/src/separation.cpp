@@ -444,8 +444,8 @@ int SolveRows(const std::vector<AgentRows*>& blocks, const std::vector<std::vect
         double f = forces[r] + settings.relaxation * (q[r] - v[r] - in.softness[r] * forces[r]) / diag[r];
         if (unilateral(r)) f = std::max(f, 0.0);
         const double delta = f - forces[r];
-        // A change below a tenth of the tolerance is not worth passing on to the other rows.
-        if (std::abs(delta) * diag[r] <= 0.1 * settings.tolerance) continue;
+        // A change below the tolerance is not worth passing on to the other rows.
+        if (std::abs(delta) * diag[r] <= settings.tolerance) continue;
         forces[r] = f;
         change = std::max(change, std::abs(delta) * diag[r]);
         for (const RowSlot& sl : slots[static_cast<size_t>(r)]) {
@@ -534,11 +534,12 @@ void SeparationSolve(const SeparationData& data, const SeparationRows& in, const
   const Eigen::Index nv = data.rest.rows();
   if (in.direction.rows() != nr || in.softness.size() != nr || in.term_vertex.size() != nt ||
       in.term_weight.size() != nt || (in.kind.size() && in.kind.size() != nr) ||
-      (in.initial_forces.size() && in.initial_forces.size() != nr))
-    throw std::invalid_argument("SeparationSolve: direction, rhs, softness, kind and initial_forces need one entry "
+      (in.initial_forces.size() && in.initial_forces.size() != nr) ||
+      (in.initial_shape_forces.size() && in.initial_shape_forces.size() != nr))
+    throw std::invalid_argument("SeparationSolve: direction, rhs, softness, kind and initial forces need one entry "
                                 "per row; term_row, term_vertex and term_weight one per term");
   if (!in.direction.allFinite() || !in.rhs.allFinite() || !in.term_weight.allFinite() || !in.softness.allFinite() ||
-      !in.initial_forces.allFinite())
+      !in.initial_forces.allFinite() || !in.initial_shape_forces.allFinite())
     throw std::invalid_argument("SeparationSolve: rows must be finite");
   if (nr && in.softness.minCoeff() < 0.0) throw std::invalid_argument("SeparationSolve: softness must not be negative");
   if (!(settings.tolerance > 0.0) || settings.max_sweeps < 1)
@@ -592,7 +593,10 @@ void SeparationSolve(const SeparationData& data, const SeparationRows& in, const
   result.regularized = false;
   result.converged = true;
   result.sweeps = 0;
-  result.forces = in.initial_forces.size() ? in.initial_forces : Eigen::VectorXd::Zero(nr);
+  result.shape_forces = in.initial_shape_forces.size() ? in.initial_shape_forces
+                        : in.initial_forces.size()     ? in.initial_forces
+                                                       : Eigen::VectorXd::Zero(nr);
+  result.forces = result.shape_forces;
   result.residuals = Eigen::VectorXd::Zero(nr);
   if (nr == 0) return;
   int64_t work = 0;
@@ -608,7 +612,9 @@ void SeparationSolve(const SeparationData& data, const SeparationRows& in, const
                &cache.step1[static_cast<size_t>(involved[static_cast<size_t>(q)])], ar);
   });
   bool converged = true;
-  result.sweeps = SolveRows(blocks, slots, in, settings, result.forces, &result.regularized, &converged);
+  result.sweeps = SolveRows(blocks, slots, in, settings, result.shape_forces, &result.regularized, &converged);
+  if (in.initial_shape_forces.size() && in.initial_forces.size()) result.forces = in.initial_forces;
+  else result.forces = result.shape_forces;
   result.converged = converged;
 
   // Step 1's result turns each range and each step; step 2 restores the rest lengths.
@@ -616,7 +622,7 @@ void SeparationSolve(const SeparationData& data, const SeparationRows& in, const
   ParallelFor(nq, threads, [&](int q) {
     const Agent& ag = data.agents[static_cast<size_t>(involved[static_cast<size_t>(q)])];
     AgentRows* ar = blocks[static_cast<size_t>(q)];
-    const Eigen::VectorXcd y1 = AgentResponse(ag.step1, *ar, result.forces);
+    const Eigen::VectorXcd y1 = AgentResponse(ag.step1, *ar, result.shape_forces);
     std::vector<Complex> z1(static_cast<size_t>(ag.count));
     for (int i = 0; i < ag.count; ++i) {
       const Map m = ag.Map1(i);

@@ -54,7 +54,10 @@ struct SeparationRows {
   Eigen::VectorXd rhs;         // #R
   Eigen::VectorXd softness;    // #R: 0 = hard, else 1 / weight relative to the shape terms
   Eigen::VectorXi kind;        // #R: 0 equality, 1 at least (value >= rhs); empty: all equalities
-  Eigen::VectorXd initial_forces;  // #R starting forces (a previous solve's), or empty
+  Eigen::VectorXd initial_forces;  // #R step-2 starting forces (a previous solve's `forces`), or empty
+  // #R step-1 starting forces (a previous solve's `shape_forces`), or empty. When it is empty,
+  // step 1 starts from initial_forces and step 2 from step 1's forces.
+  Eigen::VectorXd initial_shape_forces;
   Eigen::VectorXi term_row;    // #T row of each term
   Eigen::VectorXi term_vertex; // #T global vertex of each term
   Eigen::VectorXd term_weight; // #T
@@ -70,6 +73,7 @@ struct SeparationResult {
   Trajectory2 positions;        // #V by 2 after step 2 (agents no row touches keep rest)
   Trajectory2 shape;            // #V by 2 after step 1
   Eigen::VectorXd forces;       // #R step-2 row forces: > 0 pushes the row value up
+  Eigen::VectorXd shape_forces; // #R step-1 row forces
   Eigen::VectorXd residuals;    // #R row value minus rhs after step 2
   Eigen::VectorXd rigid_angles; // #rigid rotation of each range (radians, CCW) in step 2
   int moved_agents = 0;         // agents some row touched
