@@ -97,6 +97,7 @@ class Settings:
     overshoot: float = 0.03             # separations aim this fraction past the clearance
     buffer_m: float = 0.3               # near misses watched by relinearize, metres
     spread: int = 3                     # relinearize constrains every n-th sample of an interval
+    keep_degrees: float = 5.0           # relinearize keeps a row's direction while it turns less
     sweeps: int = 20                    # Gauss-Seidel sweeps per solve step at least (warm-started)
     sweep_budget: float = 1e6           # rows x sweeps per step allowed beyond that (up to 10x sweeps)
     tolerance: float = 1e-3             # of the clearance: Gauss-Seidel stops when no row moves more
@@ -125,6 +126,13 @@ class Outcome:
     moved: np.ndarray                   # (A,) bool: the agent's path changed
     solves: int = 0
     seconds: float = 0.0
+    #: wall seconds by phase: "factor" (the agents' energies), "detect" (sampling and
+    #: detection), "gather", "blocks", "sweeps" and "responses" (inside the solves), "rows"
+    #: (the rest: forming the rows)
+    timing: dict = field(default_factory=dict)
+    #: work done, summed over the solves: "rows" sent, Gauss-Seidel "updates" passed on,
+    #: "inverseColumns" (back-substitutions for the agents' Schur blocks)
+    work: dict = field(default_factory=dict)
 
     @property
     def converged(self) -> bool:
@@ -361,7 +369,7 @@ def resolve(problem: Problem, settings: Settings | None = None, progress=None) -
     return Outcome(paths=state.split(flat), rigid_angles=angles, iterations=run.iterations,
                    sampling=state.sampling, remaining=found, region_left=region_left,
                    blocked=_blocked(state, found), moved=moved, solves=run.solves,
-                   seconds=time.perf_counter() - t0)
+                   seconds=time.perf_counter() - t0, timing=run.timing(time.perf_counter() - t0), work=dict(run.work))
 
 
 class _Run:
@@ -372,6 +380,8 @@ class _Run:
         self.watch = watch              # near misses gathered by each detection (stage units)
         self.iterations: list[Iteration] = []
         self.solves = 0
+        self.seconds = {"factor": 0.0, "detect": 0.0, "gather": 0.0, "blocks": 0.0, "sweeps": 0.0, "responses": 0.0}
+        self.work = {"rows": 0, "updates": 0, "inverseColumns": 0}
         self.found = None
         self.hits = None
         self.task = progress.task("collision avoidance", state.s.max_iterations, "iterations") if progress else None
@@ -379,8 +389,10 @@ class _Run:
     def observe(self, flat: np.ndarray, it: int) -> bool:
         """Detects at the current paths; True when there is nothing (more) to solve."""
         state = self.state
+        t = time.perf_counter()
         self.found = state.detect(flat, watch=self.watch)
         self.hits = state.region_hits(flat)
+        self.seconds["detect"] += time.perf_counter() - t
         record = _iteration(state, self.found, self.hits)
         self.iterations.append(record)
         left = record.collisions + record.region_samples
@@ -393,7 +405,24 @@ class _Run:
                 self.task.update(it, f"{left} collision{'s' if left != 1 else ''} left")
         return last
 
+    def timing(self, total: float) -> dict:
+        out = {k: round(v, 4) for k, v in self.seconds.items()}
+        out["rows"] = round(total - sum(self.seconds.values()), 4)
+        return out
+
+    def factor(self, *args):
+        """A SeparationSolver for (rest, starts, rigid, anchor_weight, still_extent, threads), timed."""
+        t = time.perf_counter()
+        solver = _solver.SeparationSolver(*args)
+        self.seconds["factor"] += time.perf_counter() - t
+        return solver
+
     def solved(self, rows: "_Rows", out: dict) -> None:
+        for name, sec in zip(("blocks", "sweeps", "responses", "gather"), out["seconds"]):
+            self.seconds[name] += float(sec)
+        self.work["updates"] += int(out["updates"])
+        self.work["inverseColumns"] += int(out["inverse_columns"])
+        self.work["rows"] += rows.count
         self.solves += 1
         self.iterations[-1].rows = rows.count
         self.iterations[-1].solves = 1
@@ -408,7 +437,7 @@ def _accumulate(state: _State, run: _Run):
         if run.observe(flat, it):
             break
         found = run.found
-        solver = _solver.SeparationSolver(flat, state.starts, state.rigid, s.anchor_weight, _still(s), 0)
+        solver = run.factor(flat, state.starts, state.rigid, s.anchor_weight, _still(s), 0)
         rows = _Rows()
         state.fixed_rows(rows)
         # A mesh-based constraint per maximal collision: the two colliding points joined by
@@ -453,6 +482,7 @@ class _Candidates:
         self.force = np.zeros(0)          # last solve's step-2 force (warm start)
         self.force1 = np.zeros(0)         # and its step-1 force
         self.blocked = np.zeros(0, bool)  # hard constraints hold this pair together
+        self.normal = np.zeros((0, 2))    # direction of the last solve's row (NaN: not solved yet)
 
     def split(self):
         n = self.n
@@ -464,8 +494,8 @@ class _Candidates:
         gap = np.linalg.norm(state.sampling.positions[k, a] - state.sampling.positions[k, b], axis=1) \
             - _clearance(state, a, b)
         keep = (self.force > 0.0) | (self.force1 > 0.0) | self.blocked | (gap < reach)
-        self.keys, self.force, self.force1, self.blocked = (self.keys[keep], self.force[keep], self.force1[keep],
-                                                            self.blocked[keep])
+        self.keys, self.force, self.force1, self.blocked, self.normal = (
+            self.keys[keep], self.force[keep], self.force1[keep], self.blocked[keep], self.normal[keep])
 
     def add(self, a, b, k) -> None:
         keys = np.unique((k * self.n + a) * self.n + b)
@@ -478,6 +508,24 @@ class _Candidates:
         self.force = np.concatenate([self.force, np.zeros(len(new))])[order]
         self.force1 = np.concatenate([self.force1, np.zeros(len(new))])[order]
         self.blocked = np.concatenate([self.blocked, np.zeros(len(new), bool)])[order]
+        self.normal = np.concatenate([self.normal, np.full((len(new), 2), np.nan)])[order]
+
+    def linearise(self, fresh: np.ndarray, keep_cos: float) -> np.ndarray:
+        """The rows' directions for the next solve, given the directions at the latest result.
+
+        Any unit direction makes a conservative separation row (the distance is at least
+        its projection), so a row keeps the direction it was solved with while that is
+        within the angle whose cosine is ``keep_cos`` of the fresh one: rows sent again
+        unchanged cost the solver nothing to set up, and their forces are warm starts as
+        they are. A row whose direction turns past a right angle starts again from zero force.
+        """
+        cos = np.sum(self.normal * fresh, axis=1)
+        turn = ~(cos >= keep_cos)
+        flip = turn & ~(cos > 0.0)
+        self.force[flip] = 0.0
+        self.force1[flip] = 0.0
+        self.normal[turn] = fresh[turn]
+        return self.normal
 
 
 class _RegionCandidates:
@@ -577,7 +625,7 @@ def _exit(footprint, points: np.ndarray, way: np.ndarray, clearance: np.ndarray)
 
 def _relinearize(state: _State, run: _Run):
     p, s = state.p, state.s
-    solver = _solver.SeparationSolver(state.rest, state.starts, state.rigid, s.anchor_weight, _still(s), 0)
+    solver = run.factor(state.rest, state.starts, state.rigid, s.anchor_weight, _still(s), 0)
     flat = state.rest.copy()
     angles = np.zeros(len(p.rigid))
     cands = _Candidates(len(p.names))
@@ -599,8 +647,8 @@ def _relinearize(state: _State, run: _Run):
         # Linearise every kept constraint at the current result.
         ca, cb, ck = cands.split()
         cands.blocked = state.held(ca, cb, ck)
-        normal = _separation_normals(state, ca, cb, ck)
         need = _clearance(state, ca, cb)
+        normal = cands.linearise(_separation_normals(state, ca, cb, ck), np.cos(np.radians(s.keep_degrees)))
         va, wa = state.sample_terms(ca, ck)
         vb, wb = state.sample_terms(cb, ck)
         rows = _Rows()

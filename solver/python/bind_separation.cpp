@@ -61,8 +61,11 @@ class SeparationSolver {
     d["rigid_angles"] = result.rigid_angles;
     d["moved_agents"] = result.moved_agents;
     d["sweeps"] = result.sweeps;
+    d["updates"] = result.updates;
+    d["inverse_columns"] = result.inverse_columns;
     d["converged"] = result.converged;
     d["regularized"] = result.regularized;
+    d["seconds"] = result.seconds;
     return d;
   }
 
@@ -102,7 +105,8 @@ MOCAPEDIT_BINDINGS(BindSeparation) {
            "tolerance (stage units) and max_sweeps bound the Gauss-Seidel on one-sided rows.\n"
            "Returns a dict: positions (V, 2) after step 2, shape (V, 2) after step 1, forces (R,) of step 2\n"
            "(> 0 pushes the row value up), shape_forces (R,) of step 1, residuals (R,), rigid_angles (one per rigid range, radians CCW), moved_agents,\n"
-           "sweeps, converged, regularized.")
+           "sweeps, updates (row force changes passed on), inverse_columns (back-substitutions for the blocks),\n"
+           "converged, regularized, seconds (4,) wall seconds in the blocks, the sweeps, the responses and gathering the rows.")
       .def_property_readonly("agents", &SeparationSolver::agents)
       .def_property_readonly("vertices", &SeparationSolver::vertices);
 }

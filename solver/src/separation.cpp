@@ -3,6 +3,7 @@
 #include <Eigen/SparseCholesky>
 #include <Eigen/SparseCore>
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <complex>
 #include <stdexcept>
@@ -15,6 +16,39 @@ namespace {
 
 using Complex = std::complex<double>;
 using CSparse = Eigen::SparseMatrix<Complex>;
+// An agent's unknowns are its frames in order, then its ranges' few unknowns: the matrix
+// is banded with a border, which factors without fill in this order (no ordering needed).
+using Ldlt = Eigen::SimplicialLDLT<CSparse, Eigen::Lower, Eigen::NaturalOrdering<int>>;
+// Step 2's matrix is real (its terms are differences of positions and anchors); only its
+// right-hand sides are complex, and they are solved as two real ones.
+using RealLdlt = Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower, Eigen::NaturalOrdering<int>>;
+
+Eigen::MatrixXcd SolveWith(const Ldlt& solver, const Eigen::MatrixXcd& b) { return solver.solve(b); }
+
+Eigen::MatrixXcd SolveWith(const RealLdlt& solver, const Eigen::MatrixXcd& b) {
+  const Eigen::Index n = b.rows(), m = b.cols();
+  Eigen::MatrixXd parts(n, 2 * m);
+  parts.leftCols(m) = b.real();
+  parts.rightCols(m) = b.imag();
+  const Eigen::MatrixXd x = solver.solve(parts);
+  Eigen::MatrixXcd out(n, m);
+  out.real() = x.leftCols(m);
+  out.imag() = x.rightCols(m);
+  return out;
+}
+
+// Columns `columns` of the inverse of the factored matrix, #n by columns.size().
+Eigen::MatrixXcd InverseColumns(const Ldlt& solver, int n, const std::vector<int>& columns) {
+  Eigen::MatrixXcd e = Eigen::MatrixXcd::Zero(n, static_cast<Eigen::Index>(columns.size()));
+  for (size_t c = 0; c < columns.size(); ++c) e(columns[c], static_cast<Eigen::Index>(c)) = 1.0;
+  return solver.solve(e);
+}
+
+Eigen::MatrixXcd InverseColumns(const RealLdlt& solver, int n, const std::vector<int>& columns) {
+  Eigen::MatrixXd e = Eigen::MatrixXd::Zero(n, static_cast<Eigen::Index>(columns.size()));
+  for (size_t c = 0; c < columns.size(); ++c) e(columns[c], static_cast<Eigen::Index>(c)) = 1.0;
+  return solver.solve(e).cast<Complex>();
+}
 
 // Ground positions are complex numbers x + iy: step 1's shape terms are then linear with
 // complex coefficients (a similarity is one complex factor), and step 2 acts on both
@@ -42,7 +76,8 @@ struct Agent {
   std::vector<Range> ranges;
   std::vector<int> global_range;  // per range: index into SeparationProblem::rigid
   int n1 = 0, n2 = 0;
-  Eigen::SimplicialLDLT<CSparse> step1, step2;
+  Ldlt step1;
+  RealLdlt step2;
   Eigen::VectorXcd y1_rest;
   // Step-1 triangles: vertex i = (1 - mu) z_{i-1} + mu z_{i+1}.
   std::vector<int> tri;
@@ -86,7 +121,9 @@ struct Normal {
   Eigen::VectorXcd b;
   std::vector<std::pair<int, Complex>> row;
 
-  explicit Normal(int n) : b(Eigen::VectorXcd::Zero(n)) {}
+  bool matrix = true;  // false: the right-hand side alone
+
+  explicit Normal(int n, bool with_matrix = true) : b(Eigen::VectorXcd::Zero(n)), matrix(with_matrix) {}
 
   // Residual given as (map, coefficient) pairs; `beta` on the right-hand side.
   void Add(const std::vector<std::pair<Map, Complex>>& terms, Complex beta, double weight) {
@@ -97,11 +134,16 @@ struct Normal {
       beta -= c * m.k;
     }
     for (const auto& [j, aj] : row) {
-      for (const auto& [k, ak] : row) triplets.emplace_back(j, k, weight * std::conj(aj) * ak);
+      if (matrix)
+        for (const auto& [k, ak] : row) triplets.emplace_back(j, k, weight * std::conj(aj) * ak);
       b[j] += weight * std::conj(aj) * beta;
     }
   }
 };
+
+double Seconds() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
 
 template <typename Fn>
 void ParallelFor(int count, int threads, Fn fn) {
@@ -123,9 +165,20 @@ int ThreadCount(int requested, int64_t work) {
   return work < 20000 ? 1 : threads;
 }
 
-void Factor(Eigen::SimplicialLDLT<CSparse>& solver, int n, const std::vector<Eigen::Triplet<Complex>>& triplets) {
+void Factor(Ldlt& solver, int n, const std::vector<Eigen::Triplet<Complex>>& triplets) {
   CSparse k(n, n);
   k.setFromTriplets(triplets.begin(), triplets.end());
+  solver.compute(k);
+  if (solver.info() != Eigen::Success)
+    throw std::runtime_error("SeparationPrecompute: an agent's energy could not be factored");
+}
+
+void Factor(RealLdlt& solver, int n, const std::vector<Eigen::Triplet<Complex>>& triplets) {
+  std::vector<Eigen::Triplet<double>> real;
+  real.reserve(triplets.size());
+  for (const auto& t : triplets) real.emplace_back(t.row(), t.col(), t.value().real());
+  Eigen::SparseMatrix<double> k(n, n);
+  k.setFromTriplets(real.begin(), real.end());
   solver.compute(k);
   if (solver.info() != Eigen::Success)
     throw std::runtime_error("SeparationPrecompute: an agent's energy could not be factored");
@@ -145,7 +198,7 @@ struct SeparationData {
   // Step-2 right-hand side of one agent for given edge vectors and range turns.
   Eigen::VectorXcd Step2Rhs(const Agent& ag, const std::vector<Complex>& edges,
                             const std::vector<Complex>& turn) const {
-    Normal normal(ag.n2);
+    Normal normal(ag.n2, false);
     std::vector<std::pair<Map, Complex>> terms;
     for (int i = 0; i + 1 < ag.count; ++i) {
       if (ag.range[i] >= 0 && ag.range[i] == ag.range[i + 1]) continue;
@@ -297,9 +350,15 @@ struct InverseBlock {
   std::vector<int> slot;          // per unknown of the step: index into `unknowns`, -1 if absent
   Eigen::MatrixXcd inverse;       // K^-1 restricted to `unknowns`
 
+  // The last solve's rows of the agent (their terms), and their G and Schur block.
+  std::vector<std::vector<std::pair<int, Complex>>> terms, g;
+  Eigen::MatrixXd s;
+  int64_t columns = 0;  // back-substitutions done so far
+
   Complex At(int i, int j) const { return inverse(slot[static_cast<size_t>(i)], slot[static_cast<size_t>(j)]); }
 
-  void Ensure(const Eigen::SimplicialLDLT<CSparse>& solver, int n, const std::vector<int>& needed) {
+  template <typename Solver>
+  void Ensure(const Solver& solver, int n, const std::vector<int>& needed) {
     if (static_cast<int>(slot.size()) != n) {
       slot.assign(static_cast<size_t>(n), -1);
       unknowns.clear();
@@ -316,9 +375,8 @@ struct InverseBlock {
       missing = needed;
     }
     if (missing.empty()) return;
-    Eigen::MatrixXcd e = Eigen::MatrixXcd::Zero(n, static_cast<Eigen::Index>(missing.size()));
-    for (size_t c = 0; c < missing.size(); ++c) e(missing[c], static_cast<Eigen::Index>(c)) = 1.0;
-    const Eigen::MatrixXcd x = solver.solve(e);  // columns of K^-1
+    const Eigen::MatrixXcd x = InverseColumns(solver, n, missing);
+    columns += static_cast<int64_t>(missing.size());
     const Eigen::Index old = static_cast<Eigen::Index>(unknowns.size());
     const Eigen::Index total = old + static_cast<Eigen::Index>(missing.size());
     Eigen::MatrixXcd grown(total, total);
@@ -349,12 +407,21 @@ struct AgentRows {
 // Fills the agent's Schur block for one step: S = Re(G^H K^-1 G). A row's value is
 // Re(sum conj(c) z) = Re(g^H y) + constant with g_j = c conj(a_j), so S only needs the
 // entries of K^-1 between the unknowns the rows touch; those are kept in `cache` and
-// only new unknowns cost a back-substitution.
-template <typename MapFn>
-void AgentBlock(const Eigen::SimplicialLDLT<CSparse>& solver, int n, MapFn map, InverseBlock* cache, AgentRows* ar) {
+// only new unknowns cost a back-substitution. G and S depend on the rows' terms alone: when
+// the agent's rows are those of the last solve (as re-sent rows whose linearisation did
+// not change are), they are taken from `cache` as they are, and only the base values
+// (which follow y0 and the map's constants) are worked out again.
+template <typename Solver, typename MapFn>
+void AgentBlock(const Solver& solver, int n, MapFn map, InverseBlock* cache, AgentRows* ar) {
   const int r = static_cast<int>(ar->rows.size());
   ar->base.assign(static_cast<size_t>(r), 0.0);
-  ar->g.assign(static_cast<size_t>(r), {});
+  const bool same = static_cast<int>(cache->slot.size()) == n && cache->terms == ar->terms;
+  if (same) {
+    ar->g = cache->g;
+    ar->s = cache->s;
+  } else {
+    ar->g.assign(static_cast<size_t>(r), {});
+  }
   std::vector<int> needed;
   for (int k = 0; k < r; ++k) {
     auto& col = ar->g[static_cast<size_t>(k)];
@@ -368,15 +435,18 @@ void AgentBlock(const Eigen::SimplicialLDLT<CSparse>& solver, int n, MapFn map, 
     };
     for (const auto& [i, c] : ar->terms[static_cast<size_t>(k)]) {
       const Map m = map(i);
-      add(m.j0, c * std::conj(m.a0));
-      if (m.j1 >= 0) add(m.j1, c * std::conj(m.a1));
+      if (!same) {
+        add(m.j0, c * std::conj(m.a0));
+        if (m.j1 >= 0) add(m.j1, c * std::conj(m.a1));
+      }
       ar->base[static_cast<size_t>(k)] += std::real(std::conj(c) * m.k);
     }
     for (const auto& [j, gj] : col) {
       ar->base[static_cast<size_t>(k)] += std::real(std::conj(gj) * ar->y0[j]);
-      needed.push_back(j);
+      if (!same) needed.push_back(j);
     }
   }
+  if (same) return;
   std::sort(needed.begin(), needed.end());
   needed.erase(std::unique(needed.begin(), needed.end()), needed.end());
   cache->Ensure(solver, n, needed);
@@ -388,15 +458,18 @@ void AgentBlock(const Eigen::SimplicialLDLT<CSparse>& solver, int n, MapFn map, 
         for (const auto& [j, gj] : ar->g[static_cast<size_t>(l)]) v += std::conj(gi) * gj * cache->At(i, j);
       ar->s(k, l) = ar->s(l, k) = std::real(v);
     }
+  cache->terms = ar->terms;
+  cache->g = ar->g;
+  cache->s = ar->s;
 }
 
 // The agent's unknowns under the row forces: y0 + K^-1 G lambda.
-Eigen::VectorXcd AgentResponse(const Eigen::SimplicialLDLT<CSparse>& solver, const AgentRows& ar,
-                               const Eigen::VectorXd& forces) {
+template <typename Solver>
+Eigen::VectorXcd AgentResponse(const Solver& solver, const AgentRows& ar, const Eigen::VectorXd& forces) {
   Eigen::VectorXcd rhs = Eigen::VectorXcd::Zero(ar.y0.size());
   for (size_t k = 0; k < ar.rows.size(); ++k)
     for (const auto& [j, gj] : ar.g[k]) rhs[j] += gj * forces[ar.rows[k]];
-  return ar.y0 + solver.solve(rhs);
+  return ar.y0 + SolveWith(solver, rhs).col(0);
 }
 
 // Where a row sits in the agents' blocks.
@@ -412,7 +485,7 @@ struct RowSlot {
 // unilateral forces found. Returns the sweeps used.
 int SolveRows(const std::vector<AgentRows*>& blocks, const std::vector<std::vector<RowSlot>>& slots,
               const SeparationRows& in, const SeparationSettings& settings, Eigen::VectorXd& forces,
-              bool* regularized, bool* converged) {
+              bool* regularized, bool* converged, int64_t* updates) {
   const int nr = static_cast<int>(in.rhs.size());
   Eigen::VectorXd q = in.rhs;
   Eigen::VectorXd diag = in.softness;
@@ -447,6 +520,7 @@ int SolveRows(const std::vector<AgentRows*>& blocks, const std::vector<std::vect
         // A change below the tolerance is not worth passing on to the other rows.
         if (std::abs(delta) * diag[r] <= settings.tolerance) continue;
         forces[r] = f;
+        ++*updates;
         change = std::max(change, std::abs(delta) * diag[r]);
         for (const RowSlot& sl : slots[static_cast<size_t>(r)]) {
           const AgentRows* ar = blocks[static_cast<size_t>(sl.agent)];
@@ -526,6 +600,13 @@ std::unique_ptr<SeparationCache, SeparationCacheDeleter> SeparationNewCache() {
 
 void SeparationSolve(const SeparationData& data, const SeparationRows& in, const SeparationSettings& settings,
                      SeparationCache& cache, SeparationResult& result) {
+  result.seconds.setZero();
+  double clock = Seconds();
+  auto lap = [&](int phase) {
+    const double now = Seconds();
+    result.seconds[phase] += now - clock;
+    clock = now;
+  };
   if (cache.step1.size() != data.agents.size()) {
     cache.step1.assign(data.agents.size(), InverseBlock());
     cache.step2.assign(data.agents.size(), InverseBlock());
@@ -593,6 +674,9 @@ void SeparationSolve(const SeparationData& data, const SeparationRows& in, const
   result.regularized = false;
   result.converged = true;
   result.sweeps = 0;
+  result.updates = 0;
+  int64_t columns_before = 0;
+  for (size_t a = 0; a < cache.step1.size(); ++a) columns_before += cache.step1[a].columns + cache.step2[a].columns;
   result.shape_forces = in.initial_shape_forces.size() ? in.initial_shape_forces
                         : in.initial_forces.size()     ? in.initial_forces
                                                        : Eigen::VectorXd::Zero(nr);
@@ -604,6 +688,7 @@ void SeparationSolve(const SeparationData& data, const SeparationRows& in, const
   const int threads = work < 20000 ? 1 : data.threads;
 
   // Step 1.
+  lap(3);
   ParallelFor(nq, threads, [&](int q) {
     const Agent& ag = data.agents[static_cast<size_t>(involved[static_cast<size_t>(q)])];
     AgentRows* ar = blocks[static_cast<size_t>(q)];
@@ -612,7 +697,10 @@ void SeparationSolve(const SeparationData& data, const SeparationRows& in, const
                &cache.step1[static_cast<size_t>(involved[static_cast<size_t>(q)])], ar);
   });
   bool converged = true;
-  result.sweeps = SolveRows(blocks, slots, in, settings, result.shape_forces, &result.regularized, &converged);
+  lap(0);
+  result.sweeps = SolveRows(blocks, slots, in, settings, result.shape_forces, &result.regularized, &converged,
+                            &result.updates);
+  lap(1);
   if (in.initial_shape_forces.size() && in.initial_forces.size()) result.forces = in.initial_forces;
   else result.forces = result.shape_forces;
   result.converged = converged;
@@ -641,11 +729,14 @@ void SeparationSolve(const SeparationData& data, const SeparationRows& in, const
       const Complex e = z1[static_cast<size_t>(i + 1)] - z1[static_cast<size_t>(i)];
       edges[static_cast<size_t>(i)] = std::abs(e) > 0.0 ? e / std::abs(e) * std::abs(rest_edge) : rest_edge;
     }
-    ar->y0 = ag.step2.solve(data.Step2Rhs(ag, edges, turn));
+    ar->y0 = SolveWith(ag.step2, data.Step2Rhs(ag, edges, turn)).col(0);
     AgentBlock(ag.step2, ag.n2, [&](int i) { return ag.Map2(i, turn); },
                &cache.step2[static_cast<size_t>(involved[static_cast<size_t>(q)])], ar);
   });
-  result.sweeps += SolveRows(blocks, slots, in, settings, result.forces, &result.regularized, &converged);
+  lap(0);
+  result.sweeps += SolveRows(blocks, slots, in, settings, result.forces, &result.regularized, &converged,
+                             &result.updates);
+  lap(1);
   result.converged = result.converged && converged;
 
   ParallelFor(nq, threads, [&](int q) {
@@ -666,6 +757,9 @@ void SeparationSolve(const SeparationData& data, const SeparationRows& in, const
                                                 in.direction(r, 1) * result.positions(v, 1));
   }
   result.residuals -= in.rhs;
+  result.inverse_columns = -columns_before;
+  for (size_t a = 0; a < cache.step1.size(); ++a) result.inverse_columns += cache.step1[a].columns + cache.step2[a].columns;
+  lap(2);
 }
 
 void SeparationSolve(const SeparationData& data, const SeparationRows& in, const SeparationSettings& settings,

@@ -30,6 +30,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <cstdint>
 #include <memory>
 #include <vector>
 
@@ -78,8 +79,14 @@ struct SeparationResult {
   Eigen::VectorXd rigid_angles; // #rigid rotation of each range (radians, CCW) in step 2
   int moved_agents = 0;         // agents some row touched
   int sweeps = 0;               // Gauss-Seidel sweeps, both steps
+  int64_t updates = 0;          // row force changes the sweeps passed on, both steps
+  int64_t inverse_columns = 0;  // back-substitutions for the agents' blocks (the rest were cached)
   bool converged = true;        // both steps met the tolerance within max_sweeps
   bool regularized = false;     // the hard equality rows were dependent: a tiny softness was added
+  // Wall seconds spent forming the agents' blocks (both steps), in the Gauss-Seidel sweeps
+  // and exact equality solves (both steps), in the final responses, and in gathering the
+  // rows by agent.
+  Eigen::Vector4d seconds = Eigen::Vector4d::Zero();
 };
 
 struct SeparationData;  // opaque: every agent's factored steps
