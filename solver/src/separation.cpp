@@ -9,6 +9,7 @@
 #include <stdexcept>
 #include <string>
 #include <thread>
+#include <type_traits>
 #include <utility>
 
 namespace mocapedit {
@@ -16,39 +17,132 @@ namespace {
 
 using Complex = std::complex<double>;
 using CSparse = Eigen::SparseMatrix<Complex>;
-// An agent's unknowns are its frames in order, then its ranges' few unknowns: the matrix
-// is banded with a border, which factors without fill in this order (no ordering needed).
-using Ldlt = Eigen::SimplicialLDLT<CSparse, Eigen::Lower, Eigen::NaturalOrdering<int>>;
-// Step 2's matrix is real (its terms are differences of positions and anchors); only its
-// right-hand sides are complex, and they are solved as two real ones.
-using RealLdlt = Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower, Eigen::NaturalOrdering<int>>;
+// One factored step of one agent, K = L D L^H. The agent's unknowns are its frames in
+// order, then its ranges' few unknowns. Without ranges K is banded (bandwidth 2 in step 1,
+// whose terms join three frames, 1 in step 2, whose terms join two) and is factored in band
+// storage; with ranges, whose unknowns border the band, as a sparse matrix in the same order
+// (no fill either way, so no ordering). Step 2's matrix is real (its terms are differences
+// of positions and anchors); its complex right-hand sides are solved as two real ones.
+template <typename Scalar>
+class StepSolver {
+ public:
+  static constexpr int kMaxBand = 4;
 
-Eigen::MatrixXcd SolveWith(const Ldlt& solver, const Eigen::MatrixXcd& b) { return solver.solve(b); }
+  // Factors the n by n matrix summed from `triplets` (imaginary parts dropped when real).
+  // Returns false when it is not positive definite.
+  bool Factor(int n, const std::vector<Eigen::Triplet<Complex>>& triplets) {
+    n_ = n;
+    int band = 0;
+    for (const auto& t : triplets) band = std::max(band, std::abs(t.row() - t.col()));
+    if (band > kMaxBand) {
+      p_ = -1;
+      std::vector<Eigen::Triplet<Scalar>> converted;
+      converted.reserve(triplets.size());
+      for (const auto& t : triplets) converted.emplace_back(t.row(), t.col(), Convert(t.value()));
+      Eigen::SparseMatrix<Scalar> k(n, n);
+      k.setFromTriplets(converted.begin(), converted.end());
+      sparse_.compute(k);
+      return sparse_.info() == Eigen::Success;
+    }
+    p_ = band;
+    const int w = p_ + 1;
+    std::vector<Scalar> k(static_cast<size_t>(n) * w, Scalar(0));  // k[i*w + t] = K(i, i - t)
+    for (const auto& t : triplets)
+      if (t.row() >= t.col()) k[static_cast<size_t>(t.row()) * w + (t.row() - t.col())] += Convert(t.value());
+    l_.assign(static_cast<size_t>(n) * std::max(p_, 1), Scalar(0));  // l_[i*p + t] = L(i, i - 1 - t)
+    d_.assign(static_cast<size_t>(n), 0.0);
+    for (int i = 0; i < n; ++i) {
+      for (int j = std::max(0, i - p_); j < i; ++j) {
+        Scalar v = k[static_cast<size_t>(i) * w + (i - j)];
+        for (int m = std::max(0, i - p_); m < j; ++m) v -= L(i, m) * Conj(L(j, m)) * d_[m];
+        L(i, j) = v / d_[j];
+      }
+      double dii = std::real(k[static_cast<size_t>(i) * w]);
+      for (int m = std::max(0, i - p_); m < i; ++m) dii -= std::norm(L(i, m)) * d_[m];
+      if (!(dii > 0.0) || !std::isfinite(dii)) return false;
+      d_[i] = dii;
+    }
+    inverse_d_.resize(d_.size());
+    for (size_t i = 0; i < d_.size(); ++i) inverse_d_[i] = 1.0 / d_[i];
+    return true;
+  }
 
-Eigen::MatrixXcd SolveWith(const RealLdlt& solver, const Eigen::MatrixXcd& b) {
-  const Eigen::Index n = b.rows(), m = b.cols();
-  Eigen::MatrixXd parts(n, 2 * m);
-  parts.leftCols(m) = b.real();
-  parts.rightCols(m) = b.imag();
-  const Eigen::MatrixXd x = solver.solve(parts);
-  Eigen::MatrixXcd out(n, m);
-  out.real() = x.leftCols(m);
-  out.imag() = x.rightCols(m);
-  return out;
-}
+  // K^-1 b for each column of b (#n by m).
+  Eigen::MatrixXcd Solve(const Eigen::MatrixXcd& b) const {
+    if (p_ < 0) return SparseSolve(b);
+    Eigen::MatrixXcd x = b;
+    for (Eigen::Index c = 0; c < x.cols(); ++c) Substitute(x.col(c).data(), 0);
+    return x;
+  }
 
-// Columns `columns` of the inverse of the factored matrix, #n by columns.size().
-Eigen::MatrixXcd InverseColumns(const Ldlt& solver, int n, const std::vector<int>& columns) {
-  Eigen::MatrixXcd e = Eigen::MatrixXcd::Zero(n, static_cast<Eigen::Index>(columns.size()));
-  for (size_t c = 0; c < columns.size(); ++c) e(columns[c], static_cast<Eigen::Index>(c)) = 1.0;
-  return solver.solve(e);
-}
+  // Columns `columns` of K^-1, #n by columns.size(); only rows `lowest` on are meant to be
+  // read (the band path leaves the rows above undone).
+  Eigen::MatrixXcd InverseColumns(const std::vector<int>& columns, int lowest) const {
+    const Eigen::Index m = static_cast<Eigen::Index>(columns.size());
+    if (p_ < 0) {
+      Eigen::MatrixXcd e = Eigen::MatrixXcd::Zero(n_, m);
+      for (Eigen::Index c = 0; c < m; ++c) e(columns[static_cast<size_t>(c)], c) = 1.0;
+      return SparseSolve(e);
+    }
+    Eigen::MatrixXcd x = Eigen::MatrixXcd::Zero(n_, m);
+    for (Eigen::Index c = 0; c < m; ++c) {
+      const int j = columns[static_cast<size_t>(c)];
+      x(j, c) = 1.0;
+      Substitute(x.col(c).data(), j, lowest);  // the forward pass starts at the unit entry
+    }
+    return x;
+  }
 
-Eigen::MatrixXcd InverseColumns(const RealLdlt& solver, int n, const std::vector<int>& columns) {
-  Eigen::MatrixXd e = Eigen::MatrixXd::Zero(n, static_cast<Eigen::Index>(columns.size()));
-  for (size_t c = 0; c < columns.size(); ++c) e(columns[c], static_cast<Eigen::Index>(c)) = 1.0;
-  return solver.solve(e).cast<Complex>();
-}
+ private:
+  static Scalar Convert(Complex v) {
+    if constexpr (std::is_same_v<Scalar, double>) return v.real();
+    else return v;
+  }
+  static Scalar Conj(Scalar v) {
+    if constexpr (std::is_same_v<Scalar, double>) return v;
+    else return std::conj(v);
+  }
+  Scalar& L(int i, int j) { return l_[static_cast<size_t>(i) * p_ + (i - 1 - j)]; }
+  Scalar L(int i, int j) const { return l_[static_cast<size_t>(i) * p_ + (i - 1 - j)]; }
+
+  // x <- K^-1 x in place, x zero above `first`; entries above `last` are left undone.
+  void Substitute(Complex* x, int first, int last = 0) const {
+    for (int i = first; i < n_; ++i) {
+      Complex v = x[i];
+      for (int j = std::max(first, i - p_); j < i; ++j) v -= L(i, j) * x[j];
+      x[i] = v;
+    }
+    for (int i = first; i < n_; ++i) x[i] *= inverse_d_[i];
+    for (int i = n_ - 1; i >= last; --i) {
+      Complex v = x[i];
+      for (int j = i + 1; j <= std::min(n_ - 1, i + p_); ++j) v -= Conj(L(j, i)) * x[j];
+      x[i] = v;
+    }
+  }
+
+  Eigen::MatrixXcd SparseSolve(const Eigen::MatrixXcd& b) const {
+    if constexpr (std::is_same_v<Scalar, double>) {
+      const Eigen::Index n = b.rows(), m = b.cols();
+      Eigen::MatrixXd parts(n, 2 * m);
+      parts.leftCols(m) = b.real();
+      parts.rightCols(m) = b.imag();
+      const Eigen::MatrixXd x = sparse_.solve(parts);
+      Eigen::MatrixXcd out(n, m);
+      out.real() = x.leftCols(m);
+      out.imag() = x.rightCols(m);
+      return out;
+    } else {
+      return sparse_.solve(b);
+    }
+  }
+
+  int n_ = 0;
+  int p_ = -1;              // bandwidth of the band storage; -1: sparse
+  std::vector<Scalar> l_;   // strictly lower band of L
+  std::vector<double> d_;   // D
+  std::vector<double> inverse_d_;
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<Scalar>, Eigen::Lower, Eigen::NaturalOrdering<int>> sparse_;
+};
 
 // Ground positions are complex numbers x + iy: step 1's shape terms are then linear with
 // complex coefficients (a similarity is one complex factor), and step 2 acts on both
@@ -76,8 +170,8 @@ struct Agent {
   std::vector<Range> ranges;
   std::vector<int> global_range;  // per range: index into SeparationProblem::rigid
   int n1 = 0, n2 = 0;
-  Ldlt step1;
-  RealLdlt step2;
+  StepSolver<Complex> step1;
+  StepSolver<double> step2;
   Eigen::VectorXcd y1_rest;
   // Step-1 triangles: vertex i = (1 - mu) z_{i-1} + mu z_{i+1}.
   std::vector<int> tri;
@@ -165,22 +259,9 @@ int ThreadCount(int requested, int64_t work) {
   return work < 20000 ? 1 : threads;
 }
 
-void Factor(Ldlt& solver, int n, const std::vector<Eigen::Triplet<Complex>>& triplets) {
-  CSparse k(n, n);
-  k.setFromTriplets(triplets.begin(), triplets.end());
-  solver.compute(k);
-  if (solver.info() != Eigen::Success)
-    throw std::runtime_error("SeparationPrecompute: an agent's energy could not be factored");
-}
-
-void Factor(RealLdlt& solver, int n, const std::vector<Eigen::Triplet<Complex>>& triplets) {
-  std::vector<Eigen::Triplet<double>> real;
-  real.reserve(triplets.size());
-  for (const auto& t : triplets) real.emplace_back(t.row(), t.col(), t.value().real());
-  Eigen::SparseMatrix<double> k(n, n);
-  k.setFromTriplets(real.begin(), real.end());
-  solver.compute(k);
-  if (solver.info() != Eigen::Success)
+template <typename Scalar>
+void Factor(StepSolver<Scalar>& solver, int n, const std::vector<Eigen::Triplet<Complex>>& triplets) {
+  if (!solver.Factor(n, triplets))
     throw std::runtime_error("SeparationPrecompute: an agent's energy could not be factored");
 }
 
@@ -375,7 +456,10 @@ struct InverseBlock {
       missing = needed;
     }
     if (missing.empty()) return;
-    const Eigen::MatrixXcd x = InverseColumns(solver, n, missing);
+    int lowest = n;
+    for (int j : unknowns) lowest = std::min(lowest, j);
+    for (int j : missing) lowest = std::min(lowest, j);
+    const Eigen::MatrixXcd x = solver.InverseColumns(missing, lowest);
     columns += static_cast<int64_t>(missing.size());
     const Eigen::Index old = static_cast<Eigen::Index>(unknowns.size());
     const Eigen::Index total = old + static_cast<Eigen::Index>(missing.size());
@@ -469,7 +553,7 @@ Eigen::VectorXcd AgentResponse(const Solver& solver, const AgentRows& ar, const 
   Eigen::VectorXcd rhs = Eigen::VectorXcd::Zero(ar.y0.size());
   for (size_t k = 0; k < ar.rows.size(); ++k)
     for (const auto& [j, gj] : ar.g[k]) rhs[j] += gj * forces[ar.rows[k]];
-  return ar.y0 + SolveWith(solver, rhs).col(0);
+  return ar.y0 + solver.Solve(rhs).col(0);
 }
 
 // Where a row sits in the agents' blocks.
@@ -729,7 +813,7 @@ void SeparationSolve(const SeparationData& data, const SeparationRows& in, const
       const Complex e = z1[static_cast<size_t>(i + 1)] - z1[static_cast<size_t>(i)];
       edges[static_cast<size_t>(i)] = std::abs(e) > 0.0 ? e / std::abs(e) * std::abs(rest_edge) : rest_edge;
     }
-    ar->y0 = SolveWith(ag.step2, data.Step2Rhs(ag, edges, turn)).col(0);
+    ar->y0 = ag.step2.Solve(data.Step2Rhs(ag, edges, turn)).col(0);
     AgentBlock(ag.step2, ag.n2, [&](int i) { return ag.Map2(i, turn); },
                &cache.step2[static_cast<size_t>(involved[static_cast<size_t>(q)])], ar);
   });
