@@ -581,14 +581,21 @@ int SolveRows(const std::vector<AgentRows*>& blocks, const std::vector<std::vect
   auto unilateral = [&](int r) { return in.kind.size() && in.kind[r] != 0; };
   for (int r = 0; r < nr; ++r)
     if (unilateral(r)) forces[r] = std::max(forces[r], 0.0);
-  // v = S lambda, kept up to date as forces change.
-  Eigen::VectorXd v = Eigen::VectorXd::Zero(nr);
-  for (const AgentRows* ar : blocks) {
+  // S lambda, kept up to date as forces change, as each agent's part u = S_a lambda_a (a
+  // row's value is the sum of its agents' parts): a force change is then one contiguous
+  // column update per agent.
+  std::vector<Eigen::VectorXd> u(blocks.size());
+  for (size_t b = 0; b < blocks.size(); ++b) {
+    const AgentRows* ar = blocks[b];
     Eigen::VectorXd f(static_cast<Eigen::Index>(ar->rows.size()));
     for (size_t k = 0; k < ar->rows.size(); ++k) f[static_cast<Eigen::Index>(k)] = forces[ar->rows[k]];
-    const Eigen::VectorXd sv = ar->s * f;
-    for (size_t k = 0; k < ar->rows.size(); ++k) v[ar->rows[k]] += sv[static_cast<Eigen::Index>(k)];
+    u[b] = ar->s * f;
   }
+  auto value = [&](int r) {
+    double sum = 0.0;
+    for (const RowSlot& sl : slots[static_cast<size_t>(r)]) sum += u[static_cast<size_t>(sl.agent)][sl.local];
+    return sum;
+  };
   *converged = false;
   int sweep = 0;
   bool any_unilateral = false;
@@ -598,7 +605,7 @@ int SolveRows(const std::vector<AgentRows*>& blocks, const std::vector<std::vect
       double change = 0.0;
       for (int r = 0; r < nr; ++r) {
         if (!(diag[r] > 0.0)) continue;
-        double f = forces[r] + settings.relaxation * (q[r] - v[r] - in.softness[r] * forces[r]) / diag[r];
+        double f = forces[r] + settings.relaxation * (q[r] - value(r) - in.softness[r] * forces[r]) / diag[r];
         if (unilateral(r)) f = std::max(f, 0.0);
         const double delta = f - forces[r];
         // A change below the tolerance is not worth passing on to the other rows.
@@ -606,11 +613,8 @@ int SolveRows(const std::vector<AgentRows*>& blocks, const std::vector<std::vect
         forces[r] = f;
         ++*updates;
         change = std::max(change, std::abs(delta) * diag[r]);
-        for (const RowSlot& sl : slots[static_cast<size_t>(r)]) {
-          const AgentRows* ar = blocks[static_cast<size_t>(sl.agent)];
-          for (size_t k = 0; k < ar->rows.size(); ++k)
-            v[ar->rows[k]] += ar->s(static_cast<Eigen::Index>(k), sl.local) * delta;
-        }
+        for (const RowSlot& sl : slots[static_cast<size_t>(r)])
+          u[static_cast<size_t>(sl.agent)].noalias() += blocks[static_cast<size_t>(sl.agent)]->s.col(sl.local) * delta;
       }
       if (change <= settings.tolerance) {
         *converged = true;
