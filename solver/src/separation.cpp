@@ -75,8 +75,9 @@ class StepSolver {
     return x;
   }
 
-  // Columns `columns` of K^-1, #n by columns.size(); only rows `lowest` on are meant to be
-  // read (the band path leaves the rows above undone).
+  // Columns `columns` of K^-1, #n by columns.size(); in column c only the rows from
+  // min(columns[c], lowest) on are meant to be read (the band path leaves the rows above
+  // undone: those of other columns follow from symmetry).
   Eigen::MatrixXcd InverseColumns(const std::vector<int>& columns, int lowest) const {
     const Eigen::Index m = static_cast<Eigen::Index>(columns.size());
     if (p_ < 0) {
@@ -88,7 +89,7 @@ class StepSolver {
     for (Eigen::Index c = 0; c < m; ++c) {
       const int j = columns[static_cast<size_t>(c)];
       x(j, c) = 1.0;
-      Substitute(x.col(c).data(), j, lowest);  // the forward pass starts at the unit entry
+      Substitute(x.col(c).data(), j, std::min(j, lowest));  // the forward pass starts at the unit entry
     }
     return x;
   }
@@ -456,9 +457,8 @@ struct InverseBlock {
       missing = needed;
     }
     if (missing.empty()) return;
-    int lowest = n;
+    int lowest = n;  // of the unknowns cached already
     for (int j : unknowns) lowest = std::min(lowest, j);
-    for (int j : missing) lowest = std::min(lowest, j);
     const Eigen::MatrixXcd x = solver.InverseColumns(missing, lowest);
     columns += static_cast<int64_t>(missing.size());
     const Eigen::Index old = static_cast<Eigen::Index>(unknowns.size());
@@ -469,11 +469,16 @@ struct InverseBlock {
       slot[static_cast<size_t>(j)] = static_cast<int>(unknowns.size());
       unknowns.push_back(j);
     }
-    for (Eigen::Index c = 0; c < static_cast<Eigen::Index>(missing.size()); ++c)
+    // K is Hermitian: entry (i, j) of a new column j above min(j, lowest) is entry (j, i)
+    // of the new column i, conjugated.
+    for (Eigen::Index c = 0; c < static_cast<Eigen::Index>(missing.size()); ++c) {
+      const int j = missing[static_cast<size_t>(c)];
       for (Eigen::Index i = 0; i < total; ++i) {
-        grown(i, old + c) = x(unknowns[static_cast<size_t>(i)], c);
-        grown(old + c, i) = std::conj(grown(i, old + c));  // K is Hermitian
+        const int at = unknowns[static_cast<size_t>(i)];
+        grown(i, old + c) = at >= std::min(j, lowest) ? x(at, c) : std::conj(x(j, slot[static_cast<size_t>(at)] - old));
+        grown(old + c, i) = std::conj(grown(i, old + c));
       }
+    }
     inverse = std::move(grown);
   }
 };
