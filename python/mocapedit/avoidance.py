@@ -329,17 +329,19 @@ def _iteration(state: _State, found: collisions.Collisions, hits) -> Iteration:
                                        [h[2]["depth"].max(initial=0.0) for h in hits if h is not None])))
 
 
-def _expand(found: collisions.Collisions, spread: int, colliding_depth: float = 0.0):
+def _expand(found: collisions.Collisions, spread, colliding_depth: float = 0.0):
     """(a, b, sample) to constrain for each interval: its deepest sample, and, for intervals
-    deeper than ``colliding_depth``, every spread-th sample and the last one too."""
+    deeper than ``colliding_depth``, every spread-th sample and the last one too
+    (``spread``: one for all intervals, or (M,) one per interval)."""
     if len(found) == 0:
         z = np.zeros(0, np.int64)
         return z, z, z
     deep = found.depth > colliding_depth
+    spread = np.broadcast_to(np.asarray(spread, dtype=np.int64), (len(found),))
     length = np.where(deep, (found.last - found.first) // spread + 2, 0)
     rep = np.repeat(np.arange(len(found)), length)
     offset = np.arange(int(length.sum())) - np.repeat(np.cumsum(length) - length, length)
-    k = np.minimum(found.first[rep] + offset * spread, found.last[rep])
+    k = np.minimum(found.first[rep] + offset * spread[rep], found.last[rep])
     a = np.concatenate([found.agent_a, found.agent_a[rep]])
     b = np.concatenate([found.agent_b, found.agent_b[rep]])
     k = np.concatenate([found.deepest, k])
@@ -483,6 +485,8 @@ class _Candidates:
         self.force1 = np.zeros(0)         # and its step-1 force
         self.blocked = np.zeros(0, bool)  # hard constraints hold this pair together
         self.normal = np.zeros((0, 2))    # direction of the last solve's row (NaN: not solved yet)
+        self.pair_keys = np.zeros(0, np.int64)   # pairs that resisted (a * n + b), sorted
+        self.pair_count = np.zeros(0, np.int64)  # how many times each did
 
     def split(self):
         n = self.n
@@ -496,6 +500,28 @@ class _Candidates:
         keep = (self.force > 0.0) | (self.force1 > 0.0) | self.blocked | (gap < reach)
         self.keys, self.force, self.force1, self.blocked, self.normal = (
             self.keys[keep], self.force[keep], self.force1[keep], self.blocked[keep], self.normal[keep])
+
+    def resist(self, found: collisions.Collisions) -> None:
+        """Counts, per pair, the detections that still found it overlapping although it had
+        rows already (``found``: the collisions at the latest result)."""
+        if len(found) == 0:
+            return
+        pairs = np.unique(found.agent_a.astype(np.int64) * self.n + found.agent_b)
+        ca, cb, _ = self.split()
+        held = pairs[np.isin(pairs, ca * self.n + cb)]
+        self.pair_keys, self.pair_count = _count_into(self.pair_keys, self.pair_count, held)
+
+    def resistance(self, a, b) -> np.ndarray:
+        """(N,) how many times the pairs (a, b) resisted."""
+        keys = np.asarray(a, np.int64) * self.n + np.asarray(b, np.int64)
+        if len(self.pair_keys) == 0:
+            return np.zeros(len(keys), np.int64)
+        at = np.minimum(np.searchsorted(self.pair_keys, keys), len(self.pair_keys) - 1)
+        return np.where(self.pair_keys[at] == keys, self.pair_count[at], 0)
+
+    def resisting(self, found: collisions.Collisions) -> np.ndarray:
+        """(M,) True for the intervals of pairs that resisted."""
+        return self.resistance(found.agent_a, found.agent_b) > 0
 
     def add(self, a, b, k) -> None:
         keys = np.unique((k * self.n + a) * self.n + b)
@@ -526,6 +552,14 @@ class _Candidates:
         self.force1[flip] = 0.0
         self.normal[turn] = fresh[turn]
         return self.normal
+
+
+def _count_into(keys: np.ndarray, counts: np.ndarray, new: np.ndarray):
+    """Sorted keys and counts, with one more for each of the unique keys ``new``."""
+    merged = np.concatenate([keys, new])
+    uniq, inverse = np.unique(merged, return_inverse=True)
+    total = np.bincount(inverse, weights=np.concatenate([counts, np.ones(len(new))]), minlength=len(uniq))
+    return uniq, total.astype(np.int64)
 
 
 class _RegionCandidates:
@@ -639,7 +673,11 @@ def _relinearize(state: _State, run: _Run):
             break
         # Watch every near miss: each becomes a one-sided row that pushes only when needed.
         if p.collide_agents:
-            cands.add(*_expand(run.found.near, max(1, s.spread), buffer))
+            # A pair still overlapping where it was already held apart resists: it is held at
+            # every sample of its intervals from now on, and a little further apart each time.
+            near = run.found.near
+            cands.resist(run.found)
+            cands.add(*_expand(near, np.where(cands.resisting(near), 1, max(1, s.spread)), buffer))
             cands.prune(state, 2.0 * buffer)
         for r, h in enumerate(state.region_hits(flat, buffer)):
             if h is not None and len(h[0]):
@@ -655,7 +693,8 @@ def _relinearize(state: _State, run: _Run):
         state.fixed_rows(rows, fixed_force, fixed_force1)
         fixed = rows.count
         on = ~cands.blocked
-        sep = rows.add(normal[on], need[on] * (1.0 + s.overshoot), SEPARATION_SOFTNESS,
+        aim = need * (1.0 + s.overshoot * (1.0 + cands.resistance(ca, cb)))
+        sep = rows.add(normal[on], aim[on], SEPARATION_SOFTNESS,
                        np.concatenate([va, vb], axis=1)[on], np.concatenate([wa, -wb], axis=1)[on],
                        at_least=True, force=cands.force[on], force1=cands.force1[on])
         rnormal, rrhs = watched.linearise(state, flat)
