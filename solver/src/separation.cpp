@@ -108,6 +108,8 @@ class StepSolver {
 
   // x <- K^-1 x in place, x zero above `first`; entries above `last` are left undone.
   void Substitute(Complex* x, int first, int last = 0) const {
+    if (p_ == 2) return SubstituteBand<2>(x, first, last);
+    if (p_ == 1) return SubstituteBand<1>(x, first, last);
     for (int i = first; i < n_; ++i) {
       Complex v = x[i];
       for (int j = std::max(first, i - p_); j < i; ++j) v -= L(i, j) * x[j];
@@ -117,6 +119,28 @@ class StepSolver {
     for (int i = n_ - 1; i >= last; --i) {
       Complex v = x[i];
       for (int j = i + 1; j <= std::min(n_ - 1, i + p_); ++j) v -= Conj(L(j, i)) * x[j];
+      x[i] = v;
+    }
+  }
+
+  // The same for a bandwidth known at compile time (the loops unroll).
+  template <int P>
+  void SubstituteBand(Complex* x, int first, int last) const {
+    const Scalar* l = l_.data();
+    Complex y[P];  // the last P forward values before scaling by D^-1 (zero above `first`)
+    for (int t = 0; t < P; ++t) y[t] = 0.0;
+    for (int i = first; i < n_; ++i) {
+      Complex v = x[i];
+      const Scalar* li = l + static_cast<size_t>(i) * P;  // li[t] = L(i, i - 1 - t)
+      for (int t = 0; t < P; ++t) v -= li[t] * y[t];
+      for (int t = P - 1; t > 0; --t) y[t] = y[t - 1];
+      y[0] = v;
+      x[i] = v * inverse_d_[i];
+    }
+    for (int i = n_ - 1; i >= last; --i) {
+      Complex v = x[i];
+      for (int t = 0; t < P; ++t)
+        if (i + 1 + t < n_) v -= Conj(l[static_cast<size_t>(i + 1 + t) * P + t]) * x[i + 1 + t];
       x[i] = v;
     }
   }
