@@ -23,6 +23,14 @@ an avoid region, or ``max_iterations`` is reached. Two strategies:
   of being held back before the crossing and thrown forward after it. Each solve starts
   from the original source, so deformation does not accumulate.
 
+  What makes it fast: the detection that counts the collisions also gathers the near
+  misses (one pass); a row keeps the direction it was solved with while the fresh one
+  turns less than ``keep_degrees`` (any direction is a conservative separation), so rows
+  are re-sent unchanged and the solver reuses their agents' Schur blocks; each solve
+  step starts from the last solve's forces of the same step; a pair that still overlaps
+  where it was already held apart is held at every sample of its intervals, a little
+  further apart each time it resists, so the iterations do not stall on it.
+
 Artist constraints hold throughout: hard pins and links are hard rows of every solve,
 stationary ranges move rigidly. Pairs that hard constraints hold together are reported,
 not looped on.
