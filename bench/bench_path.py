@@ -5,15 +5,17 @@ real unknowns, hard constraints as Lagrange rows, SuperLU on the KKT system of t
 normal equations), measured in the same run on the same terms:
 
 - one agent, 1,000 frames, three hard constraints, full setup and solve (DESIGN.md: under
-  0.5 ms): the pass's own path (``ComponentProblem``: terms built in numpy, precompute
-  and solve in C++), and the C++ calls alone;
+  0.5 ms): the pass's own path (``ComponentProblem``), split into the solver calls
+  (``path_edit_precompute``, ``path_edit_solve`` and freeing the factor) and the Python
+  around them, and the C++ calls alone;
 - a re-solve after a dragged handle (under 50 us): ``PathEditor.move`` against the peer's
-  solve with its factorization kept;
+  solve with its factorization kept, and the ``path_edit_solve`` call alone;
 - 20,000 frames: time, and accuracy where the exact answer is known (handles a
   similarity meets: step 1 must return that similarity) and against a QR reference on a
   bend; with the condition number of step 1's normal matrix;
 - a group of 100 agents x 500 frames turned by one edit (under 50 ms), and a relay of 78
-  agents x 500 frames tied by hard relative constraints (under 50 ms);
+  agents x 500 frames tied by hard relative constraints (under 50 ms), each split as the
+  single path is;
 - the example stages of ``example_stages/stages_path.py``, solved through ``solve``: the
   path pass's time and, per edited agent, the foot skate (``metrics.foot_skate``, m/s,
   measured over the source's contact frames) before and after, and the length ratio.
@@ -21,6 +23,7 @@ normal equations), measured in the same run on the same terms:
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -56,6 +59,55 @@ def _agent(path, rest, times=None):
                                 if times is None else times)
 
 
+class _SolverClock:
+    """Seconds spent inside ``path_edit_precompute`` and ``path_edit_solve`` (and in freeing
+    the factorization): what the C++ solve costs, against the Python that builds the
+    problem around it and reads the results."""
+
+    def __init__(self):
+        self.seconds = 0.0
+
+    def __enter__(self):
+        self._saved = _solver.path_edit_precompute, _solver.path_edit_solve
+
+        def timed(fn):
+            def call(*args, **kwargs):
+                t = time.perf_counter()
+                try:
+                    return fn(*args, **kwargs)
+                finally:
+                    self.seconds += time.perf_counter() - t
+            return call
+        _solver.path_edit_precompute, _solver.path_edit_solve = map(timed, self._saved)
+        return self
+
+    def __exit__(self, *exc):
+        _solver.path_edit_precompute, _solver.path_edit_solve = self._saved
+
+    def free(self, problem) -> None:
+        """Drops the last reference to a problem, timing it with the solver (the factor's
+        destructor is most of it)."""
+        t = time.perf_counter()
+        problem.data = None
+        self.seconds += time.perf_counter() - t
+
+
+def _setup_and_solve(build, repeat: int) -> dict:
+    """Best wall time of ``build().solve()`` over ``repeat`` runs, and of the two parts of a
+    run: the solver calls, and the Python around them (each its best over the runs)."""
+    total = python = solver = float("inf")
+    with _SolverClock() as clock:
+        for _ in range(repeat):
+            clock.seconds = 0.0
+            t = time.perf_counter()
+            problem = build()
+            problem.solve()
+            clock.free(problem)
+            elapsed = time.perf_counter() - t
+            total, python, solver = min(total, elapsed), min(python, elapsed - clock.seconds), min(solver, clock.seconds)
+    return {"seconds": total, "pythonSeconds": python, "solverSeconds": solver}
+
+
 def _peer(problem: path_edit.ComponentProblem) -> PeerProblem:
     return PeerProblem(problem.rest, problem.triangles, problem.triangle_weights, problem.edges,
                        problem.edge_weights, problem.handle_vertex, problem.handle_weight, problem.link_vertex,
@@ -73,8 +125,10 @@ def _single(ctx, frames=1000):
     pos[1] += [1.0, 0.0]   # the middle dragged 1 m sideways
     hs = [path_edit.Handle("a", f, p, np.inf, f"h{f}") for f, p in zip(handles, pos)]
 
-    def ours():
-        return path_edit.ComponentProblem([_agent("a", rest)], hs, [], [], _settings()).solve()
+    agent = _agent("a", rest)
+
+    def build():
+        return path_edit.ComponentProblem([agent], hs, [], [], _settings())
 
     def cpp_only():
         tri, edg = _solver.chain_terms(rest, 0, frames, 0.01)
@@ -89,25 +143,35 @@ def _single(ctx, frames=1000):
         p = _peer(problem)
         return p, _peer_solve(problem, p)
 
-    setup = ctx.best_of(ours, repeat=20)
-    setup_cpp = ctx.best_of(cpp_only, repeat=20)
+    build().solve()
+    split = _setup_and_solve(build, repeat=200)
+    setup = split["seconds"]
+    setup_cpp = ctx.best_of(cpp_only, repeat=50)
     setup_peer = ctx.best_of(peer, repeat=3)
     peer_problem, peer_ground = peer()
     ground = result.agents["a"].ground
 
     editor = PathEditor(rest, handles, pos)
-    moves = iter(np.linspace(0.5, 1.5, 100000))
-    resolve = ctx.best_of(lambda: editor.move(1, pos[1] + [next(moves), 0.0]), repeat=200)
+    moves = iter(pos[1] + np.linspace([0.5, 0.0], [1.5, 0.0], 1000))
+    resolve = ctx.best_of(lambda: editor.move(1, next(moves)), repeat=500)
+    moved = editor.ground.copy()
+    raw = ctx.best_of(lambda: _solver.path_edit_solve(editor.problem.data, editor._positions, editor._links),
+                      repeat=500)
     hp = problem.handle_positions()
     resolve_peer = ctx.best_of(lambda: peer_problem.solve(hp), repeat=10)
     return {
         "frames": frames, "constraints": 3, "solver": result.solver,
-        "setupSolveSeconds": setup, "setupSolveCppSeconds": setup_cpp, "peerSetupSolveSeconds": setup_peer,
+        "setupSolveSeconds": setup, "setupSolvePythonSeconds": split["pythonSeconds"],
+        "setupSolveSolverSeconds": split["solverSeconds"], "setupSolveCppSeconds": setup_cpp,
+        "peerSetupSolveSeconds": setup_peer,
         "setupSolveSpeedupVsPeer": round(setup_peer / setup, 1), "setupSolveTarget": 0.5e-3,
         "maxDifferenceVsPeer": float(np.abs(ground - peer_ground).max()),
         "lengthRatio": float(np.linalg.norm(np.diff(ground, axis=0), axis=1).sum() /
                              np.linalg.norm(np.diff(rest, axis=0), axis=1).sum()),
-        "resolveSeconds": resolve, "peerResolveSeconds": resolve_peer,
+        "resolveSeconds": resolve, "resolveSolverSeconds": raw, "peerResolveSeconds": resolve_peer,
+        "resolveMaxDifferenceVsFullSolve": float(np.abs(moved - path_edit.ComponentProblem(
+            [agent], [path_edit.Handle("a", f, p, np.inf, "") for f, p in zip(handles, editor.positions)], [], [],
+            _settings()).solve().agents["a"].ground).max()),
         "resolveSpeedupVsPeer": round(resolve_peer / resolve, 1), "resolveTarget": 50e-6,
     }
 
@@ -204,8 +268,8 @@ def _relay(agents, frames):
 def _component(ctx, inputs, hs, links, groups, target):
     problem = path_edit.ComponentProblem(inputs, hs, links, groups, _settings())
     result = problem.solve()
-    seconds = ctx.best_of(lambda: path_edit.ComponentProblem(inputs, hs, links, groups, _settings()).solve(),
-                          repeat=2)
+    split = _setup_and_solve(lambda: path_edit.ComponentProblem(inputs, hs, links, groups, _settings()), repeat=3)
+    seconds = split["seconds"]
     peer = _peer(problem)
     peer_seconds = ctx.best_of(lambda: _peer_solve(problem, _peer(problem)), repeat=1)
     # The peer solves the same (key-frame) problem: compare the solver's own vertices.
@@ -215,7 +279,8 @@ def _component(ctx, inputs, hs, links, groups, target):
     return {
         "agents": len(inputs), "frames": inputs[0].frames, "unknownVertices": len(problem.rest),
         "triangles": len(problem.triangles), "edges": len(problem.edges), "solver": result.solver,
-        "seconds": seconds, "peerSeconds": peer_seconds, "speedupVsPeer": round(peer_seconds / seconds, 1),
+        "seconds": seconds, "pythonSeconds": split["pythonSeconds"], "solverSeconds": split["solverSeconds"],
+        "peerSeconds": peer_seconds, "speedupVsPeer": round(peer_seconds / seconds, 1),
         "target": target, "maxDifferenceVsPeer": float(np.abs(ours - _peer_solve(problem, peer)).max()),
         "hardResidual": float(max([np.linalg.norm(result.agents[h.agent].ground[h.frame] - h.position)
                                    for h in hs] + [0.0])),

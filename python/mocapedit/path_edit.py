@@ -37,6 +37,7 @@ stops changing.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from itertools import chain
 
 import numpy as np
 
@@ -123,7 +124,12 @@ class ComponentResult:
 
 
 class ComponentProblem:
-    """The solver problem of one component. Build once; ``solve`` any number of times."""
+    """The solver problem of one component. Build once; ``solve`` any number of times.
+
+    Agents are sorted by path and concatenated, one vertex per frame (per key frame for
+    group members). The terms come from ``_solver`` in one call per kind rather than one
+    per agent or sampled time (``solver/include/mocapedit/path_terms.h``), and the
+    freedom analysis asks the solver only when the hard handles do not pin every body down."""
 
     def __init__(self, agents: list[AgentInput], handles: list[Handle], links: list[Link],
                  groups: list[Group], settings: Settings, precompute_responses: bool = False):
@@ -131,14 +137,23 @@ class ComponentProblem:
         self.handles, self.links, self.groups = list(handles), list(links), list(groups)
         self.settings = settings
         self.notes: list[str] = []
+        self.order = sorted(self.full)
+        self.index = {p: i for i, p in enumerate(self.order)}
+        self._inputs = [self.full[p] for p in self.order]
+        fo = [0]
+        for a in self._inputs:
+            fo.append(fo[-1] + a.frames)
+        self._full_offset = fo
+        if len(self._inputs) == 1:
+            self._rest_full = np.ascontiguousarray(self._inputs[0].rest, dtype=np.float64)
+        else:
+            self._rest_full = np.concatenate([a.rest for a in self._inputs], dtype=np.float64)
         # Group members are solved on key frames; the frames between follow (see _keys).
-        self.keys = self._keys()
-        self.agents = [self._reduced(self.full[p]) for p in sorted(self.full)]
-        self.index = {a.path: i for i, a in enumerate(self.agents)}
-        self.offset = np.concatenate([[0], np.cumsum([a.frames for a in self.agents])]).astype(np.int64)
-        self.rest = np.concatenate([a.rest for a in self.agents]).astype(np.float64)
+        self._keys()
         self._build_terms()
         self._resolve_freedom()
+        self._needs_headings = any(k.space == "target" for k in self.links)
+        self._rest_headings: dict[int, np.ndarray] = {}
         self.data = _solver.path_edit_precompute(
             self.rest, self.triangles, self.triangle_weights, self.edges, self.edge_weights, self.rigid,
             self.handle_vertex, self.handle_weight, self.link_vertex, self.link_weight,
@@ -146,175 +161,149 @@ class ComponentProblem:
 
     # ---- key frames --------------------------------------------------------------------
 
-    def _keys(self) -> dict[str, np.ndarray]:
+    def _keys(self) -> None:
         """Key frames of each group member: the group's sampled shared times, constrained
         frames, stationary ranges (and the frames around them), the ends, and every frame of
         a stretch too short to interpolate across. Other agents keep every frame.
 
         Kwon et al. build the group mesh on sampled frames too; here the frames between two
-        keys follow them as one similarity, so they keep their shape and their sway."""
-        s = self.settings
-        out = {}
-        members = {m for g in self.groups if g.stiffness > 0 for m in g.members if m in self.full}
-        for g in self.groups:
-            if g.stiffness <= 0:
+        keys follow them as one similarity, so they keep their shape and their sway.
+
+        Sets ``rest``/``offset`` (the solve's vertices) and, when there are members, the maps
+        between frames and vertices (``keys`` gives each member's key frames)."""
+        s, fo = self.settings, self._full_offset
+        self._samples: dict[int, np.ndarray] = {}   # group -> (M,T) frame of each member, -1 none
+        self._sel = None                             # (V,) frame of each solve vertex
+        self._red_stationary = [a.stationary for a in self._inputs]
+        active = [(n, g, [self.index[m] for m in g.members if m in self.index])
+                  for n, g in enumerate(self.groups) if g.stiffness > 0]
+        members = sorted({i for _, _, ids in active for i in ids})
+        self._members = members
+        if not members:
+            self.rest = self._rest_full
+            self._red_offset = fo
+            self.offset = np.array(fo, dtype=np.int64)
+            return
+        is_member = np.zeros(len(self._inputs), np.int32)
+        is_member[members] = 1
+        forced = []
+        for n, g, ids in active:
+            if not ids:
                 continue
-            inside = [self.full[m] for m in g.members if m in self.full]
-            start = max(float(m.sample_times[0]) for m in inside)
-            end = min(float(m.sample_times[-1]) for m in inside)
-            times = np.arange(start, end + 1e-9, s.group_step) if end >= start else np.zeros(0)
-            for m in inside:
-                f = np.clip(np.searchsorted(m.sample_times, times - 1e-9), 0, m.frames - 1)
-                hit = f[np.abs(m.sample_times[f] - times) < 1e-6]
-                out.setdefault(m.path, set()).update(int(x) for x in hit)
-        for path in sorted(members):
-            a = self.full[path]
-            key = np.zeros(a.frames, bool)
-            key[sorted(out.get(path, ()))] = True
-            key[0] = key[-1] = True
-            for h in self.handles:
-                if h.agent == path and h.weight > 0:
-                    key[h.frame] = True
-            for k in self.links:
-                if k.weight > 0:
-                    key[k.frame] |= k.agent == path
-                    key[k.target_frame] |= k.target == path
-            for first, last in a.stationary:
-                key[max(first - 1, 0):min(last + 2, a.frames)] = True
-            at = np.flatnonzero(key)
-            short = np.linalg.norm(a.rest[at[1:]] - a.rest[at[:-1]], axis=1) < s.min_baseline
-            for lo, hi in zip(at[:-1][short], at[1:][short]):
-                key[lo:hi] = True
-            out[path] = np.flatnonzero(key)
-        return out
+            times = [self._inputs[i].sample_times for i in ids]
+            start, end = max(float(t[0]) for t in times), min(float(t[-1]) for t in times)
+            if end < start:
+                continue
+            frames = _solver.group_sample_frames(
+                np.concatenate(times, dtype=np.float64),
+                np.cumsum([0] + [len(t) for t in times], dtype=np.int32),
+                np.arange(start, end + 1e-9, s.group_step))
+            vert = np.where(frames >= 0, frames + np.array([fo[i] for i in ids])[:, None], -1)
+            forced.append(vert[vert >= 0])
+            self._samples[n] = vert
+        marks = []
+        for i in members:
+            marks += (fo[i], fo[i + 1] - 1)
+            for first, last in self._inputs[i].stationary:
+                marks.extend(range(fo[i] + max(first - 1, 0), fo[i] + min(last + 2, fo[i + 1] - fo[i])))
+        for h in self.handles:
+            if h.weight > 0 and is_member[self.index[h.agent]]:
+                marks.append(fo[self.index[h.agent]] + h.frame)
+        for k in self.links:
+            if k.weight > 0:
+                for agent, frame in ((k.agent, k.frame), (k.target, k.target_frame)):
+                    if is_member[self.index[agent]]:
+                        marks.append(fo[self.index[agent]] + frame)
+        forced.append(np.array(marks, dtype=np.int64))
+        self._sel, self._before = _solver.key_frames(self._rest_full, np.array(fo, dtype=np.int32), is_member,
+                                                     np.concatenate(forced).astype(np.int32), s.min_baseline)
+        self.rest = self._rest_full[self._sel]
+        before = self._before
+        ro = [int(before[f]) for f in fo[:-1]] + [len(self._sel)]
+        self._red_offset = ro
+        self.offset = np.array(ro, dtype=np.int64)
+        for i in members:
+            self._red_stationary[i] = [(int(before[fo[i] + f]) - ro[i], int(before[fo[i] + l]) - ro[i])
+                                       for f, l in self._inputs[i].stationary]
 
-    def _reduced(self, a: AgentInput) -> AgentInput:
-        keys = self.keys.get(a.path)
-        if keys is None:
-            return a
-        where = np.searchsorted(keys, [f for f, _ in a.stationary] + [l for _, l in a.stationary])
-        n = len(a.stationary)
-        return AgentInput(path=a.path, rest=a.rest[keys], source=a.source[keys], source_heading=a.source_heading[keys],
-                          stationary=[(int(where[r]), int(where[n + r])) for r in range(n)],
-                          stationary_refs=a.stationary_refs,
-                          rest_turn=a.rest_turn, sample_times=a.sample_times[keys])
+    @property
+    def keys(self) -> dict[str, np.ndarray]:
+        """Group member path -> its key frames (the frames it is solved on)."""
+        fo, ro = self._full_offset, self._red_offset
+        return {self.order[i]: self._sel[ro[i]:ro[i + 1]] - fo[i] for i in self._members}
 
-    def _expand(self, path: str, g: np.ndarray) -> np.ndarray:
-        """The (F,2) path of an agent from its key frames: each frame between two keys is
-        carried by the similarity that takes the keys' rest positions to their new ones."""
-        keys = self.keys.get(path)
-        a = self.full[path]
-        if keys is None:
-            return g
-        z = a.rest[:, 0] + 1j * a.rest[:, 1]
-        x = np.empty(a.frames, complex)
-        x[keys] = g[:, 0] + 1j * g[:, 1]
-        k1 = np.searchsorted(keys, np.arange(a.frames))
-        between = np.flatnonzero((k1 > 0) & (k1 < len(keys)) & ~np.isin(np.arange(a.frames), keys))
-        lo, hi = keys[k1[between] - 1], keys[k1[between]]
-        gamma = (z[between] - z[lo]) / (z[hi] - z[lo])
-        x[between] = x[lo] + gamma * (x[hi] - x[lo])
-        return np.stack([x.real, x.imag], axis=1)
+    def _expand(self, positions: np.ndarray) -> np.ndarray:
+        """(F,2) paths of every agent, concatenated, from the solve's vertices: each frame
+        between two keys is carried by the similarity that takes the keys' rest positions
+        to their new ones."""
+        if self._sel is None:
+            return positions.copy()
+        return _solver.expand_key_frames(self._rest_full, self._sel, np.ascontiguousarray(positions))
 
     # ---- structure ---------------------------------------------------------------------
 
     def vertex(self, agent: str, frame: int) -> int:
-        keys = self.keys.get(agent)
-        if keys is not None:
-            frame = int(np.searchsorted(keys, frame))
-        return int(self.offset[self.index[agent]] + frame)
+        i = self.index[agent]
+        if self._sel is not None:
+            return int(self._before[self._full_offset[i] + int(frame)])
+        return self._red_offset[i] + int(frame)
 
     def _build_terms(self) -> None:
         s = self.settings
-        tri, edg = [np.zeros((0, 3), np.int32)], [np.zeros((0, 2), np.int32)]
-        tw, ew = [], []
-        for a in self.agents:
-            t, e = _solver.chain_terms(self.rest, int(self.offset[self.index[a.path]]), a.frames, s.min_baseline)
-            tri.append(t), edg.append(e)
-            tw.append(np.ones(len(t))), ew.append(np.ones(len(e)))
-        for g in self.groups:
-            t, e, w = self._group_terms(g)
+        self._offsets32 = np.array(self._red_offset, dtype=np.int32)
+        self._partner = None   # frame partners, for group triangles
+        tri, edg = _solver.component_chain_terms(self.rest, self._offsets32, s.min_baseline)
+        tw, ew = np.empty(len(tri)), np.empty(len(edg))
+        tw.fill(1.0), ew.fill(1.0)   # as np.ones, without its Python-level wrapper
+        tri, edg, tw, ew = [tri], [edg], [tw], [ew]
+        for n, g in enumerate(self.groups):
+            t, e, w = self._group_terms(n, g)
             tri.append(t), edg.append(e)
             tw.append(np.full(len(t), w)), ew.append(np.full(len(e), w))
-        self.triangles = np.concatenate(tri).astype(np.int32)
-        self.edges = np.concatenate(edg).astype(np.int32)
-        self.triangle_weights = np.concatenate(tw + [np.zeros(0)])
-        self.edge_weights = np.concatenate(ew + [np.zeros(0)])
+        if len(tri) == 1:
+            self.triangles, self.edges, self.triangle_weights, self.edge_weights = tri[0], edg[0], tw[0], ew[0]
+        else:
+            self.triangles = np.concatenate(tri).astype(np.int32, copy=False)
+            self.edges = np.concatenate(edg).astype(np.int32, copy=False)
+            self.triangle_weights = np.concatenate(tw)
+            self.edge_weights = np.concatenate(ew)
         # Handles and links, in input order (the solver reports contradictions by index).
-        self.handle_vertex = np.array([self.vertex(h.agent, h.frame) for h in self.handles], dtype=np.int32)
+        self._hv = [self.vertex(h.agent, h.frame) for h in self.handles]
+        self._lv = [(self.vertex(k.agent, k.frame), self.vertex(k.target, k.target_frame)) for k in self.links]
+        self.handle_vertex = np.array(self._hv, dtype=np.int32)
         self.handle_weight = np.array([h.weight for h in self.handles], dtype=np.float64)
         self.handle_refs = [h.ref for h in self.handles]
-        self.link_vertex = np.array([[self.vertex(k.agent, k.frame), self.vertex(k.target, k.target_frame)]
-                                     for k in self.links], dtype=np.int32).reshape(-1, 2)
-        self.link_weight = np.array([k.weight for k in self.links], dtype=np.float64)
+        if self.links:
+            self.link_vertex = np.array(self._lv, dtype=np.int32)
+            self.link_weight = np.array([k.weight for k in self.links], dtype=np.float64)
+        else:
+            self.link_vertex, self.link_weight = np.zeros((0, 2), np.int32), np.zeros(0)
         self.link_refs = [k.ref for k in self.links]
         self.extra_links: list[tuple[int, int, np.ndarray]] = []   # gauge terms: (a, b, offset)
         self.extra_handle_positions: list[np.ndarray] = []          # gauge pins
 
-    def _group_terms(self, g: Group):
+    def _group_terms(self, n: int, g: Group):
         """Triangles and edges joining the members of a group at every sampled shared time:
         each member to its nearest neighbours there, its position in their local path frame
         (step 1) and its distance to them (step 2)."""
-        s = self.settings
-        members = [self.agents[self.index[m]] for m in g.members if m in self.index]
-        if g.stiffness <= 0 or len(members) < 2:
+        count = sum(1 for m in g.members if m in self.index)
+        if g.stiffness <= 0 or count < 2 or n not in self._samples:
             return np.zeros((0, 3), np.int32), np.zeros((0, 2), np.int32), 0.0
-        start = max(float(m.sample_times[0]) for m in members)
-        end = min(float(m.sample_times[-1]) for m in members)
-        if end < start:
-            return np.zeros((0, 3), np.int32), np.zeros((0, 2), np.int32), 0.0
-        times = np.arange(start, end + 1e-9, s.group_step)
-        # (M,T) frame of each member at each time (-1 where it has no sample there).
-        frames = np.empty((len(members), len(times)), np.int64)
-        for k, m in enumerate(members):
-            f = np.clip(np.searchsorted(m.sample_times, times - 1e-9), 0, m.frames - 1)
-            frames[k] = np.where(np.abs(m.sample_times[f] - times) < 1e-6, f, -1)
-        ok = (frames >= 0).all(axis=0)
-        frames = frames[:, ok]
-        vert = frames + np.array([self.offset[self.index[m.path]] for m in members])[:, None]   # (M,T)
-        k = min(s.group_neighbours, len(members) - 1)
-        pairs = []
-        for chunk in range(0, vert.shape[1], 256):   # bounded memory: (M, M, 256) distances
-            v = vert[:, chunk:chunk + 256]
-            p = self.rest[v]                                                       # (M,t,2)
-            d = np.linalg.norm(p[:, None] - p[None], axis=-1)                      # (M,M,t)
-            d[np.arange(len(members)), np.arange(len(members))] = np.inf
-            near = np.argsort(d, axis=1, kind="stable")[:, :k]                     # (M,k,t)
-            a = np.broadcast_to(v[:, None, :], near.shape)
-            b = np.take_along_axis(np.broadcast_to(v[None], (len(members),) + v.shape), near, axis=1)
-            pairs.append(np.stack([np.minimum(a, b).ravel(), np.maximum(a, b).ravel()], axis=1))
-        edg = np.unique(np.concatenate(pairs), axis=0)
-        partner = self._frame_partners()
-        tri = []
-        for v, w in ((edg[:, 0], edg[:, 1]), (edg[:, 1], edg[:, 0])):
-            f = partner[w]
-            keep = (f >= 0) & (np.linalg.norm(self.rest[v] - self.rest[w], axis=1) > 0)
-            tri.append(np.stack([v[keep], w[keep], f[keep]], axis=1))
-        weight = g.stiffness
-        return np.concatenate(tri).astype(np.int32), edg.astype(np.int32), weight
-
-    def _frame_partners(self) -> np.ndarray:
-        """(V,) per vertex: the nearest later frame of the same agent at least min_baseline
-        away (an earlier one near the end; -1 if none), to frame a group triangle."""
-        out = np.full(len(self.rest), -1, np.int64)
-        for i, a in enumerate(self.agents):
-            lo = int(self.offset[i])
-            arc = _solver.cumulative_arc_length(np.ascontiguousarray(a.rest))
-            idx = np.arange(a.frames)
-            ahead = np.searchsorted(arc, arc + self.settings.min_baseline, side="left")
-            behind = np.searchsorted(arc, arc - self.settings.min_baseline, side="right") - 1
-            for cand in (ahead, behind):
-                c = np.clip(cand, 0, a.frames - 1)
-                far = np.linalg.norm(a.rest[c] - a.rest, axis=1) >= self.settings.min_baseline
-                take = (out[lo:lo + a.frames] < 0) & far & (cand >= 0) & (cand < a.frames) & (c != idx)
-                out[lo:lo + a.frames][take] = c[take] + lo
-        return out
+        vert = self._samples[n]
+        vert = self._before[vert[:, (vert >= 0).all(axis=0)]]   # their solve vertices
+        if self._partner is None:
+            self._partner = _solver.frame_partners(self.rest, self._offsets32, self.settings.min_baseline)
+        k = min(self.settings.group_neighbours, count - 1)
+        tri, edg = _solver.group_mesh_terms(self.rest, vert, k, self._partner)
+        return tri, edg, g.stiffness
 
     # ---- the freedom the constraints leave -------------------------------------------
 
     def _bodies(self) -> list[list[int]]:
         """Agent indices of each body: a group joins its members, an agent is its own."""
-        parent = list(range(len(self.agents)))
+        if not any(g.stiffness > 0 for g in self.groups):
+            return [[i] for i in range(len(self.order))]
+        parent = list(range(len(self.order)))
 
         def find(i):
             while parent[i] != i:
@@ -327,78 +316,125 @@ class ComponentProblem:
                 for k in ids[1:]:
                     parent[find(k)] = find(ids[0])
         out: dict[int, list[int]] = {}
-        for i in range(len(self.agents)):
+        for i in range(len(self.order)):
             out.setdefault(find(i), []).append(i)
         return [sorted(v) for _, v in sorted(out.items())]
 
-    def _anchors(self, body: list[int]) -> list[int]:
-        verts = set()
-        owner = set(body)
-        for h, v in zip(self.handles, self.handle_vertex):
-            if h.weight > 0 and self.index[h.agent] in owner:
-                verts.add(int(v))
-        for k, (a, b) in zip(self.links, self.link_vertex):
-            if k.weight > 0:
-                if self.index[k.agent] in owner:
-                    verts.add(int(a))
-                if self.index[k.target] in owner:
-                    verts.add(int(b))
-        return sorted(verts)
+    def _places(self, verts) -> int:
+        """How many distinct rest positions the vertices have."""
+        if len(verts) < 2:
+            return len(verts)
+        at = self.rest.item
+        return len({(at(v, 0), at(v, 1)) for v in verts})
 
     def _resolve_freedom(self) -> None:
-        bodies = self._bodies()
+        bodies, index = self._bodies(), self.index
+        self._centre = None
+        if len(bodies) == len(self.order):   # every agent its own body, in order
+            self._body_of = body_of = list(range(len(bodies)))
+        else:
+            self._body_of = body_of = [0] * len(self.order)
+            for b, body in enumerate(bodies):
+                for i in body:
+                    body_of[i] = b
+        # Anchors: the vertices each body is held at by a handle or a link; by a hard handle.
+        held, hard = [set() for _ in bodies], [set() for _ in bodies]
+        handled = False
+        for h, v in zip(self.handles, self._hv):
+            if h.weight > 0:
+                handled = True
+                b = body_of[index[h.agent]]
+                held[b].add(v)
+                if h.weight == HARD:
+                    hard[b].add(v)
+        for k, (a, b) in zip(self.links, self._lv):
+            if k.weight > 0:
+                held[body_of[index[k.agent]]].add(a)
+                held[body_of[index[k.target]]].add(b)
+        anchors = [sorted(x) for x in held]
+        places = self._count_places(anchors)
+        ro = self._red_offset
         self.translate_only = set()
         self.rigid, self.rigid_refs = [], []
-        anchors = [self._anchors(b) for b in bodies]
-        for body, anchor in zip(bodies, anchors):
-            distinct = {tuple(self.rest[v]) for v in anchor}
-            if len(distinct) < 2:
+        for body, anchor, n in zip(bodies, anchors, places):
+            if n < 2:
                 self.translate_only.update(body)
-                verts = np.concatenate([np.arange(self.offset[i], self.offset[i + 1]) for i in body])
-                self.rigid.append((verts.astype(np.int64).tolist(), "translate"))
-                self.rigid_refs.append(("body", [self.agents[i].path for i in body]))
-        for i, a in enumerate(self.agents):
+                self.rigid.append((list(chain.from_iterable(range(ro[i], ro[i + 1]) for i in body)), "translate"))
+                self.rigid_refs.append(("body", [self.order[i] for i in body]))
+        for i in range(len(self.order)):
             if i in self.translate_only:
                 continue
-            for r, (first, last) in enumerate(a.stationary):
-                verts = np.arange(first, last + 1) + int(self.offset[i])
-                self.rigid.append((verts.astype(np.int64).tolist(), "rotate"))
-                self.rigid_refs.append(("stationary", a.path, r))
+            for r, (first, last) in enumerate(self._red_stationary[i]):
+                self.rigid.append((list(range(first + ro[i], last + 1 + ro[i])), "rotate"))
+                self.rigid_refs.append(("stationary", self.order[i], r))
         # No position constraint: pin one link end; the solve is shifted back afterwards.
         self.pinned = None
-        if not any(h.weight > 0 for h in self.handles) and len(self.links):
-            self.pinned = int(self.link_vertex[0, 0])
+        if not handled and self.links:
+            self.pinned = self._lv[0][0]
             self._append_handle(self.pinned, self.rest[self.pinned], HARD, None)
-        kernel = set() if self._pinned_down(bodies) else self._similarity_kernel(bodies)
+        kernel = set() if self._pinned_down(held, hard, places) else self._similarity_kernel(bodies)
         if kernel:
-            for body, anchor in zip(bodies, anchors):
-                if len(anchor) >= 2 and any(i in kernel for i in body):
-                    pts = self.rest[anchor]
-                    d = np.linalg.norm(pts[:, None] - pts[None], axis=-1)
-                    i, j = np.unravel_index(int(np.argmax(d)), d.shape)
-                    a, b = anchor[min(i, j)], anchor[max(i, j)]
-                    self.extra_links.append((a, b, self.rest[a] - self.rest[b]))
-            for a, b, offset in self.extra_links:
-                self.link_vertex = np.concatenate([self.link_vertex, np.array([[a, b]], np.int32)])
-                self.link_weight = np.append(self.link_weight, GAUGE_WEIGHT)
-                self.link_refs.append(None)
+            gauged = [k for k, (body, anchor) in enumerate(zip(bodies, anchors))
+                      if len(anchor) >= 2 and any(i in kernel for i in body)]
+            ends = self._farthest_anchors([anchors[k] for k in gauged])
+            if len(ends):
+                offsets = self.rest[ends[:, 0]] - self.rest[ends[:, 1]]
+                self.extra_links = [(a, b, o) for (a, b), o in zip(ends.tolist(), offsets)]
             if self.extra_links:
+                self.link_vertex = np.concatenate([self.link_vertex,
+                                                   np.array([(a, b) for a, b, _ in self.extra_links], np.int32)])
+                self.link_weight = np.append(self.link_weight, np.full(len(self.extra_links), GAUGE_WEIGHT))
+                self.link_refs.extend([None] * len(self.extra_links))
                 self.notes.append("the constraints leave some agents free to turn or scale: each keeps, as far "
                                   "as it can, the direction and distance between the farthest frames it is held at")
             if self._similarity_kernel(bodies):
                 self.notes.append("the constraints leave some agents free to move; add a position constraint")
 
-    def _pinned_down(self, bodies: list[list[int]]) -> bool:
+    def _count_places(self, sets: list[list[int]]) -> list[int]:
+        """How many distinct rest positions each list of vertices has."""
+        many = [k for k, verts in enumerate(sets) if len(verts) > 1]
+        if len(many) < 8:
+            return [self._places(verts) for verts in sets]
+        out = [len(verts) for verts in sets]
+        sizes = [len(sets[k]) for k in many]
+        owner = np.repeat(np.arange(len(many)), sizes)
+        pts = self.rest[np.fromiter(chain.from_iterable(sets[k] for k in many), np.int64, sum(sizes))]
+        order = np.lexsort((pts[:, 1], pts[:, 0], owner))
+        owner, pts = owner[order], pts[order]
+        new = np.ones(len(owner), bool)
+        new[1:] = (owner[1:] != owner[:-1]) | (pts[1:] != pts[:-1]).any(axis=1)
+        for k, n in zip(many, np.bincount(owner[new], minlength=len(many)).tolist()):
+            out[k] = n
+        return out
+
+    def _farthest_anchors(self, sets: list[list[int]]) -> np.ndarray:
+        """(S,2) per list of two or more vertices (sorted): the two farthest apart at rest, the
+        earlier listed first (the first such pair in row order; a vertex twice when all
+        coincide)."""
+        out = np.zeros((len(sets), 2), np.int64)
+        pairs = [k for k, verts in enumerate(sets) if len(verts) == 2]
+        if pairs:
+            ends = np.array([sets[k] for k in pairs], np.int64)
+            apart = np.linalg.norm(self.rest[ends[:, 0]] - self.rest[ends[:, 1]], axis=1) > 0
+            out[pairs, 0] = ends[:, 0]
+            out[pairs, 1] = np.where(apart, ends[:, 1], ends[:, 0])
+        for k, verts in enumerate(sets):
+            if len(verts) > 2:
+                pts = self.rest[verts]
+                d = np.linalg.norm(pts[:, None] - pts[None], axis=-1)
+                i, j = np.unravel_index(int(np.argmax(d)), d.shape)
+                out[k] = verts[min(i, j)], verts[max(i, j)]
+        return out
+
+    def _pinned_down(self, held: list[set[int]], hard: list[set[int]], places: list[int]) -> bool:
         """True when every body carries hard handles at two or more places and no link ties
-        bodies together: nothing is left free (the common case, decided without analysis)."""
+        bodies together: nothing is left free (the common case, decided without analysis).
+        Per body: ``held`` its anchors (at ``places`` distinct places), ``hard`` its hard
+        handles' vertices."""
         if len(self.link_vertex):
             return False
-        owner = np.searchsorted(self.offset, self.handle_vertex, side="right") - 1
-        for body in bodies:
-            mine = np.isin(owner, body) & np.isinf(self.handle_weight)
-            if len({tuple(p) for p in self.rest[self.handle_vertex[mine]]}) < 2:
-                return False
-        return True
+        return all((n if verts == anchors else self._places(verts)) >= 2
+                   for verts, anchors, n in zip(hard, held, places))
 
     def _append_handle(self, v: int, position: np.ndarray, weight: float, ref) -> None:
         self.handle_vertex = np.append(self.handle_vertex, np.int32(v)).astype(np.int32)
@@ -408,55 +444,54 @@ class ComponentProblem:
 
     def _similarity_kernel(self, bodies: list[list[int]]) -> set[int]:
         """Agents that some motion of the bodies (a similarity each) leaves every constraint
-        unchanged for: the freedom the constraints do not fix. Empty when there is none."""
-        cols, centre = {}, {}
-        for b, body in enumerate(bodies):
-            verts = np.concatenate([np.arange(self.offset[i], self.offset[i + 1]) for i in body])
-            centre[b] = self.rest[verts].mean(axis=0)
-            cols[b] = 1 if body[0] in self.translate_only else 2
-        start = np.cumsum([0] + [cols[b] for b in range(len(bodies))])
-        body_of = np.empty(len(self.rest), np.int64)
-        for b, body in enumerate(bodies):
-            for i in body:
-                body_of[self.offset[i]:self.offset[i + 1]] = b
-        rows = []
+        unchanged for: the freedom the constraints do not fix. Empty when there is none.
 
-        def term(v, sign, row):
-            b = body_of[v]
-            row[start[b]] += sign
-            if cols[b] == 2:
-                d = self.rest[v] - centre[b]
-                row[start[b] + 1] += sign * complex(d[0], d[1])
-        for v, w in zip(self.handle_vertex, self.handle_weight):
-            if w > 0:
-                row = np.zeros(start[-1], complex)
-                term(v, 1, row)
-                rows.append(row)
-        for (a, b), w in zip(self.link_vertex, self.link_weight):
-            if w > 0:
-                row = np.zeros(start[-1], complex)
-                term(a, 1, row)
-                term(b, -1, row)
-                rows.append(row)
-        if not rows:
-            return set(range(len(self.agents)))
-        moving = _null_columns(np.array(rows))
-        free = set()
-        for b, body in enumerate(bodies):
-            if moving[start[b]:start[b + 1]].any():
-                free.update(body)
-        return free
+        Unknowns: each body's translation, and unless it only translates its rotation and
+        scale about its centre (complex). Each handle and link of positive weight is a row;
+        the solver finds the columns the null space reaches."""
+        nb = len(bodies)
+        similar = np.array([body[0] not in self.translate_only for body in bodies])
+        start = np.concatenate([[0], np.cumsum(np.where(similar, 2, 1))])
+        body_of = np.array(self._body_of, dtype=np.int64)
+        if self._centre is None:   # of each body's rest vertices
+            sums = np.zeros((nb, 2))
+            np.add.at(sums, body_of, np.add.reduceat(self.rest, self.offset[:-1]))
+            self._centre = sums / np.bincount(body_of, weights=np.diff(self.offset), minlength=nb)[:, None]
+        centre = self._centre
+        hv, hw = self.handle_vertex, self.handle_weight
+        lv, lw = self.link_vertex, self.link_weight
+        hv, lv = hv[hw > 0], lv[lw > 0]
+        nh, nl = len(hv), len(lv)
+        if nh + nl == 0:
+            return set(range(len(self.order)))
+        verts = np.concatenate([hv, lv[:, 0], lv[:, 1]]).astype(np.int64)
+        rows = np.concatenate([np.arange(nh), nh + np.arange(nl), nh + np.arange(nl)])
+        sign = np.concatenate([np.ones(nh + nl), -np.ones(nl)])
+        b = body_of[np.searchsorted(self.offset, verts, side="right") - 1]
+        d = self.rest[verts] - centre[b]
+        two = similar[b]
+        values = np.concatenate([sign + 0j, sign[two] * (d[two, 0] + 1j * d[two, 1])])
+        used = _solver.null_space_support(np.concatenate([rows, rows[two]]).astype(np.int32),
+                                          np.concatenate([start[b], start[b][two] + 1]).astype(np.int32),
+                                          values, nh + nl, int(start[-1]))
+        moved = np.logical_or.reduceat(used, start[:-1]).tolist()
+        return {i for body, m in zip(bodies, moved) if m for i in body}
 
     # ---- solving -----------------------------------------------------------------------
 
     def handle_positions(self, positions: np.ndarray | None = None) -> np.ndarray:
         """(H,2) positions for the solver: the handles' own, then the gauge pins'."""
-        own = np.array([h.position for h in self.handles], dtype=np.float64).reshape(-1, 2)
-        if positions is not None:
-            own = np.asarray(positions, dtype=np.float64).reshape(-1, 2)
+        if positions is None:
+            own = np.array([h.position for h in self.handles], dtype=np.float64).reshape(-1, 2)
+        else:
+            own = np.array(positions, dtype=np.float64).reshape(-1, 2)
+        if not self.extra_handle_positions:
+            return own
         return np.concatenate([own, np.array(self.extra_handle_positions, dtype=np.float64).reshape(-1, 2)])
 
     def _link_offsets(self, headings: dict[str, np.ndarray] | None) -> np.ndarray:
+        if not self.links and not self.extra_links:
+            return np.zeros((0, 2))
         out = []
         for k in self.links:
             o = np.asarray(k.offset, dtype=np.float64)
@@ -473,89 +508,91 @@ class ComponentProblem:
     def solve(self, handle_positions: np.ndarray | None = None) -> ComponentResult:
         """Solves for the handles' positions (default: their own), ``(H,2)`` in handle order."""
         hp = self.handle_positions(handle_positions)
-        needs_headings = any(k.space == "target" for k in self.links)
-        headings = None
         offsets = self._link_offsets(None)
-        for _ in range(MAX_HEADING_ITERATIONS):
-            result = _solver.path_edit_solve(self.data, hp, offsets)
-            agents = self._agents(result)
-            if not needs_headings:
-                break
-            headings = {p: r.heading for p, r in agents.items()}
-            new = self._link_offsets(headings)
-            change = np.abs(new - offsets).max(initial=0.0)
-            offsets = new
-            if change <= HEADING_TOLERANCE * max(1.0, np.abs(offsets).max(initial=0.0)):
-                break
-        else:
-            self.notes.append("target-space relative constraints: the target headings did not settle")
+        result = _solver.path_edit_solve(self.data, hp, offsets)
+        if self._needs_headings:
+            targets = {self.index[k.target] for k in self.links if k.space == "target"}
+            for iteration in range(MAX_HEADING_ITERATIONS):
+                if iteration:
+                    result = _solver.path_edit_solve(self.data, hp, offsets)
+                ground, turn_of = self._ground(result)
+                headings = self._headings(ground, result, {i: self._turn(i, result, turn_of) for i in targets})
+                new = self._link_offsets({self.order[i]: h for i, h in headings.items()})
+                change = np.abs(new - offsets).max(initial=0.0)
+                offsets = new
+                if change <= HEADING_TOLERANCE * max(1.0, np.abs(offsets).max(initial=0.0)):
+                    break
+            else:
+                self.notes.append("target-space relative constraints: the target headings did not settle")
+        agents = self._agents(result)
         step1, step2 = result.step1, result.step2
         solver = step1["solver"] if step1["solver"] == step2["solver"] or step2["solver"] == "none" \
             else f"{step1['solver']}; {step2['solver']}"
         return ComponentResult(agents=agents, solver=solver, notes=list(self.notes),
                                link_offsets=offsets[:len(self.links)], step1=step1, step2=step2)
 
-    def _agents(self, result) -> dict[str, AgentResult]:
+    def _ground(self, result) -> tuple[np.ndarray, dict]:
+        """(F,2) paths of every agent concatenated, and the turn of each stationary range."""
         positions = np.asarray(result.positions)
         if self.pinned is not None:
             ends = np.unique(self.link_vertex[:len(self.links)].ravel())
             positions = positions - (positions[ends] - self.rest[ends]).mean(axis=0)
-        angles = np.asarray(result.rigid_angles)
-        turn_of: dict[tuple[str, int], float] = {}
-        for (ref, angle) in zip(self.rigid_refs, angles):
-            if ref[0] == "stationary":
-                turn_of[(ref[1], ref[2])] = float(angle)
-        out = {}
-        for i, reduced in enumerate(self.agents):
-            a = self.full[reduced.path]
-            g = self._expand(a.path, positions[self.offset[i]:self.offset[i + 1]].copy())
-            rest_turn = a.rest_turn if a.rest_turn is not None else np.zeros(len(a.stationary))
+        turn_of: dict[tuple[int, int], float] = {}
+        if self.rigid_refs:
+            for ref, angle in zip(self.rigid_refs, np.asarray(result.rigid_angles).tolist()):
+                if ref[0] == "stationary":
+                    turn_of[(self.index[ref[1]], ref[2])] = angle
+        return self._expand(positions), turn_of
+
+    def _turn(self, i: int, result, turn_of: dict) -> np.ndarray:
+        a = self._inputs[i]
+        rest_turn = a.rest_turn if a.rest_turn is not None else np.zeros(len(a.stationary))
+        if i in self.translate_only or not a.stationary:
+            return rest_turn.copy() if a.rest_turn is not None else rest_turn
+        if result.rigid_motion:
+            return rest_turn + result.rigid_angle
+        return rest_turn + np.array([turn_of.get((i, r), 0.0) for r in range(len(a.stationary))])
+
+    def _headings(self, ground: np.ndarray, result, turns: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
+        """(F,) headings of the agents ``turns`` names (index -> turn of each stationary range)
+        on their edited paths (``ground``: every agent's, concatenated), as ``edited_heading``
+        gives them, the tangent ones from one solver call."""
+        rigid = result.rigid_angle if result.rigid_motion else None
+        fo = self._full_offset
+        out, tangent, fixed, fallback = {}, [], [], []
+        for i, turn in turns.items():
+            a = self._inputs[i]
             if i in self.translate_only:
                 # Moved by one translation: the heading is the rest path's.
-                turn = rest_turn.copy()
-                heading = rest_heading(a)
-                out[a.path] = AgentResult(ground=g, heading=heading, range_turn=turn, translate_only=True)
-                continue
-            if result.rigid_motion:
-                turn = rest_turn + result.rigid_angle
+                if i not in self._rest_headings:
+                    self._rest_headings[i] = rest_heading(a)
+                out[i] = self._rest_headings[i].copy()
+            elif rigid is not None and a.rest_turn is None:
+                out[i] = edited_heading(a, None, turn, None, rigid)
             else:
-                turn = rest_turn + np.array([turn_of.get((a.path, r), 0.0) for r in range(len(a.stationary))])
-            out[a.path] = AgentResult(ground=g, heading=edited_heading(a, g, turn, self.settings.still,
-                                                                       result.rigid_angle if result.rigid_motion
-                                                                       else None),
-                                      range_turn=turn)
+                for (first, last), t in zip(a.stationary, turn):
+                    fixed.append((len(tangent), first, last))
+                    fallback.append(a.source_heading[first] + t)
+                tangent.append(i)
+        if tangent:
+            blocks = np.array([(fo[i], fo[i + 1]) for i in tangent], dtype=np.int32)
+            if fixed:
+                fixed, fallback = np.array(fixed, dtype=np.int32), np.array(fallback, dtype=np.float64)
+            else:
+                fixed, fallback = np.zeros((0, 3), np.int32), np.zeros(0)
+            h = _solver.block_tangent_headings(ground, blocks, fixed, fallback, self.settings.still)
+            for i, (begin, end) in zip(tangent, blocks.tolist()):
+                out[i] = h[begin:end]
         return out
 
-
-def _null_columns(m: np.ndarray, tol: float = 1e-9) -> np.ndarray:
-    """(C,) bool: the columns some null vector of m uses (reduced row echelon form by
-    Gaussian elimination with partial pivoting; the matrices here are small, and LAPACK's
-    thread pool costs more than the work)."""
-    a = np.array(m, dtype=complex)
-    scale = np.abs(a).max(axis=0)
-    a /= np.where(scale > 0, scale, 1.0)
-    rows, cols = a.shape
-    pivots, r = [], 0
-    for c in range(cols):
-        if r == rows:
-            break
-        k = r + int(np.argmax(np.abs(a[r:, c])))
-        if abs(a[k, c]) <= tol:
-            continue
-        a[[r, k]] = a[[k, r]]
-        a[r] /= a[r, c]
-        others = np.abs(a[:, c]) > 0
-        others[r] = False
-        a[others] -= np.outer(a[others, c], a[r])
-        pivots.append(c)
-        r += 1
-    free = np.ones(cols, dtype=bool)
-    free[pivots] = False
-    used = free.copy()
-    for row, c in enumerate(pivots):
-        if np.abs(a[row, free]).max(initial=0.0) > tol:
-            used[c] = True
-    return used
+    def _agents(self, result) -> dict[str, AgentResult]:
+        ground, turn_of = self._ground(result)
+        fo = self._full_offset
+        turns = {i: self._turn(i, result, turn_of) for i in range(len(self._inputs))}
+        headings = self._headings(ground, result, turns)
+        return {a.path: AgentResult(ground=ground[fo[i]:fo[i + 1]], heading=headings[i], range_turn=turns[i],
+                                    translate_only=i in self.translate_only)
+                for i, a in enumerate(self._inputs)}
 
 
 def rest_heading(a: AgentInput) -> np.ndarray:

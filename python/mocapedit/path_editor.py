@@ -67,6 +67,7 @@ class PathEditor:
                    for k, (f, p, w) in enumerate(zip(frames, positions, weights))]
         self.problem = path_edit.ComponentProblem([self.agent], handles, [], [], self.settings,
                                                   precompute_responses=True)
+        self._data = self.problem.data
         self._positions = self.problem.handle_positions()
         self._links = np.zeros((len(self.problem.link_vertex), 2))
         self._links[:] = self.problem._link_offsets(None)
@@ -91,14 +92,16 @@ class PathEditor:
         return editor
 
     def _solve(self) -> None:
-        self._result = _solver.path_edit_solve(self.problem.data, self._positions, self._links)
+        self._result = _solver.path_edit_solve(self._data, self._positions, self._links)
         self._heading = None
 
     def move(self, handle: int, position) -> np.ndarray:
         """Moves one handle (index into ``frames``) to a ground position; returns the (F,2) path."""
         self._positions[handle] = position
-        self._solve()
-        return self.ground
+        # As _solve, inlined: a drag calls this for every mouse move.
+        self._result = result = _solver.path_edit_solve(self._data, self._positions, self._links)
+        self._heading = None
+        return result.positions
 
     def set_positions(self, positions) -> np.ndarray:
         """Moves every handle at once: (H,2) ground positions; returns the (F,2) path."""

@@ -24,8 +24,9 @@ Eigen::VectorXd CumulativeArcLength(const Eigen::Ref<const Trajectory2>& points)
 void UnwrapAngles(Eigen::Ref<Eigen::VectorXd> angles) {
   constexpr double kTwoPi = 2.0 * M_PI;
   for (Eigen::Index i = 1; i < angles.size(); ++i) {
-    const double d = angles[i] - angles[i - 1];
-    angles[i] -= kTwoPi * std::round(d / kTwoPi);
+    const double turns = (angles[i] - angles[i - 1]) / kTwoPi;
+    // std::round is a library call; most steps turn by far less than half a turn.
+    if (!(std::abs(turns) < 0.5)) angles[i] -= kTwoPi * std::round(turns);
   }
 }
 

@@ -80,6 +80,23 @@ def _components(ctx: SolveContext) -> list[list[str]]:
     return [members for _, members in sorted(groups.items()) if active & set(members)]
 
 
+def _by_component(ctx: SolveContext, components: list[list[str]]) -> list[tuple[list, list, list]]:
+    """The position and relative constraints and the groups of each component, in stage order."""
+    data = ctx.data
+    which = {a: n for n, members in enumerate(components) for a in members}
+    out = [([], [], []) for _ in components]
+    for c in data.position_constraints:
+        if c.agent in which:
+            out[which[c.agent]][0].append(c)
+    for c in data.relative_constraints:
+        if c.agent in which:
+            out[which[c.agent]][1].append(c)
+    for g in data.groups:
+        if g.members and g.members[0] in which and all(which.get(m) == which[g.members[0]] for m in g.members):
+            out[which[g.members[0]]][2].append(g)
+    return out
+
+
 def _merged_ranges(agent) -> tuple[list[tuple[int, int]], list[list[str]]]:
     """Stationary ranges of an agent, overlapping ones merged, with the tags behind each."""
     out, names = [], []
@@ -114,15 +131,15 @@ def _agent_input(ctx: SolveContext, path: str, fps: float) -> path_edit.AgentInp
 class _Component:
     """The inputs of one component, and (after run) its result."""
 
-    def __init__(self, ctx: SolveContext, members: list[str], fps: float):
+    def __init__(self, ctx: SolveContext, members: list[str], fps: float, positions: list, relatives: list,
+                 groups: list):
+        """``positions``, ``relatives``, ``groups``: the stage's constraints and groups on these
+        members (see ``_by_component``)."""
         data, info = ctx.data, ctx.data.info
         up = info.up_axis
-        member = set(members)
         self.members = members
         self.inputs = [_agent_input(ctx, p, fps) for p in members]
-        self.positions = [c for c in data.position_constraints if c.agent in member]
-        self.relatives = [c for c in data.relative_constraints if c.agent in member]
-        self.groups = [g for g in data.groups if set(g.members) <= member]
+        self.positions, self.relatives, self.groups = positions, relatives, groups
         self.handles = [path_edit.Handle(c.agent, c.frame, ground.to_ground(c.position, up), _weight(c), c.path)
                         for c in self.positions]
         self.links = [path_edit.Link(c.agent, c.frame, c.target, c.target_frame, ground.to_ground(c.offset, up),
@@ -249,7 +266,7 @@ def path_pass(ctx: SolveContext) -> None:
     if not members:
         return
     fps = ctx.data.info.time_codes_per_second
-    comps = [_Component(ctx, m, fps) for m in members]
+    comps = [_Component(ctx, m, fps, *mine) for m, mine in zip(members, _by_component(ctx, members))]
     task = ctx.progress.task("path edits", len(comps))
     workers = min(len(comps), os.cpu_count() or 1, 2)
     if workers > 1:

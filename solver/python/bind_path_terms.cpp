@@ -1,0 +1,118 @@
+#include <pybind11/eigen.h>
+#include <pybind11/stl.h>
+
+#include "mocapedit/path_terms.h"
+#include "registry.h"
+
+namespace py = pybind11;
+using mocapedit::Trajectory2;
+using IntGrid = Eigen::Matrix<int, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+MOCAPEDIT_BINDINGS(BindPathTerms) {
+  m.def(
+      "component_chain_terms",
+      [](const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& offsets,
+         double min_baseline) {
+        mocapedit::IndexTriples t(0, 3);
+        mocapedit::IndexPairs e(0, 2);
+        {
+          py::gil_scoped_release release;
+          mocapedit::ComponentChainTerms(rest, offsets, min_baseline, t, e);
+        }
+        return py::make_tuple(t, e);
+      },
+      py::arg("rest"), py::arg("offsets"), py::arg("min_baseline"),
+      "(triangles (T,3), edges (V-A,2)) shape terms of every agent: rest (V,2) concatenated,\n"
+      "offsets (A+1,) int32 first vertex of each agent then V. chain_terms for each agent in order.");
+  m.def(
+      "key_frames",
+      [](const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& offsets,
+         const Eigen::Ref<const Eigen::VectorXi>& keyed, const Eigen::Ref<const Eigen::VectorXi>& forced,
+         double min_baseline) {
+        Eigen::VectorXi keys, before;
+        mocapedit::KeyFrames(rest, offsets, keyed, forced, min_baseline, keys, before);
+        return py::make_tuple(keys, before);
+      },
+      py::arg("rest"), py::arg("offsets"), py::arg("keyed"), py::arg("forced"), py::arg("min_baseline"),
+      "(keys (K,), before (V,)) int32: key frames of agents solved on keys (keyed (A,) int32 flags),\n"
+      "forced (N,) int32 frames that must be keys, and per frame how many keys precede it.");
+  m.def(
+      "expand_key_frames",
+      [](const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& keys,
+         const Eigen::Ref<const Trajectory2>& positions) {
+        Trajectory2 out;
+        {
+          py::gil_scoped_release release;
+          mocapedit::ExpandKeyFrames(rest, keys, positions, out);
+        }
+        return out;
+      },
+      py::arg("rest"), py::arg("keys"), py::arg("positions"),
+      "(V,2) every frame from the (K,2) solved positions of the keys (K,) int32: frames between\n"
+      "two keys follow the similarity taking the keys' rest positions to their solved ones.");
+  m.def(
+      "group_sample_frames",
+      [](const Eigen::Ref<const Eigen::VectorXd>& sample_times, const Eigen::Ref<const Eigen::VectorXi>& offsets,
+         const Eigen::Ref<const Eigen::VectorXd>& times) {
+        IntGrid frames;
+        mocapedit::GroupSampleFrames(sample_times, offsets, times, frames);
+        return frames;
+      },
+      py::arg("sample_times"), py::arg("offsets"), py::arg("times"),
+      "(M,T) int32 frame of each member at each sampled time, -1 where it has none (within 1e-6):\n"
+      "sample_times (F,) concatenated, offsets (M+1,) int32, times (T,).");
+  m.def(
+      "frame_partners",
+      [](const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& offsets,
+         double min_baseline) {
+        Eigen::VectorXi partner;
+        mocapedit::FramePartners(rest, offsets, min_baseline, partner);
+        return partner;
+      },
+      py::arg("rest"), py::arg("offsets"), py::arg("min_baseline"),
+      "(V,) int32 frame partner of each vertex for group triangles (-1: none); rest (V,2),\n"
+      "offsets (A+1,) int32.");
+  m.def(
+      "group_mesh_terms",
+      [](const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const IntGrid>& members, int neighbours,
+         const Eigen::Ref<const Eigen::VectorXi>& partner) {
+        mocapedit::IndexTriples t(0, 3);
+        mocapedit::IndexPairs e(0, 2);
+        {
+          py::gil_scoped_release release;
+          mocapedit::GroupMeshTerms(rest, members, neighbours, partner, t, e);
+        }
+        return py::make_tuple(t, e);
+      },
+      py::arg("rest"), py::arg("members"), py::arg("neighbours"), py::arg("partner"),
+      "(triangles (t,3), edges (e,2)) of a group mesh: members (M,T) int32 vertex of each member at\n"
+      "each sampled time, each joined to its `neighbours` nearest there; partner (V,) int32.");
+  m.def(
+      "block_tangent_headings",
+      [](const Eigen::Ref<const Trajectory2>& points, const Eigen::Ref<const mocapedit::IndexPairs>& blocks,
+         const Eigen::Ref<const mocapedit::IndexTriples>& fixed, const Eigen::Ref<const Eigen::VectorXd>& fallback,
+         double min_step) {
+        Eigen::VectorXd out;
+        {
+          py::gil_scoped_release release;
+          mocapedit::BlockTangentHeadings(points, blocks, fixed, fallback, min_step, out);
+        }
+        return out;
+      },
+      py::arg("points"), py::arg("blocks"), py::arg("fixed"), py::arg("fallback"), py::arg("min_step"),
+      "(V,) tangent_headings of each block of rows: points (V,2), blocks (B,2) int32 [begin, end),\n"
+      "fixed (R,3) int32 (block, first, last) grouped by block, fallback (R,); other rows 0.");
+  m.def(
+      "null_space_support",
+      [](const Eigen::Ref<const Eigen::VectorXi>& rows, const Eigen::Ref<const Eigen::VectorXi>& cols,
+         const Eigen::Ref<const Eigen::VectorXcd>& values, int num_rows, int num_cols, double tolerance) {
+        const std::vector<char> used = mocapedit::NullSpaceSupport(rows, cols, values, num_rows, num_cols, tolerance);
+        Eigen::Matrix<bool, Eigen::Dynamic, 1> out(static_cast<Eigen::Index>(used.size()));
+        for (size_t c = 0; c < used.size(); ++c) out[static_cast<Eigen::Index>(c)] = used[c] != 0;
+        return out;
+      },
+      py::arg("rows"), py::arg("cols"), py::arg("values"), py::arg("num_rows"), py::arg("num_cols"),
+      py::arg("tolerance") = 1e-9,
+      "(C,) bool: columns of the sparse complex (R,C) matrix given by (rows, cols, values) entries\n"
+      "(int32, int32, complex128; repeats summed) that some null vector uses.");
+}

@@ -1,0 +1,444 @@
+#include "mocapedit/path_terms.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <iterator>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <utility>
+
+namespace mocapedit {
+
+namespace {
+
+void Check(bool ok, const std::string& what) {
+  if (!ok) throw std::invalid_argument(what);
+}
+
+void CheckOffsets(const Eigen::Ref<const Eigen::VectorXi>& offsets, Eigen::Index total, const char* what) {
+  Check(offsets.size() >= 1 && offsets[0] == 0 && offsets[offsets.size() - 1] == total,
+        std::string(what) + ": offsets must start at 0 and end at " + std::to_string(total));
+  for (Eigen::Index a = 1; a < offsets.size(); ++a)
+    Check(offsets[a] >= offsets[a - 1], std::string(what) + ": offsets must not decrease");
+}
+
+// Distance as numpy's norm computes it (sqrt of the summed squares), so that ties and
+// thresholds decide exactly as the reference implementation does.
+double Distance(const Eigen::Ref<const Trajectory2>& p, Eigen::Index a, Eigen::Index b) {
+  const double dx = p(a, 0) - p(b, 0), dy = p(a, 1) - p(b, 1);
+  return std::sqrt(dx * dx + dy * dy);
+}
+
+}  // namespace
+
+void ComponentChainTerms(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& offsets,
+                         double min_baseline, IndexTriples& triangles, IndexPairs& edges) {
+  CheckOffsets(offsets, rest.rows(), "ComponentChainTerms");
+  // Each agent's terms on their own, then one copy: appending to the whole list would
+  // reallocate it once per agent.
+  const Eigen::Index agents = offsets.size() - 1;
+  std::vector<IndexTriples> tri(static_cast<size_t>(agents), IndexTriples(0, 3));
+  std::vector<IndexPairs> edg(static_cast<size_t>(agents), IndexPairs(0, 2));
+  Eigen::Index t = 0, e = 0;
+  for (Eigen::Index a = 0; a < agents; ++a) {
+    AppendChainTerms(rest, offsets[a], offsets[a + 1] - offsets[a], min_baseline, tri[a], edg[a]);
+    t += tri[a].rows(), e += edg[a].rows();
+  }
+  triangles.resize(t, 3);
+  edges.resize(e, 2);
+  t = e = 0;
+  for (Eigen::Index a = 0; a < agents; ++a) {
+    triangles.middleRows(t, tri[a].rows()) = tri[a];
+    edges.middleRows(e, edg[a].rows()) = edg[a];
+    t += tri[a].rows(), e += edg[a].rows();
+  }
+}
+
+void KeyFrames(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& offsets,
+               const Eigen::Ref<const Eigen::VectorXi>& keyed, const Eigen::Ref<const Eigen::VectorXi>& forced,
+               double min_baseline, Eigen::VectorXi& keys, Eigen::VectorXi& before) {
+  const Eigen::Index n = rest.rows();
+  CheckOffsets(offsets, n, "KeyFrames");
+  Check(keyed.size() == offsets.size() - 1, "KeyFrames: one keyed flag per agent is needed");
+  std::vector<char> key(static_cast<size_t>(n), 0);
+  for (Eigen::Index a = 0; a < keyed.size(); ++a)
+    if (!keyed[a]) std::fill(key.begin() + offsets[a], key.begin() + offsets[a + 1], 1);
+  for (Eigen::Index i = 0; i < forced.size(); ++i) {
+    Check(forced[i] >= 0 && forced[i] < n, "KeyFrames: forced frame out of range");
+    key[forced[i]] = 1;
+  }
+  // Keys of one agent closer than min_baseline: every frame between them is a key too
+  // (decided on the keys given, not on those this adds).
+  for (Eigen::Index a = 0; a < keyed.size(); ++a) {
+    if (!keyed[a]) continue;
+    int last = -1;
+    for (int f = offsets[a]; f < offsets[a + 1]; ++f) {
+      if (!key[f]) continue;
+      if (last >= 0 && f > last + 1 && Distance(rest, last, f) < min_baseline)
+        std::fill(key.begin() + last + 1, key.begin() + f, 2);
+      last = f;
+    }
+  }
+  before.resize(n);
+  int count = 0;
+  for (Eigen::Index f = 0; f < n; ++f) {
+    before[f] = count;
+    count += key[f] != 0;
+  }
+  keys.resize(count);
+  for (Eigen::Index f = 0, k = 0; f < n; ++f)
+    if (key[f]) keys[k++] = static_cast<int>(f);
+}
+
+void ExpandKeyFrames(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& keys,
+                     const Eigen::Ref<const Trajectory2>& positions, Trajectory2& out) {
+  const Eigen::Index n = rest.rows(), k = keys.size();
+  Check(positions.rows() == k, "ExpandKeyFrames: one position per key is needed");
+  Check(n == 0 || (k >= 1 && keys[0] == 0 && keys[k - 1] == n - 1),
+        "ExpandKeyFrames: the first and last frames must be keys");
+  out.resize(n, 2);
+  for (Eigen::Index j = 0; j < k; ++j) {
+    Check(j == 0 || keys[j] > keys[j - 1], "ExpandKeyFrames: keys must increase");
+    out.row(keys[j]) = positions.row(j);
+    if (j == 0 || keys[j] == keys[j - 1] + 1) continue;
+    const int f0 = keys[j - 1], f1 = keys[j];
+    const std::complex<double> z0(rest(f0, 0), rest(f0, 1)), dz = std::complex<double>(rest(f1, 0), rest(f1, 1)) - z0;
+    const std::complex<double> x0(positions(j - 1, 0), positions(j - 1, 1));
+    const std::complex<double> dx = std::complex<double>(positions(j, 0), positions(j, 1)) - x0;
+    for (int f = f0 + 1; f < f1; ++f) {
+      const std::complex<double> x = x0 + (std::complex<double>(rest(f, 0), rest(f, 1)) - z0) / dz * dx;
+      out(f, 0) = x.real(), out(f, 1) = x.imag();
+    }
+  }
+}
+
+void GroupSampleFrames(const Eigen::Ref<const Eigen::VectorXd>& sample_times,
+                       const Eigen::Ref<const Eigen::VectorXi>& offsets, const Eigen::Ref<const Eigen::VectorXd>& times,
+                       Eigen::Matrix<int, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& frames) {
+  CheckOffsets(offsets, sample_times.size(), "GroupSampleFrames");
+  const Eigen::Index members = offsets.size() - 1;
+  frames.resize(members, times.size());
+  for (Eigen::Index m = 0; m < members; ++m) {
+    const double* first = sample_times.data() + offsets[m];
+    const double* last = sample_times.data() + offsets[m + 1];
+    Check(last > first, "GroupSampleFrames: member " + std::to_string(m) + " has no frame");
+    const Eigen::Index count = last - first;
+    for (Eigen::Index t = 0; t < times.size(); ++t) {
+      const Eigen::Index f =
+          std::min<Eigen::Index>(std::lower_bound(first, last, times[t] - 1e-9) - first, count - 1);
+      frames(m, t) = std::abs(first[f] - times[t]) < 1e-6 ? static_cast<int>(f) : -1;
+    }
+  }
+}
+
+void FramePartners(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& offsets,
+                   double min_baseline, Eigen::VectorXi& partner) {
+  CheckOffsets(offsets, rest.rows(), "FramePartners");
+  partner.setConstant(rest.rows(), -1);
+  for (Eigen::Index a = 0; a + 1 < offsets.size(); ++a) {
+    const int lo = offsets[a], count = offsets[a + 1] - offsets[a];
+    if (count == 0) continue;
+    const auto block = rest.middleRows(lo, count);
+    const Eigen::VectorXd arc = CumulativeArcLength(block);
+    const double* begin = arc.data();
+    const double* end = arc.data() + count;
+    for (int i = 0; i < count; ++i) {
+      const std::array<Eigen::Index, 2> candidates = {
+          std::lower_bound(begin, end, arc[i] + min_baseline) - begin,   // the nearest later frame
+          std::upper_bound(begin, end, arc[i] - min_baseline) - begin - 1};  // else an earlier one
+      for (const Eigen::Index cand : candidates) {
+        if (cand < 0 || cand >= count || cand == i) continue;
+        if (Distance(block, cand, i) >= min_baseline) {
+          partner[lo + i] = lo + static_cast<int>(cand);
+          break;
+        }
+      }
+    }
+  }
+}
+
+void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
+                    const Eigen::Ref<const Eigen::Matrix<int, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>& members,
+                    int neighbours, const Eigen::Ref<const Eigen::VectorXi>& partner, IndexTriples& triangles,
+                    IndexPairs& edges) {
+  const Eigen::Index m = members.rows(), times = members.cols(), n = rest.rows();
+  Check(partner.size() == n, "GroupMeshTerms: one partner per vertex is needed");
+  Check(neighbours >= 0 && (m == 0 || neighbours < m),
+        "GroupMeshTerms: neighbours must be at least 0 and less than the member count");
+  Check(members.size() == 0 || (members.minCoeff() >= 0 && members.maxCoeff() < n),
+        "GroupMeshTerms: member vertex out of range");
+  for (Eigen::Index v = 0; v < n; ++v)
+    Check(partner[v] >= -1 && partner[v] < n, "GroupMeshTerms: partner out of range");
+
+  // Pairs packed as (min << 32 | max): sorting integers is cheaper than sorting pairs.
+  std::vector<uint64_t> pairs;
+  pairs.reserve(static_cast<size_t>(m * times * neighbours));
+  std::vector<double> x(static_cast<size_t>(m)), y(static_cast<size_t>(m));
+  const int keep = neighbours + 1;
+  std::vector<std::pair<double, int>> near(static_cast<size_t>(keep)), close, met;
+  const auto squared = [&](int a, int b) {  // as Distance, squared
+    const double dx = x[a] - x[b], dy = y[a] - y[b];
+    return dx * dx + dy * dy;
+  };
+  // Members bucketed in a grid of about one member per cell; each one's candidates are met
+  // ring by ring around its cell, until the next ring is farther than the (k+1)-th nearest.
+  std::vector<int> cell_of(static_cast<size_t>(m)), start, items(static_cast<size_t>(m));
+  for (Eigen::Index t = 0; t < times && neighbours > 0; ++t) {
+    double x0 = std::numeric_limits<double>::infinity(), y0 = x0, x1 = -x0, y1 = -x0;
+    for (Eigen::Index a = 0; a < m; ++a) {
+      x[a] = rest(members(a, t), 0), y[a] = rest(members(a, t), 1);
+      Check(std::isfinite(x[a]) && std::isfinite(y[a]), "GroupMeshTerms: rest positions must be finite");
+      x0 = std::min(x0, x[a]), x1 = std::max(x1, x[a]), y0 = std::min(y0, y[a]), y1 = std::max(y1, y[a]);
+    }
+    const double extent = std::max(x1 - x0, y1 - y0);
+    const double h = extent > 0 ? std::max(extent / std::ceil(std::sqrt(static_cast<double>(m))), extent * 1e-6) : 1.0;
+    const int nx = static_cast<int>((x1 - x0) / h) + 1, ny = static_cast<int>((y1 - y0) / h) + 1;
+    start.assign(static_cast<size_t>(nx) * ny + 1, 0);
+    for (int a = 0; a < m; ++a) {
+      const int cx = std::min(static_cast<int>((x[a] - x0) / h), nx - 1);
+      const int cy = std::min(static_cast<int>((y[a] - y0) / h), ny - 1);
+      cell_of[a] = cy * nx + cx;
+      ++start[cell_of[a] + 1];
+    }
+    for (size_t c = 1; c < start.size(); ++c) start[c] += start[c - 1];
+    {
+      std::vector<int> next(start.begin(), start.end() - 1);
+      for (int a = 0; a < m; ++a) items[next[cell_of[a]]++] = a;
+    }
+    for (int a = 0; a < m; ++a) {
+      // The k+1 smallest squared distances, ties to the earlier member...
+      int count = 0;
+      met.clear();
+      const int ax = cell_of[a] % nx, ay = cell_of[a] / nx;
+      for (int ring = 0;; ++ring) {
+        // Members outside the rings so far are at least (ring - 1) cells away along x or y.
+        // (Margins: the cells are found in rounded arithmetic, and the ties below must all
+        // have been met.)
+        const double reach = (ring - 1) * h * (1 - 1e-9);
+        if (ring > 0 && count == keep && reach > 0 && reach * reach > near[keep - 1].first * (1 + 1e-13)) break;
+        if (ax - ring < 0 && ay - ring < 0 && ax + ring >= nx && ay + ring >= ny) break;
+        const auto visit = [&](int cx, int cy) {
+          const int c = cy * nx + cx;
+          for (int i = start[c]; i < start[c + 1]; ++i) {
+            const int b = items[i];
+            if (b == a) continue;
+            const std::pair<double, int> e{squared(a, b), b};
+            met.push_back(e);
+            if (count == keep && !(e < near[count - 1])) continue;
+            int at = count < keep ? count++ : count - 1;
+            for (; at > 0 && e < near[at - 1]; --at) near[at] = near[at - 1];
+            near[at] = e;
+          }
+        };
+        for (int cy = std::max(ay - ring, 0); cy <= std::min(ay + ring, ny - 1); ++cy) {
+          if (cy == ay - ring || cy == ay + ring) {
+            for (int cx = std::max(ax - ring, 0); cx <= std::min(ax + ring, nx - 1); ++cx) visit(cx, cy);
+          } else {
+            if (ax - ring >= 0) visit(ax - ring, cy);
+            if (ax + ring < nx) visit(ax + ring, cy);
+          }
+        }
+      }
+      // ... and the k nearest as a stable sort of the distances themselves would rank them:
+      // two squared distances may differ and their square roots not, so when the next one
+      // is that close to the k-th, every member whose distance may equal the k-th is
+      // ranked by (distance, member).
+      const double bound = near[neighbours - 1].first * (1 + 1e-14);
+      close.assign(near.begin(), near.begin() + neighbours);
+      if (count > neighbours && near[neighbours].first <= bound) {
+        close.clear();
+        for (const auto& [sq, b] : met)
+          if (sq <= bound) close.emplace_back(std::sqrt(sq), b);
+        std::partial_sort(close.begin(), close.begin() + neighbours, close.end());
+      }
+      for (int k = 0; k < neighbours; ++k) {
+        const uint64_t va = static_cast<uint32_t>(members(a, t)), vb = static_cast<uint32_t>(members(close[k].second, t));
+        pairs.push_back(std::min(va, vb) << 32 | std::max(va, vb));
+      }
+    }
+  }
+  // Sorted and unique: bucketed by first vertex (vertex indices are bounded), each bucket
+  // (a few pairs) sorted on its own.
+  {
+    std::vector<int> first(static_cast<size_t>(n) + 1, 0);
+    for (const uint64_t pair : pairs) ++first[(pair >> 32) + 1];
+    for (Eigen::Index v = 0; v < n; ++v) first[v + 1] += first[v];
+    std::vector<uint64_t> sorted(pairs.size());
+    std::vector<int> next(first.begin(), first.end() - 1);
+    for (const uint64_t pair : pairs) sorted[next[pair >> 32]++] = pair;
+    pairs.clear();
+    for (Eigen::Index v = 0; v < n; ++v) {
+      const auto begin = sorted.begin() + first[v], end = sorted.begin() + first[v + 1];
+      std::sort(begin, end);
+      std::unique_copy(begin, end, std::back_inserter(pairs));
+    }
+  }
+
+  edges.resize(static_cast<Eigen::Index>(pairs.size()), 2);
+  for (size_t e = 0; e < pairs.size(); ++e)
+    edges.row(static_cast<Eigen::Index>(e)) << static_cast<int>(pairs[e] >> 32), static_cast<int>(pairs[e] & 0xffffffffu);
+  std::vector<std::array<int, 3>> tri;
+  tri.reserve(2 * pairs.size());
+  for (int side = 0; side < 2; ++side)
+    for (const uint64_t pair : pairs) {
+      const int a = static_cast<int>(pair >> 32), b = static_cast<int>(pair & 0xffffffffu);
+      const int v = side == 0 ? a : b, w = side == 0 ? b : a;
+      if (partner[w] >= 0 && Distance(rest, v, w) > 0) tri.push_back({v, w, partner[w]});
+    }
+  triangles.resize(static_cast<Eigen::Index>(tri.size()), 3);
+  for (size_t k = 0; k < tri.size(); ++k)
+    triangles.row(static_cast<Eigen::Index>(k)) << tri[k][0], tri[k][1], tri[k][2];
+}
+
+void BlockTangentHeadings(const Eigen::Ref<const Trajectory2>& points, const Eigen::Ref<const IndexPairs>& blocks,
+                          const Eigen::Ref<const IndexTriples>& fixed, const Eigen::Ref<const Eigen::VectorXd>& fallback,
+                          double min_step, Eigen::VectorXd& headings) {
+  Check(fixed.rows() == fallback.size(), "BlockTangentHeadings: one fallback heading is needed per fixed range");
+  headings.setZero(points.rows());
+  Eigen::Index r = 0;
+  std::vector<FrameRange> ranges;
+  for (Eigen::Index b = 0; b < blocks.rows(); ++b) {
+    const int begin = blocks(b, 0), end = blocks(b, 1);
+    Check(0 <= begin && begin <= end && end <= points.rows(), "BlockTangentHeadings: block out of range");
+    ranges.clear();
+    const Eigen::Index first = r;
+    for (; r < fixed.rows() && fixed(r, 0) == b; ++r) ranges.emplace_back(fixed(r, 1), fixed(r, 2));
+    headings.segment(begin, end - begin) =
+        TangentHeadings(points.middleRows(begin, end - begin), ranges, fallback.segment(first, r - first), min_step);
+  }
+  Check(r == fixed.rows(), "BlockTangentHeadings: fixed ranges must be grouped by block, in block order");
+}
+
+namespace {
+
+using Complex = std::complex<double>;
+using SparseRow = std::vector<std::pair<int, Complex>>;  // sorted by column
+
+const Complex* Find(const SparseRow& row, int col) {
+  const auto it = std::lower_bound(row.begin(), row.end(), col, [](const auto& e, int c) { return e.first < c; });
+  return it != row.end() && it->first == col ? &it->second : nullptr;
+}
+
+// Unit-magnitude pseudo-random value k of sequence `stream` (splitmix64; deterministic).
+Complex Phase(uint64_t stream, uint64_t k) {
+  uint64_t z = stream * 0x9E3779B97F4A7C15ull + k + 1;
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  z ^= z >> 31;
+  return std::polar(1.0, 2.0 * M_PI * static_cast<double>(z >> 11) * 0x1.0p-53);
+}
+
+}  // namespace
+
+std::vector<char> NullSpaceSupport(const Eigen::Ref<const Eigen::VectorXi>& rows,
+                                   const Eigen::Ref<const Eigen::VectorXi>& cols,
+                                   const Eigen::Ref<const Eigen::VectorXcd>& values, int num_rows, int num_cols,
+                                   double tolerance) {
+  Check(num_rows >= 0 && num_cols >= 0, "NullSpaceSupport: negative size");
+  Check(rows.size() == cols.size() && rows.size() == values.size(),
+        "NullSpaceSupport: rows, cols and values must have one entry each");
+  Check(tolerance > 0 && std::isfinite(tolerance), "NullSpaceSupport: tolerance must be finite and > 0");
+  std::vector<char> used(static_cast<size_t>(num_cols), 1);
+  if (num_rows == 0) return used;
+
+  // Rows as sorted sparse vectors, repeated positions summed; columns scaled to unit max.
+  std::vector<std::array<int, 2>> at(static_cast<size_t>(rows.size()));
+  for (Eigen::Index e = 0; e < rows.size(); ++e) {
+    Check(rows[e] >= 0 && rows[e] < num_rows && cols[e] >= 0 && cols[e] < num_cols,
+          "NullSpaceSupport: entry out of range");
+    Check(std::isfinite(values[e].real()) && std::isfinite(values[e].imag()), "NullSpaceSupport: entries must be finite");
+    at[static_cast<size_t>(e)] = {rows[e], cols[e]};
+  }
+  std::vector<int> perm(at.size());
+  for (size_t e = 0; e < perm.size(); ++e) perm[e] = static_cast<int>(e);
+  std::stable_sort(perm.begin(), perm.end(), [&](int x, int y) { return at[x] < at[y]; });
+  std::vector<SparseRow> a(static_cast<size_t>(num_rows));
+  for (const int e : perm) {
+    SparseRow& row = a[static_cast<size_t>(at[e][0])];
+    if (!row.empty() && row.back().first == at[e][1])
+      row.back().second += values[e];
+    else
+      row.emplace_back(at[e][1], values[e]);
+  }
+  std::vector<double> scale(static_cast<size_t>(num_cols), 0.0);
+  for (const auto& row : a)
+    for (const auto& [c, v] : row) scale[c] = std::max(scale[c], std::abs(v));
+  std::vector<std::vector<int>> holders(static_cast<size_t>(num_cols));  // rows that may hold a column
+  for (int r = 0; r < num_rows; ++r)
+    for (auto& [c, v] : a[r]) {
+      if (scale[c] > 0) v /= scale[c];
+      holders[c].push_back(r);
+    }
+
+  // Row echelon form, column by column.
+  std::vector<char> active(static_cast<size_t>(num_rows), 1);
+  std::vector<int> pivot_row(static_cast<size_t>(num_cols), -1);
+  std::vector<int> seen(static_cast<size_t>(num_rows), -1);
+  SparseRow merged;
+  for (int c = 0; c < num_cols; ++c) {
+    int best = -1;
+    double best_abs = 0;
+    std::vector<int> holding;
+    for (const int r : holders[c]) {
+      if (!active[r] || seen[r] == c) continue;
+      seen[r] = c;
+      const Complex* v = Find(a[r], c);
+      if (!v || *v == Complex(0)) continue;
+      holding.push_back(r);
+      if (std::abs(*v) > best_abs) best_abs = std::abs(*v), best = r;
+    }
+    holders[c].clear();
+    if (best < 0 || best_abs <= tolerance) continue;  // a free column
+    pivot_row[c] = best;
+    active[best] = 0;
+    const SparseRow& p = a[best];
+    const Complex pv = *Find(p, c);
+    for (const int r : holding) {
+      if (r == best) continue;
+      SparseRow& row = a[r];
+      const Complex f = *Find(row, c) / pv;
+      merged.clear();
+      size_t i = 0, j = 0;
+      while (i < row.size() || j < p.size()) {
+        if (j == p.size() || (i < row.size() && row[i].first < p[j].first)) {
+          merged.push_back(row[i++]);
+        } else if (i == row.size() || p[j].first < row[i].first) {
+          merged.emplace_back(p[j].first, -f * p[j].second);
+          holders[p[j].first].push_back(r);
+          ++j;
+        } else {
+          if (row[i].first != c) merged.emplace_back(row[i].first, row[i].second - f * p[j].second);
+          ++i, ++j;
+        }
+      }
+      row.swap(merged);
+    }
+  }
+
+  // Back-substitute two pseudo-random null vectors; pivot rows hold no earlier pivot column.
+  std::vector<double> reach(static_cast<size_t>(num_cols), 0.0);
+  std::vector<Complex> x(static_cast<size_t>(num_cols));
+  for (uint64_t stream = 1; stream <= 2; ++stream) {
+    for (int c = 0; c < num_cols; ++c)
+      if (pivot_row[c] < 0) x[c] = Phase(stream, static_cast<uint64_t>(c));
+    for (int c = num_cols - 1; c >= 0; --c) {
+      if (pivot_row[c] < 0) continue;
+      Complex sum = 0, pivot = 0;
+      for (const auto& [j, v] : a[pivot_row[c]]) {
+        if (j == c)
+          pivot = v;
+        else
+          sum += v * x[j];
+      }
+      x[c] = -sum / pivot;
+      reach[c] = std::max(reach[c], std::abs(x[c]));
+    }
+  }
+  for (int c = 0; c < num_cols; ++c) used[c] = pivot_row[c] < 0 || reach[c] > tolerance;
+  return used;
+}
+
+}  // namespace mocapedit

@@ -1,0 +1,452 @@
+"""The fast paths that build a component's path problem, against straightforward numpy
+references on generated problems: the solver's batched terms (``_solver.component_chain_terms``,
+``group_sample_frames``, ``frame_partners``, ``group_mesh_terms``, ``null_space_support``,
+``block_tangent_headings``) and ComponentProblem's vectorised key frames, interpolation and
+freedom analysis. Each reference does the work one agent, one sampled time or one dense
+elimination at a time."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mocapedit import _solver, path_edit
+
+FPS = 24.0
+SETTINGS = path_edit.Settings(min_baseline=0.01, rigid_min_extent=0.02, still=1e-5, group_step=12.0)
+
+
+def _walk(frames, origin=(0.0, 0.0), heading=np.pi / 2, stand=None, step=1.4 / FPS):
+    f = np.arange(frames, dtype=np.float64)
+    along = f * step
+    if stand is not None:   # stands still over [first, last]
+        first, last = stand
+        along = np.where(f < first, along, np.where(f <= last, first * step, along - (last - first) * step))
+    d = np.array([np.cos(heading), np.sin(heading)])
+    n = np.array([-d[1], d[0]])
+    return np.asarray(origin) + along[:, None] * d + (0.03 * np.sin(2 * np.pi * f / FPS))[:, None] * n
+
+
+def _agent(path, rest, stationary=(), times=None):
+    from mocapedit import trajectory
+    return path_edit.AgentInput(path=path, rest=rest, source=rest,
+                                source_heading=trajectory.headings(rest, list(stationary), 1.0),
+                                stationary=list(stationary), stationary_refs=[f"{path}:{r}" for r in stationary],
+                                sample_times=np.arange(len(rest), dtype=np.float64) if times is None else times)
+
+
+# ---- references ----------------------------------------------------------------------
+
+def ref_frame_partners(rest, offsets, min_baseline):
+    out = np.full(len(rest), -1, np.int64)
+    for lo, hi in zip(offsets[:-1], offsets[1:]):
+        a = rest[lo:hi]
+        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(a, axis=0), axis=1))])
+        idx = np.arange(len(a))
+        for cand in (np.searchsorted(arc, arc + min_baseline, side="left"),
+                     np.searchsorted(arc, arc - min_baseline, side="right") - 1):
+            c = np.clip(cand, 0, len(a) - 1)
+            far = np.linalg.norm(a[c] - a, axis=1) >= min_baseline
+            take = (out[lo:hi] < 0) & far & (cand >= 0) & (cand < len(a)) & (c != idx)
+            out[lo:hi][take] = c[take] + lo
+    return out
+
+
+def ref_group_mesh(rest, vert, k, partner):
+    """Each member to its k nearest at every sampled time (a stable sort of distances)."""
+    pairs = []
+    m = len(vert)
+    for t in range(vert.shape[1]):
+        p = rest[vert[:, t]]
+        d = np.linalg.norm(p[:, None] - p[None], axis=-1)
+        d[np.arange(m), np.arange(m)] = np.inf
+        for a in range(m):
+            for b in np.argsort(d[a], kind="stable")[:k]:
+                pairs.append((min(vert[a, t], vert[b, t]), max(vert[a, t], vert[b, t])))
+    edg = np.unique(np.array(pairs, np.int64).reshape(-1, 2), axis=0)
+    tri = [(v, w, partner[w]) for v, w in np.concatenate([edg, edg[:, ::-1]])
+           if partner[w] >= 0 and np.linalg.norm(rest[v] - rest[w]) > 0]
+    return np.array(tri, np.int64).reshape(-1, 3), edg
+
+
+def ref_null_columns(m, tol=1e-9):
+    """Reduced row echelon form by dense Gaussian elimination with partial pivoting."""
+    a = np.array(m, dtype=complex)
+    scale = np.abs(a).max(axis=0)
+    a /= np.where(scale > 0, scale, 1.0)
+    rows, cols = a.shape
+    pivots, r = [], 0
+    for c in range(cols):
+        if r == rows:
+            break
+        k = r + int(np.argmax(np.abs(a[r:, c])))
+        if abs(a[k, c]) <= tol:
+            continue
+        a[[r, k]] = a[[k, r]]
+        a[r] /= a[r, c]
+        others = np.abs(a[:, c]) > 0
+        others[r] = False
+        a[others] -= np.outer(a[others, c], a[r])
+        pivots.append(c)
+        r += 1
+    used = np.ones(cols, dtype=bool)
+    used[pivots] = False
+    free = used.copy()
+    for row, c in enumerate(pivots):
+        used[c] = np.abs(a[row, free]).max(initial=0.0) > tol
+    return used
+
+
+def ref_keys(agents, handles, links, groups, s):
+    """Key frames of each group member, one member at a time."""
+    full = {a.path: a for a in agents}
+    out = {}
+    for g in groups:
+        if g.stiffness <= 0:
+            continue
+        inside = [full[m] for m in g.members if m in full]
+        start = max(float(m.sample_times[0]) for m in inside)
+        end = min(float(m.sample_times[-1]) for m in inside)
+        times = np.arange(start, end + 1e-9, s.group_step) if end >= start else np.zeros(0)
+        for m in inside:
+            f = np.clip(np.searchsorted(m.sample_times, times - 1e-9), 0, m.frames - 1)
+            out.setdefault(m.path, set()).update(f[np.abs(m.sample_times[f] - times) < 1e-6].tolist())
+    keys = {}
+    for path in sorted(out):
+        a = full[path]
+        key = np.zeros(a.frames, bool)
+        key[sorted(out[path])] = True
+        key[0] = key[-1] = True
+        for h in handles:
+            if h.agent == path and h.weight > 0:
+                key[h.frame] = True
+        for k in links:
+            if k.weight > 0:
+                key[k.frame] |= k.agent == path
+                key[k.target_frame] |= k.target == path
+        for first, last in a.stationary:
+            key[max(first - 1, 0):min(last + 2, a.frames)] = True
+        at = np.flatnonzero(key)
+        short = np.linalg.norm(a.rest[at[1:]] - a.rest[at[:-1]], axis=1) < s.min_baseline
+        for lo, hi in zip(at[:-1][short], at[1:][short]):
+            key[lo:hi] = True
+        keys[path] = np.flatnonzero(key)
+    return keys
+
+
+def ref_expand(a, keys, g):
+    """(F,2) path from its key frames: frames between keys follow them as one similarity."""
+    z = a.rest[:, 0] + 1j * a.rest[:, 1]
+    x = np.empty(a.frames, complex)
+    x[keys] = g[:, 0] + 1j * g[:, 1]
+    for f in range(a.frames):
+        if f not in set(keys.tolist()):
+            hi = keys[np.searchsorted(keys, f)]
+            lo = keys[np.searchsorted(keys, f) - 1]
+            x[f] = x[lo] + (z[f] - z[lo]) / (z[hi] - z[lo]) * (x[hi] - x[lo])
+    return np.stack([x.real, x.imag], axis=1)
+
+
+def ref_freedom(p):
+    """The freedom analysis one body at a time, the null space by dense elimination: which
+    agents only translate, and the gauge links (vertex pairs) added."""
+    bodies = {}
+    for i, path in enumerate(p.order):
+        root = min((g for g in p.groups if g.stiffness > 0 and path in g.members),
+                   key=lambda g: p.groups.index(g), default=None)
+        bodies.setdefault(root.ref if root else path, []).append(i)
+    bodies = list(bodies.values())
+    rest, off = p.rest, p.offset
+    hv = np.array([p.vertex(h.agent, h.frame) for h in p.handles], np.int64)
+    lv = np.array([(p.vertex(k.agent, k.frame), p.vertex(k.target, k.target_frame)) for k in p.links],
+                  np.int64).reshape(-1, 2)
+    hw = np.array([h.weight for h in p.handles], float)
+    lw = np.array([k.weight for k in p.links], float)
+
+    def anchors(body):
+        verts = {int(v) for h, v in zip(p.handles, hv) if h.weight > 0 and p.index[h.agent] in body}
+        verts |= {int(a) for k, (a, b) in zip(p.links, lv) if k.weight > 0 and p.index[k.agent] in body}
+        verts |= {int(b) for k, (a, b) in zip(p.links, lv) if k.weight > 0 and p.index[k.target] in body}
+        return sorted(verts)
+    translate = set()
+    for body in bodies:
+        if len({tuple(rest[v]) for v in anchors(body)}) < 2:
+            translate.update(body)
+    if not (hw > 0).any() and len(lv):
+        hv, hw = np.append(hv, lv[0, 0]), np.append(hw, np.inf)
+
+    def kernel(lv, lw):
+        cols = [1 if body[0] in translate else 2 for body in bodies]
+        start = np.cumsum([0] + cols)
+        rows = []
+        for signs in ([(v, 1)] for v, w in zip(hv, hw) if w > 0), ([(a, 1), (b, -1)] for (a, b), w in zip(lv, lw) if w > 0):
+            for terms in signs:
+                row = np.zeros(start[-1], complex)
+                for v, sign in terms:
+                    b = next(n for n, body in enumerate(bodies) if any(off[i] <= v < off[i + 1] for i in body))
+                    verts = np.concatenate([np.arange(off[i], off[i + 1]) for i in bodies[b]])
+                    row[start[b]] += sign
+                    if cols[b] == 2:
+                        d = rest[v] - rest[verts].mean(axis=0)
+                        row[start[b] + 1] += sign * complex(d[0], d[1])
+                rows.append(row)
+        if not rows:
+            return set(range(len(p.order)))
+        used = ref_null_columns(np.array(rows))
+        return {i for b, body in enumerate(bodies) if used[start[b]:start[b + 1]].any() for i in body}
+    gauge = []
+    free = kernel(lv, lw)
+    if free:
+        for body in bodies:
+            anchor = anchors(body)
+            if len(anchor) >= 2 and free & set(body):
+                d = np.linalg.norm(rest[anchor][:, None] - rest[anchor][None], axis=-1)
+                i, j = np.unravel_index(int(np.argmax(d)), d.shape)
+                gauge.append((anchor[min(i, j)], anchor[max(i, j)]))
+    if gauge:
+        lv = np.concatenate([lv, np.array(gauge, np.int64)])
+        lw = np.append(lw, np.full(len(gauge), path_edit.GAUGE_WEIGHT))
+    return translate, gauge, bool(free) and bool(kernel(lv, lw))
+
+
+# ---- the solver's batched terms ------------------------------------------------------
+
+def _paths(seed):
+    rng = np.random.default_rng(seed)
+    out = []
+    for k in range(5):
+        frames = int(rng.integers(2, 90))
+        stand = (frames // 3, frames // 3 + int(rng.integers(0, 20))) if k % 2 else None
+        out.append(_walk(frames, rng.normal(size=2), rng.uniform(-3, 3), stand))
+    return out
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_component_chain_terms_and_partners_are_each_agents(seed):
+    paths = _paths(seed)
+    rest = np.concatenate(paths)
+    offsets = np.cumsum([0] + [len(p) for p in paths]).astype(np.int32)
+    tri, edg = _solver.component_chain_terms(rest, offsets, 0.01)
+    each = [_solver.chain_terms(rest, int(lo), int(hi - lo), 0.01) for lo, hi in zip(offsets[:-1], offsets[1:])]
+    np.testing.assert_array_equal(tri, np.concatenate([t for t, _ in each]))
+    np.testing.assert_array_equal(edg, np.concatenate([e for _, e in each]))
+    np.testing.assert_array_equal(_solver.frame_partners(rest, offsets, 0.05), ref_frame_partners(rest, offsets, 0.05))
+    with pytest.raises(ValueError, match="offsets"):
+        _solver.component_chain_terms(rest, offsets[:-1], 0.01)
+
+
+def test_group_sample_frames_match_searchsorted():
+    rng = np.random.default_rng(3)
+    times = [np.arange(40, dtype=float) + 3, np.arange(30, dtype=float) + 0.5, np.arange(50, dtype=float),
+             np.sort(rng.uniform(0, 40, 35))]
+    sampled = np.arange(0.0, 45.0, 4.0)
+    got = _solver.group_sample_frames(np.concatenate(times), np.cumsum([0] + [len(t) for t in times]).astype(np.int32),
+                                      sampled)
+    for m, t in enumerate(times):
+        f = np.clip(np.searchsorted(t, sampled - 1e-9), 0, len(t) - 1)
+        np.testing.assert_array_equal(got[m], np.where(np.abs(t[f] - sampled) < 1e-6, f, -1))
+    assert (got[1] == -1).all() and (got[2] >= 0).all() and (got[0] == -1).sum() == 2  # before its first and after its last
+
+
+@pytest.mark.parametrize("layout", ["grid", "jittered", "coincident"])
+def test_group_mesh_terms_match_a_stable_sort(layout):
+    rng = np.random.default_rng(4)
+    members, frames = 24, 30
+    origin = np.array([(1.0 * (m % 6), -1.2 * (m // 6)) for m in range(members)])
+    if layout == "jittered":
+        origin += rng.normal(scale=0.3, size=origin.shape)
+    if layout == "coincident":
+        origin[5] = origin[4]
+    rest = np.concatenate([_walk(frames, o) for o in origin])
+    offsets = np.cumsum([0] + [frames] * members).astype(np.int32)
+    partner = _solver.frame_partners(rest, offsets, 0.01)
+    vert = (offsets[:-1, None] + np.arange(0, frames, 7)[None]).astype(np.int32)
+    for k in (1, 3, 5):
+        tri, edg = _solver.group_mesh_terms(rest, vert, k, partner)
+        ref_tri, ref_edg = ref_group_mesh(rest, vert, k, partner)
+        np.testing.assert_array_equal(edg, ref_edg)
+        np.testing.assert_array_equal(tri, ref_tri)
+    with pytest.raises(ValueError, match="neighbours"):
+        _solver.group_mesh_terms(rest, vert, members, partner)
+
+
+def test_group_mesh_ties_go_to_the_earlier_member():
+    """Equal distances rank the earlier member first, as a stable sort of the distances
+    does, also where the squared distances differ and their square roots do not."""
+    angle = next(a for a in np.linspace(0.3, 0.4, 10000)
+                 if (5 * np.cos(a)) ** 2 + (5 * np.sin(a)) ** 2 > 25 and np.hypot(5 * np.cos(a), 5 * np.sin(a)) == 5
+                 and np.sqrt((5 * np.cos(a)) ** 2 + (5 * np.sin(a)) ** 2) == 5)
+    tilted = 5 * np.array([np.cos(angle), np.sin(angle)])
+    points = np.array([
+        (0, 0), tilted, (5, 0), 1.1 * tilted, (5.5, 0),          # 0 ties 1 (farther squared) and 2
+        (100, 0), (101, 0), (99, 0), (98.5, 0), (101.5, 0)])    # 5 ties 6 and 7 exactly
+    rest = np.repeat(points, 3, axis=0)
+    vert = (3 * np.arange(len(points)))[:, None].astype(np.int32)
+    partner = np.full(len(rest), -1, np.int32)
+    _, edg = _solver.group_mesh_terms(rest, vert, 1, partner)
+    np.testing.assert_array_equal(edg, ref_group_mesh(rest, vert, 1, partner)[1])
+    assert [0, 1] in (edg // 3).tolist() and [5, 6] in (edg // 3).tolist()
+    assert [0, 2] not in (edg // 3).tolist() and [5, 7] not in (edg // 3).tolist()
+
+
+def _similarity_system(rng, bodies, rows, coincide):
+    """A handle-and-link system over bodies of one or two complex unknowns (as the freedom
+    analysis builds it), some rows repeated or on coinciding points."""
+    cols = rng.integers(1, 3, bodies)
+    start = np.cumsum(np.concatenate([[0], cols]))
+    m = np.zeros((rows, start[-1]), complex)
+    points = rng.normal(size=(bodies, 4)) + 1j * rng.normal(size=(bodies, 4))
+    if coincide:
+        points[:, 1] = points[:, 0]
+    for r in range(rows):
+        ends = rng.integers(0, bodies, 1 if r % 3 == 0 else 2)
+        for sign, b in zip((1, -1), ends):
+            m[r, start[b]] += sign
+            if cols[b] == 2:
+                m[r, start[b] + 1] += sign * points[b, rng.integers(0, 4 if not coincide else 2)]
+    if rows > 2:
+        m[-1] = m[0] * (0.5 - 2j)   # a dependent row
+    return m
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_null_space_support_matches_dense_elimination(seed):
+    rng = np.random.default_rng(seed)
+    m = _similarity_system(rng, int(rng.integers(1, 12)), int(rng.integers(1, 20)), coincide=seed % 3 == 0)
+    r, c = np.nonzero(m)
+    got = _solver.null_space_support(r.astype(np.int32), c.astype(np.int32), m[r, c], *m.shape)
+    np.testing.assert_array_equal(got, ref_null_columns(m))
+    # And the truth: the columns the SVD's null vectors reach.
+    _, sv, vh = np.linalg.svd(m)
+    null = vh[np.sum(sv > 1e-9 * sv.max()):]
+    np.testing.assert_array_equal(got, np.abs(null).max(axis=0, initial=0.0) > 1e-9)
+
+
+def test_null_space_support_of_known_matrices():
+    one = np.array([0], np.int32)
+    # x0 = 0 leaves x1 free; x0 - x1 = 0 and x1 = 0 fix both; no rows: all free.
+    assert _solver.null_space_support(one, one, np.array([1 + 0j]), 1, 2).tolist() == [False, True]
+    rows, cols = np.array([0, 0, 1], np.int32), np.array([0, 1, 1], np.int32)
+    assert _solver.null_space_support(rows, cols, np.array([1, -1, 1 + 0j]), 2, 2).tolist() == [False, False]
+    assert _solver.null_space_support(one[:0], one[:0], np.zeros(0, complex), 0, 3).tolist() == [True] * 3
+    # Repeated entries are summed: 1 - 1 = 0 leaves x0 free.
+    assert _solver.null_space_support(np.zeros(2, np.int32), np.zeros(2, np.int32), np.array([1, -1 + 0j]), 1, 1)[0]
+    with pytest.raises(ValueError, match="out of range"):
+        _solver.null_space_support(one, one + 5, np.array([1 + 0j]), 1, 2)
+
+
+def test_block_tangent_headings_are_each_agents():
+    paths = _paths(5)
+    g = np.concatenate(paths)
+    offsets = np.cumsum([0] + [len(p) for p in paths])
+    blocks = np.array([(offsets[i], offsets[i + 1]) for i in (0, 2, 3)], np.int32)
+    fixed = np.array([(1, 1, len(paths[2]) // 2), (2, 0, 0), (2, 1, 1)], np.int32)
+    fallback = np.array([0.5, -1.0, 2.0])
+    got = _solver.block_tangent_headings(g, blocks, fixed, fallback, 1e-5)
+    for b, (lo, hi) in enumerate(blocks):
+        mine = fixed[:, 0] == b
+        ref = _solver.tangent_headings(g[lo:hi], [tuple(r) for r in fixed[mine, 1:].tolist()], fallback[mine], 1e-5)
+        np.testing.assert_array_equal(got[lo:hi], ref)
+    assert not got[offsets[1]:offsets[2]].any()
+    with pytest.raises(ValueError, match="grouped by block"):
+        _solver.block_tangent_headings(g, blocks, fixed[::-1].copy(), fallback, 1e-5)
+
+
+# ---- whole problems ------------------------------------------------------------------
+
+def _problems():
+    """name -> (agents, handles, links, groups): single paths, relays, groups, mixtures."""
+    H, L, G = path_edit.Handle, path_edit.Link, path_edit.Group
+    out = {}
+    rest = _walk(300, stand=(120, 160))
+    single = [_agent("a", rest, [(120, 160)])]
+    out["single"] = (single, [H("a", 0, rest[0], np.inf, "h0"), H("a", 200, rest[200] + [0.5, 0], np.inf, "h1"),
+                              H("a", 299, rest[299], np.inf, "h2")], [], [])
+    out["single-one-soft-handle"] = (single, [H("a", 50, rest[50] + 1, 2.0, "s")], [], [])
+    relay = [_agent(f"r{k}", _walk(60, (0.4 * np.sin(k), k * 3.8)), times=np.arange(60.0) + 59 * k) for k in range(9)]
+    links = [L(f"r{k}", 59, f"r{k + 1}", 0, np.array([0.4, 0.0]), "world", np.inf, f"/l{k}") for k in range(8)]
+    ends = [H("r0", 0, relay[0].rest[0], np.inf, "first"), H("r8", 59, relay[8].rest[59] + [2.0, -1.0], np.inf, "last")]
+    out["relay"] = (relay, ends, links, [])
+    out["relay-target-space"] = (relay, ends, [L(k.agent, k.frame, k.target, k.target_frame, k.offset, "target",
+                                                 k.weight, k.ref) for k in links], [])
+    out["relay-soft-links-one-handle"] = (relay, ends[:1], [L(k.agent, k.frame, k.target, k.target_frame, k.offset,
+                                                              "world", 4.0, k.ref) for k in links], [])
+    out["relay-no-handles"] = (relay, [], links, [])
+    block = [_agent(f"m{m:02d}", _walk(120, (1.0 * (m % 5), -1.2 * (m // 5)), stand=(40, 52) if m == 7 else None),
+                    [(40, 52)] if m == 7 else [], times=np.arange(120.0) + (0.5 if m == 9 else 0.0))
+             for m in range(15)]
+    lead = block[0].rest
+    turn = [H("m00", 0, lead[0], np.inf, "start"), H("m00", 60, lead[60], np.inf, "half"),
+            H("m00", 119, lead[60] + [2.0, 0.0], np.inf, "turn")]
+    group = G([a.path for a in block], 1.0, "/group")
+    out["group"] = (block, turn, [], [group])
+    out["group-one-handle"] = (block, turn[2:], [], [group])
+    other = _agent("zz", _walk(120, (9.0, 0.0)))
+    tie = [L("zz", 70, "m03", 70, np.array([2.0, 0.0]), "world", np.inf, "/tie")]
+    out["groups-and-a-link"] = (block + [other], turn, tie, [group, G([a.path for a in block[:6]], 0.5, "/g2")])
+    out["group-no-handles"] = (block + [other], [], tie, [group])
+    return out
+
+
+@pytest.mark.parametrize("name", list(_problems()))
+def test_component_problems_match_the_reference_build(name):
+    agents, handles, links, groups = _problems()[name]
+    p = path_edit.ComponentProblem(agents, handles, links, groups, SETTINGS)
+    # Key frames and the solve's vertices.
+    keys = ref_keys(agents, handles, links, groups, SETTINGS)
+    assert sorted(p.keys) == sorted(keys)
+    for path, k in keys.items():
+        np.testing.assert_array_equal(p.keys[path], k)
+    full = {a.path: a for a in agents}
+    reduced = [full[q].rest[keys[q]] if q in keys else full[q].rest for q in sorted(full)]
+    np.testing.assert_array_equal(p.rest, np.concatenate(reduced))
+    offsets = np.cumsum([0] + [len(r) for r in reduced])
+    for h in handles:
+        frame = int(np.searchsorted(keys[h.agent], h.frame)) if h.agent in keys else h.frame
+        assert p.vertex(h.agent, h.frame) == offsets[sorted(full).index(h.agent)] + frame
+    # Terms: every agent's chain, then each group's mesh at its shared sampled times.
+    tri = [_solver.chain_terms(p.rest, int(lo), int(hi - lo), SETTINGS.min_baseline) for lo, hi in
+           zip(offsets[:-1], offsets[1:])]
+    tris, edgs = [t for t, _ in tri], [e for _, e in tri]
+    partner = ref_frame_partners(p.rest, offsets, SETTINGS.min_baseline)
+    for g in groups:
+        inside = [sorted(full).index(m) for m in g.members]
+        sampled = np.arange(max(full[m].sample_times[0] for m in g.members),
+                            min(full[m].sample_times[-1] for m in g.members) + 1e-9, SETTINGS.group_step)
+        vert = []
+        for m, i in zip(g.members, inside):
+            t = full[m].sample_times[keys[m]]
+            f = np.clip(np.searchsorted(t, sampled - 1e-9), 0, len(t) - 1)
+            vert.append(np.where(np.abs(t[f] - sampled) < 1e-6, f + offsets[i], -1))
+        vert = np.array(vert)[:, (np.array(vert) >= 0).all(axis=0)]
+        t, e = ref_group_mesh(p.rest, vert, min(SETTINGS.group_neighbours, len(inside) - 1), partner)
+        tris.append(t), edgs.append(e)
+    np.testing.assert_array_equal(p.triangles, np.concatenate(tris))
+    np.testing.assert_array_equal(p.edges, np.concatenate(edgs))
+    # The freedom the constraints leave.
+    translate, gauge, free = ref_freedom(p)
+    assert p.translate_only == translate
+    assert [(a, b) for a, b, _ in p.extra_links] == gauge
+    assert any("free to move" in n for n in p.notes) == free
+    # Solved paths: frames between keys follow them; headings as each agent's own call.
+    result = p.solve()
+    target_space = any(k.space == "target" for k in links)
+    offsets_used = p._link_offsets({q: r.heading for q, r in result.agents.items()} if target_space else None)
+    positions = np.asarray(_solver.path_edit_solve(p.data, p.handle_positions(), offsets_used).positions)
+    if p.pinned is not None:
+        ends = np.unique(p.link_vertex[:len(links)].ravel())
+        positions = positions - (positions[ends] - p.rest[ends]).mean(axis=0)
+    for i, path in enumerate(sorted(full)):
+        a, r = full[path], result.agents[path]
+        mine = positions[offsets[i]:offsets[i + 1]]
+        ground = ref_expand(a, keys[path], mine) if path in keys else mine
+        # Target-space offsets: the last solve used the offsets before the last (settled) update.
+        np.testing.assert_allclose(r.ground, ground, rtol=0, atol=1e-9 if target_space else 1e-12)
+        if r.translate_only:
+            np.testing.assert_array_equal(r.heading, a.source_heading)
+        elif result.solver == "rigid":
+            assert np.ptp(r.heading - a.source_heading) < 1e-12
+        else:
+            fixed = [tuple(map(int, s)) for s in a.stationary]
+            fallback = np.array([a.source_heading[f] + t for (f, _), t in zip(fixed, r.range_turn)])
+            np.testing.assert_array_equal(r.heading, _solver.tangent_headings(r.ground, fixed, fallback,
+                                                                              SETTINGS.still))
