@@ -450,6 +450,28 @@ void SeparationPrecompute(const SeparationProblem& problem, std::shared_ptr<Sepa
 
 namespace {
 
+// Lists of (index, coefficient) pairs, one list per local row, stored one after another
+// (a few allocations per agent rather than one per row).
+struct RowLists {
+  using Item = std::pair<int, Complex>;
+  struct Span {
+    const Item *first, *last;
+    const Item* begin() const { return first; }
+    const Item* end() const { return last; }
+  };
+  std::vector<int> start{0};  // #rows+1 offsets into items
+  std::vector<Item> items;
+
+  size_t rows() const { return start.size() - 1; }
+  Span row(size_t k) const { return {items.data() + start[k], items.data() + start[k + 1]}; }
+  void Clear() {
+    start.assign(1, 0);
+    items.clear();
+  }
+  void CloseRow() { start.push_back(static_cast<int>(items.size())); }
+  bool operator==(const RowLists& other) const { return start == other.start && items == other.items; }
+};
+
 // Entries of an agent's K^-1 between some of its unknowns, grown as rows touch new ones.
 struct InverseBlock {
   std::vector<int> unknowns;      // cached unknowns, in the order of `inverse`
@@ -457,7 +479,7 @@ struct InverseBlock {
   Eigen::MatrixXcd inverse;       // K^-1 restricted to `unknowns`
 
   // The last solve's rows of the agent (their terms), and their G and Schur block.
-  std::vector<std::vector<std::pair<int, Complex>>> terms, g;
+  RowLists terms, g;
   Eigen::MatrixXd s;
   int64_t columns = 0;  // back-substitutions done so far
 
@@ -509,12 +531,12 @@ struct InverseBlock {
 
 // The rows that touch one agent, and that agent's block of the Schur complement.
 struct AgentRows {
-  std::vector<int> rows;                                    // global rows, ascending
-  std::vector<std::vector<std::pair<int, Complex>>> terms;  // per local row: (local vertex, weight * direction)
-  Eigen::MatrixXd s;                                        // local rows by local rows: Re(g^H K^-1 g)
-  std::vector<double> base;                                 // per local row: its value without rows
-  Eigen::VectorXcd y0;                                      // the step's unknowns without rows
-  std::vector<std::vector<std::pair<int, Complex>>> g;      // per local row: (unknown, coefficient)
+  std::vector<int> rows;       // global rows, ascending
+  RowLists terms;              // per local row: (local vertex, weight * direction)
+  Eigen::MatrixXd s;           // local rows by local rows: Re(g^H K^-1 g)
+  std::vector<double> base;    // per local row: its value without rows
+  Eigen::VectorXcd y0;         // the step's unknowns without rows
+  RowLists g;                  // per local row: (unknown, coefficient)
 };
 
 // Fills the agent's Schur block for one step: S = Re(G^H K^-1 G). A row's value is
@@ -533,11 +555,12 @@ void AgentBlock(const Solver& solver, int n, MapFn map, InverseBlock* cache, Age
     ar->g = cache->g;
     ar->s = cache->s;
   } else {
-    ar->g.assign(static_cast<size_t>(r), {});
+    ar->g.Clear();
+    ar->g.items.reserve(ar->terms.items.size() * 2);
   }
   std::vector<int> needed;
+  std::vector<RowLists::Item> col;
   for (int k = 0; k < r; ++k) {
-    auto& col = ar->g[static_cast<size_t>(k)];
     auto add = [&](int j, Complex v) {
       for (auto& e : col)
         if (e.first == j) {
@@ -546,7 +569,8 @@ void AgentBlock(const Solver& solver, int n, MapFn map, InverseBlock* cache, Age
         }
       col.emplace_back(j, v);
     };
-    for (const auto& [i, c] : ar->terms[static_cast<size_t>(k)]) {
+    col.clear();
+    for (const auto& [i, c] : ar->terms.row(static_cast<size_t>(k))) {
       const Map m = map(i);
       if (!same) {
         add(m.j0, c * std::conj(m.a0));
@@ -554,7 +578,11 @@ void AgentBlock(const Solver& solver, int n, MapFn map, InverseBlock* cache, Age
       }
       ar->base[static_cast<size_t>(k)] += std::real(std::conj(c) * m.k);
     }
-    for (const auto& [j, gj] : col) {
+    if (!same) {
+      ar->g.items.insert(ar->g.items.end(), col.begin(), col.end());
+      ar->g.CloseRow();
+    }
+    for (const auto& [j, gj] : ar->g.row(static_cast<size_t>(k))) {
       ar->base[static_cast<size_t>(k)] += std::real(std::conj(gj) * ar->y0[j]);
       if (!same) needed.push_back(j);
     }
@@ -567,8 +595,8 @@ void AgentBlock(const Solver& solver, int n, MapFn map, InverseBlock* cache, Age
   for (int k = 0; k < r; ++k)
     for (int l = k; l < r; ++l) {
       Complex v = 0.0;
-      for (const auto& [i, gi] : ar->g[static_cast<size_t>(k)])
-        for (const auto& [j, gj] : ar->g[static_cast<size_t>(l)]) v += std::conj(gi) * gj * cache->At(i, j);
+      for (const auto& [i, gi] : ar->g.row(static_cast<size_t>(k)))
+        for (const auto& [j, gj] : ar->g.row(static_cast<size_t>(l))) v += std::conj(gi) * gj * cache->At(i, j);
       ar->s(k, l) = ar->s(l, k) = std::real(v);
     }
   cache->terms = ar->terms;
@@ -581,7 +609,7 @@ template <typename Solver>
 Eigen::VectorXcd AgentResponse(const Solver& solver, const AgentRows& ar, const Eigen::VectorXd& forces) {
   Eigen::VectorXcd rhs = Eigen::VectorXcd::Zero(ar.y0.size());
   for (size_t k = 0; k < ar.rows.size(); ++k)
-    for (const auto& [j, gj] : ar.g[k]) rhs[j] += gj * forces[ar.rows[k]];
+    for (const auto& [j, gj] : ar.g.row(k)) rhs[j] += gj * forces[ar.rows[k]];
   return ar.y0 + solver.Solve(rhs).col(0);
 }
 
@@ -591,19 +619,34 @@ struct RowSlot {
   int local;  // index of the row in that agent's block
 };
 
+// The slots of every row, stored one row after another.
+struct RowSlots {
+  struct Span {
+    const RowSlot *first, *last;
+    const RowSlot* begin() const { return first; }
+    const RowSlot* end() const { return last; }
+  };
+  std::vector<int> start;  // #R+1 offsets into items
+  std::vector<RowSlot> items;
+
+  Span row(int r) const {
+    return {items.data() + start[static_cast<size_t>(r)], items.data() + start[static_cast<size_t>(r) + 1]};
+  }
+};
+
 // Solves the mixed complementarity problem on the Schur complement,
 //   (S + D) lambda = q              on equality rows,
 //   lambda >= 0, (S + D) lambda - q >= 0, complementary   on "at least" rows,
 // by projected Gauss-Seidel from `forces`, then meets the equality rows exactly for the
 // unilateral forces found. Returns the sweeps used.
-int SolveRows(const std::vector<AgentRows*>& blocks, const std::vector<std::vector<RowSlot>>& slots,
+int SolveRows(const std::vector<AgentRows*>& blocks, const RowSlots& slots,
               const SeparationRows& in, const SeparationSettings& settings, Eigen::VectorXd& forces,
               bool* regularized, bool* converged, int64_t* updates) {
   const int nr = static_cast<int>(in.rhs.size());
   Eigen::VectorXd q = in.rhs;
   Eigen::VectorXd diag = in.softness;
   for (int r = 0; r < nr; ++r)
-    for (const RowSlot& sl : slots[static_cast<size_t>(r)]) {
+    for (const RowSlot& sl : slots.row(r)) {
       q[r] -= blocks[static_cast<size_t>(sl.agent)]->base[static_cast<size_t>(sl.local)];
       diag[r] += blocks[static_cast<size_t>(sl.agent)]->s(sl.local, sl.local);
     }
@@ -622,7 +665,7 @@ int SolveRows(const std::vector<AgentRows*>& blocks, const std::vector<std::vect
   }
   auto value = [&](int r) {
     double sum = 0.0;
-    for (const RowSlot& sl : slots[static_cast<size_t>(r)]) sum += u[static_cast<size_t>(sl.agent)][sl.local];
+    for (const RowSlot& sl : slots.row(r)) sum += u[static_cast<size_t>(sl.agent)][sl.local];
     return sum;
   };
   *converged = false;
@@ -642,7 +685,7 @@ int SolveRows(const std::vector<AgentRows*>& blocks, const std::vector<std::vect
         forces[r] = f;
         ++*updates;
         change = std::max(change, std::abs(delta) * diag[r]);
-        for (const RowSlot& sl : slots[static_cast<size_t>(r)])
+        for (const RowSlot& sl : slots.row(r))
           u[static_cast<size_t>(sl.agent)].noalias() += blocks[static_cast<size_t>(sl.agent)]->s.col(sl.local) * delta;
       }
       if (change <= settings.tolerance) {
@@ -753,23 +796,36 @@ void SeparationSolve(const SeparationData& data, const SeparationRows& in, const
     if (!has_term[static_cast<size_t>(r)])
       throw std::invalid_argument("SeparationSolve: row " + std::to_string(r) + " has no term");
 
-  // Terms by agent; rows numbered locally per agent.
+  // Terms by agent (in term order within a row); rows numbered locally per agent.
   const size_t na = data.agents.size();
   std::vector<AgentRows> agent_rows(na);
-  for (Eigen::Index t = 0; t < nt; ++t) {
-    if (in.term_weight[t] == 0.0) continue;  // an interpolation weight of zero touches nothing
-    const int v = in.term_vertex[t], row = in.term_row[t];
-    const int a = data.agent_of[static_cast<size_t>(v)];
-    AgentRows& ar = agent_rows[static_cast<size_t>(a)];
-    auto it = std::lower_bound(ar.rows.begin(), ar.rows.end(), row);
-    const auto k = it - ar.rows.begin();
-    if (it == ar.rows.end() || *it != row) {
-      ar.rows.insert(it, row);
-      ar.terms.insert(ar.terms.begin() + k, std::vector<std::pair<int, Complex>>());
+  {
+    std::vector<int> count(na, 0), agent_of_term(static_cast<size_t>(nt), -1);
+    for (Eigen::Index t = 0; t < nt; ++t) {
+      if (in.term_weight[t] == 0.0) continue;  // an interpolation weight of zero touches nothing
+      agent_of_term[static_cast<size_t>(t)] = data.agent_of[static_cast<size_t>(in.term_vertex[t])];
+      ++count[static_cast<size_t>(agent_of_term[static_cast<size_t>(t)])];
     }
-    const Complex dir(in.direction(row, 0), in.direction(row, 1));
-    ar.terms[static_cast<size_t>(k)].emplace_back(v - data.agents[static_cast<size_t>(a)].first,
-                                                  in.term_weight[t] * dir);
+    std::vector<std::vector<std::pair<int, Eigen::Index>>> by_agent(na);  // (row, term)
+    for (size_t a = 0; a < na; ++a) by_agent[a].reserve(static_cast<size_t>(count[a]));
+    for (Eigen::Index t = 0; t < nt; ++t)
+      if (agent_of_term[static_cast<size_t>(t)] >= 0)
+        by_agent[static_cast<size_t>(agent_of_term[static_cast<size_t>(t)])].emplace_back(in.term_row[t], t);
+    for (size_t a = 0; a < na; ++a) {
+      auto& list = by_agent[a];
+      if (list.empty()) continue;
+      if (!std::is_sorted(list.begin(), list.end())) std::stable_sort(list.begin(), list.end());
+      AgentRows& ar = agent_rows[a];
+      ar.terms.items.reserve(list.size());
+      for (size_t i = 0; i < list.size(); ++i) {
+        const auto [row, t] = list[i];
+        if (i > 0 && row != list[i - 1].first) ar.terms.CloseRow();
+        if (i == 0 || row != list[i - 1].first) ar.rows.push_back(row);
+        const Complex dir(in.direction(row, 0), in.direction(row, 1));
+        ar.terms.items.emplace_back(in.term_vertex[t] - data.agents[a].first, in.term_weight[t] * dir);
+      }
+      ar.terms.CloseRow();
+    }
   }
   std::vector<int> involved;
   std::vector<AgentRows*> blocks;
@@ -779,10 +835,18 @@ void SeparationSolve(const SeparationData& data, const SeparationRows& in, const
       blocks.push_back(&agent_rows[a]);
     }
   const int nq = static_cast<int>(involved.size());
-  std::vector<std::vector<RowSlot>> slots(static_cast<size_t>(nr));
+  RowSlots slots;
+  slots.start.assign(static_cast<size_t>(nr) + 1, 0);
   for (int q = 0; q < nq; ++q)
-    for (size_t k = 0; k < blocks[static_cast<size_t>(q)]->rows.size(); ++k)
-      slots[static_cast<size_t>(blocks[static_cast<size_t>(q)]->rows[k])].push_back({q, static_cast<int>(k)});
+    for (int row : blocks[static_cast<size_t>(q)]->rows) ++slots.start[static_cast<size_t>(row) + 1];
+  for (int r = 0; r < nr; ++r) slots.start[static_cast<size_t>(r) + 1] += slots.start[static_cast<size_t>(r)];
+  slots.items.resize(static_cast<size_t>(slots.start[static_cast<size_t>(nr)]));
+  {
+    std::vector<int> fill(slots.start.begin(), slots.start.end() - 1);
+    for (int q = 0; q < nq; ++q)
+      for (size_t k = 0; k < blocks[static_cast<size_t>(q)]->rows.size(); ++k)
+        slots.items[static_cast<size_t>(fill[static_cast<size_t>(blocks[static_cast<size_t>(q)]->rows[k])]++)] = {q, static_cast<int>(k)};
+  }
 
   result.positions = data.rest;
   result.shape = data.rest;
