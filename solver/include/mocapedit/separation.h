@@ -13,7 +13,10 @@
 // complementarity problem on S by projected Gauss-Seidel (a one-sided row pushes, never
 // pulls), then the equality rows are met exactly by a direct solve. The Schur complement
 // of a dense crowd fills in badly when factored, so it is never factored whole; the cost
-// of a solve grows with the rows per agent, not with the crowd.
+// of a solve grows with the rows per agent, not with the crowd. Repeated solves (with a
+// SeparationCache) reuse the entries of K^-1 earlier rows needed and, for an agent whose
+// rows are the same as last time, its whole block; the forces of a previous solve, given
+// back per step, are warm starts.
 //
 // Every frame is also pulled weakly towards its rest position (anchor_weight, relative to
 // the shape terms): it keeps agents without any pin in place and makes a push a local
@@ -66,6 +69,7 @@ struct SeparationRows {
 
 struct SeparationSettings {
   double tolerance = 1e-6;     // stage units: Gauss-Seidel stops when no row value moves more
+                               // (smaller changes are not passed on to the other rows)
   int max_sweeps = 500;        // Gauss-Seidel sweeps per step at most
   double relaxation = 1.0;     // over-relaxation factor of the sweeps, in (0, 2)
 };
