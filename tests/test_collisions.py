@@ -359,6 +359,19 @@ def test_grid_detection_equals_all_pairs_and_sampling_interpolates():
     assert len(grid) == len(brute) > 5
     for name in ("agent_a", "agent_b", "first", "last", "deepest", "depth", "min_clearance"):
         np.testing.assert_array_equal(getattr(grid, name), getattr(brute, name))
+    # Near misses gathered in the same pass are the collisions at the watch distance.
+    watched = collisions.detect(s, radius, height, 0.05, report_distance=0.5, watch=0.3)
+    wide = collisions.detect(s, radius, height, 0.3, report_distance=0.5, brute_force=True)
+    assert len(watched.near) > len(watched) == len(grid)
+    for name in ("agent_a", "agent_b", "first", "last", "deepest", "depth"):
+        np.testing.assert_array_equal(getattr(watched, name), getattr(grid, name))
+        np.testing.assert_array_equal(getattr(watched.near, name), getattr(wide, name))
+    # Re-reading new paths through the precomputed gathers interpolates as sampling does.
+    order = list(range(80))
+    starts = np.concatenate([[0], np.cumsum([len(paths[i]) for i in order])])
+    moved = {i: paths[i] + rng.normal(0, 0.1, paths[i].shape) for i in order}
+    collisions.Resampler(s, starts)(np.concatenate([moved[i] for i in order]))
+    np.testing.assert_allclose(s.positions, collisions.sample(order, times, moved, 1.0).positions, atol=1e-12)
 
 
 def test_region_footprints_follow_the_transform(tmp_path):

@@ -23,6 +23,14 @@ an avoid region, or ``max_iterations`` is reached. Two strategies:
   of being held back before the crossing and thrown forward after it. Each solve starts
   from the original source, so deformation does not accumulate.
 
+  What makes it fast: the detection that counts the collisions also gathers the near
+  misses (one pass); a row keeps the direction it was solved with while the fresh one
+  turns less than ``keep_degrees`` (any direction is a conservative separation), so rows
+  are re-sent unchanged and the solver reuses their agents' Schur blocks; each solve
+  step starts from the last solve's forces of the same step; a pair that still overlaps
+  where it was already held apart is held at every sample of its intervals, a little
+  further apart each time it resists, so the iterations do not stall on it.
+
 Artist constraints hold throughout: hard pins and links are hard rows of every solve,
 stationary ranges move rigidly. Pairs that hard constraints hold together are reported,
 not looped on.
@@ -97,6 +105,7 @@ class Settings:
     overshoot: float = 0.03             # separations aim this fraction past the clearance
     buffer_m: float = 0.3               # near misses watched by relinearize, metres
     spread: int = 3                     # relinearize constrains every n-th sample of an interval
+    keep_degrees: float = 5.0           # relinearize keeps a row's direction while it turns less
     sweeps: int = 20                    # Gauss-Seidel sweeps per solve step at least (warm-started)
     sweep_budget: float = 1e6           # rows x sweeps per step allowed beyond that (up to 10x sweeps)
     tolerance: float = 1e-3             # of the clearance: Gauss-Seidel stops when no row moves more
@@ -125,6 +134,13 @@ class Outcome:
     moved: np.ndarray                   # (A,) bool: the agent's path changed
     solves: int = 0
     seconds: float = 0.0
+    #: wall seconds by phase: "factor" (the agents' energies), "detect" (sampling and
+    #: detection), "gather", "blocks", "sweeps" and "responses" (inside the solves), "rows"
+    #: (the rest: forming the rows)
+    timing: dict = field(default_factory=dict)
+    #: work done, summed over the solves: "rows" sent, Gauss-Seidel "updates" passed on,
+    #: "inverseColumns" (back-substitutions for the agents' Schur blocks)
+    work: dict = field(default_factory=dict)
 
     @property
     def converged(self) -> bool:
@@ -135,14 +151,15 @@ class _Rows:
     """Rows of a SeparationSolver solve, gathered as numpy arrays."""
 
     def __init__(self):
-        self.direction, self.rhs, self.softness, self.kind, self.force = [], [], [], [], []
+        self.direction, self.rhs, self.softness, self.kind, self.force, self.force1 = [], [], [], [], [], []
         self.term_row, self.term_vertex, self.term_weight = [], [], []
         self.count = 0
 
-    def add(self, direction, rhs, softness, vertices, weights, at_least=False, force=0.0):
+    def add(self, direction, rhs, softness, vertices, weights, at_least=False, force=0.0, force1=None):
         """Rows in bulk: direction (R,2), rhs (R,), softness (R,), vertices/weights (R,T).
 
-        ``at_least``: one-sided rows (value >= rhs); ``force``: (R,) starting forces.
+        ``at_least``: one-sided rows (value >= rhs); ``force``, ``force1``: (R,) starting forces
+        of step 2 and step 1 (``force1`` defaults to ``force``).
         """
         direction = np.asarray(direction, dtype=np.float64).reshape(-1, 2)
         r = len(direction)
@@ -154,6 +171,7 @@ class _Rows:
         self.softness.append(np.broadcast_to(np.asarray(softness, dtype=np.float64), (r,)))
         self.kind.append(np.full(r, 1 if at_least else 0, dtype=np.int32))
         self.force.append(np.broadcast_to(np.asarray(force, dtype=np.float64), (r,)))
+        self.force1.append(np.broadcast_to(np.asarray(force if force1 is None else force1, dtype=np.float64), (r,)))
         vertices = np.asarray(vertices).reshape(r, -1)
         weights = np.asarray(weights, dtype=np.float64).reshape(r, -1)
         self.term_row.append(np.repeat(idx, vertices.shape[1]))
@@ -168,7 +186,8 @@ class _Rows:
                             cat(self.rhs, 0, np.float64), cat(self.softness, 0, np.float64),
                             cat(self.term_row, 0, np.int32), cat(self.term_vertex, 0, np.int32),
                             cat(self.term_weight, 0, np.float64), cat(self.kind, 0, np.int32),
-                            cat(self.force, 0, np.float64), tolerance, max_sweeps)
+                            cat(self.force, 0, np.float64), tolerance, max_sweeps,
+                            cat(self.force1, 0, np.float64))
 
 
 class _State:
@@ -185,6 +204,7 @@ class _State:
         idx = list(range(len(problem.names)))
         self.sampling = collisions.sample(idx, self.times, {i: g for i, g in enumerate(problem.paths)},
                                           problem.sample_step)
+        self.resample = collisions.Resampler(self.sampling, self.starts)
         pinned = np.zeros(len(self.rest), dtype=bool)
         for pin in problem.pins:
             if pin.softness == 0:
@@ -211,23 +231,31 @@ class _State:
         vb, wb = self.sample_terms(b, k)
         return np.all(self.pinned[va] | (wa == 0), axis=1) & np.all(self.pinned[vb] | (wb == 0), axis=1)
 
-    def fixed_rows(self, rows: _Rows, forces: np.ndarray | None = None) -> None:
-        """Artist pins and links, two rows each: every solve carries them (``forces``: the
-        last solve's, to start from)."""
+    def fixed_rows(self, rows: _Rows, forces: np.ndarray | None = None, forces1: np.ndarray | None = None) -> None:
+        """Artist pins and links, two rows each: every solve carries them (``forces``,
+        ``forces1``: the last solve's step-2 and step-1 forces, to start from)."""
         count = len(self.p.pins) + len(self.p.links)
-        start = np.zeros((count, 2)) if forces is None or len(forces) != 2 * count else forces.reshape(-1, 2)
+
+        def start(f):
+            return np.zeros((count, 2)) if f is None or len(f) != 2 * count else f.reshape(-1, 2)
+
+        f2, f1 = start(forces), start(forces1)
         for i, pin in enumerate(self.p.pins):
             v = self.starts[pin.agent] + pin.frame
-            rows.add(np.eye(2), pin.position, pin.softness, [[v], [v]], [[1.0], [1.0]], force=start[i])
+            rows.add(np.eye(2), pin.position, pin.softness, [[v], [v]], [[1.0], [1.0]], force=f2[i], force1=f1[i])
         for i, link in enumerate(self.p.links, len(self.p.pins)):
             va, vb = self.starts[link.a] + link.fa, self.starts[link.b] + link.fb
-            rows.add(np.eye(2), link.offset, 0.0, [[va, vb], [va, vb]], [[1.0, -1.0], [1.0, -1.0]], force=start[i])
+            rows.add(np.eye(2), link.offset, 0.0, [[va, vb], [va, vb]], [[1.0, -1.0], [1.0, -1.0]],
+                     force=f2[i], force1=f1[i])
 
-    def detect(self, flat: np.ndarray, extra: float = 0.0) -> collisions.Collisions:
-        collisions.resample(self.sampling, flat, self.starts)
+    def detect(self, flat: np.ndarray, extra: float = 0.0, watch: float | None = None) -> collisions.Collisions:
+        """Collisions at the paths ``flat`` closer than margin + ``extra``; with ``watch``, also
+        the near misses closer than margin + ``watch`` (as ``near``), in the same pass."""
+        self.resample(flat)
         active = np.ones(len(self.p.names), dtype=bool) if self.p.collide_agents else np.zeros(len(self.p.names), bool)
         return collisions.detect(self.sampling, self.p.radius, self.p.height, self.p.margin + extra,
-                                 report_distance=self.p.margin + extra, active=active)
+                                 report_distance=self.p.margin + extra, active=active,
+                                 watch=None if watch is None else self.p.margin + watch)
 
     def region_hits(self, flat: np.ndarray, extra: float = 0.0):
         """Per region: (vertices, agent of each, push) of frames within clearance + extra."""
@@ -309,17 +337,19 @@ def _iteration(state: _State, found: collisions.Collisions, hits) -> Iteration:
                                        [h[2]["depth"].max(initial=0.0) for h in hits if h is not None])))
 
 
-def _expand(found: collisions.Collisions, spread: int, colliding_depth: float = 0.0):
+def _expand(found: collisions.Collisions, spread, colliding_depth: float = 0.0):
     """(a, b, sample) to constrain for each interval: its deepest sample, and, for intervals
-    deeper than ``colliding_depth``, every spread-th sample and the last one too."""
+    deeper than ``colliding_depth``, every spread-th sample and the last one too
+    (``spread``: one for all intervals, or (M,) one per interval)."""
     if len(found) == 0:
         z = np.zeros(0, np.int64)
         return z, z, z
     deep = found.depth > colliding_depth
+    spread = np.broadcast_to(np.asarray(spread, dtype=np.int64), (len(found),))
     length = np.where(deep, (found.last - found.first) // spread + 2, 0)
     rep = np.repeat(np.arange(len(found)), length)
     offset = np.arange(int(length.sum())) - np.repeat(np.cumsum(length) - length, length)
-    k = np.minimum(found.first[rep] + offset * spread, found.last[rep])
+    k = np.minimum(found.first[rep] + offset * spread[rep], found.last[rep])
     a = np.concatenate([found.agent_a, found.agent_a[rep]])
     b = np.concatenate([found.agent_b, found.agent_b[rep]])
     k = np.concatenate([found.deepest, k])
@@ -333,7 +363,8 @@ def resolve(problem: Problem, settings: Settings | None = None, progress=None) -
         raise ValueError(f"unknown collision strategy '{settings.strategy}' (use {' or '.join(STRATEGIES)})")
     t0 = time.perf_counter()
     state = _State(problem, settings)
-    run = _Run(state, progress)
+    watch = settings.buffer_m / settings.meters_per_unit if settings.strategy == "relinearize" else None
+    run = _Run(state, progress, watch)
     flat, angles = (_relinearize if settings.strategy == "relinearize" else _accumulate)(state, run)
     found, hits = run.found, run.hits
     region_left = []
@@ -348,16 +379,19 @@ def resolve(problem: Problem, settings: Settings | None = None, progress=None) -
     return Outcome(paths=state.split(flat), rigid_angles=angles, iterations=run.iterations,
                    sampling=state.sampling, remaining=found, region_left=region_left,
                    blocked=_blocked(state, found), moved=moved, solves=run.solves,
-                   seconds=time.perf_counter() - t0)
+                   seconds=time.perf_counter() - t0, timing=run.timing(time.perf_counter() - t0), work=dict(run.work))
 
 
 class _Run:
     """What both strategies share: the detection before each solve, its record, progress."""
 
-    def __init__(self, state: _State, progress):
+    def __init__(self, state: _State, progress, watch: float | None = None):
         self.state = state
+        self.watch = watch              # near misses gathered by each detection (stage units)
         self.iterations: list[Iteration] = []
         self.solves = 0
+        self.seconds = {"factor": 0.0, "detect": 0.0, "gather": 0.0, "blocks": 0.0, "sweeps": 0.0, "responses": 0.0}
+        self.work = {"rows": 0, "updates": 0, "inverseColumns": 0}
         self.found = None
         self.hits = None
         self.task = progress.task("collision avoidance", state.s.max_iterations, "iterations") if progress else None
@@ -365,8 +399,10 @@ class _Run:
     def observe(self, flat: np.ndarray, it: int) -> bool:
         """Detects at the current paths; True when there is nothing (more) to solve."""
         state = self.state
-        self.found = state.detect(flat)
+        t = time.perf_counter()
+        self.found = state.detect(flat, watch=self.watch)
         self.hits = state.region_hits(flat)
+        self.seconds["detect"] += time.perf_counter() - t
         record = _iteration(state, self.found, self.hits)
         self.iterations.append(record)
         left = record.collisions + record.region_samples
@@ -379,7 +415,24 @@ class _Run:
                 self.task.update(it, f"{left} collision{'s' if left != 1 else ''} left")
         return last
 
+    def timing(self, total: float) -> dict:
+        out = {k: round(v, 4) for k, v in self.seconds.items()}
+        out["rows"] = round(total - sum(self.seconds.values()), 4)
+        return out
+
+    def factor(self, *args):
+        """A SeparationSolver for (rest, starts, rigid, anchor_weight, still_extent, threads), timed."""
+        t = time.perf_counter()
+        solver = _solver.SeparationSolver(*args)
+        self.seconds["factor"] += time.perf_counter() - t
+        return solver
+
     def solved(self, rows: "_Rows", out: dict) -> None:
+        for name, sec in zip(("blocks", "sweeps", "responses", "gather"), out["seconds"]):
+            self.seconds[name] += float(sec)
+        self.work["updates"] += int(out["updates"])
+        self.work["inverseColumns"] += int(out["inverse_columns"])
+        self.work["rows"] += rows.count
         self.solves += 1
         self.iterations[-1].rows = rows.count
         self.iterations[-1].solves = 1
@@ -394,7 +447,7 @@ def _accumulate(state: _State, run: _Run):
         if run.observe(flat, it):
             break
         found = run.found
-        solver = _solver.SeparationSolver(flat, state.starts, state.rigid, s.anchor_weight, _still(s), 0)
+        solver = run.factor(flat, state.starts, state.rigid, s.anchor_weight, _still(s), 0)
         rows = _Rows()
         state.fixed_rows(rows)
         # A mesh-based constraint per maximal collision: the two colliding points joined by
@@ -436,8 +489,12 @@ class _Candidates:
     def __init__(self, agents: int):
         self.n = np.int64(max(agents, 1))
         self.keys = np.zeros(0, np.int64)
-        self.force = np.zeros(0)          # last solve's force (warm start)
+        self.force = np.zeros(0)          # last solve's step-2 force (warm start)
+        self.force1 = np.zeros(0)         # and its step-1 force
         self.blocked = np.zeros(0, bool)  # hard constraints hold this pair together
+        self.normal = np.zeros((0, 2))    # direction of the last solve's row (NaN: not solved yet)
+        self.pair_keys = np.zeros(0, np.int64)   # pairs that resisted (a * n + b), sorted
+        self.pair_count = np.zeros(0, np.int64)  # how many times each did
 
     def split(self):
         n = self.n
@@ -448,8 +505,31 @@ class _Candidates:
         a, b, k = self.split()
         gap = np.linalg.norm(state.sampling.positions[k, a] - state.sampling.positions[k, b], axis=1) \
             - _clearance(state, a, b)
-        keep = (self.force > 0.0) | self.blocked | (gap < reach)
-        self.keys, self.force, self.blocked = self.keys[keep], self.force[keep], self.blocked[keep]
+        keep = (self.force > 0.0) | (self.force1 > 0.0) | self.blocked | (gap < reach)
+        self.keys, self.force, self.force1, self.blocked, self.normal = (
+            self.keys[keep], self.force[keep], self.force1[keep], self.blocked[keep], self.normal[keep])
+
+    def resist(self, found: collisions.Collisions) -> None:
+        """Counts, per pair, the detections that still found it overlapping although it had
+        rows already (``found``: the collisions at the latest result)."""
+        if len(found) == 0:
+            return
+        pairs = np.unique(found.agent_a.astype(np.int64) * self.n + found.agent_b)
+        ca, cb, _ = self.split()
+        held = pairs[np.isin(pairs, ca * self.n + cb)]
+        self.pair_keys, self.pair_count = _count_into(self.pair_keys, self.pair_count, held)
+
+    def resistance(self, a, b) -> np.ndarray:
+        """(N,) how many times the pairs (a, b) resisted."""
+        keys = np.asarray(a, np.int64) * self.n + np.asarray(b, np.int64)
+        if len(self.pair_keys) == 0:
+            return np.zeros(len(keys), np.int64)
+        at = np.minimum(np.searchsorted(self.pair_keys, keys), len(self.pair_keys) - 1)
+        return np.where(self.pair_keys[at] == keys, self.pair_count[at], 0)
+
+    def resisting(self, found: collisions.Collisions) -> np.ndarray:
+        """(M,) True for the intervals of pairs that resisted."""
+        return self.resistance(found.agent_a, found.agent_b) > 0
 
     def add(self, a, b, k) -> None:
         keys = np.unique((k * self.n + a) * self.n + b)
@@ -460,7 +540,34 @@ class _Candidates:
         order = np.argsort(merged, kind="stable")
         self.keys = merged[order]
         self.force = np.concatenate([self.force, np.zeros(len(new))])[order]
+        self.force1 = np.concatenate([self.force1, np.zeros(len(new))])[order]
         self.blocked = np.concatenate([self.blocked, np.zeros(len(new), bool)])[order]
+        self.normal = np.concatenate([self.normal, np.full((len(new), 2), np.nan)])[order]
+
+    def linearise(self, fresh: np.ndarray, keep_cos: float) -> np.ndarray:
+        """The rows' directions for the next solve, given the directions at the latest result.
+
+        Any unit direction makes a conservative separation row (the distance is at least
+        its projection), so a row keeps the direction it was solved with while that is
+        within the angle whose cosine is ``keep_cos`` of the fresh one: rows sent again
+        unchanged cost the solver nothing to set up, and their forces are warm starts as
+        they are. A row whose direction turns past a right angle starts again from zero force.
+        """
+        cos = np.sum(self.normal * fresh, axis=1)
+        turn = ~(cos >= keep_cos)
+        flip = turn & ~(cos > 0.0)
+        self.force[flip] = 0.0
+        self.force1[flip] = 0.0
+        self.normal[turn] = fresh[turn]
+        return self.normal
+
+
+def _count_into(keys: np.ndarray, counts: np.ndarray, new: np.ndarray):
+    """Sorted keys and counts, with one more for each of the unique keys ``new``."""
+    merged = np.concatenate([keys, new])
+    uniq, inverse = np.unique(merged, return_inverse=True)
+    total = np.bincount(inverse, weights=np.concatenate([counts, np.ones(len(new))]), minlength=len(uniq))
+    return uniq, total.astype(np.int64)
 
 
 class _RegionCandidates:
@@ -471,6 +578,7 @@ class _RegionCandidates:
         self.vertex = np.zeros(0, np.int64)
         self.clearance = np.zeros(0)
         self.force = np.zeros(0)
+        self.force1 = np.zeros(0)
 
     def add(self, region: int, vertices: np.ndarray, clearance: np.ndarray) -> None:
         known = self.vertex[self.region == region]
@@ -479,6 +587,7 @@ class _RegionCandidates:
         self.vertex = np.concatenate([self.vertex, vertices[new]])
         self.clearance = np.concatenate([self.clearance, clearance[new]])
         self.force = np.concatenate([self.force, np.zeros(int(new.sum()))])
+        self.force1 = np.concatenate([self.force1, np.zeros(int(new.sum()))])
 
     def linearise(self, state: _State, flat: np.ndarray):
         """(normal (N,2), rhs (N,)) of one-sided rows n . x >= rhs keeping frames out.
@@ -558,13 +667,13 @@ def _exit(footprint, points: np.ndarray, way: np.ndarray, clearance: np.ndarray)
 
 def _relinearize(state: _State, run: _Run):
     p, s = state.p, state.s
-    solver = _solver.SeparationSolver(state.rest, state.starts, state.rigid, s.anchor_weight, _still(s), 0)
+    solver = run.factor(state.rest, state.starts, state.rigid, s.anchor_weight, _still(s), 0)
     flat = state.rest.copy()
     angles = np.zeros(len(p.rigid))
     cands = _Candidates(len(p.names))
     watched = _RegionCandidates()
     buffer = s.buffer_m / s.meters_per_unit
-    fixed_force = np.zeros(0)
+    fixed_force, fixed_force1 = np.zeros(0), np.zeros(0)
     for it in range(s.max_iterations + 1):
         if run.observe(flat, it):
             break
@@ -572,7 +681,11 @@ def _relinearize(state: _State, run: _Run):
             break
         # Watch every near miss: each becomes a one-sided row that pushes only when needed.
         if p.collide_agents:
-            cands.add(*_expand(state.detect(flat, buffer), max(1, s.spread), buffer))
+            # A pair still overlapping where it was already held apart resists: it is held at
+            # every sample of its intervals from now on, and a little further apart each time.
+            near = run.found.near
+            cands.resist(run.found)
+            cands.add(*_expand(near, np.where(cands.resisting(near), 1, max(1, s.spread)), buffer))
             cands.prune(state, 2.0 * buffer)
         for r, h in enumerate(state.region_hits(flat, buffer)):
             if h is not None and len(h[0]):
@@ -580,30 +693,31 @@ def _relinearize(state: _State, run: _Run):
         # Linearise every kept constraint at the current result.
         ca, cb, ck = cands.split()
         cands.blocked = state.held(ca, cb, ck)
-        normal = _separation_normals(state, ca, cb, ck)
         need = _clearance(state, ca, cb)
+        normal = cands.linearise(_separation_normals(state, ca, cb, ck), np.cos(np.radians(s.keep_degrees)))
         va, wa = state.sample_terms(ca, ck)
         vb, wb = state.sample_terms(cb, ck)
         rows = _Rows()
-        state.fixed_rows(rows, fixed_force)
+        state.fixed_rows(rows, fixed_force, fixed_force1)
         fixed = rows.count
         on = ~cands.blocked
-        sep = rows.add(normal[on], need[on] * (1.0 + s.overshoot), SEPARATION_SOFTNESS,
+        aim = need * (1.0 + s.overshoot * (1.0 + cands.resistance(ca, cb)))
+        sep = rows.add(normal[on], aim[on], SEPARATION_SOFTNESS,
                        np.concatenate([va, vb], axis=1)[on], np.concatenate([wa, -wb], axis=1)[on],
-                       at_least=True, force=cands.force[on])
+                       at_least=True, force=cands.force[on], force1=cands.force1[on])
         rnormal, rrhs = watched.linearise(state, flat)
         reg = rows.add(rnormal, rrhs + watched.clearance * s.overshoot, SEPARATION_SOFTNESS,
                        watched.vertex[:, None], np.ones((len(watched.vertex), 1)), at_least=True,
-                       force=watched.force)
+                       force=watched.force, force1=watched.force1)
         # Small problems afford a converged Gauss-Seidel; big ones carry it on from iteration
         # to iteration (warm start) within a budget of row updates.
         sweeps = int(np.clip(s.sweep_budget / max(rows.count, 1), s.sweeps, 10 * s.sweeps))
         out = rows.solve(solver, tolerance=s.tolerance * float(np.min(need, initial=1.0)), max_sweeps=sweeps)
         run.solved(rows, out)
-        force = out["forces"]
-        fixed_force = force[:fixed]
-        cands.force[on] = force[sep]
-        watched.force = force[reg]
+        force, force1 = out["forces"], out["shape_forces"]
+        fixed_force, fixed_force1 = force[:fixed], force1[:fixed]
+        cands.force[on], cands.force1[on] = force[sep], force1[sep]
+        watched.force, watched.force1 = force[reg], force1[reg]
         flat = out["positions"]
         angles = out["rigid_angles"]
     return flat, angles

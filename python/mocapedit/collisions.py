@@ -90,6 +90,38 @@ def sample(agents: list[str], frame_times: dict[str, np.ndarray], paths: dict[st
     return Sampling(agents=list(agents), times=times, frames=frames, positions=positions)
 
 
+class Resampler:
+    """Re-reads a sampling's positions from new per-frame paths, concatenated; the frames
+    and weights are worked out once, so a re-read is two gathers.
+
+    Args:
+      sampling: the sampling to update in place (its frames stay)
+      starts: #A+1 first row of each agent (in sampling order) in the paths, then #V
+    """
+
+    def __init__(self, sampling: Sampling, starts: np.ndarray):
+        starts = np.asarray(starts, dtype=np.int64)
+        last = (starts[1:] - starts[:-1] - 1)[None, :]
+        f = np.clip(sampling.frames, 0.0, last)
+        i0 = np.floor(f).astype(np.int64)
+        base = starts[:-1][None, :]
+        w1 = (f - i0).ravel()
+        self.sampling = sampling
+        self.i0 = (base + i0).ravel()
+        # Only samples between two frames blend (none when samples fall on frames).
+        self.blend = np.flatnonzero(w1 > 0.0)
+        self.i1 = (base + np.minimum(i0 + 1, last)).ravel()[self.blend]
+        self.w1 = w1[self.blend, None]
+
+    def __call__(self, paths: np.ndarray) -> None:
+        """paths: #V by 2 ground positions, agent i's frames at rows starts[i] .. starts[i+1]-1."""
+        out = self.sampling.positions.reshape(-1, 2)
+        np.take(paths, self.i0, axis=0, out=out)
+        if len(self.blend):
+            p0 = out[self.blend]
+            out[self.blend] = p0 + (paths[self.i1] - p0) * self.w1
+
+
 def resample(sampling: Sampling, paths: np.ndarray, starts: np.ndarray) -> None:
     """Re-reads every agent's positions from new per-frame paths, concatenated.
 
@@ -97,14 +129,7 @@ def resample(sampling: Sampling, paths: np.ndarray, starts: np.ndarray) -> None:
       paths: #V by 2 ground positions, agent i's frames at rows starts[i] .. starts[i+1]-1
       starts: #A+1 first row of each agent (in sampling order), then #V
     """
-    starts = np.asarray(starts, dtype=np.int64)
-    last = (starts[1:] - starts[:-1] - 1)[None, :]
-    f = np.clip(sampling.frames, 0.0, last)
-    i0 = np.floor(f).astype(np.int64)
-    i1 = np.minimum(i0 + 1, last)
-    a = (f - i0)[..., None]
-    base = starts[:-1][None, :]
-    sampling.positions[:] = paths[base + i0] * (1.0 - a) + paths[base + i1] * a
+    Resampler(sampling, starts)(paths)
 
 
 @dataclass
@@ -120,6 +145,7 @@ class Collisions:
     min_clearance_sample: np.ndarray  # (A,) sample of it, -1 if +inf
     colliding_samples: int       # (pair, sample) records below the wanted clearance
     pair_tests: int = 0          # narrow-phase capsule tests the detection made
+    near: "Collisions | None" = None  # intervals below the watch distance, when one was asked for
 
     def __len__(self) -> int:
         return int(self.agent_a.shape[0])
@@ -127,14 +153,24 @@ class Collisions:
 
 def detect(sampling: Sampling, radius: np.ndarray, height: np.ndarray, margin: float,
            report_distance: float = 0.0, active: np.ndarray | None = None,
-           brute_force: bool = False) -> Collisions:
-    """Collision intervals of every pair at a sampling (a grid per sample, in C++)."""
+           brute_force: bool = False, watch: float | None = None) -> Collisions:
+    """Collision intervals of every pair at a sampling (a grid per sample, in C++).
+
+    ``watch``: a clearance above ``margin``; the intervals below it are gathered in the same
+    pass as ``near`` (their depth measured from ``watch``).
+    """
     out = _solver.detect_collisions(
         sampling.flat(), len(sampling.times), np.asarray(radius, dtype=np.float64),
         np.asarray(height, dtype=np.float64), None,
         None if active is None else [bool(x) for x in active], float(margin), float(report_distance),
-        0, brute_force)
-    return Collisions(**out)
+        0, brute_force, float(watch) if watch is not None and watch > margin else 0.0)
+    near = out.pop("near", None)
+    found = Collisions(**out)
+    if near is not None:
+        found.near = Collisions(**near, min_clearance=found.min_clearance,
+                                min_clearance_sample=found.min_clearance_sample,
+                                colliding_samples=int(np.sum(near["last"] - near["first"] + 1)))
+    return found
 
 
 def clearances(sampling: Sampling, radius: np.ndarray, a: np.ndarray, b: np.ndarray,

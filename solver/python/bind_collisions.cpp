@@ -21,10 +21,10 @@ py::array_t<T> ToArray(const std::vector<T>& v) {
   return out;
 }
 
-py::dict CollisionsToDict(const mocapedit::CollisionResult& r) {
+py::dict IntervalsToDict(const std::vector<mocapedit::Collision>& intervals) {
   std::vector<int> a, b, first, last, deepest;
   std::vector<double> depth;
-  for (const auto& c : r.collisions) {
+  for (const auto& c : intervals) {
     a.push_back(c.agent_a);
     b.push_back(c.agent_b);
     first.push_back(c.first);
@@ -39,6 +39,12 @@ py::dict CollisionsToDict(const mocapedit::CollisionResult& r) {
   d["last"] = ToArray(last);
   d["deepest"] = ToArray(deepest);
   d["depth"] = ToArray(depth);
+  return d;
+}
+
+py::dict CollisionsToDict(const mocapedit::CollisionResult& r, bool near) {
+  py::dict d = IntervalsToDict(r.collisions);
+  if (near) d["near"] = IntervalsToDict(r.near);
   d["min_clearance"] = r.min_clearance;
   d["min_clearance_sample"] = r.min_clearance_sample;
   d["colliding_samples"] = r.colliding_samples;
@@ -54,7 +60,7 @@ MOCAPEDIT_BINDINGS(BindCollisions) {
       [](const Eigen::Ref<const Trajectory2>& positions, int samples, const Eigen::VectorXd& radius,
          const Eigen::VectorXd& height, std::optional<Eigen::VectorXd> base,
          std::optional<std::vector<bool>> active, double margin, double report_distance, int threads,
-         bool brute_force) {
+         bool brute_force, double watch_distance) {
         mocapedit::CapsuleSet capsules;
         capsules.radius = radius;
         capsules.height = height;
@@ -64,27 +70,32 @@ MOCAPEDIT_BINDINGS(BindCollisions) {
         settings.margin = margin;
         settings.report_distance = report_distance;
         settings.threads = threads;
+        settings.watch_distance = watch_distance;
         mocapedit::CollisionResult result;
         {
           py::gil_scoped_release release;
           result = brute_force ? mocapedit::DetectCollisionsBruteForce(positions, samples, capsules, settings)
                                : mocapedit::DetectCollisions(positions, samples, capsules, settings);
         }
-        return CollisionsToDict(result);
+        return CollisionsToDict(result, watch_distance > margin);
       },
       py::arg("positions"), py::arg("samples"), py::arg("radius"), py::arg("height"),
       py::arg("base") = py::none(), py::arg("active") = py::none(), py::arg("margin") = 0.0,
       py::arg("report_distance") = 0.0, py::arg("threads") = 0, py::arg("brute_force") = false,
+      py::arg("watch_distance") = 0.0,
       "Collision intervals between vertical capsules sampled at common shot times.\n\n"
       "positions: (K*A, 2) ground positions, time-major (row k*A + a is agent a at sample k);\n"
       "radius, height, base: (A,) capsule radius, height and base elevation (stage units);\n"
       "active: (A,) flags, None = all; margin: wanted clearance (stage units);\n"
       "report_distance: min_clearance is exact up to this clearance, +inf beyond;\n"
-      "brute_force: test all pairs at every sample instead of using the grid (the reference).\n\n"
+      "brute_force: test all pairs at every sample instead of using the grid (the reference);\n"
+      "watch_distance: when above margin, intervals below this clearance are also returned as 'near'.\n\n"
       "Returns a dict of arrays, one entry per collision interval sorted by (agent_a, agent_b, first):\n"
       "agent_a < agent_b, first, last (inclusive samples), deepest (sample of the maximal overlap),\n"
       "depth (margin minus clearance there); and per agent min_clearance (A,) and\n"
-      "min_clearance_sample (A,) (-1 when +inf); colliding_samples and pair_tests (counts).");
+      "min_clearance_sample (A,) (-1 when +inf); colliding_samples and pair_tests (counts); with a\n"
+      "watch_distance above margin, near: a dict of the same interval arrays below watch_distance\n"
+      "(depth = watch_distance minus clearance).");
   m.def("capsule_clearance", &mocapedit::CapsuleClearance, py::arg("dx"), py::arg("dy"), py::arg("radius_a"),
         py::arg("height_a"), py::arg("base_a"), py::arg("radius_b"), py::arg("height_b"), py::arg("base_b"),
         "Clearance between two vertical capsules whose ground positions differ by (dx, dy); "

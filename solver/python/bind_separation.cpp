@@ -32,13 +32,15 @@ class SeparationSolver {
   py::dict Solve(const Eigen::Ref<const Trajectory2>& direction, const Eigen::VectorXd& rhs,
                  const Eigen::VectorXd& softness, const Eigen::VectorXi& term_row, const Eigen::VectorXi& term_vertex,
                  const Eigen::VectorXd& term_weight, const Eigen::VectorXi& kind,
-                 const Eigen::VectorXd& initial_forces, double tolerance, int max_sweeps) {
+                 const Eigen::VectorXd& initial_forces, double tolerance, int max_sweeps,
+                 const Eigen::VectorXd& initial_shape_forces) {
     mocapedit::SeparationRows rows;
     rows.direction = direction;
     rows.rhs = rhs;
     rows.softness = softness;
     rows.kind = kind;
     rows.initial_forces = initial_forces;
+    rows.initial_shape_forces = initial_shape_forces;
     mocapedit::SeparationSettings settings;
     settings.tolerance = tolerance;
     settings.max_sweeps = max_sweeps;
@@ -54,12 +56,16 @@ class SeparationSolver {
     d["positions"] = result.positions;
     d["shape"] = result.shape;
     d["forces"] = result.forces;
+    d["shape_forces"] = result.shape_forces;
     d["residuals"] = result.residuals;
     d["rigid_angles"] = result.rigid_angles;
     d["moved_agents"] = result.moved_agents;
     d["sweeps"] = result.sweeps;
+    d["updates"] = result.updates;
+    d["inverse_columns"] = result.inverse_columns;
     d["converged"] = result.converged;
     d["regularized"] = result.regularized;
+    d["seconds"] = result.seconds;
     return d;
   }
 
@@ -90,13 +96,17 @@ MOCAPEDIT_BINDINGS(BindSeparation) {
            py::arg("term_row"), py::arg("term_vertex"), py::arg("term_weight"),
            py::arg("kind") = Eigen::VectorXi(), py::arg("initial_forces") = Eigen::VectorXd(),
            py::arg("tolerance") = 1e-6, py::arg("max_sweeps") = 500,
+           py::arg("initial_shape_forces") = Eigen::VectorXd(),
            "Solves both steps under R rows, each sum_t term_weight[t] * dot(direction[row], x[term_vertex[t]])\n"
            "= rhs[row] (kind 0), or >= rhs[row] (kind 1: a one-sided row, it only pushes); softness 0 = hard,\n"
-           "else 1 / weight relative to the shape terms. initial_forces: a previous solve's forces (warm start);\n"
+           "else 1 / weight relative to the shape terms. initial_forces and initial_shape_forces: a previous\n"
+           "solve's forces and shape_forces (warm starts of step 2 and step 1; with initial_forces alone both\n"
+           "steps start from it);\n"
            "tolerance (stage units) and max_sweeps bound the Gauss-Seidel on one-sided rows.\n"
-           "Returns a dict: positions (V, 2) after step 2, shape (V, 2) after step 1, forces (R,) (> 0 pushes\n"
-           "the row value up), residuals (R,), rigid_angles (one per rigid range, radians CCW), moved_agents,\n"
-           "sweeps, converged, regularized.")
+           "Returns a dict: positions (V, 2) after step 2, shape (V, 2) after step 1, forces (R,) of step 2\n"
+           "(> 0 pushes the row value up), shape_forces (R,) of step 1, residuals (R,), rigid_angles (one per rigid range, radians CCW), moved_agents,\n"
+           "sweeps, updates (row force changes passed on), inverse_columns (back-substitutions for the blocks),\n"
+           "converged, regularized, seconds (4,) wall seconds in the blocks, the sweeps, the responses and gathering the rows.")
       .def_property_readonly("agents", &SeparationSolver::agents)
       .def_property_readonly("vertices", &SeparationSolver::vertices);
 }

@@ -12,10 +12,10 @@ namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-// One colliding (pair, sample).
+// One (pair, sample) closer than the margin or the watch distance.
 struct Record {
   int a, b, sample;
-  double depth;
+  double clearance;
 };
 
 // What one worker finds over its samples.
@@ -36,6 +36,7 @@ struct Problem {
   int agents;
   const CapsuleSet& capsules;
   double margin;
+  double watch;   // records are kept below max(margin, watch)
   double report;  // clearances up to this are tracked per agent
   double reach;   // horizontal axis distance beyond which no pair matters
 
@@ -71,7 +72,7 @@ inline void TestPair(const Problem& p, int sample, int a, int b, Partial* out) {
   const auto& c = p.capsules;
   const double clearance = CapsuleClearance(pb[0] - pa[0], pb[1] - pa[1], c.radius[a], c.height[a],
                                             c.base[a], c.radius[b], c.height[b], c.base[b]);
-  if (clearance < p.margin) out->records.push_back({a, b, sample, p.margin - clearance});
+  if (clearance < p.margin || clearance < p.watch) out->records.push_back({a, b, sample, clearance});
   if (clearance <= p.report) {
     Keep(out, a, clearance, sample);
     Keep(out, b, clearance, sample);
@@ -115,9 +116,12 @@ Problem Validate(const Eigen::Ref<const Trajectory2>& positions, int samples,
     }
     max_radius = std::max(max_radius, capsules.radius[a]);
   }
+  if (std::isnan(settings.watch_distance) || std::isinf(settings.watch_distance))
+    throw std::invalid_argument("DetectCollisions: watch_distance must be finite");
+  const double watch = settings.watch_distance > settings.margin ? settings.watch_distance : settings.margin;
   const double report = std::max(settings.margin, settings.report_distance);
-  return Problem{positions, samples, static_cast<int>(n), capsules, settings.margin, report,
-                 report + 2.0 * max_radius};
+  return Problem{positions, samples, static_cast<int>(n), capsules, settings.margin, watch, report,
+                 std::max(report, watch) + 2.0 * max_radius};
 }
 
 // Uniform grid over one sample: agents sorted by cell; each occupied cell is tested
@@ -198,28 +202,39 @@ CollisionResult Finish(const Problem& p, std::vector<Partial>& parts) {
       }
     }
   }
-  result.colliding_samples = static_cast<int64_t>(records.size());
   std::sort(records.begin(), records.end(), [](const Record& x, const Record& y) {
     if (x.a != y.a) return x.a < y.a;
     if (x.b != y.b) return x.b < y.b;
     return x.sample < y.sample;
   });
-  for (size_t i = 0; i < records.size();) {
-    Collision c{records[i].a, records[i].b, records[i].sample, records[i].sample, records[i].sample,
-                records[i].depth};
-    size_t j = i + 1;
-    for (; j < records.size() && records[j].a == c.agent_a && records[j].b == c.agent_b &&
-           records[j].sample == c.last + 1;
-         ++j) {
-      c.last = records[j].sample;
-      if (records[j].depth > c.depth) {
-        c.depth = records[j].depth;
-        c.deepest = records[j].sample;
+  // Runs of consecutive samples below `limit`, each one interval with its deepest sample.
+  auto intervals = [&](double limit, std::vector<Collision>* out) {
+    int64_t count = 0;
+    for (size_t i = 0; i < records.size();) {
+      if (!(records[i].clearance < limit)) {
+        ++i;
+        continue;
       }
+      Collision c{records[i].a, records[i].b, records[i].sample, records[i].sample, records[i].sample,
+                  limit - records[i].clearance};
+      size_t j = i + 1;
+      for (; j < records.size() && records[j].a == c.agent_a && records[j].b == c.agent_b &&
+             records[j].sample == c.last + 1 && records[j].clearance < limit;
+           ++j) {
+        c.last = records[j].sample;
+        if (limit - records[j].clearance > c.depth) {
+          c.depth = limit - records[j].clearance;
+          c.deepest = records[j].sample;
+        }
+      }
+      count += static_cast<int64_t>(j - i);
+      out->push_back(c);
+      i = j;
     }
-    result.collisions.push_back(c);
-    i = j;
-  }
+    return count;
+  };
+  result.colliding_samples = intervals(p.margin, &result.collisions);
+  if (p.watch > p.margin) intervals(p.watch, &result.near);
   return result;
 }
 

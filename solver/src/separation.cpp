@@ -3,11 +3,13 @@
 #include <Eigen/SparseCholesky>
 #include <Eigen/SparseCore>
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <complex>
 #include <stdexcept>
 #include <string>
 #include <thread>
+#include <type_traits>
 #include <utility>
 
 namespace mocapedit {
@@ -15,6 +17,157 @@ namespace {
 
 using Complex = std::complex<double>;
 using CSparse = Eigen::SparseMatrix<Complex>;
+// One factored step of one agent, K = L D L^H. The agent's unknowns are its frames in
+// order, then its ranges' few unknowns. Without ranges K is banded (bandwidth 2 in step 1,
+// whose terms join three frames, 1 in step 2, whose terms join two) and is factored in band
+// storage; with ranges, whose unknowns border the band, as a sparse matrix in the same order
+// (no fill either way, so no ordering). Step 2's matrix is real (its terms are differences
+// of positions and anchors); its complex right-hand sides are solved as two real ones.
+template <typename Scalar>
+class StepSolver {
+ public:
+  static constexpr int kMaxBand = 4;
+
+  // Factors the n by n matrix summed from `triplets` (imaginary parts dropped when real).
+  // Returns false when it is not positive definite.
+  bool Factor(int n, const std::vector<Eigen::Triplet<Complex>>& triplets) {
+    n_ = n;
+    int band = 0;
+    for (const auto& t : triplets) band = std::max(band, std::abs(t.row() - t.col()));
+    if (band > kMaxBand) {
+      p_ = -1;
+      std::vector<Eigen::Triplet<Scalar>> converted;
+      converted.reserve(triplets.size());
+      for (const auto& t : triplets) converted.emplace_back(t.row(), t.col(), Convert(t.value()));
+      Eigen::SparseMatrix<Scalar> k(n, n);
+      k.setFromTriplets(converted.begin(), converted.end());
+      sparse_.compute(k);
+      return sparse_.info() == Eigen::Success;
+    }
+    p_ = band;
+    const int w = p_ + 1;
+    std::vector<Scalar> k(static_cast<size_t>(n) * w, Scalar(0));  // k[i*w + t] = K(i, i - t)
+    for (const auto& t : triplets)
+      if (t.row() >= t.col()) k[static_cast<size_t>(t.row()) * w + (t.row() - t.col())] += Convert(t.value());
+    l_.assign(static_cast<size_t>(n) * std::max(p_, 1), Scalar(0));  // l_[i*p + t] = L(i, i - 1 - t)
+    d_.assign(static_cast<size_t>(n), 0.0);
+    for (int i = 0; i < n; ++i) {
+      for (int j = std::max(0, i - p_); j < i; ++j) {
+        Scalar v = k[static_cast<size_t>(i) * w + (i - j)];
+        for (int m = std::max(0, i - p_); m < j; ++m) v -= L(i, m) * Conj(L(j, m)) * d_[m];
+        L(i, j) = v / d_[j];
+      }
+      double dii = std::real(k[static_cast<size_t>(i) * w]);
+      for (int m = std::max(0, i - p_); m < i; ++m) dii -= std::norm(L(i, m)) * d_[m];
+      if (!(dii > 0.0) || !std::isfinite(dii)) return false;
+      d_[i] = dii;
+    }
+    inverse_d_.resize(d_.size());
+    for (size_t i = 0; i < d_.size(); ++i) inverse_d_[i] = 1.0 / d_[i];
+    return true;
+  }
+
+  // K^-1 b for each column of b (#n by m).
+  Eigen::MatrixXcd Solve(const Eigen::MatrixXcd& b) const {
+    if (p_ < 0) return SparseSolve(b);
+    Eigen::MatrixXcd x = b;
+    for (Eigen::Index c = 0; c < x.cols(); ++c) Substitute(x.col(c).data(), 0);
+    return x;
+  }
+
+  // Columns `columns` of K^-1, #n by columns.size(); in column c only the rows from
+  // min(columns[c], lowest) on are meant to be read (the band path leaves the rows above
+  // undone: those of other columns follow from symmetry).
+  Eigen::MatrixXcd InverseColumns(const std::vector<int>& columns, int lowest) const {
+    const Eigen::Index m = static_cast<Eigen::Index>(columns.size());
+    if (p_ < 0) {
+      Eigen::MatrixXcd e = Eigen::MatrixXcd::Zero(n_, m);
+      for (Eigen::Index c = 0; c < m; ++c) e(columns[static_cast<size_t>(c)], c) = 1.0;
+      return SparseSolve(e);
+    }
+    Eigen::MatrixXcd x = Eigen::MatrixXcd::Zero(n_, m);
+    for (Eigen::Index c = 0; c < m; ++c) {
+      const int j = columns[static_cast<size_t>(c)];
+      x(j, c) = 1.0;
+      Substitute(x.col(c).data(), j, std::min(j, lowest));  // the forward pass starts at the unit entry
+    }
+    return x;
+  }
+
+ private:
+  static Scalar Convert(Complex v) {
+    if constexpr (std::is_same_v<Scalar, double>) return v.real();
+    else return v;
+  }
+  static Scalar Conj(Scalar v) {
+    if constexpr (std::is_same_v<Scalar, double>) return v;
+    else return std::conj(v);
+  }
+  Scalar& L(int i, int j) { return l_[static_cast<size_t>(i) * p_ + (i - 1 - j)]; }
+  Scalar L(int i, int j) const { return l_[static_cast<size_t>(i) * p_ + (i - 1 - j)]; }
+
+  // x <- K^-1 x in place, x zero above `first`; entries above `last` are left undone.
+  void Substitute(Complex* x, int first, int last = 0) const {
+    if (p_ == 2) return SubstituteBand<2>(x, first, last);
+    if (p_ == 1) return SubstituteBand<1>(x, first, last);
+    for (int i = first; i < n_; ++i) {
+      Complex v = x[i];
+      for (int j = std::max(first, i - p_); j < i; ++j) v -= L(i, j) * x[j];
+      x[i] = v;
+    }
+    for (int i = first; i < n_; ++i) x[i] *= inverse_d_[i];
+    for (int i = n_ - 1; i >= last; --i) {
+      Complex v = x[i];
+      for (int j = i + 1; j <= std::min(n_ - 1, i + p_); ++j) v -= Conj(L(j, i)) * x[j];
+      x[i] = v;
+    }
+  }
+
+  // The same for a bandwidth known at compile time (the loops unroll).
+  template <int P>
+  void SubstituteBand(Complex* x, int first, int last) const {
+    const Scalar* l = l_.data();
+    Complex y[P];  // the last P forward values before scaling by D^-1 (zero above `first`)
+    for (int t = 0; t < P; ++t) y[t] = 0.0;
+    for (int i = first; i < n_; ++i) {
+      Complex v = x[i];
+      const Scalar* li = l + static_cast<size_t>(i) * P;  // li[t] = L(i, i - 1 - t)
+      for (int t = 0; t < P; ++t) v -= li[t] * y[t];
+      for (int t = P - 1; t > 0; --t) y[t] = y[t - 1];
+      y[0] = v;
+      x[i] = v * inverse_d_[i];
+    }
+    for (int i = n_ - 1; i >= last; --i) {
+      Complex v = x[i];
+      for (int t = 0; t < P; ++t)
+        if (i + 1 + t < n_) v -= Conj(l[static_cast<size_t>(i + 1 + t) * P + t]) * x[i + 1 + t];
+      x[i] = v;
+    }
+  }
+
+  Eigen::MatrixXcd SparseSolve(const Eigen::MatrixXcd& b) const {
+    if constexpr (std::is_same_v<Scalar, double>) {
+      const Eigen::Index n = b.rows(), m = b.cols();
+      Eigen::MatrixXd parts(n, 2 * m);
+      parts.leftCols(m) = b.real();
+      parts.rightCols(m) = b.imag();
+      const Eigen::MatrixXd x = sparse_.solve(parts);
+      Eigen::MatrixXcd out(n, m);
+      out.real() = x.leftCols(m);
+      out.imag() = x.rightCols(m);
+      return out;
+    } else {
+      return sparse_.solve(b);
+    }
+  }
+
+  int n_ = 0;
+  int p_ = -1;              // bandwidth of the band storage; -1: sparse
+  std::vector<Scalar> l_;   // strictly lower band of L
+  std::vector<double> d_;   // D
+  std::vector<double> inverse_d_;
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<Scalar>, Eigen::Lower, Eigen::NaturalOrdering<int>> sparse_;
+};
 
 // Ground positions are complex numbers x + iy: step 1's shape terms are then linear with
 // complex coefficients (a similarity is one complex factor), and step 2 acts on both
@@ -42,7 +195,8 @@ struct Agent {
   std::vector<Range> ranges;
   std::vector<int> global_range;  // per range: index into SeparationProblem::rigid
   int n1 = 0, n2 = 0;
-  Eigen::SimplicialLDLT<CSparse> step1, step2;
+  StepSolver<Complex> step1;
+  StepSolver<double> step2;
   Eigen::VectorXcd y1_rest;
   // Step-1 triangles: vertex i = (1 - mu) z_{i-1} + mu z_{i+1}.
   std::vector<int> tri;
@@ -86,7 +240,9 @@ struct Normal {
   Eigen::VectorXcd b;
   std::vector<std::pair<int, Complex>> row;
 
-  explicit Normal(int n) : b(Eigen::VectorXcd::Zero(n)) {}
+  bool matrix = true;  // false: the right-hand side alone
+
+  explicit Normal(int n, bool with_matrix = true) : b(Eigen::VectorXcd::Zero(n)), matrix(with_matrix) {}
 
   // Residual given as (map, coefficient) pairs; `beta` on the right-hand side.
   void Add(const std::vector<std::pair<Map, Complex>>& terms, Complex beta, double weight) {
@@ -97,11 +253,16 @@ struct Normal {
       beta -= c * m.k;
     }
     for (const auto& [j, aj] : row) {
-      for (const auto& [k, ak] : row) triplets.emplace_back(j, k, weight * std::conj(aj) * ak);
+      if (matrix)
+        for (const auto& [k, ak] : row) triplets.emplace_back(j, k, weight * std::conj(aj) * ak);
       b[j] += weight * std::conj(aj) * beta;
     }
   }
 };
+
+double Seconds() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
 
 template <typename Fn>
 void ParallelFor(int count, int threads, Fn fn) {
@@ -123,11 +284,9 @@ int ThreadCount(int requested, int64_t work) {
   return work < 20000 ? 1 : threads;
 }
 
-void Factor(Eigen::SimplicialLDLT<CSparse>& solver, int n, const std::vector<Eigen::Triplet<Complex>>& triplets) {
-  CSparse k(n, n);
-  k.setFromTriplets(triplets.begin(), triplets.end());
-  solver.compute(k);
-  if (solver.info() != Eigen::Success)
+template <typename Scalar>
+void Factor(StepSolver<Scalar>& solver, int n, const std::vector<Eigen::Triplet<Complex>>& triplets) {
+  if (!solver.Factor(n, triplets))
     throw std::runtime_error("SeparationPrecompute: an agent's energy could not be factored");
 }
 
@@ -145,7 +304,7 @@ struct SeparationData {
   // Step-2 right-hand side of one agent for given edge vectors and range turns.
   Eigen::VectorXcd Step2Rhs(const Agent& ag, const std::vector<Complex>& edges,
                             const std::vector<Complex>& turn) const {
-    Normal normal(ag.n2);
+    Normal normal(ag.n2, false);
     std::vector<std::pair<Map, Complex>> terms;
     for (int i = 0; i + 1 < ag.count; ++i) {
       if (ag.range[i] >= 0 && ag.range[i] == ag.range[i + 1]) continue;
@@ -291,15 +450,43 @@ void SeparationPrecompute(const SeparationProblem& problem, std::shared_ptr<Sepa
 
 namespace {
 
+// Lists of (index, coefficient) pairs, one list per local row, stored one after another
+// (a few allocations per agent rather than one per row).
+struct RowLists {
+  using Item = std::pair<int, Complex>;
+  struct Span {
+    const Item *first, *last;
+    const Item* begin() const { return first; }
+    const Item* end() const { return last; }
+  };
+  std::vector<int> start{0};  // #rows+1 offsets into items
+  std::vector<Item> items;
+
+  size_t rows() const { return start.size() - 1; }
+  Span row(size_t k) const { return {items.data() + start[k], items.data() + start[k + 1]}; }
+  void Clear() {
+    start.assign(1, 0);
+    items.clear();
+  }
+  void CloseRow() { start.push_back(static_cast<int>(items.size())); }
+  bool operator==(const RowLists& other) const { return start == other.start && items == other.items; }
+};
+
 // Entries of an agent's K^-1 between some of its unknowns, grown as rows touch new ones.
 struct InverseBlock {
   std::vector<int> unknowns;      // cached unknowns, in the order of `inverse`
   std::vector<int> slot;          // per unknown of the step: index into `unknowns`, -1 if absent
   Eigen::MatrixXcd inverse;       // K^-1 restricted to `unknowns`
 
+  // The last solve's rows of the agent (their terms), and their G and Schur block.
+  RowLists terms, g;
+  Eigen::MatrixXd s;
+  int64_t columns = 0;  // back-substitutions done so far
+
   Complex At(int i, int j) const { return inverse(slot[static_cast<size_t>(i)], slot[static_cast<size_t>(j)]); }
 
-  void Ensure(const Eigen::SimplicialLDLT<CSparse>& solver, int n, const std::vector<int>& needed) {
+  template <typename Solver>
+  void Ensure(const Solver& solver, int n, const std::vector<int>& needed) {
     if (static_cast<int>(slot.size()) != n) {
       slot.assign(static_cast<size_t>(n), -1);
       unknowns.clear();
@@ -316,9 +503,10 @@ struct InverseBlock {
       missing = needed;
     }
     if (missing.empty()) return;
-    Eigen::MatrixXcd e = Eigen::MatrixXcd::Zero(n, static_cast<Eigen::Index>(missing.size()));
-    for (size_t c = 0; c < missing.size(); ++c) e(missing[c], static_cast<Eigen::Index>(c)) = 1.0;
-    const Eigen::MatrixXcd x = solver.solve(e);  // columns of K^-1
+    int lowest = n;  // of the unknowns cached already
+    for (int j : unknowns) lowest = std::min(lowest, j);
+    const Eigen::MatrixXcd x = solver.InverseColumns(missing, lowest);
+    columns += static_cast<int64_t>(missing.size());
     const Eigen::Index old = static_cast<Eigen::Index>(unknowns.size());
     const Eigen::Index total = old + static_cast<Eigen::Index>(missing.size());
     Eigen::MatrixXcd grown(total, total);
@@ -327,37 +515,52 @@ struct InverseBlock {
       slot[static_cast<size_t>(j)] = static_cast<int>(unknowns.size());
       unknowns.push_back(j);
     }
-    for (Eigen::Index c = 0; c < static_cast<Eigen::Index>(missing.size()); ++c)
+    // K is Hermitian: entry (i, j) of a new column j above min(j, lowest) is entry (j, i)
+    // of the new column i, conjugated.
+    for (Eigen::Index c = 0; c < static_cast<Eigen::Index>(missing.size()); ++c) {
+      const int j = missing[static_cast<size_t>(c)];
       for (Eigen::Index i = 0; i < total; ++i) {
-        grown(i, old + c) = x(unknowns[static_cast<size_t>(i)], c);
-        grown(old + c, i) = std::conj(grown(i, old + c));  // K is Hermitian
+        const int at = unknowns[static_cast<size_t>(i)];
+        grown(i, old + c) = at >= std::min(j, lowest) ? x(at, c) : std::conj(x(j, slot[static_cast<size_t>(at)] - old));
+        grown(old + c, i) = std::conj(grown(i, old + c));
       }
+    }
     inverse = std::move(grown);
   }
 };
 
 // The rows that touch one agent, and that agent's block of the Schur complement.
 struct AgentRows {
-  std::vector<int> rows;                                    // global rows, ascending
-  std::vector<std::vector<std::pair<int, Complex>>> terms;  // per local row: (local vertex, weight * direction)
-  Eigen::MatrixXd s;                                        // local rows by local rows: Re(g^H K^-1 g)
-  std::vector<double> base;                                 // per local row: its value without rows
-  Eigen::VectorXcd y0;                                      // the step's unknowns without rows
-  std::vector<std::vector<std::pair<int, Complex>>> g;      // per local row: (unknown, coefficient)
+  std::vector<int> rows;       // global rows, ascending
+  RowLists terms;              // per local row: (local vertex, weight * direction)
+  Eigen::MatrixXd s;           // local rows by local rows: Re(g^H K^-1 g)
+  std::vector<double> base;    // per local row: its value without rows
+  Eigen::VectorXcd y0;         // the step's unknowns without rows
+  RowLists g;                  // per local row: (unknown, coefficient)
 };
 
 // Fills the agent's Schur block for one step: S = Re(G^H K^-1 G). A row's value is
 // Re(sum conj(c) z) = Re(g^H y) + constant with g_j = c conj(a_j), so S only needs the
 // entries of K^-1 between the unknowns the rows touch; those are kept in `cache` and
-// only new unknowns cost a back-substitution.
-template <typename MapFn>
-void AgentBlock(const Eigen::SimplicialLDLT<CSparse>& solver, int n, MapFn map, InverseBlock* cache, AgentRows* ar) {
+// only new unknowns cost a back-substitution. G and S depend on the rows' terms alone: when
+// the agent's rows are those of the last solve (as re-sent rows whose linearisation did
+// not change are), they are taken from `cache` as they are, and only the base values
+// (which follow y0 and the map's constants) are worked out again.
+template <typename Solver, typename MapFn>
+void AgentBlock(const Solver& solver, int n, MapFn map, InverseBlock* cache, AgentRows* ar) {
   const int r = static_cast<int>(ar->rows.size());
   ar->base.assign(static_cast<size_t>(r), 0.0);
-  ar->g.assign(static_cast<size_t>(r), {});
+  const bool same = static_cast<int>(cache->slot.size()) == n && cache->terms == ar->terms;
+  if (same) {
+    ar->g = cache->g;
+    ar->s = cache->s;
+  } else {
+    ar->g.Clear();
+    ar->g.items.reserve(ar->terms.items.size() * 2);
+  }
   std::vector<int> needed;
+  std::vector<RowLists::Item> col;
   for (int k = 0; k < r; ++k) {
-    auto& col = ar->g[static_cast<size_t>(k)];
     auto add = [&](int j, Complex v) {
       for (auto& e : col)
         if (e.first == j) {
@@ -366,17 +569,25 @@ void AgentBlock(const Eigen::SimplicialLDLT<CSparse>& solver, int n, MapFn map, 
         }
       col.emplace_back(j, v);
     };
-    for (const auto& [i, c] : ar->terms[static_cast<size_t>(k)]) {
+    col.clear();
+    for (const auto& [i, c] : ar->terms.row(static_cast<size_t>(k))) {
       const Map m = map(i);
-      add(m.j0, c * std::conj(m.a0));
-      if (m.j1 >= 0) add(m.j1, c * std::conj(m.a1));
+      if (!same) {
+        add(m.j0, c * std::conj(m.a0));
+        if (m.j1 >= 0) add(m.j1, c * std::conj(m.a1));
+      }
       ar->base[static_cast<size_t>(k)] += std::real(std::conj(c) * m.k);
     }
-    for (const auto& [j, gj] : col) {
+    if (!same) {
+      ar->g.items.insert(ar->g.items.end(), col.begin(), col.end());
+      ar->g.CloseRow();
+    }
+    for (const auto& [j, gj] : ar->g.row(static_cast<size_t>(k))) {
       ar->base[static_cast<size_t>(k)] += std::real(std::conj(gj) * ar->y0[j]);
-      needed.push_back(j);
+      if (!same) needed.push_back(j);
     }
   }
+  if (same) return;
   std::sort(needed.begin(), needed.end());
   needed.erase(std::unique(needed.begin(), needed.end()), needed.end());
   cache->Ensure(solver, n, needed);
@@ -384,19 +595,22 @@ void AgentBlock(const Eigen::SimplicialLDLT<CSparse>& solver, int n, MapFn map, 
   for (int k = 0; k < r; ++k)
     for (int l = k; l < r; ++l) {
       Complex v = 0.0;
-      for (const auto& [i, gi] : ar->g[static_cast<size_t>(k)])
-        for (const auto& [j, gj] : ar->g[static_cast<size_t>(l)]) v += std::conj(gi) * gj * cache->At(i, j);
+      for (const auto& [i, gi] : ar->g.row(static_cast<size_t>(k)))
+        for (const auto& [j, gj] : ar->g.row(static_cast<size_t>(l))) v += std::conj(gi) * gj * cache->At(i, j);
       ar->s(k, l) = ar->s(l, k) = std::real(v);
     }
+  cache->terms = ar->terms;
+  cache->g = ar->g;
+  cache->s = ar->s;
 }
 
 // The agent's unknowns under the row forces: y0 + K^-1 G lambda.
-Eigen::VectorXcd AgentResponse(const Eigen::SimplicialLDLT<CSparse>& solver, const AgentRows& ar,
-                               const Eigen::VectorXd& forces) {
+template <typename Solver>
+Eigen::VectorXcd AgentResponse(const Solver& solver, const AgentRows& ar, const Eigen::VectorXd& forces) {
   Eigen::VectorXcd rhs = Eigen::VectorXcd::Zero(ar.y0.size());
   for (size_t k = 0; k < ar.rows.size(); ++k)
-    for (const auto& [j, gj] : ar.g[k]) rhs[j] += gj * forces[ar.rows[k]];
-  return ar.y0 + solver.solve(rhs);
+    for (const auto& [j, gj] : ar.g.row(k)) rhs[j] += gj * forces[ar.rows[k]];
+  return ar.y0 + solver.Solve(rhs).col(0);
 }
 
 // Where a row sits in the agents' blocks.
@@ -405,33 +619,55 @@ struct RowSlot {
   int local;  // index of the row in that agent's block
 };
 
+// The slots of every row, stored one row after another.
+struct RowSlots {
+  struct Span {
+    const RowSlot *first, *last;
+    const RowSlot* begin() const { return first; }
+    const RowSlot* end() const { return last; }
+  };
+  std::vector<int> start;  // #R+1 offsets into items
+  std::vector<RowSlot> items;
+
+  Span row(int r) const {
+    return {items.data() + start[static_cast<size_t>(r)], items.data() + start[static_cast<size_t>(r) + 1]};
+  }
+};
+
 // Solves the mixed complementarity problem on the Schur complement,
 //   (S + D) lambda = q              on equality rows,
 //   lambda >= 0, (S + D) lambda - q >= 0, complementary   on "at least" rows,
 // by projected Gauss-Seidel from `forces`, then meets the equality rows exactly for the
 // unilateral forces found. Returns the sweeps used.
-int SolveRows(const std::vector<AgentRows*>& blocks, const std::vector<std::vector<RowSlot>>& slots,
+int SolveRows(const std::vector<AgentRows*>& blocks, const RowSlots& slots,
               const SeparationRows& in, const SeparationSettings& settings, Eigen::VectorXd& forces,
-              bool* regularized, bool* converged) {
+              bool* regularized, bool* converged, int64_t* updates) {
   const int nr = static_cast<int>(in.rhs.size());
   Eigen::VectorXd q = in.rhs;
   Eigen::VectorXd diag = in.softness;
   for (int r = 0; r < nr; ++r)
-    for (const RowSlot& sl : slots[static_cast<size_t>(r)]) {
+    for (const RowSlot& sl : slots.row(r)) {
       q[r] -= blocks[static_cast<size_t>(sl.agent)]->base[static_cast<size_t>(sl.local)];
       diag[r] += blocks[static_cast<size_t>(sl.agent)]->s(sl.local, sl.local);
     }
   auto unilateral = [&](int r) { return in.kind.size() && in.kind[r] != 0; };
   for (int r = 0; r < nr; ++r)
     if (unilateral(r)) forces[r] = std::max(forces[r], 0.0);
-  // v = S lambda, kept up to date as forces change.
-  Eigen::VectorXd v = Eigen::VectorXd::Zero(nr);
-  for (const AgentRows* ar : blocks) {
+  // S lambda, kept up to date as forces change, as each agent's part u = S_a lambda_a (a
+  // row's value is the sum of its agents' parts): a force change is then one contiguous
+  // column update per agent.
+  std::vector<Eigen::VectorXd> u(blocks.size());
+  for (size_t b = 0; b < blocks.size(); ++b) {
+    const AgentRows* ar = blocks[b];
     Eigen::VectorXd f(static_cast<Eigen::Index>(ar->rows.size()));
     for (size_t k = 0; k < ar->rows.size(); ++k) f[static_cast<Eigen::Index>(k)] = forces[ar->rows[k]];
-    const Eigen::VectorXd sv = ar->s * f;
-    for (size_t k = 0; k < ar->rows.size(); ++k) v[ar->rows[k]] += sv[static_cast<Eigen::Index>(k)];
+    u[b] = ar->s * f;
   }
+  auto value = [&](int r) {
+    double sum = 0.0;
+    for (const RowSlot& sl : slots.row(r)) sum += u[static_cast<size_t>(sl.agent)][sl.local];
+    return sum;
+  };
   *converged = false;
   int sweep = 0;
   bool any_unilateral = false;
@@ -441,18 +677,16 @@ int SolveRows(const std::vector<AgentRows*>& blocks, const std::vector<std::vect
       double change = 0.0;
       for (int r = 0; r < nr; ++r) {
         if (!(diag[r] > 0.0)) continue;
-        double f = forces[r] + settings.relaxation * (q[r] - v[r] - in.softness[r] * forces[r]) / diag[r];
+        double f = forces[r] + settings.relaxation * (q[r] - value(r) - in.softness[r] * forces[r]) / diag[r];
         if (unilateral(r)) f = std::max(f, 0.0);
         const double delta = f - forces[r];
-        // A change below a tenth of the tolerance is not worth passing on to the other rows.
-        if (std::abs(delta) * diag[r] <= 0.1 * settings.tolerance) continue;
+        // A change below the tolerance is not worth passing on to the other rows.
+        if (std::abs(delta) * diag[r] <= settings.tolerance) continue;
         forces[r] = f;
+        ++*updates;
         change = std::max(change, std::abs(delta) * diag[r]);
-        for (const RowSlot& sl : slots[static_cast<size_t>(r)]) {
-          const AgentRows* ar = blocks[static_cast<size_t>(sl.agent)];
-          for (size_t k = 0; k < ar->rows.size(); ++k)
-            v[ar->rows[k]] += ar->s(static_cast<Eigen::Index>(k), sl.local) * delta;
-        }
+        for (const RowSlot& sl : slots.row(r))
+          u[static_cast<size_t>(sl.agent)].noalias() += blocks[static_cast<size_t>(sl.agent)]->s.col(sl.local) * delta;
       }
       if (change <= settings.tolerance) {
         *converged = true;
@@ -526,6 +760,13 @@ std::unique_ptr<SeparationCache, SeparationCacheDeleter> SeparationNewCache() {
 
 void SeparationSolve(const SeparationData& data, const SeparationRows& in, const SeparationSettings& settings,
                      SeparationCache& cache, SeparationResult& result) {
+  result.seconds.setZero();
+  double clock = Seconds();
+  auto lap = [&](int phase) {
+    const double now = Seconds();
+    result.seconds[phase] += now - clock;
+    clock = now;
+  };
   if (cache.step1.size() != data.agents.size()) {
     cache.step1.assign(data.agents.size(), InverseBlock());
     cache.step2.assign(data.agents.size(), InverseBlock());
@@ -534,11 +775,12 @@ void SeparationSolve(const SeparationData& data, const SeparationRows& in, const
   const Eigen::Index nv = data.rest.rows();
   if (in.direction.rows() != nr || in.softness.size() != nr || in.term_vertex.size() != nt ||
       in.term_weight.size() != nt || (in.kind.size() && in.kind.size() != nr) ||
-      (in.initial_forces.size() && in.initial_forces.size() != nr))
-    throw std::invalid_argument("SeparationSolve: direction, rhs, softness, kind and initial_forces need one entry "
+      (in.initial_forces.size() && in.initial_forces.size() != nr) ||
+      (in.initial_shape_forces.size() && in.initial_shape_forces.size() != nr))
+    throw std::invalid_argument("SeparationSolve: direction, rhs, softness, kind and initial forces need one entry "
                                 "per row; term_row, term_vertex and term_weight one per term");
   if (!in.direction.allFinite() || !in.rhs.allFinite() || !in.term_weight.allFinite() || !in.softness.allFinite() ||
-      !in.initial_forces.allFinite())
+      !in.initial_forces.allFinite() || !in.initial_shape_forces.allFinite())
     throw std::invalid_argument("SeparationSolve: rows must be finite");
   if (nr && in.softness.minCoeff() < 0.0) throw std::invalid_argument("SeparationSolve: softness must not be negative");
   if (!(settings.tolerance > 0.0) || settings.max_sweeps < 1)
@@ -554,23 +796,36 @@ void SeparationSolve(const SeparationData& data, const SeparationRows& in, const
     if (!has_term[static_cast<size_t>(r)])
       throw std::invalid_argument("SeparationSolve: row " + std::to_string(r) + " has no term");
 
-  // Terms by agent; rows numbered locally per agent.
+  // Terms by agent (in term order within a row); rows numbered locally per agent.
   const size_t na = data.agents.size();
   std::vector<AgentRows> agent_rows(na);
-  for (Eigen::Index t = 0; t < nt; ++t) {
-    if (in.term_weight[t] == 0.0) continue;  // an interpolation weight of zero touches nothing
-    const int v = in.term_vertex[t], row = in.term_row[t];
-    const int a = data.agent_of[static_cast<size_t>(v)];
-    AgentRows& ar = agent_rows[static_cast<size_t>(a)];
-    auto it = std::lower_bound(ar.rows.begin(), ar.rows.end(), row);
-    const auto k = it - ar.rows.begin();
-    if (it == ar.rows.end() || *it != row) {
-      ar.rows.insert(it, row);
-      ar.terms.insert(ar.terms.begin() + k, std::vector<std::pair<int, Complex>>());
+  {
+    std::vector<int> count(na, 0), agent_of_term(static_cast<size_t>(nt), -1);
+    for (Eigen::Index t = 0; t < nt; ++t) {
+      if (in.term_weight[t] == 0.0) continue;  // an interpolation weight of zero touches nothing
+      agent_of_term[static_cast<size_t>(t)] = data.agent_of[static_cast<size_t>(in.term_vertex[t])];
+      ++count[static_cast<size_t>(agent_of_term[static_cast<size_t>(t)])];
     }
-    const Complex dir(in.direction(row, 0), in.direction(row, 1));
-    ar.terms[static_cast<size_t>(k)].emplace_back(v - data.agents[static_cast<size_t>(a)].first,
-                                                  in.term_weight[t] * dir);
+    std::vector<std::vector<std::pair<int, Eigen::Index>>> by_agent(na);  // (row, term)
+    for (size_t a = 0; a < na; ++a) by_agent[a].reserve(static_cast<size_t>(count[a]));
+    for (Eigen::Index t = 0; t < nt; ++t)
+      if (agent_of_term[static_cast<size_t>(t)] >= 0)
+        by_agent[static_cast<size_t>(agent_of_term[static_cast<size_t>(t)])].emplace_back(in.term_row[t], t);
+    for (size_t a = 0; a < na; ++a) {
+      auto& list = by_agent[a];
+      if (list.empty()) continue;
+      if (!std::is_sorted(list.begin(), list.end())) std::stable_sort(list.begin(), list.end());
+      AgentRows& ar = agent_rows[a];
+      ar.terms.items.reserve(list.size());
+      for (size_t i = 0; i < list.size(); ++i) {
+        const auto [row, t] = list[i];
+        if (i > 0 && row != list[i - 1].first) ar.terms.CloseRow();
+        if (i == 0 || row != list[i - 1].first) ar.rows.push_back(row);
+        const Complex dir(in.direction(row, 0), in.direction(row, 1));
+        ar.terms.items.emplace_back(in.term_vertex[t] - data.agents[a].first, in.term_weight[t] * dir);
+      }
+      ar.terms.CloseRow();
+    }
   }
   std::vector<int> involved;
   std::vector<AgentRows*> blocks;
@@ -580,10 +835,18 @@ void SeparationSolve(const SeparationData& data, const SeparationRows& in, const
       blocks.push_back(&agent_rows[a]);
     }
   const int nq = static_cast<int>(involved.size());
-  std::vector<std::vector<RowSlot>> slots(static_cast<size_t>(nr));
+  RowSlots slots;
+  slots.start.assign(static_cast<size_t>(nr) + 1, 0);
   for (int q = 0; q < nq; ++q)
-    for (size_t k = 0; k < blocks[static_cast<size_t>(q)]->rows.size(); ++k)
-      slots[static_cast<size_t>(blocks[static_cast<size_t>(q)]->rows[k])].push_back({q, static_cast<int>(k)});
+    for (int row : blocks[static_cast<size_t>(q)]->rows) ++slots.start[static_cast<size_t>(row) + 1];
+  for (int r = 0; r < nr; ++r) slots.start[static_cast<size_t>(r) + 1] += slots.start[static_cast<size_t>(r)];
+  slots.items.resize(static_cast<size_t>(slots.start[static_cast<size_t>(nr)]));
+  {
+    std::vector<int> fill(slots.start.begin(), slots.start.end() - 1);
+    for (int q = 0; q < nq; ++q)
+      for (size_t k = 0; k < blocks[static_cast<size_t>(q)]->rows.size(); ++k)
+        slots.items[static_cast<size_t>(fill[static_cast<size_t>(blocks[static_cast<size_t>(q)]->rows[k])]++)] = {q, static_cast<int>(k)};
+  }
 
   result.positions = data.rest;
   result.shape = data.rest;
@@ -592,7 +855,13 @@ void SeparationSolve(const SeparationData& data, const SeparationRows& in, const
   result.regularized = false;
   result.converged = true;
   result.sweeps = 0;
-  result.forces = in.initial_forces.size() ? in.initial_forces : Eigen::VectorXd::Zero(nr);
+  result.updates = 0;
+  int64_t columns_before = 0;
+  for (size_t a = 0; a < cache.step1.size(); ++a) columns_before += cache.step1[a].columns + cache.step2[a].columns;
+  result.shape_forces = in.initial_shape_forces.size() ? in.initial_shape_forces
+                        : in.initial_forces.size()     ? in.initial_forces
+                                                       : Eigen::VectorXd::Zero(nr);
+  result.forces = result.shape_forces;
   result.residuals = Eigen::VectorXd::Zero(nr);
   if (nr == 0) return;
   int64_t work = 0;
@@ -600,6 +869,7 @@ void SeparationSolve(const SeparationData& data, const SeparationRows& in, const
   const int threads = work < 20000 ? 1 : data.threads;
 
   // Step 1.
+  lap(3);
   ParallelFor(nq, threads, [&](int q) {
     const Agent& ag = data.agents[static_cast<size_t>(involved[static_cast<size_t>(q)])];
     AgentRows* ar = blocks[static_cast<size_t>(q)];
@@ -608,7 +878,12 @@ void SeparationSolve(const SeparationData& data, const SeparationRows& in, const
                &cache.step1[static_cast<size_t>(involved[static_cast<size_t>(q)])], ar);
   });
   bool converged = true;
-  result.sweeps = SolveRows(blocks, slots, in, settings, result.forces, &result.regularized, &converged);
+  lap(0);
+  result.sweeps = SolveRows(blocks, slots, in, settings, result.shape_forces, &result.regularized, &converged,
+                            &result.updates);
+  lap(1);
+  if (in.initial_shape_forces.size() && in.initial_forces.size()) result.forces = in.initial_forces;
+  else result.forces = result.shape_forces;
   result.converged = converged;
 
   // Step 1's result turns each range and each step; step 2 restores the rest lengths.
@@ -616,7 +891,7 @@ void SeparationSolve(const SeparationData& data, const SeparationRows& in, const
   ParallelFor(nq, threads, [&](int q) {
     const Agent& ag = data.agents[static_cast<size_t>(involved[static_cast<size_t>(q)])];
     AgentRows* ar = blocks[static_cast<size_t>(q)];
-    const Eigen::VectorXcd y1 = AgentResponse(ag.step1, *ar, result.forces);
+    const Eigen::VectorXcd y1 = AgentResponse(ag.step1, *ar, result.shape_forces);
     std::vector<Complex> z1(static_cast<size_t>(ag.count));
     for (int i = 0; i < ag.count; ++i) {
       const Map m = ag.Map1(i);
@@ -635,11 +910,14 @@ void SeparationSolve(const SeparationData& data, const SeparationRows& in, const
       const Complex e = z1[static_cast<size_t>(i + 1)] - z1[static_cast<size_t>(i)];
       edges[static_cast<size_t>(i)] = std::abs(e) > 0.0 ? e / std::abs(e) * std::abs(rest_edge) : rest_edge;
     }
-    ar->y0 = ag.step2.solve(data.Step2Rhs(ag, edges, turn));
+    ar->y0 = ag.step2.Solve(data.Step2Rhs(ag, edges, turn)).col(0);
     AgentBlock(ag.step2, ag.n2, [&](int i) { return ag.Map2(i, turn); },
                &cache.step2[static_cast<size_t>(involved[static_cast<size_t>(q)])], ar);
   });
-  result.sweeps += SolveRows(blocks, slots, in, settings, result.forces, &result.regularized, &converged);
+  lap(0);
+  result.sweeps += SolveRows(blocks, slots, in, settings, result.forces, &result.regularized, &converged,
+                             &result.updates);
+  lap(1);
   result.converged = result.converged && converged;
 
   ParallelFor(nq, threads, [&](int q) {
@@ -660,6 +938,9 @@ void SeparationSolve(const SeparationData& data, const SeparationRows& in, const
                                                 in.direction(r, 1) * result.positions(v, 1));
   }
   result.residuals -= in.rhs;
+  result.inverse_columns = -columns_before;
+  for (size_t a = 0; a < cache.step1.size(); ++a) result.inverse_columns += cache.step1[a].columns + cache.step2[a].columns;
+  lap(2);
 }
 
 void SeparationSolve(const SeparationData& data, const SeparationRows& in, const SeparationSettings& settings,

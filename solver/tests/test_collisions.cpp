@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <random>
 
 #include "mocapedit/collisions.h"
@@ -193,4 +194,35 @@ TEST(Collisions, FarApartCoordinatesAndNoAgents) {
   ExpectSame(grid, mocapedit::DetectCollisionsBruteForce(p, K, Capsules(A), CollisionSettings{}));
   const auto none = mocapedit::DetectCollisions(Trajectory2(0, 2), 10, Capsules(0), CollisionSettings{});
   EXPECT_TRUE(none.collisions.empty());
+}
+
+TEST(Collisions, WatchDistanceGathersNearMissesInTheSamePass) {
+  // The near intervals at watch distance w are the collisions at margin w; the collisions
+  // at the margin are those of a pass without watching.
+  const int A = 200, K = 40;
+  const Trajectory2 p = Crossing(A, K, 10.0, 5);
+  CollisionSettings s;
+  s.margin = 0.05;
+  s.report_distance = 0.5;
+  const auto plain = mocapedit::DetectCollisions(p, K, Capsules(A), s);
+  CollisionSettings wide = s;
+  wide.margin = 0.35;
+  const auto at_watch = mocapedit::DetectCollisionsBruteForce(p, K, Capsules(A), wide);
+  for (int threads : {1, 2}) {
+    CollisionSettings watched = s;
+    watched.watch_distance = 0.35;
+    watched.threads = threads;
+    const auto both = mocapedit::DetectCollisions(p, K, Capsules(A), watched);
+    ExpectSame(both, plain);
+    ASSERT_GT(at_watch.collisions.size(), plain.collisions.size());
+    CollisionResult near = at_watch;
+    near.collisions = both.near;
+    near.colliding_samples = at_watch.colliding_samples;
+    near.min_clearance = at_watch.min_clearance;
+    near.min_clearance_sample = at_watch.min_clearance_sample;
+    ExpectSame(near, at_watch);
+  }
+  CollisionSettings bad = s;
+  bad.watch_distance = std::numeric_limits<double>::infinity();
+  EXPECT_THROW(mocapedit::DetectCollisions(p, K, Capsules(A), bad), std::invalid_argument);
 }

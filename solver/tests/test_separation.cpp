@@ -224,3 +224,38 @@ TEST(Separation, TheCacheGivesTheSameAnswer) {
     EXPECT_NEAR((cached.positions - fresh.positions).cwiseAbs().maxCoeff(), 0.0, 1e-12) << "round " << round;
   }
 }
+
+TEST(Separation, WarmStartsOfBothStepsResumeTheSolve) {
+  // Rows several frames apart along the crossing: the forces of a converged solve, given
+  // back as the starting forces of each step, are a solution already (no force changes),
+  // and a solve on the same cache with the same rows reuses the blocks and agrees.
+  const int n = 81;
+  const SeparationProblem p = HeadOn(n);
+  RowBuilder b;
+  for (int k = 30; k <= 50; k += 4) b.Add(0, -1, 0.7, 0, 1, {{k, -1.0}, {n + k, 1.0}});
+  SeparationRows rows = b.Build();
+  std::shared_ptr<mocapedit::SeparationData> data;
+  mocapedit::SeparationPrecompute(p, data);
+  auto cache = mocapedit::SeparationNewCache();
+  SeparationSettings settings;
+  settings.tolerance = 1e-9;
+  SeparationResult cold;
+  mocapedit::SeparationSolve(*data, rows, settings, *cache, cold);
+  ASSERT_TRUE(cold.converged);
+  EXPECT_GT(cold.updates, 0);
+  EXPECT_GT(cold.inverse_columns, 0);
+  EXPECT_GT((cold.forces - cold.shape_forces).cwiseAbs().maxCoeff(), 1e-6);  // the steps differ
+  rows.initial_forces = cold.forces;
+  rows.initial_shape_forces = cold.shape_forces;
+  SeparationResult warm;
+  mocapedit::SeparationSolve(*data, rows, settings, *cache, warm);
+  EXPECT_EQ(warm.updates, 0);
+  EXPECT_EQ(warm.inverse_columns, 0);
+  EXPECT_NEAR((warm.positions - cold.positions).cwiseAbs().maxCoeff(), 0.0, 1e-12);
+  // Step 1 started from step 2's forces (the old warm start) has work to do.
+  rows.initial_shape_forces.resize(0);
+  SeparationResult mixed;
+  mocapedit::SeparationSolve(*data, rows, settings, *cache, mixed);
+  EXPECT_GT(mixed.updates, 0);
+  EXPECT_NEAR((mixed.positions - cold.positions).cwiseAbs().maxCoeff(), 0.0, 1e-6);
+}

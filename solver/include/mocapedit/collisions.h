@@ -33,6 +33,9 @@ struct CapsuleSet {
 struct CollisionSettings {
   double margin = 0.0;          // clearance wanted between capsules, stage units (>= 0)
   double report_distance = 0.0;  // min_clearance is exact up to this clearance (>= margin)
+  // Clearance (stage units) below which pairs are also gathered into `near` intervals;
+  // <= margin: none. Collision avoidance watches near misses with it in the same pass.
+  double watch_distance = 0.0;
   int threads = 0;              // worker threads over time samples; 0 = hardware (at most 2)
 };
 
@@ -48,6 +51,9 @@ struct Collision {
 
 struct CollisionResult {
   std::vector<Collision> collisions;  // sorted by (agent_a, agent_b, first)
+  // Intervals below watch_distance, sorted the same way, depth = watch_distance minus the
+  // clearance (empty when watch_distance <= margin).
+  std::vector<Collision> near;
   // #A smallest clearance of each agent to any other over all samples; +inf when no other
   // agent came within report_distance (the value is exact below it).
   Eigen::VectorXd min_clearance;

@@ -13,7 +13,10 @@
 // complementarity problem on S by projected Gauss-Seidel (a one-sided row pushes, never
 // pulls), then the equality rows are met exactly by a direct solve. The Schur complement
 // of a dense crowd fills in badly when factored, so it is never factored whole; the cost
-// of a solve grows with the rows per agent, not with the crowd.
+// of a solve grows with the rows per agent, not with the crowd. Repeated solves (with a
+// SeparationCache) reuse the entries of K^-1 earlier rows needed and, for an agent whose
+// rows are the same as last time, its whole block; the forces of a previous solve, given
+// back per step, are warm starts.
 //
 // Every frame is also pulled weakly towards its rest position (anchor_weight, relative to
 // the shape terms): it keeps agents without any pin in place and makes a push a local
@@ -30,6 +33,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <cstdint>
 #include <memory>
 #include <vector>
 
@@ -54,7 +58,10 @@ struct SeparationRows {
   Eigen::VectorXd rhs;         // #R
   Eigen::VectorXd softness;    // #R: 0 = hard, else 1 / weight relative to the shape terms
   Eigen::VectorXi kind;        // #R: 0 equality, 1 at least (value >= rhs); empty: all equalities
-  Eigen::VectorXd initial_forces;  // #R starting forces (a previous solve's), or empty
+  Eigen::VectorXd initial_forces;  // #R step-2 starting forces (a previous solve's `forces`), or empty
+  // #R step-1 starting forces (a previous solve's `shape_forces`), or empty. When it is empty,
+  // step 1 starts from initial_forces and step 2 from step 1's forces.
+  Eigen::VectorXd initial_shape_forces;
   Eigen::VectorXi term_row;    // #T row of each term
   Eigen::VectorXi term_vertex; // #T global vertex of each term
   Eigen::VectorXd term_weight; // #T
@@ -62,6 +69,7 @@ struct SeparationRows {
 
 struct SeparationSettings {
   double tolerance = 1e-6;     // stage units: Gauss-Seidel stops when no row value moves more
+                               // (smaller changes are not passed on to the other rows)
   int max_sweeps = 500;        // Gauss-Seidel sweeps per step at most
   double relaxation = 1.0;     // over-relaxation factor of the sweeps, in (0, 2)
 };
@@ -70,12 +78,19 @@ struct SeparationResult {
   Trajectory2 positions;        // #V by 2 after step 2 (agents no row touches keep rest)
   Trajectory2 shape;            // #V by 2 after step 1
   Eigen::VectorXd forces;       // #R step-2 row forces: > 0 pushes the row value up
+  Eigen::VectorXd shape_forces; // #R step-1 row forces
   Eigen::VectorXd residuals;    // #R row value minus rhs after step 2
   Eigen::VectorXd rigid_angles; // #rigid rotation of each range (radians, CCW) in step 2
   int moved_agents = 0;         // agents some row touched
   int sweeps = 0;               // Gauss-Seidel sweeps, both steps
+  int64_t updates = 0;          // row force changes the sweeps passed on, both steps
+  int64_t inverse_columns = 0;  // back-substitutions for the agents' blocks (the rest were cached)
   bool converged = true;        // both steps met the tolerance within max_sweeps
   bool regularized = false;     // the hard equality rows were dependent: a tiny softness was added
+  // Wall seconds spent forming the agents' blocks (both steps), in the Gauss-Seidel sweeps
+  // and exact equality solves (both steps), in the final responses, and in gathering the
+  // rows by agent.
+  Eigen::Vector4d seconds = Eigen::Vector4d::Zero();
 };
 
 struct SeparationData;  // opaque: every agent's factored steps
