@@ -2,7 +2,9 @@
 """`make bench`: every speed figure, each measured next to a peer in the same run.
 
 Each ``bench/bench_*.py`` module defines ``run(ctx) -> dict``; the results are gathered into
-one JSON file. A figure is reported with its target (from DESIGN.md) and, where there is a
+one JSON file. Each module runs in a fresh Python process, so no benchmark measures the heap
+and caches another left behind (the 10,000-agent collision run would otherwise slow the
+sub-millisecond path solves after it). A figure is reported with its target (from DESIGN.md) and, where there is a
 peer (a scipy.sparse version of the same solve, a naive loop), the ratio to it, so the
 numbers can be read on a noisy machine.
 """
@@ -13,6 +15,7 @@ import importlib.util
 import json
 import os
 import platform
+import subprocess
 import sys
 import tempfile
 import time
@@ -43,11 +46,22 @@ def main() -> int:
     ap.add_argument("--out", default=str(HERE / "results" / "bench.json"), help="JSON file to write")
     ap.add_argument("--only", nargs="*", help="run only these benchmark modules (e.g. reader path)")
     ap.add_argument("--quick", action="store_true", help="smaller sizes, for a smoke run")
+    ap.add_argument("--in-process", action="store_true",
+                    help="run the selected modules in this process instead of one fresh process each")
     args = ap.parse_args()
 
     results = {"machine": {"python": sys.version.split()[0], "platform": platform.platform(),
                            "cpus": os.cpu_count()}, "benchmarks": {}}
     modules = sorted(HERE.glob("bench_*.py"))
+    names = [p.stem[len("bench_"):] for p in modules if not args.only or p.stem[len("bench_"):] in args.only]
+    if not args.in_process:
+        with tempfile.TemporaryDirectory(prefix="mocapedit-bench-") as tmp:
+            for name in names:
+                out = Path(tmp) / f"{name}.json"
+                cmd = [sys.executable, __file__, "--in-process", "--only", name, "--out", str(out)]
+                subprocess.run(cmd + (["--quick"] if args.quick else []), check=True)
+                results["benchmarks"].update(json.loads(out.read_text())["benchmarks"])
+        return _write(results, args.out)
     with tempfile.TemporaryDirectory(prefix="mocapedit-bench-") as tmp:
         ctx = Context(Path(tmp), args.quick)
         for path in modules:
@@ -63,11 +77,15 @@ def main() -> int:
             figures["benchSeconds"] = round(time.perf_counter() - t, 3)
             results["benchmarks"][name] = figures
             print(json.dumps({name: figures}, indent=2, sort_keys=True), file=sys.stderr, flush=True)
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    with open(args.out, "w") as f:
+    return _write(results, args.out)
+
+
+def _write(results: dict, out: str) -> int:
+    os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
+    with open(out, "w") as f:
         json.dump(results, f, indent=2, sort_keys=True)
         f.write("\n")
-    print(f"wrote {args.out}", file=sys.stderr)
+    print(f"wrote {out}", file=sys.stderr)
     return 0
 
 
