@@ -35,6 +35,13 @@ def _stage(tmp_path, agents, **kw):
                                       clips_dir=tmp_path / "clips", **kw)
 
 
+def _standing_agent(tmp_path, stop_clip):
+    """A stage with one agent "a" playing `stop_clip`, its stand tagged stationary."""
+    clip, (first, last) = stop_clip
+    stage = _stage(tmp_path, [examples.AgentSpec("a", clip)], stationary={clip.name: {"stand": (first, last)}})
+    return stage, f"{CROWD}/a", clip, (first, last)
+
+
 def _solve(tmp_path, stage, **kw):
     """Solves the stage's saved root layer; returns (result, input stage, composed stage).
     Each call writes new files: layers stay cached while stages that use them are alive."""
@@ -124,9 +131,7 @@ def test_moving_the_middle_of_a_ten_metre_walk_sideways(tmp_path, walk_clip, pin
 
 
 def test_stationary_ranges_move_rigidly_and_keep_their_heading(tmp_path, stop_clip):
-    clip, (first, last) = stop_clip
-    stage = _stage(tmp_path, [examples.AgentSpec("a", clip)], stationary={clip.name: {"stand": (first, last)}})
-    a = f"{CROWD}/a"
+    stage, a, clip, (first, last) = _standing_agent(tmp_path, stop_clip)
     reach = float(clip.translations[first, 0, 2])
     examples.add_position_constraint(stage, "/Edits/start", a, 0, (0.0, 0.0, 0.0))
     examples.add_position_constraint(stage, "/Edits/stand", a, first + 10, (0.8, 0.0, reach + 0.3))
@@ -258,9 +263,7 @@ def test_remap_keeps_distance_per_frame_and_sway():
 
 
 def test_spline_and_constraints_and_stationary_tags_together(tmp_path, stop_clip):
-    clip, (first, last) = stop_clip
-    stage = _stage(tmp_path, [examples.AgentSpec("a", clip)], stationary={clip.name: {"stand": (first, last)}})
-    a = f"{CROWD}/a"
+    stage, a, clip, (first, last) = _standing_agent(tmp_path, stop_clip)
     examples.add_path_curve(stage, "/Curves/arc", [(0, 0, 0), (0, 0, 3), (2, 0, 5), (5, 0, 5)], [a],
                             basis="bezier", wrap="nonperiodic")
     result, src, out = _solve(tmp_path, stage)
@@ -330,9 +333,7 @@ def test_bad_input_names_the_prims(tmp_path, walk_clip, stop_clip):
 
 
 def test_contradicting_hard_constraints_through_a_stationary_range(tmp_path, stop_clip):
-    clip, (first, last) = stop_clip
-    stage = _stage(tmp_path, [examples.AgentSpec("a", clip)], stationary={clip.name: {"stand": (first, last)}})
-    a = f"{CROWD}/a"
+    stage, a, clip, (first, last) = _standing_agent(tmp_path, stop_clip)
     reach = float(clip.translations[first, 0, 2])
     examples.add_position_constraint(stage, "/Edits/start", a, 0, (0, 0, 0))
     examples.add_position_constraint(stage, "/Edits/in", a, first, (0, 0, reach))

@@ -9,6 +9,8 @@
 #include <set>
 #include <sstream>
 
+#include "mocapedit/blas_lock.h"
+
 namespace mocapedit {
 
 namespace {
@@ -296,7 +298,10 @@ std::unique_ptr<Reduced> Factor(const TimeWarpComponent& c, const Forest& f) {
     r->ap.resize(c.a.rows(), f.unknowns);
     r->ap.setFromTriplets(trip.begin(), trip.end());
     r->qr = std::make_unique<Eigen::SPQR<SparseMatrix>>();
-    r->qr->compute(r->ap);
+    {
+      std::lock_guard<std::mutex> lock(BlasMutex());  // SPQR runs in BLAS: see blas_lock.h
+      r->qr->compute(r->ap);
+    }
     if (r->qr->info() != Eigen::Success) throw std::runtime_error("TimeWarp: SPQR factorization failed");
   }
   return r;
@@ -357,6 +362,7 @@ Eigen::VectorXd SolveReduced(const TimeWarpComponent& c, const Forest& f, const 
   Eigen::VectorXd z;
   if (f.unknowns > 0) {
     if (red.fallback) {
+      std::lock_guard<std::mutex> lock(BlasMutex());
       z = red.qr->solve(Eigen::VectorXd(targets - c.a * offset));
     } else {
       // Normal equations square the condition number of the interval-change rows (it grows
