@@ -13,9 +13,10 @@ need_file /usr/include/suitesparse/cholmod.h          libsuitesparse-dev
 need_file /usr/include/suitesparse/SuiteSparseQR.hpp  libsuitesparse-dev
 need_file /usr/include/gtest/gtest.h                  libgtest-dev
 # CHOLMOD's supernodal factorization and SPQR spend their time in BLAS; Debian's default
-# reference BLAS is several times slower than OpenBLAS (single-threaded: the solver runs
-# independent components on its own threads).
-need_glob '/usr/lib/*/openblas-serial/libblas.so.3'  libopenblas0-serial
+# reference BLAS is several times slower than OpenBLAS. The threaded build, because the
+# serial one cannot be called from two threads at once and the solver factors independent
+# systems on threads of its own (it keeps each BLAS call on its calling thread).
+need_glob '/usr/lib/*/openblas-pthread/libblas.so.3'  libopenblas0-pthread
 need_cmd cmake   cmake
 need_cmd ninja   ninja-build
 need_cmd g++     g++

@@ -299,7 +299,7 @@ std::unique_ptr<Reduced> Factor(const TimeWarpComponent& c, const Forest& f) {
     r->ap.setFromTriplets(trip.begin(), trip.end());
     r->qr = std::make_unique<Eigen::SPQR<SparseMatrix>>();
     {
-      std::lock_guard<std::mutex> lock(BlasMutex());  // SPQR runs in BLAS: see blas_lock.h
+      BlasLock lock;  // SPQR runs in BLAS: see blas_lock.h
       r->qr->compute(r->ap);
     }
     if (r->qr->info() != Eigen::Success) throw std::runtime_error("TimeWarp: SPQR factorization failed");
@@ -362,7 +362,7 @@ Eigen::VectorXd SolveReduced(const TimeWarpComponent& c, const Forest& f, const 
   Eigen::VectorXd z;
   if (f.unknowns > 0) {
     if (red.fallback) {
-      std::lock_guard<std::mutex> lock(BlasMutex());
+      BlasLock lock;
       z = red.qr->solve(Eigen::VectorXd(targets - c.a * offset));
     } else {
       // Normal equations square the condition number of the interval-change rows (it grows

@@ -1,23 +1,52 @@
-// One lock for the calls that spend their time in BLAS and LAPACK (CHOLMOD's supernodal
-// factorization and solves, SPQR).
+// Calls that spend their time in BLAS and LAPACK (CHOLMOD's supernodal factorization and
+// solves, SPQR) hold a BlasLock. It locks only when the BLAS loaded in this process cannot
+// be entered by two threads at once.
 //
-// tools/system-deps.sh installs Debian's serial OpenBLAS ("SINGLE_THREADED", built without
-// locking): two threads inside it at once corrupt each other's results. Measured: two
-// threads each factoring a group mesh with CHOLMOD's supernodal Cholesky failed 2 to 11
-// times in 20 ("matrix not positive definite"), and the path solve fell back to QR whose
-// refinement then did not converge; with the reference BLAS, or one thread at a time, never.
-// The solver runs independent components on threads of its own, so every such call holds
-// this lock; work outside BLAS (assembly, orderings, simplicial and envelope
-// factorizations) still runs in parallel.
+// Debian's serial OpenBLAS (libopenblas0-serial: built without threads and without
+// locking) is such a BLAS. Measured: two threads each factoring a group mesh with CHOLMOD's
+// supernodal Cholesky failed 2 to 11 times in 20 ("matrix not positive definite"). The
+// threaded OpenBLAS (libopenblas0-pthread, which tools/system-deps.sh installs), the
+// reference BLAS, ATLAS, BLIS and MKL are reentrant: with them the lock does nothing, and
+// independent factorizations (components, the two steps of one path solve) run at once.
 #pragma once
 
 #include <mutex>
 
 namespace mocapedit {
 
-inline std::mutex& BlasMutex() {
-  static std::mutex m;
-  return m;
-}
+// What the solver found out about the BLAS it calls, once per process.
+struct BlasInfo {
+  const char* name = "unknown";  // "OpenBLAS (serial)", "OpenBLAS (pthreads)", ...
+  bool concurrent = false;       // several threads may call it at once (false until known)
+};
+
+// Looks the BLAS up on first use. When it is a threaded OpenBLAS and OPENBLAS_NUM_THREADS
+// is not set, its calls are kept on the calling thread (the solver parallelises over
+// independent factorizations instead, which measured faster than threads inside BLAS on
+// these small fronts).
+const BlasInfo& Blas();
+
+// CHOLMOD's supernodal factorization parallelises its inner loops with OpenMP on up to four
+// threads. The solver runs independent factorizations on threads of its own, and on a
+// two-core machine those extra threads measured 1.3 to 2 times slower than one (group of
+// 100 agents x 43 key frames). Call this on every thread before it calls CHOLMOD: it keeps
+// CHOLMOD's parallel regions on the calling thread. libgomp keeps that setting per thread:
+// a thread that did not make it spawns a team for every supernode and waits for it on
+// futexes. Without an OpenMP runtime loaded it does nothing.
+void SerialCholmod();
+
+class BlasLock {
+ public:
+  BlasLock() : lock_(Mutex(), std::defer_lock) {
+    if (!Blas().concurrent) lock_.lock();
+  }
+
+ private:
+  static std::mutex& Mutex() {
+    static std::mutex m;
+    return m;
+  }
+  std::unique_lock<std::mutex> lock_;
+};
 
 }  // namespace mocapedit
