@@ -50,8 +50,9 @@ def main() -> int:
                     help="run the selected modules in this process instead of one fresh process each")
     args = ap.parse_args()
 
+    from mocapedit import _solver
     results = {"machine": {"python": sys.version.split()[0], "platform": platform.platform(),
-                           "cpus": os.cpu_count()}, "benchmarks": {}}
+                           "cpus": os.cpu_count(), "blas": _solver.blas()}, "benchmarks": {}}
     modules = sorted(HERE.glob("bench_*.py"))
     names = [p.stem[len("bench_"):] for p in modules if not args.only or p.stem[len("bench_"):] in args.only]
     if not args.in_process:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mocapedit import _solver, path_edit
+from mocapedit import _solver, metrics, path_edit
 
 FPS = 24.0
 SETTINGS = path_edit.Settings(min_baseline=0.01, rigid_min_extent=0.02, still=1e-5, group_step=12.0)
@@ -106,7 +106,7 @@ def ref_keys(agents, handles, links, groups, s):
         inside = [full[m] for m in g.members if m in full]
         start = max(float(m.sample_times[0]) for m in inside)
         end = min(float(m.sample_times[-1]) for m in inside)
-        times = np.arange(start, end + 1e-9, s.group_step) if end >= start else np.zeros(0)
+        times = ref_sample_times(start, end, s.group_step)
         for m in inside:
             f = np.clip(np.searchsorted(m.sample_times, times - 1e-9), 0, m.frames - 1)
             out.setdefault(m.path, set()).update(f[np.abs(m.sample_times[f] - times) < 1e-6].tolist())
@@ -133,16 +133,50 @@ def ref_keys(agents, handles, links, groups, s):
     return keys
 
 
+def ref_sample_times(start, end, step):
+    """A group's sampled times: start, start + step, ..., and the end, which takes the last
+    regular time's place when within half a step of it."""
+    if end < start:
+        return np.zeros(0)
+    times = [start + i * step for i in range(int(np.floor((end - start) / step + 1e-9)) + 1)]
+    if end - times[-1] > 1e-6:
+        if len(times) > 1 and end - times[-1] < step / 2:
+            times[-1] = end
+        else:
+            times.append(end)
+    return np.array(times)
+
+
 def ref_expand(a, keys, g):
-    """(F,2) path from its key frames: frames between keys follow them as one similarity."""
+    """(F,2) path from its key frames: each interval's similarity (keys' rest positions to
+    their solved ones), blended with its neighbours' by (1-t)^2/2 and t^2/2."""
     z = a.rest[:, 0] + 1j * a.rest[:, 1]
+    k = np.asarray(keys)
     x = np.empty(a.frames, complex)
-    x[keys] = g[:, 0] + 1j * g[:, 1]
-    for f in range(a.frames):
-        if f not in set(keys.tolist()):
-            hi = keys[np.searchsorted(keys, f)]
-            lo = keys[np.searchsorted(keys, f) - 1]
-            x[f] = x[lo] + (z[f] - z[lo]) / (z[hi] - z[lo]) * (x[hi] - x[lo])
+    xk = g[:, 0] + 1j * g[:, 1]
+    x[k] = xk
+
+    def similarity(j):  # interval (k[j-1], k[j]) as a function of rest positions, or None
+        if j < 1 or j >= len(k) or k[j] - k[j - 1] < 2 or z[k[j]] == z[k[j - 1]]:
+            return None
+        m = (xk[j] - xk[j - 1]) / (z[k[j]] - z[k[j - 1]])
+        return lambda w: xk[j - 1] + (w - z[k[j - 1]]) * m
+
+    for j in range(1, len(k)):
+        frames = np.arange(k[j - 1] + 1, k[j])
+        if not len(frames):
+            continue
+        t = (frames - k[j - 1]) / (k[j] - k[j - 1])
+        s, before, after = similarity(j), similarity(j - 1), similarity(j + 1)
+        if s is None:  # keys at one rest position: the frames between move in time
+            x[frames] = xk[j - 1] + t * (xk[j] - xk[j - 1])
+            continue
+        here = s(z[frames])
+        if before is not None:
+            here = here + (1 - t) ** 2 / 2 * (before(z[frames]) - s(z[frames]))
+        if after is not None:
+            here = here + t ** 2 / 2 * (after(z[frames]) - s(z[frames]))
+        x[frames] = here
     return np.stack([x.real, x.imag], axis=1)
 
 
@@ -410,8 +444,8 @@ def test_component_problems_match_the_reference_build(name):
     partner = ref_frame_partners(p.rest, offsets, SETTINGS.min_baseline)
     for g in groups:
         inside = [sorted(full).index(m) for m in g.members]
-        sampled = np.arange(max(full[m].sample_times[0] for m in g.members),
-                            min(full[m].sample_times[-1] for m in g.members) + 1e-9, SETTINGS.group_step)
+        sampled = ref_sample_times(max(full[m].sample_times[0] for m in g.members),
+                                   min(full[m].sample_times[-1] for m in g.members), SETTINGS.group_step)
         vert = []
         for m, i in zip(g.members, inside):
             t = full[m].sample_times[keys[m]]
@@ -450,3 +484,33 @@ def test_component_problems_match_the_reference_build(name):
             fallback = np.array([a.source_heading[f] + t for (f, _), t in zip(fixed, r.range_turn)])
             np.testing.assert_array_equal(r.heading, _solver.tangent_headings(r.ground, fixed, fallback,
                                                                               SETTINGS.still))
+
+
+@pytest.mark.parametrize("start, end, expected", [
+    (0.0, 48.0, [0, 12, 24, 36, 48]),            # the end on the grid
+    (0.0, 45.0, [0, 12, 24, 36, 45]),            # the end after the grid: added
+    (0.0, 40.0, [0, 12, 24, 40]),                # within half a step: it takes 36's place
+    (3.0, 8.0, [3, 8]),
+    (5.0, 5.0, [5]),
+    (6.0, 5.0, []),
+])
+def test_group_sample_times_reach_the_end_of_the_shared_range(start, end, expected):
+    np.testing.assert_allclose(path_edit.group_sample_times(start, end, 12.0), expected)
+    np.testing.assert_allclose(ref_sample_times(start, end, 12.0), expected)
+
+
+def test_a_group_keeps_its_formation_to_the_end_of_a_range_off_the_sampling_grid():
+    # 46 frames: regular samples at 0, 12, 24, 36; the mesh also joins the members at
+    # frame 45, so pulling the lead's last frame sideways takes the group along to the end.
+    # (Sampled at 0..36 only, the last frames moved apart by 14% of their spacing.)
+    frames = 46
+    agents = [_agent(f"/m{r}{c}", _walk(frames, (1.0 * c, -1.2 * r))) for r in range(2) for c in range(3)]
+    lead = agents[0]
+    handles = [path_edit.Handle(lead.path, 0, lead.rest[0], np.inf, "start"),
+               path_edit.Handle(lead.path, frames - 1, lead.rest[-1] + [-3.0, 0.0], np.inf, "end")]
+    group = path_edit.Group([a.path for a in agents], 1.0, "/group")
+    result = path_edit.ComponentProblem(agents, handles, [], [group], SETTINGS).solve()
+    source = np.array([a.rest for a in agents])
+    edited = np.array([result.agents[a.path].ground for a in agents])
+    change = np.nanmean(metrics.neighbour_distance_change(source, edited), axis=(1, 2))
+    assert change[-1] < 0.08, change[-6:]

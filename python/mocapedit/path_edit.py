@@ -11,11 +11,13 @@ per frame:
 - position constraints are handles, relative constraints links (hard ones eliminated,
   so they hold exactly);
 - a group joins its members' paths at sampled shared times (every ``group_step`` time
-  codes): each member is linked to its nearest neighbours there, its position kept in
+  codes, and the last shared time: ``group_sample_times``): each member is linked to its nearest neighbours there, its position kept in
   their local path frames (step 1) and its distance to them kept (step 2), weighted by the
   group's stiffness (Kwon et al. 2008). Group members are solved on key frames only (the
   sampled times, constrained frames, stationary ranges, the ends); each frame between two
-  keys follows them as one similarity, so it keeps its shape and sway.
+  keys follows them by their similarity, blended with the neighbouring keys' so that the
+  path turns smoothly through a key (``_solver.expand_key_frames``); it keeps its shape and
+  sway.
 
 The constraints leave some motions free; these are resolved so that an edit moves no more
 than it must:
@@ -94,6 +96,22 @@ class Group:
     members: list[str]
     stiffness: float
     ref: str
+
+
+def group_sample_times(start: float, end: float, step: float) -> np.ndarray:
+    """Times at which a group's mesh joins its members, over their shared range [start, end]:
+    every ``step`` from ``start``, and ``end`` itself, so that the formation holds up to the
+    end of the shared range. ``end`` replaces the last regular time when it would follow it
+    by less than half a step. Empty when the range is empty."""
+    if end < start:
+        return np.zeros(0)
+    times = np.arange(start, end + 1e-9, step)
+    if end - times[-1] > 1e-6:
+        if len(times) > 1 and end - times[-1] < 0.5 * step:
+            times[-1] = end
+        else:
+            times = np.append(times, end)
+    return times
 
 
 @dataclass
@@ -197,7 +215,7 @@ class ComponentProblem:
             frames = _solver.group_sample_frames(
                 np.concatenate(times, dtype=np.float64),
                 np.cumsum([0] + [len(t) for t in times], dtype=np.int32),
-                np.arange(start, end + 1e-9, s.group_step))
+                group_sample_times(start, end, s.group_step))
             vert = np.where(frames >= 0, frames + np.array([fo[i] for i in ids])[:, None], -1)
             forced.append(vert[vert >= 0])
             self._samples[n] = vert

@@ -3,12 +3,14 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <complex>
 #include <cstdint>
 #include <iterator>
 #include <limits>
 #include <stdexcept>
 #include <string>
 #include <utility>
+#include <vector>
 
 namespace mocapedit {
 
@@ -100,17 +102,38 @@ void ExpandKeyFrames(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref
   Check(n == 0 || (k >= 1 && keys[0] == 0 && keys[k - 1] == n - 1),
         "ExpandKeyFrames: the first and last frames must be keys");
   out.resize(n, 2);
+  using Cplx = std::complex<double>;
+  const auto z = [&](int f) { return Cplx(rest(f, 0), rest(f, 1)); };
+  const auto x = [&](Eigen::Index j) { return Cplx(positions(j, 0), positions(j, 1)); };
+  // The multiplier of each interval (keys j-1, j) with frames between its keys.
+  std::vector<Cplx> m(static_cast<size_t>(k));
+  std::vector<char> smooth(static_cast<size_t>(k), 0);
   for (Eigen::Index j = 0; j < k; ++j) {
     Check(j == 0 || keys[j] > keys[j - 1], "ExpandKeyFrames: keys must increase");
     out.row(keys[j]) = positions.row(j);
     if (j == 0 || keys[j] == keys[j - 1] + 1) continue;
+    const Cplx dz = z(keys[j]) - z(keys[j - 1]);
+    if (dz == Cplx(0.0)) continue;
+    m[j] = (x(j) - x(j - 1)) / dz;
+    smooth[j] = 1;
+  }
+  for (Eigen::Index j = 1; j < k; ++j) {
     const int f0 = keys[j - 1], f1 = keys[j];
-    const std::complex<double> z0(rest(f0, 0), rest(f0, 1)), dz = std::complex<double>(rest(f1, 0), rest(f1, 1)) - z0;
-    const std::complex<double> x0(positions(j - 1, 0), positions(j - 1, 1));
-    const std::complex<double> dx = std::complex<double>(positions(j, 0), positions(j, 1)) - x0;
+    if (f1 == f0 + 1) continue;
+    const Cplx x0 = x(j - 1), x1 = x(j), z0 = z(f0), z1 = z(f1);
+    const bool prev = j >= 2 && smooth[j - 1], next = j + 1 < k && smooth[j + 1];
     for (int f = f0 + 1; f < f1; ++f) {
-      const std::complex<double> x = x0 + (std::complex<double>(rest(f, 0), rest(f, 1)) - z0) / dz * dx;
-      out(f, 0) = x.real(), out(f, 1) = x.imag();
+      const double t = static_cast<double>(f - f0) / (f1 - f0);
+      Cplx p;
+      if (!smooth[j]) {  // keys at one rest position: the frames between move in time
+        p = x0 + t * (x1 - x0);
+      } else {
+        p = x0 + (z(f) - z0) * m[j];
+        // S_prev(z) - S(z) = (z - z0)(m_prev - m); S_next(z) - S(z) = (z - z1)(m_next - m).
+        if (prev) p += 0.5 * (1 - t) * (1 - t) * (z(f) - z0) * (m[j - 1] - m[j]);
+        if (next) p += 0.5 * t * t * (z(f) - z1) * (m[j + 1] - m[j]);
+      }
+      out(f, 0) = p.real(), out(f, 1) = p.imag();
     }
   }
 }

@@ -201,6 +201,30 @@ TEST(PathTerms, KeyFramesKeepShortStretchesAndUnkeyedAgents) {
   EXPECT_THROW(mocapedit::KeyFrames(rest, offsets, keyed, forced, 0.01, keys, before), std::invalid_argument);
 }
 
+TEST(PathTerms, ExpandedFramesTurnSmoothlyThroughKeys) {
+  // A straight walk whose keys (every 4th frame) were solved on a quarter circle, equal
+  // chords apart. One similarity per interval would put every frame on a chord: no turn
+  // between keys and a turn of a whole chord angle at each key. Blended, the frames away
+  // from the ends turn by about a quarter of it at every frame, keys included.
+  const int n = 17;
+  Trajectory2 rest(n, 2);
+  for (int f = 0; f < n; ++f) rest.row(f) << f, 0.0;
+  Eigen::VectorXi keys(5);
+  keys << 0, 4, 8, 12, 16;
+  const double chord = M_PI / 8, radius = 4 / (2 * std::sin(chord / 2));
+  Trajectory2 positions(5, 2);
+  for (int j = 0; j < 5; ++j) positions.row(j) << radius * std::sin(j * chord), radius * (1 - std::cos(j * chord));
+  Trajectory2 out;
+  mocapedit::ExpandKeyFrames(rest, keys, positions, out);
+  for (int j = 0; j < 5; ++j) EXPECT_EQ(out.row(keys[j]), positions.row(j)) << "key " << j;
+  const auto step = [&](int f) { return std::complex<double>(out(f + 1, 0) - out(f, 0), out(f + 1, 1) - out(f, 1)); };
+  for (int f = 5; f <= 11; ++f) {  // the turn between the steps into and out of frame f
+    const double turn = std::arg(step(f) / step(f - 1));
+    EXPECT_NEAR(turn, chord / 4, 0.25 * chord / 4) << "frame " << f;
+    EXPECT_NEAR(std::abs(step(f)), 1.0, 0.03) << "frame " << f;  // speed kept within 3%
+  }
+}
+
 TEST(PathTerms, ExpandedFramesFollowTheSimilarityOfTheirKeys) {
   Trajectory2 rest(6, 2);
   rest << 0, 0, 1, 0.2, 2, -0.1, 3, 0, 4, 0.3, 5, 0;

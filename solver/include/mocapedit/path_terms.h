@@ -54,9 +54,18 @@ void KeyFrames(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const
                const Eigen::Ref<const Eigen::VectorXi>& keyed, const Eigen::Ref<const Eigen::VectorXi>& forced,
                double min_baseline, Eigen::VectorXi& keys, Eigen::VectorXi& before);
 
-// Every frame's position from the key frames' solved positions: a frame between keys j0
-// and j1 is carried by the similarity that takes their rest positions to their solved
-// ones, x = x0 + (z - z0) / (z1 - z0) * (x1 - x0) in complex numbers.
+// Every frame's position from the key frames' solved positions. An interval between two
+// keys j0, j1 with frames between them has the similarity S that takes the keys' rest
+// positions to their solved ones, S(z) = x0 + (z - z0) m with m = (x1 - x0) / (z1 - z0) in
+// complex numbers. A frame between them at t = (f - f0) / (f1 - f0) is carried by S,
+// blended with the similarities of the neighbouring intervals (those with frames between
+// their keys):
+//   x = S(z) + (1 - t)^2 / 2 (S_prev(z) - S(z)) + t^2 / 2 (S_next(z) - S(z)).
+// Keys stay where they were solved (S_prev and S agree at j0, S and S_next at j1), and the
+// path's direction and speed change smoothly through a key, where one similarity per
+// interval would turn at each key of a curve (a kink in the root's velocity, which shows as
+// foot skate). Where keys turn and scale the path alike, every frame moves by that one
+// similarity.
 //
 // Inputs:
 //   rest       #V by 2 rest positions of every frame
