@@ -1,4 +1,5 @@
 #include "mocapedit/separation.h"
+#include "mocapedit/skyline_ldlt.h"
 
 #include <Eigen/SparseCholesky>
 #include <Eigen/SparseCore>
@@ -19,10 +20,11 @@ using Complex = std::complex<double>;
 using CSparse = Eigen::SparseMatrix<Complex>;
 // One factored step of one agent, K = L D L^H. The agent's unknowns are its frames in
 // order, then its ranges' few unknowns. Without ranges K is banded (bandwidth 2 in step 1,
-// whose terms join three frames, 1 in step 2, whose terms join two) and is factored in band
-// storage; with ranges, whose unknowns border the band, as a sparse matrix in the same order
-// (no fill either way, so no ordering). Step 2's matrix is real (its terms are differences
-// of positions and anchors); its complex right-hand sides are solved as two real ones.
+// whose terms join three frames, 1 in step 2, whose terms join two) and is factored as an
+// envelope (SkylineLdlt, a band being an envelope of constant width); with ranges, whose
+// unknowns border the band, as a sparse matrix in the same order (no fill either way, so no
+// ordering). Step 2's matrix is real (its terms are differences of positions and anchors);
+// its complex right-hand sides are solved as two real ones.
 template <typename Scalar>
 class StepSolver {
  public:
@@ -34,8 +36,8 @@ class StepSolver {
     n_ = n;
     int band = 0;
     for (const auto& t : triplets) band = std::max(band, std::abs(t.row() - t.col()));
-    if (band > kMaxBand) {
-      p_ = -1;
+    banded_ = band <= kMaxBand;
+    if (!banded_) {
       std::vector<Eigen::Triplet<Scalar>> converted;
       converted.reserve(triplets.size());
       for (const auto& t : triplets) converted.emplace_back(t.row(), t.col(), Convert(t.value()));
@@ -44,34 +46,19 @@ class StepSolver {
       sparse_.compute(k);
       return sparse_.info() == Eigen::Success;
     }
-    p_ = band;
-    const int w = p_ + 1;
-    std::vector<Scalar> k(static_cast<size_t>(n) * w, Scalar(0));  // k[i*w + t] = K(i, i - t)
+    std::vector<int> first(static_cast<size_t>(n));
+    for (int i = 0; i < n; ++i) first[i] = std::max(0, i - band);
+    band_.Reset(first);
     for (const auto& t : triplets)
-      if (t.row() >= t.col()) k[static_cast<size_t>(t.row()) * w + (t.row() - t.col())] += Convert(t.value());
-    l_.assign(static_cast<size_t>(n) * std::max(p_, 1), Scalar(0));  // l_[i*p + t] = L(i, i - 1 - t)
-    d_.assign(static_cast<size_t>(n), 0.0);
-    for (int i = 0; i < n; ++i) {
-      for (int j = std::max(0, i - p_); j < i; ++j) {
-        Scalar v = k[static_cast<size_t>(i) * w + (i - j)];
-        for (int m = std::max(0, i - p_); m < j; ++m) v -= L(i, m) * Conj(L(j, m)) * d_[m];
-        L(i, j) = v / d_[j];
-      }
-      double dii = std::real(k[static_cast<size_t>(i) * w]);
-      for (int m = std::max(0, i - p_); m < i; ++m) dii -= std::norm(L(i, m)) * d_[m];
-      if (!(dii > 0.0) || !std::isfinite(dii)) return false;
-      d_[i] = dii;
-    }
-    inverse_d_.resize(d_.size());
-    for (size_t i = 0; i < d_.size(); ++i) inverse_d_[i] = 1.0 / d_[i];
-    return true;
+      if (t.row() >= t.col()) band_.Add(t.row(), t.col(), Convert(t.value()));
+    return band_.Factor();
   }
 
   // K^-1 b for each column of b (#n by m).
   Eigen::MatrixXcd Solve(const Eigen::MatrixXcd& b) const {
-    if (p_ < 0) return SparseSolve(b);
+    if (!banded_) return SparseSolve(b);
     Eigen::MatrixXcd x = b;
-    for (Eigen::Index c = 0; c < x.cols(); ++c) Substitute(x.col(c).data(), 0);
+    for (Eigen::Index c = 0; c < x.cols(); ++c) band_.Solve(x.col(c).data(), 1);
     return x;
   }
 
@@ -80,16 +67,12 @@ class StepSolver {
   // undone: those of other columns follow from symmetry).
   Eigen::MatrixXcd InverseColumns(const std::vector<int>& columns, int lowest) const {
     const Eigen::Index m = static_cast<Eigen::Index>(columns.size());
-    if (p_ < 0) {
-      Eigen::MatrixXcd e = Eigen::MatrixXcd::Zero(n_, m);
-      for (Eigen::Index c = 0; c < m; ++c) e(columns[static_cast<size_t>(c)], c) = 1.0;
-      return SparseSolve(e);
-    }
     Eigen::MatrixXcd x = Eigen::MatrixXcd::Zero(n_, m);
+    for (Eigen::Index c = 0; c < m; ++c) x(columns[static_cast<size_t>(c)], c) = 1.0;
+    if (!banded_) return SparseSolve(x);
     for (Eigen::Index c = 0; c < m; ++c) {
       const int j = columns[static_cast<size_t>(c)];
-      x(j, c) = 1.0;
-      Substitute(x.col(c).data(), j, std::min(j, lowest));  // the forward pass starts at the unit entry
+      band_.SolveFrom(x.col(c).data(), j, std::min(j, lowest));  // the forward pass starts at the unit entry
     }
     return x;
   }
@@ -98,51 +81,6 @@ class StepSolver {
   static Scalar Convert(Complex v) {
     if constexpr (std::is_same_v<Scalar, double>) return v.real();
     else return v;
-  }
-  static Scalar Conj(Scalar v) {
-    if constexpr (std::is_same_v<Scalar, double>) return v;
-    else return std::conj(v);
-  }
-  Scalar& L(int i, int j) { return l_[static_cast<size_t>(i) * p_ + (i - 1 - j)]; }
-  Scalar L(int i, int j) const { return l_[static_cast<size_t>(i) * p_ + (i - 1 - j)]; }
-
-  // x <- K^-1 x in place, x zero above `first`; entries above `last` are left undone.
-  void Substitute(Complex* x, int first, int last = 0) const {
-    if (p_ == 2) return SubstituteBand<2>(x, first, last);
-    if (p_ == 1) return SubstituteBand<1>(x, first, last);
-    for (int i = first; i < n_; ++i) {
-      Complex v = x[i];
-      for (int j = std::max(first, i - p_); j < i; ++j) v -= L(i, j) * x[j];
-      x[i] = v;
-    }
-    for (int i = first; i < n_; ++i) x[i] *= inverse_d_[i];
-    for (int i = n_ - 1; i >= last; --i) {
-      Complex v = x[i];
-      for (int j = i + 1; j <= std::min(n_ - 1, i + p_); ++j) v -= Conj(L(j, i)) * x[j];
-      x[i] = v;
-    }
-  }
-
-  // The same for a bandwidth known at compile time (the loops unroll).
-  template <int P>
-  void SubstituteBand(Complex* x, int first, int last) const {
-    const Scalar* l = l_.data();
-    Complex y[P];  // the last P forward values before scaling by D^-1 (zero above `first`)
-    for (int t = 0; t < P; ++t) y[t] = 0.0;
-    for (int i = first; i < n_; ++i) {
-      Complex v = x[i];
-      const Scalar* li = l + static_cast<size_t>(i) * P;  // li[t] = L(i, i - 1 - t)
-      for (int t = 0; t < P; ++t) v -= li[t] * y[t];
-      for (int t = P - 1; t > 0; --t) y[t] = y[t - 1];
-      y[0] = v;
-      x[i] = v * inverse_d_[i];
-    }
-    for (int i = n_ - 1; i >= last; --i) {
-      Complex v = x[i];
-      for (int t = 0; t < P; ++t)
-        if (i + 1 + t < n_) v -= Conj(l[static_cast<size_t>(i + 1 + t) * P + t]) * x[i + 1 + t];
-      x[i] = v;
-    }
   }
 
   Eigen::MatrixXcd SparseSolve(const Eigen::MatrixXcd& b) const {
@@ -162,10 +100,8 @@ class StepSolver {
   }
 
   int n_ = 0;
-  int p_ = -1;              // bandwidth of the band storage; -1: sparse
-  std::vector<Scalar> l_;   // strictly lower band of L
-  std::vector<double> d_;   // D
-  std::vector<double> inverse_d_;
+  bool banded_ = false;
+  SkylineLdlt<Scalar> band_;
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<Scalar>, Eigen::Lower, Eigen::NaturalOrdering<int>> sparse_;
 };
 

@@ -34,18 +34,24 @@ Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic> Random(const std::vector<i
   return a;
 }
 
+// The lower triangle of `a` in the envelope `first`, each entry added in two pieces, as
+// assembly does.
+template <typename Scalar, typename Matrix>
+void Load(SkylineLdlt<Scalar>& f, const std::vector<int>& first, const Matrix& a) {
+  f.Reset(first);
+  for (int i = 0; i < static_cast<int>(first.size()); ++i)
+    for (int j = first[i]; j <= i; ++j) {
+      f.Add(i, j, a(i, j) * 0.25);
+      f.Add(i, j, a(i, j) * 0.75);
+    }
+}
+
 template <typename Scalar>
 void CheckAgainstDense(const std::vector<int>& first, unsigned seed) {
   const int n = static_cast<int>(first.size());
   const auto a = Random<Scalar>(first, seed);
   SkylineLdlt<Scalar> f;
-  f.Reset(first);
-  // Entries added in pieces, as assembly does.
-  for (int i = 0; i < n; ++i)
-    for (int j = first[i]; j <= i; ++j) {
-      f.Add(i, j, a(i, j) * 0.25);
-      f.Add(i, j, a(i, j) * 0.75);
-    }
+  Load(f, first, a);
   const double rowsum = a.cwiseAbs().rowwise().sum().maxCoeff();
   EXPECT_GE(f.GershgorinBound(), rowsum * (1 - 1e-12));
   EXPECT_LE(f.GershgorinBound(), rowsum * std::sqrt(2.0));
@@ -123,4 +129,38 @@ TEST(SkylineLdlt, IndefiniteOrSingularMatricesAreRefused) {
   f.Add(1, 0, 2.0);
   f.Add(1, 1, 1.0);  // indefinite
   EXPECT_FALSE(f.Factor());
+}
+
+// Columns of the inverse by SolveFrom: exact from row `last` on, for bands and envelopes,
+// real and complex.
+template <typename Scalar>
+void CheckInverseColumns(const std::vector<int>& first, unsigned seed) {
+  const int n = static_cast<int>(first.size());
+  const auto a = Random<Scalar>(first, seed);
+  SkylineLdlt<Scalar> f;
+  Load(f, first, a);
+  ASSERT_TRUE(f.Factor());
+  const Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic> inverse = a.inverse();
+  for (int column : {0, n / 3, n - 1})
+    for (int last : {0, column / 2, column}) {
+      std::vector<Cplx> x(static_cast<size_t>(n), Cplx(0.0));
+      x[column] = 1.0;
+      f.SolveFrom(x.data(), column, last);
+      for (int i = last; i < n; ++i)
+        EXPECT_LT(std::abs(x[i] - Cplx(inverse(i, column))), 1e-12)
+            << "n=" << n << " column " << column << " last " << last << " row " << i;
+    }
+}
+
+TEST(SkylineLdlt, InverseColumnsFromTheirUnitEntry) {
+  for (int band : {1, 2, 4}) {
+    std::vector<int> first(40);
+    for (int i = 0; i < 40; ++i) first[i] = std::max(0, i - band);
+    CheckInverseColumns<double>(first, 11 + band);
+    CheckInverseColumns<Cplx>(first, 17 + band);
+  }
+  std::vector<int> envelope(30);
+  for (int i = 0; i < 30; ++i) envelope[i] = i == 29 ? 0 : std::max(0, i - 2);  // one long row
+  CheckInverseColumns<double>(envelope, 5);
+  CheckInverseColumns<Cplx>(envelope, 6);
 }

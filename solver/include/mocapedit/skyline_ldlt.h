@@ -121,6 +121,28 @@ class SkylineLdlt {
       for (int c = 0; c < k; ++c) SolveStrided(x + c, k);
   }
 
+  // One right-hand side whose entries above `first` are zero (a unit vector e_first, for a
+  // column of the inverse): the forward pass starts at `first`, and the backward pass stops
+  // at `last` (<= first), leaving the entries above `last` undone. T as for Solve.
+  template <typename T>
+  void SolveFrom(T* x, int first, int last) const {
+    const int n = size();
+    const Scalar* val = val_.data();
+    for (int i = first; i < n; ++i) {  // L y = b
+      const int p0 = std::max(first_[i], first);
+      const Scalar* li = val + ptr_[i] - first_[i];  // li[p]: entry (i, p)
+      T s = x[i];
+      for (int p = p0; p < i; ++p) s -= li[p] * x[p];
+      x[i] = s;
+    }
+    for (int i = first; i < n; ++i) x[i] /= d_[i];  // D
+    for (int i = n - 1; i >= last; --i) {  // L^H x = y, rows from `last` on
+      const Scalar* li = val + ptr_[i] - first_[i];
+      const T xi = x[i];
+      for (int p = std::max(first_[i], last); p < i; ++p) x[p] -= Conj(li[p]) * xi;
+    }
+  }
+
  private:
   // K right-hand sides, interleaved (K known at compile time).
   template <typename T, int K>
