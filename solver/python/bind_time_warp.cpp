@@ -100,7 +100,7 @@ MOCAPEDIT_BINDINGS(BindTimeWarp) {
          const mocapedit::FrameQuads& sync_frames, const mocapedit::Flags& sync_hard,
          const Eigen::VectorXd& sync_weights, double min_interval_fraction,
          std::vector<Eigen::VectorXd> min_intervals, double stretch_weight, double anchor_weight,
-         int max_active_set_iterations) {
+         int max_active_set_iterations, bool responses) {
         auto data = std::make_unique<mocapedit::TimeWarpData>();
         {
           py::gil_scoped_release release;
@@ -108,15 +108,17 @@ MOCAPEDIT_BINDINGS(BindTimeWarp) {
               MakeProblem(std::move(rest_times), time_frames, time_hard, time_weights, sync_frames, sync_hard,
                           sync_weights, min_interval_fraction, std::move(min_intervals), stretch_weight,
                           anchor_weight, max_active_set_iterations),
-              *data);
+              *data, responses);
         }
         return data;
       },
       py::arg("rest_times"), py::arg("time_frames"), py::arg("time_hard"), py::arg("time_weights"),
       py::arg("sync_frames"), py::arg("sync_hard"), py::arg("sync_weights"), py::arg("min_interval_fraction") = 0.1,
       py::arg("min_intervals") = std::vector<Eigen::VectorXd>{}, py::arg("stretch_weight") = 1e-6,
-      py::arg("anchor_weight") = 1e-6, py::arg("max_active_set_iterations") = -1,
-      (std::string("Splits agents linked by sync constraints into components and factors each.\n\n") +
+      py::arg("anchor_weight") = 1e-6, py::arg("max_active_set_iterations") = -1, py::arg("responses") = false,
+      (std::string("Splits agents linked by sync constraints into components and factors each.\n"
+                   "responses: also keep each component's response to each constraint value it reads\n"
+                   "(up to 16), for cheap re-solves as values change (see time_warp.h).\n\n") +
        structure_doc)
           .c_str());
   m.def(

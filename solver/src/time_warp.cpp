@@ -25,6 +25,8 @@ constexpr double kConsistency = 1e-9;
 // A pivot below this fraction of the largest one marks the normal equations singular.
 constexpr double kSingularPivot = 1e-13;
 constexpr int kMaxRefinementSteps = 4;
+// Components reading at most this many constraint values keep responses to them (when asked).
+constexpr int kMaxResponses = 16;
 constexpr double kRefinedError = 1e-13;
 
 enum class EdgeKind { kTime, kSync, kInterval };
@@ -174,6 +176,11 @@ struct TimeWarpComponent {
   Forest forest;                // of the hard edges
   std::unique_ptr<Reduced> base;
   int max_iterations = 0;
+  // Responses (TimeWarpPrecompute with responses): the unbounded solution is affine in the
+  // constraint values the component reads, t = response0 + responses * values(params).
+  std::vector<std::pair<EdgeKind, int>> params;  // (kTime or kSync, constraint index)
+  Eigen::VectorXd response0;
+  Eigen::MatrixXd responses;                     // #nodes by #params; empty: solve instead
 };
 
 TimeWarpConflict::TimeWarpConflict(Kind kind_, std::vector<int> time_constraints_,
@@ -729,7 +736,36 @@ void BuildComponent(const TimeWarpProblem& p, const std::vector<int>& agents, co
 
 }  // namespace
 
-void TimeWarpPrecompute(const TimeWarpProblem& problem, TimeWarpData& data) {
+namespace {
+
+// The component's unbounded solution for zero constraint values and its change per unit of
+// each value it reads (at most kMaxResponses of them; more are solved for each time).
+void BuildResponses(const TimeWarpData& data, TimeWarpComponent& c) {
+  std::set<std::pair<EdgeKind, int>> params;
+  for (const Edge& e : c.hard)
+    if (e.kind != EdgeKind::kInterval) params.emplace(e.kind, e.id);
+  for (const SoftRow& r : c.soft) params.emplace(r.kind, r.id);
+  if (params.empty() || static_cast<int>(params.size()) > kMaxResponses) return;
+  Eigen::VectorXd times = Eigen::VectorXd::Zero(data.time_constraints);
+  Eigen::VectorXd offsets = Eigen::VectorXd::Zero(data.sync_constraints);
+  auto solve = [&] {
+    const Eigen::VectorXd pot = Potentials(c, c.forest, c.hard, times, offsets);
+    return SolveReduced(c, c.forest, *c.base, pot, RowTargets(c, times, offsets));
+  };
+  c.params.assign(params.begin(), params.end());
+  c.response0 = solve();
+  c.responses.resize(c.nodes, static_cast<Eigen::Index>(c.params.size()));
+  for (size_t j = 0; j < c.params.size(); ++j) {
+    double& value = c.params[j].first == EdgeKind::kTime ? times[c.params[j].second] : offsets[c.params[j].second];
+    value = 1.0;
+    c.responses.col(static_cast<Eigen::Index>(j)) = solve() - c.response0;
+    value = 0.0;
+  }
+}
+
+}  // namespace
+
+void TimeWarpPrecompute(const TimeWarpProblem& problem, TimeWarpData& data, bool responses) {
   Validate(problem);
   const int agents = static_cast<int>(problem.rest_times.size());
   data = TimeWarpData();
@@ -773,6 +809,7 @@ void TimeWarpPrecompute(const TimeWarpProblem& problem, TimeWarpData& data) {
   for (size_t k = 0; k < members.size(); ++k) {
     auto c = std::make_unique<TimeWarpComponent>();
     BuildComponent(problem, members[k], time_ids[k], sync_ids[k], *c);
+    if (responses) BuildResponses(data, *c);
     data.components.push_back(std::move(c));
   }
 }
@@ -796,7 +833,18 @@ TimeWarpResult TimeWarpSolve(const TimeWarpData& data, const Eigen::Ref<const Ei
     const Eigen::VectorXd pot = Potentials(c, c.forest, c.hard, times, offsets);
     CheckCycles(c, pot, times, offsets);
     const Eigen::VectorXd targets = RowTargets(c, times, offsets);
-    Eigen::VectorXd t = SolveReduced(c, c.forest, *c.base, pot, targets);
+    Eigen::VectorXd t;
+    if (c.responses.size()) {  // the unbounded solution from the responses
+      t = c.response0;
+      for (size_t j = 0; j < c.params.size(); ++j) {
+        const auto [kind, id] = c.params[j];
+        t.noalias() += (kind == EdgeKind::kTime ? times[id] : offsets[id]) * c.responses.col(static_cast<Eigen::Index>(j));
+      }
+      for (int n = 0; n < c.nodes; ++n)  // known times exactly, as SolveReduced gives them
+        if (c.forest.unknown[c.forest.cls[n]] < 0) t[n] = pot[n];
+    } else {
+      t = SolveReduced(c, c.forest, *c.base, pot, targets);
+    }
     bool fallback = c.base->fallback;
     std::vector<char> at_minimum(c.nodes, 0);
     const double tol = kConsistency * Scale(t);

@@ -401,6 +401,37 @@ TEST(TimeWarp, PrecomputeOnceSolveForNewValues) {
   }
 }
 
+TEST(TimeWarp, ResponsesGiveTheSolveForAnyValues) {
+  // Hard and soft times, a hard and a soft sync, and a free agent: re-solved from the
+  // responses as the values change, including values that push an interval below its
+  // minimum (the active set then takes over), against solving from scratch.
+  Builder b({Range(300), Range(300, 2.0), Range(50)});
+  b.Time(0, 20, 25.0).Time(0, 250, 240.0).Time(1, 200, 410.0, false, 0.5);
+  b.Sync(1, 100, 0, 100, 0.5).Sync(1, 10, 0, 30, 3.0, false, 2.0);
+  b.p.min_interval_fraction = 0.5;
+  mocapedit::TimeWarpData plain, fast;
+  mocapedit::TimeWarpPrecompute(b.p, plain);
+  mocapedit::TimeWarpPrecompute(b.p, fast, true);
+  ASSERT_EQ(fast.components.size(), 1u);
+  int bounded = 0;
+  for (double end : {240.0, 300.0, 160.0, 145.0}) {  // the last ones squeeze frames 20..250
+    b.times[1] = end;
+    b.offsets[0] = end / 100.0;
+    const TimeWarpResult solved = mocapedit::TimeWarpSolve(plain, b.Times(), b.Offsets());
+    const TimeWarpResult summed = mocapedit::TimeWarpSolve(fast, b.Times(), b.Offsets());
+    for (int a = 0; a < 3; ++a)  // as accurate as the solve: 1e-11 of the times
+      EXPECT_LT((solved.time_maps[a] - summed.time_maps[a]).cwiseAbs().maxCoeff(),
+                1e-11 * (1 + solved.time_maps[a].cwiseAbs().maxCoeff())) << "end " << end;
+    EXPECT_EQ(summed.time_residuals[0], 0.0);  // hard times are set, not summed
+    EXPECT_EQ(summed.time_residuals[1], 0.0);
+    EXPECT_LT(summed.sync_residuals[0], 1e-9);
+    EXPECT_EQ(solved.min_enforced, summed.min_enforced);
+    ExpectIncreasingAboveMinimum(b.p, summed);
+    bounded += summed.min_enforced.sum() > 0;
+  }
+  EXPECT_GT(bounded, 0);  // the active set was needed at least once
+}
+
 TEST(TimeWarp, ASingularSystemFallsBackToSpqr) {
   Builder b({Range(40)});
   b.p.stretch_weight = 0.0;  // one constraint leaves the stretch undetermined

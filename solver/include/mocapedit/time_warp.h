@@ -123,12 +123,17 @@ struct TimeWarpResult {
 // Splits the agents into components and factors each one.
 //
 // Inputs:
-//   problem  the structure: rest time maps, constraint frames, hardness and weights
+//   problem    the structure: rest time maps, constraint frames, hardness and weights
+//   responses  for re-solving as constraint values change (a dragged time): each component
+//              that reads at most 16 constraint values also keeps its unbounded solution's
+//              response to each of them (one solve per value), so that TimeWarpSolve only
+//              sums them; it still runs the active set when an interval falls below its
+//              minimum, and gives known times exactly.
 // Outputs:
-//   data     the factored components, for TimeWarpSolve
+//   data       the factored components, for TimeWarpSolve
 // Throws std::invalid_argument on bad shapes, indices, frames out of range, weights or
 // rest times that do not increase.
-void TimeWarpPrecompute(const TimeWarpProblem& problem, TimeWarpData& data);
+void TimeWarpPrecompute(const TimeWarpProblem& problem, TimeWarpData& data, bool responses = false);
 
 // Warps every time map to the constraint values.
 //
