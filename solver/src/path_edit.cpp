@@ -1162,23 +1162,6 @@ void PathEditPrecompute(const PathEditProblem& p, std::shared_ptr<PathEditData>&
   }
   AddSoftRows(p, *d, d->rows1);
   d->rows1.Finish();
-  // Step 2 rows: edges, then soft handles and links.
-  for (Eigen::Index e = 0; e < p.edges.rows(); ++e) {
-    const int j = p.edges(e, 0), k = p.edges(e, 1);
-    const int rj = d->rigid_of[j], rk = d->rigid_of[k];
-    if (rj != rk) {
-      if (rj >= 0) d->boundary_edges[rj].push_back(static_cast<int>(e));
-      if (rk >= 0) d->boundary_edges[rk].push_back(static_cast<int>(e));
-    }
-    if (ew[e] == 0 || j == k || same_range({j, k})) continue;
-    if (ew[e] == 1.0)
-      d->rows2.AddExact({{k, 1.0}, {j, -1.0}}, TargetKind::kEdge, static_cast<int>(e));
-    else
-      d->rows2.Add({{k, 1.0L}, {j, -1.0L}}, TargetKind::kEdge, static_cast<int>(e), ew[e]);
-  }
-  AddSoftRows(p, *d, d->rows2);
-  d->rows2.Finish();
-
   // The two steps' systems are independent until solved: a large problem builds and
   // factors the second on another thread while this one does the first.
   auto step1 = [&] {
@@ -1188,6 +1171,22 @@ void PathEditPrecompute(const PathEditProblem& p, std::shared_ptr<PathEditData>&
     Factor(d->step1, p.force_qr);
   };
   auto step2 = [&] {
+    // Step 2 rows: edges, then soft handles and links.
+    for (Eigen::Index e = 0; e < p.edges.rows(); ++e) {
+      const int j = p.edges(e, 0), k = p.edges(e, 1);
+      const int rj = d->rigid_of[j], rk = d->rigid_of[k];
+      if (rj != rk) {
+        if (rj >= 0) d->boundary_edges[rj].push_back(static_cast<int>(e));
+        if (rk >= 0) d->boundary_edges[rk].push_back(static_cast<int>(e));
+      }
+      if (ew[e] == 0 || j == k || same_range({j, k})) continue;
+      if (ew[e] == 1.0)
+        d->rows2.AddExact({{k, 1.0}, {j, -1.0}}, TargetKind::kEdge, static_cast<int>(e));
+      else
+        d->rows2.Add({{k, 1.0L}, {j, -1.0L}}, TargetKind::kEdge, static_cast<int>(e), ew[e]);
+    }
+    AddSoftRows(p, *d, d->rows2);
+    d->rows2.Finish();
     BuildElimination(*d, false, d->elim2);
     AssembleStep(d->rows2, d->elim2, d->step2);
     FindBetaRows(d->rows2, d->elim2, d->step2);
