@@ -281,10 +281,14 @@ def test_group_sample_frames_match_searchsorted():
     assert (got[1] == -1).all() and (got[2] >= 0).all() and (got[0] == -1).sum() == 2  # before its first and after its last
 
 
-@pytest.mark.parametrize("layout", ["grid", "jittered", "coincident"])
+@pytest.mark.parametrize("layout", ["grid", "jittered", "coincident", "large"])
 def test_group_mesh_terms_match_a_stable_sort(layout):
     rng = np.random.default_rng(4)
-    members, frames = 24, 30
+    # "large": 60 members x 43 sampled times, enough for the search to split the times
+    # between two threads.
+    members, frames = (60, 300) if layout == "large" else (24, 30)
+    if layout == "large":
+        layout = "jittered"
     origin = np.array([(1.0 * (m % 6), -1.2 * (m // 6)) for m in range(members)])
     if layout == "jittered":
         origin += rng.normal(scale=0.3, size=origin.shape)
@@ -383,6 +387,22 @@ def test_block_tangent_headings_are_each_agents():
     assert not got[offsets[1]:offsets[2]].any()
     with pytest.raises(ValueError, match="grouped by block"):
         _solver.block_tangent_headings(g, blocks, fixed[::-1].copy(), fallback, 1e-5)
+
+
+def test_many_headings_split_between_threads_are_each_agents():
+    # Over 20,000 frames: computed on two threads, the same as one agent at a time.
+    paths = [p for seed in range(100) for p in _paths(seed)]
+    g = np.concatenate(paths)
+    offsets = np.cumsum([0] + [len(p) for p in paths])
+    assert offsets[-1] > 20000
+    blocks = np.array([(offsets[i], offsets[i + 1]) for i in range(len(paths))], np.int32)
+    fixed = np.array([(b, 0, 1) for b in range(0, len(paths), 3)], np.int32)
+    fallback = np.linspace(-1.0, 1.0, len(fixed))
+    got = _solver.block_tangent_headings(g, blocks, fixed, fallback, 1e-5)
+    for b, (lo, hi) in enumerate(blocks):
+        mine = fixed[:, 0] == b
+        ref = _solver.tangent_headings(g[lo:hi], [tuple(r) for r in fixed[mine, 1:].tolist()], fallback[mine], 1e-5)
+        np.testing.assert_array_equal(got[lo:hi], ref)
 
 
 # ---- whole problems ------------------------------------------------------------------

@@ -11,10 +11,10 @@
 #include <mutex>
 #include <numeric>
 #include <sstream>
-#include <thread>
 
 #include "mocapedit/blas_lock.h"
 #include "mocapedit/skyline_ldlt.h"
+#include "mocapedit/two_threads.h"
 
 namespace mocapedit {
 namespace {
@@ -1193,23 +1193,7 @@ void PathEditPrecompute(const PathEditProblem& p, std::shared_ptr<PathEditData>&
     Factor(d->step2, p.force_qr);
   };
   if (n >= kParallelStepsVertices && Blas().concurrent) {
-    std::exception_ptr error2;
-    std::thread worker([&] {
-      try {
-        step2();
-      } catch (...) {
-        error2 = std::current_exception();
-      }
-    });
-    std::exception_ptr error1;
-    try {
-      step1();
-    } catch (...) {
-      error1 = std::current_exception();
-    }
-    worker.join();
-    if (error1) std::rethrow_exception(error1);  // the first step's error first, as when run in turn
-    if (error2) std::rethrow_exception(error2);
+    OnTwoThreads(step1, step2);
   } else {
     step1();
     step2();

@@ -12,6 +12,8 @@
 #include <utility>
 #include <vector>
 
+#include "mocapedit/two_threads.h"
+
 namespace mocapedit {
 
 namespace {
@@ -183,6 +185,12 @@ void FramePartners(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<c
   }
 }
 
+// Groups with at least this many member samples (members x sampled times) find their
+// neighbours on two threads.
+constexpr Eigen::Index kParallelMemberSamples = 2000;
+// Heading sets of at least this many frames are computed on two threads.
+constexpr Eigen::Index kParallelHeadingFrames = 20000;
+
 void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
                     const Eigen::Ref<const Eigen::Matrix<int, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>& members,
                     int neighbours, const Eigen::Ref<const Eigen::VectorXi>& partner, IndexTriples& triangles,
@@ -196,92 +204,103 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
   for (Eigen::Index v = 0; v < n; ++v)
     Check(partner[v] >= -1 && partner[v] < n, "GroupMeshTerms: partner out of range");
 
-  // Pairs packed as (min << 32 | max): sorting integers is cheaper than sorting pairs.
-  std::vector<uint64_t> pairs;
-  pairs.reserve(static_cast<size_t>(m * times * neighbours));
-  std::vector<double> x(static_cast<size_t>(m)), y(static_cast<size_t>(m));
-  const int keep = neighbours + 1;
-  std::vector<std::pair<double, int>> near(static_cast<size_t>(keep)), close, met;
-  const auto squared = [&](int a, int b) {  // as Distance, squared
-    const double dx = x[a] - x[b], dy = y[a] - y[b];
-    return dx * dx + dy * dy;
-  };
-  // Members bucketed in a grid of about one member per cell; each one's candidates are met
-  // ring by ring around its cell, until the next ring is farther than the (k+1)-th nearest.
-  std::vector<int> cell_of(static_cast<size_t>(m)), start, items(static_cast<size_t>(m));
-  for (Eigen::Index t = 0; t < times && neighbours > 0; ++t) {
-    double x0 = std::numeric_limits<double>::infinity(), y0 = x0, x1 = -x0, y1 = -x0;
-    for (Eigen::Index a = 0; a < m; ++a) {
-      x[a] = rest(members(a, t), 0), y[a] = rest(members(a, t), 1);
-      Check(std::isfinite(x[a]) && std::isfinite(y[a]), "GroupMeshTerms: rest positions must be finite");
-      x0 = std::min(x0, x[a]), x1 = std::max(x1, x[a]), y0 = std::min(y0, y[a]), y1 = std::max(y1, y[a]);
-    }
-    const double extent = std::max(x1 - x0, y1 - y0);
-    const double h = extent > 0 ? std::max(extent / std::ceil(std::sqrt(static_cast<double>(m))), extent * 1e-6) : 1.0;
-    const int nx = static_cast<int>((x1 - x0) / h) + 1, ny = static_cast<int>((y1 - y0) / h) + 1;
-    start.assign(static_cast<size_t>(nx) * ny + 1, 0);
-    for (int a = 0; a < m; ++a) {
-      const int cx = std::min(static_cast<int>((x[a] - x0) / h), nx - 1);
-      const int cy = std::min(static_cast<int>((y[a] - y0) / h), ny - 1);
-      cell_of[a] = cy * nx + cx;
-      ++start[cell_of[a] + 1];
-    }
-    for (size_t c = 1; c < start.size(); ++c) start[c] += start[c - 1];
-    {
-      std::vector<int> next(start.begin(), start.end() - 1);
-      for (int a = 0; a < m; ++a) items[next[cell_of[a]]++] = a;
-    }
-    for (int a = 0; a < m; ++a) {
-      // The k+1 smallest squared distances, ties to the earlier member...
-      int count = 0;
-      met.clear();
-      const int ax = cell_of[a] % nx, ay = cell_of[a] / nx;
-      for (int ring = 0;; ++ring) {
-        // Members outside the rings so far are at least (ring - 1) cells away along x or y.
-        // (Margins: the cells are found in rounded arithmetic, and the ties below must all
-        // have been met.)
-        const double reach = (ring - 1) * h * (1 - 1e-9);
-        if (ring > 0 && count == keep && reach > 0 && reach * reach > near[keep - 1].first * (1 + 1e-13)) break;
-        if (ax - ring < 0 && ay - ring < 0 && ax + ring >= nx && ay + ring >= ny) break;
-        const auto visit = [&](int cx, int cy) {
-          const int c = cy * nx + cx;
-          for (int i = start[c]; i < start[c + 1]; ++i) {
-            const int b = items[i];
-            if (b == a) continue;
-            const std::pair<double, int> e{squared(a, b), b};
-            met.push_back(e);
-            if (count == keep && !(e < near[count - 1])) continue;
-            int at = count < keep ? count++ : count - 1;
-            for (; at > 0 && e < near[at - 1]; --at) near[at] = near[at - 1];
-            near[at] = e;
-          }
-        };
-        for (int cy = std::max(ay - ring, 0); cy <= std::min(ay + ring, ny - 1); ++cy) {
-          if (cy == ay - ring || cy == ay + ring) {
-            for (int cx = std::max(ax - ring, 0); cx <= std::min(ax + ring, nx - 1); ++cx) visit(cx, cy);
-          } else {
-            if (ax - ring >= 0) visit(ax - ring, cy);
-            if (ax + ring < nx) visit(ax + ring, cy);
+  // Pairs packed as (min << 32 | max): sorting integers is cheaper than sorting pairs. The
+  // sampled times are independent: large groups split them between two threads (the pairs
+  // are sorted below, so the result does not depend on the split).
+  const auto pairs_at = [&](Eigen::Index t_begin, Eigen::Index t_end, std::vector<uint64_t>& pairs) {
+    pairs.reserve(static_cast<size_t>(m * (t_end - t_begin) * neighbours));
+    std::vector<double> x(static_cast<size_t>(m)), y(static_cast<size_t>(m));
+    const int keep = neighbours + 1;
+    std::vector<std::pair<double, int>> near(static_cast<size_t>(keep)), close, met;
+    const auto squared = [&](int a, int b) {  // as Distance, squared
+      const double dx = x[a] - x[b], dy = y[a] - y[b];
+      return dx * dx + dy * dy;
+    };
+    // Members bucketed in a grid of about one member per cell; each one's candidates are met
+    // ring by ring around its cell, until the next ring is farther than the (k+1)-th nearest.
+    std::vector<int> cell_of(static_cast<size_t>(m)), start, items(static_cast<size_t>(m));
+    for (Eigen::Index t = t_begin; t < t_end && neighbours > 0; ++t) {
+      double x0 = std::numeric_limits<double>::infinity(), y0 = x0, x1 = -x0, y1 = -x0;
+      for (Eigen::Index a = 0; a < m; ++a) {
+        x[a] = rest(members(a, t), 0), y[a] = rest(members(a, t), 1);
+        Check(std::isfinite(x[a]) && std::isfinite(y[a]), "GroupMeshTerms: rest positions must be finite");
+        x0 = std::min(x0, x[a]), x1 = std::max(x1, x[a]), y0 = std::min(y0, y[a]), y1 = std::max(y1, y[a]);
+      }
+      const double extent = std::max(x1 - x0, y1 - y0);
+      const double h = extent > 0 ? std::max(extent / std::ceil(std::sqrt(static_cast<double>(m))), extent * 1e-6) : 1.0;
+      const int nx = static_cast<int>((x1 - x0) / h) + 1, ny = static_cast<int>((y1 - y0) / h) + 1;
+      start.assign(static_cast<size_t>(nx) * ny + 1, 0);
+      for (int a = 0; a < m; ++a) {
+        const int cx = std::min(static_cast<int>((x[a] - x0) / h), nx - 1);
+        const int cy = std::min(static_cast<int>((y[a] - y0) / h), ny - 1);
+        cell_of[a] = cy * nx + cx;
+        ++start[cell_of[a] + 1];
+      }
+      for (size_t c = 1; c < start.size(); ++c) start[c] += start[c - 1];
+      {
+        std::vector<int> next(start.begin(), start.end() - 1);
+        for (int a = 0; a < m; ++a) items[next[cell_of[a]]++] = a;
+      }
+      for (int a = 0; a < m; ++a) {
+        // The k+1 smallest squared distances, ties to the earlier member...
+        int count = 0;
+        met.clear();
+        const int ax = cell_of[a] % nx, ay = cell_of[a] / nx;
+        for (int ring = 0;; ++ring) {
+          // Members outside the rings so far are at least (ring - 1) cells away along x or y.
+          // (Margins: the cells are found in rounded arithmetic, and the ties below must all
+          // have been met.)
+          const double reach = (ring - 1) * h * (1 - 1e-9);
+          if (ring > 0 && count == keep && reach > 0 && reach * reach > near[keep - 1].first * (1 + 1e-13)) break;
+          if (ax - ring < 0 && ay - ring < 0 && ax + ring >= nx && ay + ring >= ny) break;
+          const auto visit = [&](int cx, int cy) {
+            const int c = cy * nx + cx;
+            for (int i = start[c]; i < start[c + 1]; ++i) {
+              const int b = items[i];
+              if (b == a) continue;
+              const std::pair<double, int> e{squared(a, b), b};
+              met.push_back(e);
+              if (count == keep && !(e < near[count - 1])) continue;
+              int at = count < keep ? count++ : count - 1;
+              for (; at > 0 && e < near[at - 1]; --at) near[at] = near[at - 1];
+              near[at] = e;
+            }
+          };
+          for (int cy = std::max(ay - ring, 0); cy <= std::min(ay + ring, ny - 1); ++cy) {
+            if (cy == ay - ring || cy == ay + ring) {
+              for (int cx = std::max(ax - ring, 0); cx <= std::min(ax + ring, nx - 1); ++cx) visit(cx, cy);
+            } else {
+              if (ax - ring >= 0) visit(ax - ring, cy);
+              if (ax + ring < nx) visit(ax + ring, cy);
+            }
           }
         }
-      }
-      // ... and the k nearest as a stable sort of the distances themselves would rank them:
-      // two squared distances may differ and their square roots not, so when the next one
-      // is that close to the k-th, every member whose distance may equal the k-th is
-      // ranked by (distance, member).
-      const double bound = near[neighbours - 1].first * (1 + 1e-14);
-      close.assign(near.begin(), near.begin() + neighbours);
-      if (count > neighbours && near[neighbours].first <= bound) {
-        close.clear();
-        for (const auto& [sq, b] : met)
-          if (sq <= bound) close.emplace_back(std::sqrt(sq), b);
-        std::partial_sort(close.begin(), close.begin() + neighbours, close.end());
-      }
-      for (int k = 0; k < neighbours; ++k) {
-        const uint64_t va = static_cast<uint32_t>(members(a, t)), vb = static_cast<uint32_t>(members(close[k].second, t));
-        pairs.push_back(std::min(va, vb) << 32 | std::max(va, vb));
+        // ... and the k nearest as a stable sort of the distances themselves would rank them:
+        // two squared distances may differ and their square roots not, so when the next one
+        // is that close to the k-th, every member whose distance may equal the k-th is
+        // ranked by (distance, member).
+        const double bound = near[neighbours - 1].first * (1 + 1e-14);
+        close.assign(near.begin(), near.begin() + neighbours);
+        if (count > neighbours && near[neighbours].first <= bound) {
+          close.clear();
+          for (const auto& [sq, b] : met)
+            if (sq <= bound) close.emplace_back(std::sqrt(sq), b);
+          std::partial_sort(close.begin(), close.begin() + neighbours, close.end());
+        }
+        for (int k = 0; k < neighbours; ++k) {
+          const uint64_t va = static_cast<uint32_t>(members(a, t)), vb = static_cast<uint32_t>(members(close[k].second, t));
+          pairs.push_back(std::min(va, vb) << 32 | std::max(va, vb));
+        }
       }
     }
+  };
+  std::vector<uint64_t> pairs;
+  if (times >= 2 && m * times >= kParallelMemberSamples) {
+    std::vector<uint64_t> later;
+    OnTwoThreads([&] { pairs_at(0, times / 2, pairs); }, [&] { pairs_at(times / 2, times, later); });
+    pairs.insert(pairs.end(), later.begin(), later.end());
+  } else {
+    pairs_at(0, times, pairs);
   }
   // Sorted and unique: bucketed by first vertex (vertex indices are bounded), each bucket
   // (a few pairs) sorted on its own.
@@ -321,18 +340,40 @@ void BlockTangentHeadings(const Eigen::Ref<const Trajectory2>& points, const Eig
                           double min_step, Eigen::VectorXd& headings) {
   Check(fixed.rows() == fallback.size(), "BlockTangentHeadings: one fallback heading is needed per fixed range");
   headings.setZero(points.rows());
-  Eigen::Index r = 0;
-  std::vector<FrameRange> ranges;
-  for (Eigen::Index b = 0; b < blocks.rows(); ++b) {
+  // Each block's first fixed range; the blocks are independent.
+  const Eigen::Index count = blocks.rows();
+  std::vector<Eigen::Index> first_range(static_cast<size_t>(count) + 1);
+  Eigen::Index r = 0, frames = 0;
+  bool disjoint = true;  // in order, each after the last: the threads below write apart
+  for (Eigen::Index b = 0; b < count; ++b) {
     const int begin = blocks(b, 0), end = blocks(b, 1);
     Check(0 <= begin && begin <= end && end <= points.rows(), "BlockTangentHeadings: block out of range");
-    ranges.clear();
-    const Eigen::Index first = r;
-    for (; r < fixed.rows() && fixed(r, 0) == b; ++r) ranges.emplace_back(fixed(r, 1), fixed(r, 2));
-    headings.segment(begin, end - begin) =
-        TangentHeadings(points.middleRows(begin, end - begin), ranges, fallback.segment(first, r - first), min_step);
+    if (b > 0 && begin < blocks(b - 1, 1)) disjoint = false;
+    first_range[b] = r;
+    while (r < fixed.rows() && fixed(r, 0) == b) ++r;
+    frames += end - begin;
   }
+  first_range[count] = r;
   Check(r == fixed.rows(), "BlockTangentHeadings: fixed ranges must be grouped by block, in block order");
+  const auto head = [&](Eigen::Index b0, Eigen::Index b1) {
+    std::vector<FrameRange> ranges;
+    for (Eigen::Index b = b0; b < b1; ++b) {
+      const int begin = blocks(b, 0), end = blocks(b, 1);
+      const Eigen::Index lo = first_range[b], hi = first_range[b + 1];
+      ranges.clear();
+      for (Eigen::Index k = lo; k < hi; ++k) ranges.emplace_back(fixed(k, 1), fixed(k, 2));
+      headings.segment(begin, end - begin) =
+          TangentHeadings(points.middleRows(begin, end - begin), ranges, fallback.segment(lo, hi - lo), min_step);
+    }
+  };
+  if (count < 2 || frames < kParallelHeadingFrames || !disjoint) {
+    head(0, count);
+    return;
+  }
+  // Large sets on two threads, split at half of the frames.
+  Eigen::Index split = 0;
+  for (Eigen::Index seen = 0; split < count && 2 * seen < frames; ++split) seen += blocks(split, 1) - blocks(split, 0);
+  OnTwoThreads([&] { head(0, split); }, [&] { head(split, count); });
 }
 
 namespace {
