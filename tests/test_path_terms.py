@@ -519,6 +519,13 @@ def test_group_sample_times_reach_the_end_of_the_shared_range(start, end, expect
     np.testing.assert_allclose(ref_sample_times(start, end, 12.0), expected)
 
 
+@pytest.mark.parametrize("start, end, step", [(0.0, 10.0, 0.0), (0.0, 10.0, -1.0), (0.0, np.inf, 1.0),
+                                              (0.0, 10.0, np.nan)])
+def test_group_sample_times_reject_a_bad_step_or_range(start, end, step):
+    with pytest.raises(ValueError, match="positive step"):
+        path_edit.group_sample_times(start, end, step)
+
+
 def test_a_group_keeps_its_formation_to_the_end_of_a_range_off_the_sampling_grid():
     # 46 frames: regular samples at 0, 12, 24, 36; the mesh also joins the members at
     # frame 45, so pulling the lead's last frame sideways takes the group along to the end.

@@ -103,6 +103,9 @@ def group_sample_times(start: float, end: float, step: float) -> np.ndarray:
     every ``step`` from ``start``, and ``end`` itself, so that the formation holds up to the
     end of the shared range. ``end`` replaces the last regular time when it would follow it
     by less than half a step. Empty when the range is empty."""
+    if not (np.isfinite(step) and step > 0) or not (np.isfinite(start) and np.isfinite(end)):
+        raise ValueError(f"group sampling needs a finite range and a positive step, got [{start}, {end}] "
+                         f"every {step}")
     if end < start:
         return np.zeros(0)
     times = np.arange(start, end + 1e-9, step)

@@ -1,12 +1,17 @@
 #include <pybind11/eigen.h>
 #include <pybind11/stl.h>
 
+#include <tuple>
+
 #include "mocapedit/path_terms.h"
 #include "registry.h"
 
 namespace py = pybind11;
 using mocapedit::Trajectory2;
 using IntGrid = Eigen::Matrix<int, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+// The GIL is released while the solver runs; arguments and results convert with it held.
+const py::call_guard<py::gil_scoped_release> kReleaseGil;
 
 MOCAPEDIT_BINDINGS(BindPathTerms) {
   m.def(
@@ -15,13 +20,10 @@ MOCAPEDIT_BINDINGS(BindPathTerms) {
          double min_baseline) {
         mocapedit::IndexTriples t(0, 3);
         mocapedit::IndexPairs e(0, 2);
-        {
-          py::gil_scoped_release release;
-          mocapedit::ComponentChainTerms(rest, offsets, min_baseline, t, e);
-        }
-        return py::make_tuple(t, e);
+        mocapedit::ComponentChainTerms(rest, offsets, min_baseline, t, e);
+        return std::make_tuple(t, e);
       },
-      py::arg("rest"), py::arg("offsets"), py::arg("min_baseline"),
+      kReleaseGil, py::arg("rest"), py::arg("offsets"), py::arg("min_baseline"),
       "(triangles (T,3), edges (V-A,2)) shape terms of every agent: rest (V,2) concatenated,\n"
       "offsets (A+1,) int32 first vertex of each agent then V. chain_terms for each agent in order.");
   m.def(
@@ -31,9 +33,9 @@ MOCAPEDIT_BINDINGS(BindPathTerms) {
          double min_baseline) {
         Eigen::VectorXi keys, before;
         mocapedit::KeyFrames(rest, offsets, keyed, forced, min_baseline, keys, before);
-        return py::make_tuple(keys, before);
+        return std::make_tuple(keys, before);
       },
-      py::arg("rest"), py::arg("offsets"), py::arg("keyed"), py::arg("forced"), py::arg("min_baseline"),
+      kReleaseGil, py::arg("rest"), py::arg("offsets"), py::arg("keyed"), py::arg("forced"), py::arg("min_baseline"),
       "(keys (K,), before (V,)) int32: key frames of agents solved on keys (keyed (A,) int32 flags),\n"
       "forced (N,) int32 frames that must be keys, and per frame how many keys precede it.");
   m.def(
@@ -41,13 +43,10 @@ MOCAPEDIT_BINDINGS(BindPathTerms) {
       [](const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& keys,
          const Eigen::Ref<const Trajectory2>& positions) {
         Trajectory2 out;
-        {
-          py::gil_scoped_release release;
-          mocapedit::ExpandKeyFrames(rest, keys, positions, out);
-        }
+        mocapedit::ExpandKeyFrames(rest, keys, positions, out);
         return out;
       },
-      py::arg("rest"), py::arg("keys"), py::arg("positions"),
+      kReleaseGil, py::arg("rest"), py::arg("keys"), py::arg("positions"),
       "(V,2) every frame from the (K,2) solved positions of the keys (K,) int32: frames between\n"
       "two keys follow the similarity taking the keys' rest positions to their solved ones.");
   m.def(
@@ -58,7 +57,7 @@ MOCAPEDIT_BINDINGS(BindPathTerms) {
         mocapedit::GroupSampleFrames(sample_times, offsets, times, frames);
         return frames;
       },
-      py::arg("sample_times"), py::arg("offsets"), py::arg("times"),
+      kReleaseGil, py::arg("sample_times"), py::arg("offsets"), py::arg("times"),
       "(M,T) int32 frame of each member at each sampled time, -1 where it has none (within 1e-6):\n"
       "sample_times (F,) concatenated, offsets (M+1,) int32, times (T,).");
   m.def(
@@ -69,7 +68,7 @@ MOCAPEDIT_BINDINGS(BindPathTerms) {
         mocapedit::FramePartners(rest, offsets, min_baseline, partner);
         return partner;
       },
-      py::arg("rest"), py::arg("offsets"), py::arg("min_baseline"),
+      kReleaseGil, py::arg("rest"), py::arg("offsets"), py::arg("min_baseline"),
       "(V,) int32 frame partner of each vertex for group triangles (-1: none); rest (V,2),\n"
       "offsets (A+1,) int32.");
   m.def(
@@ -78,13 +77,10 @@ MOCAPEDIT_BINDINGS(BindPathTerms) {
          const Eigen::Ref<const Eigen::VectorXi>& partner) {
         mocapedit::IndexTriples t(0, 3);
         mocapedit::IndexPairs e(0, 2);
-        {
-          py::gil_scoped_release release;
-          mocapedit::GroupMeshTerms(rest, members, neighbours, partner, t, e);
-        }
-        return py::make_tuple(t, e);
+        mocapedit::GroupMeshTerms(rest, members, neighbours, partner, t, e);
+        return std::make_tuple(t, e);
       },
-      py::arg("rest"), py::arg("members"), py::arg("neighbours"), py::arg("partner"),
+      kReleaseGil, py::arg("rest"), py::arg("members"), py::arg("neighbours"), py::arg("partner"),
       "(triangles (t,3), edges (e,2)) of a group mesh: members (M,T) int32 vertex of each member at\n"
       "each sampled time, each joined to its `neighbours` nearest there; partner (V,) int32.");
   m.def(
@@ -93,13 +89,10 @@ MOCAPEDIT_BINDINGS(BindPathTerms) {
          const Eigen::Ref<const mocapedit::IndexTriples>& fixed, const Eigen::Ref<const Eigen::VectorXd>& fallback,
          double min_step) {
         Eigen::VectorXd out;
-        {
-          py::gil_scoped_release release;
-          mocapedit::BlockTangentHeadings(points, blocks, fixed, fallback, min_step, out);
-        }
+        mocapedit::BlockTangentHeadings(points, blocks, fixed, fallback, min_step, out);
         return out;
       },
-      py::arg("points"), py::arg("blocks"), py::arg("fixed"), py::arg("fallback"), py::arg("min_step"),
+      kReleaseGil, py::arg("points"), py::arg("blocks"), py::arg("fixed"), py::arg("fallback"), py::arg("min_step"),
       "(V,) tangent_headings of each block of rows: points (V,2), blocks (B,2) int32 [begin, end),\n"
       "fixed (R,3) int32 (block, first, last) grouped by block, fallback (R,); other rows 0.");
   m.def(
