@@ -541,3 +541,41 @@ def test_a_group_keeps_its_formation_to_the_end_of_a_range_off_the_sampling_grid
     edited = np.array([result.agents[a.path].ground for a in agents])
     change = np.nanmean(metrics.neighbour_distance_change(source, edited), axis=(1, 2))
     assert change[-1] < 0.08, change[-6:]
+
+
+def _large_group(rows=6, cols=10, frames=500):
+    """rows x cols members walking in a block, the front-left one turned left over the
+    second half: 2,581 key vertices for 6 x 10 x 500 frames, enough for the supernodal
+    factorization."""
+    agents = [_agent(f"/m{r}{c}", _walk(frames, (1.0 * c, -1.2 * r))) for r in range(rows) for c in range(cols)]
+    lead, half = agents[0], frames // 2
+    handles = [path_edit.Handle(lead.path, 0, lead.rest[0], np.inf, "start"),
+               path_edit.Handle(lead.path, half, lead.rest[half], np.inf, "half"),
+               path_edit.Handle(lead.path, frames - 1, lead.rest[half] + [-1.4 / FPS * (frames - 1 - half), 0.0],
+                                np.inf, "turn")]
+    return agents, handles, path_edit.Group([a.path for a in agents], 1.0, "/group")
+
+
+def test_a_large_group_is_ordered_by_position_and_time_without_changing_its_answer(monkeypatch):
+    # The reference: the same problem without vertex times, factored in AMD order.
+    agents, handles, group = _large_group()
+    problem = path_edit.ComponentProblem(agents, handles, [], [group], SETTINGS)
+    times = problem._vertex_times()
+    assert times is not None and len(times) == len(problem.rest) > 2000
+    result = problem.solve()
+    assert result.step1["solver"] == "CHOLMOD supernodal (nested dissection)"
+    monkeypatch.setattr(path_edit.ComponentProblem, "_vertex_times", lambda self: None)
+    reference = path_edit.ComponentProblem(agents, handles, [], [group], SETTINGS).solve()
+    assert reference.step1["solver"] == "CHOLMOD supernodal"
+    for a in agents:
+        np.testing.assert_allclose(result.agents[a.path].ground, reference.agents[a.path].ground, rtol=0, atol=1e-9)
+    for h in handles:
+        assert np.abs(result.agents[h.agent].ground[h.frame] - h.position).max() < 1e-9
+
+
+def test_vertex_times_must_match_the_vertices():
+    rest = _walk(10)
+    with pytest.raises(ValueError, match="vertex times: expected 10, got 9"):
+        _solver.path_edit_precompute(rest, vertex_times=np.zeros(9))
+    with pytest.raises(ValueError, match="vertex times must be finite"):
+        _solver.path_edit_precompute(rest, vertex_times=np.full(10, np.nan))

@@ -178,7 +178,8 @@ class ComponentProblem:
         self.data = _solver.path_edit_precompute(
             self.rest, self.triangles, self.triangle_weights, self.edges, self.edge_weights, self.rigid,
             self.handle_vertex, self.handle_weight, self.link_vertex, self.link_weight,
-            settings.rigid_min_extent, precompute_responses=precompute_responses)
+            settings.rigid_min_extent, precompute_responses=precompute_responses,
+            vertex_times=self._vertex_times())
 
     # ---- key frames --------------------------------------------------------------------
 
@@ -246,6 +247,16 @@ class ComponentProblem:
         for i in members:
             self._red_stationary[i] = [(int(before[fo[i] + f]) - ro[i], int(before[fo[i] + l]) - ro[i])
                                        for f, l in self._inputs[i].stationary]
+
+    def _vertex_times(self) -> np.ndarray | None:
+        """Shot time of each solve vertex when the component has group members (frame
+        numbers for agents without shot times), else None. The solver orders a large
+        group's factorization by position and time (mocapedit/nested_dissection.h)."""
+        if self._sel is None:
+            return None
+        full = np.concatenate([np.asarray(a.sample_times, dtype=np.float64) if a.sample_times is not None
+                               else np.arange(a.frames, dtype=np.float64) for a in self._inputs])
+        return full[self._sel]
 
     @property
     def keys(self) -> dict[str, np.ndarray]:

@@ -2,6 +2,7 @@
 #include <pybind11/stl.h>
 
 #include <limits>
+#include <optional>
 
 #include "mocapedit/path_edit.h"
 #include "registry.h"
@@ -72,7 +73,8 @@ MOCAPEDIT_BINDINGS(BindPathEdit) {
          const mocapedit::IndexPairs& edges, const Eigen::VectorXd& edge_weights,
          const std::vector<std::pair<std::vector<int>, std::string>>& rigid, const Eigen::VectorXi& handles,
          const Eigen::VectorXd& handle_weights, const mocapedit::IndexPairs& links, const Eigen::VectorXd& link_weights,
-         double rigid_min_extent, bool precompute_responses, bool force_qr) {
+         double rigid_min_extent, bool precompute_responses, bool force_qr,
+         const std::optional<Eigen::VectorXd>& vertex_times) {
         mocapedit::PathEditProblem p;
         p.rest = rest;
         p.triangles = triangles;
@@ -92,6 +94,7 @@ MOCAPEDIT_BINDINGS(BindPathEdit) {
         p.rigid_min_extent = rigid_min_extent;
         p.precompute_responses = precompute_responses;
         p.force_qr = force_qr;
+        if (vertex_times) p.vertex_times = *vertex_times;
         PathEditHandle h;
         h.handles = static_cast<int>(handles.size());
         h.links = static_cast<int>(links.rows());
@@ -106,6 +109,7 @@ MOCAPEDIT_BINDINGS(BindPathEdit) {
       py::arg("handles") = Eigen::VectorXi(), py::arg("handle_weights") = Eigen::VectorXd(),
       py::arg("links") = mocapedit::IndexPairs(0, 2), py::arg("link_weights") = Eigen::VectorXd(),
       py::arg("rigid_min_extent") = 0.0, py::arg("precompute_responses") = false, py::arg("force_qr") = false,
+      py::arg("vertex_times") = py::none(),
       "Builds and factors a two-step ARAP path-editing problem (see solver/include/mocapedit/path_edit.h).\n\n"
       "rest (V,2) rest positions; triangles (T,3) int (i, j, k): vertex i in the frame j->k (step 1);\n"
       "edges (E,2) int (j, k) (step 2); rigid: list of (vertex indices, 'rotate'|'translate');\n"
@@ -113,7 +117,9 @@ MOCAPEDIT_BINDINGS(BindPathEdit) {
       "per term, +inf for hard handles and links (empty: all 1, i.e. soft). rigid_min_extent: rotating\n"
       "ranges smaller than this turn with the edges around them. precompute_responses: also solve\n"
       "step 1 once per handle and link so each path_edit_solve only solves step 2 (dragging).\n"
-      "force_qr: use sparse QR for both steps. The GIL is released.");
+      "force_qr: use sparse QR for both steps. vertex_times (V,) float or None: the time of each\n"
+      "vertex (shot times for group members); large group meshes use them to order their\n"
+      "factorization by nested dissection. The GIL is released.");
   m.def(
       "path_edit_solve",
       [](const PathEditHandle& h, const Trajectory2& handle_positions, const Trajectory2& link_offsets) {

@@ -511,6 +511,48 @@ TEST(PathEdit, WideMeshesUseTheSupernodalFactorAndAgreeWithQR) {
   EXPECT_LE((Rows(r.positions, p.handles) - h).cwiseAbs().maxCoeff(), 1e-9);
 }
 
+TEST(PathEdit, WideMeshesWithTimesAreOrderedByDissectionAndAgree) {
+  Trajectory2 h;
+  const int rows = 8, cols = 5, frames = 80;
+  const PathEditProblem p = WideMesh(h, rows, cols, frames);
+  PathEditProblem timed = p;
+  timed.vertex_times.resize(p.rest.rows());
+  for (Eigen::Index v = 0; v < p.rest.rows(); ++v) timed.vertex_times[v] = 100.0 + static_cast<double>(v % frames);
+  const PathEditResult amd = Solve(p, h), nd = Solve(timed, h);
+  EXPECT_EQ(nd.step1.solver, "CHOLMOD supernodal (nested dissection)");
+  EXPECT_LE((nd.positions - amd.positions).cwiseAbs().maxCoeff(), 1e-9);
+  EXPECT_LE((Rows(nd.positions, p.handles) - h).cwiseAbs().maxCoeff(), 1e-9);
+  // Times on other vertices than the grid's (one agent's constrained frame) change the
+  // order, not the answer.
+  timed.vertex_times[frames / 3] += 0.5;
+  EXPECT_LE((Solve(timed, h).positions - amd.positions).cwiseAbs().maxCoeff(), 1e-9);
+}
+
+TEST(PathEdit, WideMeshesKeepMinimumDegreeWhenTheDissectionFillsMore) {
+  // 5 x 5 walkers of 120 frames: a long thin mesh, where AMD's order costs fewer flops than
+  // the dissection's; the solver keeps it (and the answer does not depend on it).
+  Trajectory2 h;
+  const int frames = 120;
+  const PathEditProblem p = WideMesh(h, 5, 5, frames);
+  PathEditProblem timed = p;
+  timed.vertex_times.resize(p.rest.rows());
+  for (Eigen::Index v = 0; v < p.rest.rows(); ++v) timed.vertex_times[v] = static_cast<double>(v % frames);
+  const PathEditResult amd = Solve(p, h), kept = Solve(timed, h);
+  EXPECT_EQ(kept.step1.solver, "CHOLMOD supernodal");
+  EXPECT_LE((kept.positions - amd.positions).cwiseAbs().maxCoeff(), 1e-12);
+}
+
+TEST(PathEdit, RejectsBadVertexTimes) {
+  Trajectory2 h;
+  PathEditProblem p = WideMesh(h, 2, 2, 10);
+  std::shared_ptr<PathEditData> d;
+  p.vertex_times = Eigen::VectorXd::Zero(p.rest.rows() - 1);
+  EXPECT_THROW(mocapedit::PathEditPrecompute(p, d), std::invalid_argument);
+  p.vertex_times = Eigen::VectorXd::Zero(p.rest.rows());
+  p.vertex_times[3] = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(mocapedit::PathEditPrecompute(p, d), std::invalid_argument);
+}
+
 TEST(PathEdit, WideMeshesFactoredOnSeveralThreadsAtOnceAgree) {
   // Components are solved on threads of their own: their BLAS calls must not interfere
   // (Debian's serial OpenBLAS is not thread-safe; see mocapedit/blas_lock.h). A race: without

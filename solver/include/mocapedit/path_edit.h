@@ -40,17 +40,17 @@
 //    a whole agent, but the envelope only one extra entry per column, and fills nothing
 //    else). 1,000 frames: precompute and solve 0.70 -> 0.31 ms; relay of 78 agents x 500
 //    frames (39,000 unknowns): precompute 57-69 -> 14-16 ms (Eigen's AMD took 23 ms).
-//  - Otherwise CHOLMOD analyses the matrix with its AMD (several times faster than
-//    Eigen's); when its factor has at least 40 flops per entry (dense fronts: group meshes)
-//    CHOLMOD's supernodal Cholesky factors it with BLAS, its OpenMP regions kept on the
-//    calling thread (its four threads on two busy cores measured 1.3 to 2 times slower).
-//    Group of 100 agents x 43 key frames (4,298 unknowns): precompute 75-120 -> 42-58
-//    ms, of which step 1's factorization is 25-30 ms: it is flop-bound (1.4e8 flops, complex,
-//    in OpenBLAS's zgemm). METIS or CHOLMOD's nested dissection halve the flops but their
-//    ordering costs as much as they save (20 to 35 ms); a reverse Cuthill-McKee band or a
-//    level-set dissection costs more flops than AMD; AMD started from a reverse
-//    Cuthill-McKee order saves a quarter of the flops but only 8% of the time. Calls
-//    into BLAS hold the lock of mocapedit/blas_lock.h.
+//  - Otherwise CHOLMOD analyses the matrix; when its factor has at least 40 flops per
+//    entry (dense fronts: group meshes) CHOLMOD's supernodal Cholesky factors it with BLAS,
+//    its OpenMP regions kept on the calling thread (its four threads on two busy cores
+//    measured 1.3 to 2 times slower). Calls into BLAS hold the lock of
+//    mocapedit/blas_lock.h. The order: with vertex times, a nested dissection by position
+//    about the centroid at each time and by time (mocapedit/nested_dissection.h), CAMD
+//    within its parts; without, CHOLMOD's AMD (several times faster than Eigen's). Group of
+//    100 agents x 43 key frames, step 1 (4,298 complex unknowns): 7.2e7 flops against
+//    1.25e8 in AMD order; analysis and factorization, best of 40 interleaved: 26 against
+//    30 ms. METIS (through CHOLMOD) reaches 6.6e7 flops but takes 21 ms to order; a
+//    reverse Cuthill-McKee band or a level-set dissection costs more flops than AMD.
 //  - Else Eigen's simplicial LDLT in AMD order (small components with scattered links).
 // UMFPACK LU and CHOLMOD on single paths measured 5 to 30 times slower than a banded LDLT.
 //
@@ -110,6 +110,9 @@ struct PathEditProblem {
   // each other are too small to carry a rotation of their own: they move as a point in
   // step 1 and turn with the step-1 edges entering and leaving them.
   double rigid_min_extent = 0;
+  // #V time of each vertex (any unit; shot times for group members), or empty. Large
+  // systems use them to order their factorization (below).
+  Eigen::VectorXd vertex_times;
   // Also precompute step 1's response to each handle position and link offset (one solve
   // each): PathEditSolve then needs only step 2's solve. For interactive dragging.
   bool precompute_responses = false;
