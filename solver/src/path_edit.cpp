@@ -53,9 +53,12 @@ constexpr int kSupernodalColumns = 2000;
 // 3.5e8 (AMD 6.2e8); 100 x 85: 2.9e8 / 2.8e8 / 2.6e8 (AMD 4.1e8); 400 x 21: 1.7e8 /
 // 1.6e8 / 1.7e8 (AMD 1.8e8).
 constexpr int kDissectionLeaf = 1500;
-// Problems with at least this many vertices build and factor their two steps at once (when
-// the BLAS may be called from two threads). Group of 100 agents x 43 key frames, setup and
-// solve: median 63 ms against 78 ms in turn (40 solves each, interleaved, two cores).
+// Problems with at least this many vertices build their two steps at once, order step 1
+// two ways at once, and factor the two steps at once (when the BLAS may be called from two
+// threads). Group of 100 agents x 43 key frames, setup and solve: median 63 ms against 78
+// ms with the steps in turn (40 solves each, interleaved, two cores); the three phases
+// against one thread per step: best 38.6 / 40.9 ms against 44.3 / 46.7 ms (60 each, two
+// runs), medians 1.5 ms lower.
 constexpr int kParallelStepsVertices = 2000;
 // CHOLMOD's flop count per factor entry above which its fronts are dense enough for the
 // supernodal factorization (BLAS on dense blocks) to beat the simplicial one; CHOLMOD's own
@@ -196,8 +199,15 @@ struct Ldlt : Eigen::SimplicialLDLT<Sparse, Eigen::Lower, Ordering> {
   Eigen::Index FactorNonZeros() const { return this->m_nonZerosPerCol.sum(); }
 };
 
-// CHOLMOD's supernodal Cholesky of a lower triangle, ordered by CAMD within given
-// constraint sets (a nested dissection) or by AMD.
+// Fill-reducing orders of a normal matrix to choose from (empty when not computed), each
+// with AMD's or CAMD's count of its factorization's multiply-subtracts.
+struct CandidateOrders {
+  std::vector<int> dissection;  // CAMD within a nested dissection's sets
+  std::vector<int> amd;
+  double dissection_flops = kInf, amd_flops = kInf;
+};
+
+// CHOLMOD's supernodal Cholesky of a lower triangle.
 template <typename Scalar>
 class SupernodalCholesky {
  public:
@@ -217,28 +227,18 @@ class SupernodalCholesky {
   SupernodalCholesky(const SupernodalCholesky&) = delete;
   SupernodalCholesky& operator=(const SupernodalCholesky&) = delete;
 
-  // Symbolic analysis of `lower` (compressed) in AMD order, or, given `sets` (a nested
-  // dissection: each column's CAMD constraint set), in whichever of CAMD within the sets
-  // and AMD costs fewer flops (by AMD's and CAMD's own counts, without a symbolic analysis
-  // of the loser). Then Flops() and FactorNonZeros() describe the factor, and Dissected()
-  // tells which order won.
-  bool Analyze(Sparse& lower, const int* sets) {
+  // Symbolic analysis of `lower` (compressed) in the candidate order with fewer flops, or
+  // in CHOLMOD's AMD order when there are none. Then Flops() and FactorNonZeros() describe
+  // the factor, and Dissected() tells whether the dissection's order won.
+  bool Analyze(Sparse& lower, const CandidateOrders& orders) {
     cholmod_sparse a = View(lower);
     c_.nmethods = 1;
     c_.postorder = 1;
-    dissected_ = false;
-    if (sets) {
-      const int n = static_cast<int>(lower.cols());
-      const int* p = lower.outerIndexPtr();
-      const int* i = lower.innerIndexPtr();
-      std::vector<int> by_sets(n), by_amd(n);
-      double camd_info[CAMD_INFO], amd_info[AMD_INFO];
-      const bool camd_ok = camd_order(n, p, i, by_sets.data(), nullptr, camd_info, sets) >= CAMD_OK;
-      const bool amd_ok = amd_order(n, p, i, by_amd.data(), nullptr, amd_info) >= AMD_OK;
-      if (!camd_ok && !amd_ok) return false;
-      dissected_ = camd_ok && (!amd_ok || camd_info[CAMD_NMULTSUBS_LDL] < amd_info[AMD_NMULTSUBS_LDL]);
+    dissected_ = !orders.dissection.empty() && orders.dissection_flops < orders.amd_flops;
+    const std::vector<int>& given = dissected_ ? orders.dissection : orders.amd;
+    if (!given.empty()) {
       c_.method[0].ordering = CHOLMOD_GIVEN;
-      f_ = cholmod_analyze_p(&a, dissected_ ? by_sets.data() : by_amd.data(), nullptr, 0, &c_);
+      f_ = cholmod_analyze_p(&a, const_cast<int*>(given.data()), nullptr, 0, &c_);
     } else {
       c_.method[0].ordering = CHOLMOD_AMD;
       f_ = cholmod_analyze(&a, &c_);
@@ -907,7 +907,7 @@ void AssembleStep(const Rows& rows, const Elimination& e, StepSystem<Scalar>& s)
 // Empty without vertex times. Large factorizations are ordered by splitting along these
 // (nested_dissection.h): a group is a formation (position about its centroid) by time.
 std::vector<double> ColumnCoordinates(const PathEditData& d, const Elimination& e) {
-  if (d.times.empty() || e.columns < kSupernodalColumns) return {};
+  if (d.times.empty()) return {};
   const int n = d.vertices;
   std::vector<int> by_time(n);
   std::iota(by_time.begin(), by_time.end(), 0);
@@ -960,6 +960,44 @@ std::vector<double> ColumnCoordinates(const PathEditData& d, const Elimination& 
   return coords;
 }
 
+// The orders of a step's normal matrix for the supernodal factorization to choose from:
+// with vertex times, CAMD within a nested dissection by position and time, and AMD (whose
+// order fills less on some meshes: long thin ones). Both on two threads when `two_threads`.
+// None when the system is small, banded (skyline) or without times: Factor then asks
+// CHOLMOD for its AMD order.
+template <typename Scalar>
+CandidateOrders OrderCandidates(const StepSystem<Scalar>& s, const PathEditData& d, const Elimination& e,
+                                bool two_threads) {
+  CandidateOrders o;
+  if (s.use_skyline || s.cols < kSupernodalColumns || d.times.empty()) return o;
+  const int n = s.cols;
+  const int* ptr = s.normal.outerIndexPtr();
+  const int* idx = s.normal.innerIndexPtr();
+  auto dissect = [&] {
+    const std::vector<double> coords = ColumnCoordinates(d, e);
+    const Dissection parts = CoordinateDissection(n, ptr, idx, coords.data(), 3, kDissectionLeaf);
+    std::vector<int> perm(n);
+    double info[CAMD_INFO];
+    if (camd_order(n, ptr, idx, perm.data(), nullptr, info, parts.set.data()) < CAMD_OK) return;
+    o.dissection = std::move(perm);
+    o.dissection_flops = info[CAMD_NMULTSUBS_LDL];
+  };
+  auto amd = [&] {
+    std::vector<int> perm(n);
+    double info[AMD_INFO];
+    if (amd_order(n, ptr, idx, perm.data(), nullptr, info) < AMD_OK) return;
+    o.amd = std::move(perm);
+    o.amd_flops = info[AMD_NMULTSUBS_LDL];
+  };
+  if (two_threads) {
+    OnTwoThreads(dissect, amd);
+  } else {
+    dissect();
+    amd();
+  }
+  return o;
+}
+
 // Estimate of cond(A^H A): Gershgorin's bound over inverse iteration with the factor.
 template <typename Scalar>
 double EstimateCondition(const StepSystem<Scalar>& s) {
@@ -981,7 +1019,7 @@ double EstimateCondition(const StepSystem<Scalar>& s) {
 // Factors the normal matrix; uses QR when it is singular or too ill-conditioned for
 // refinement of the normal equations to converge.
 template <typename Scalar>
-void Factor(StepSystem<Scalar>& s, const std::vector<double>& coords, bool force_qr) {
+void Factor(StepSystem<Scalar>& s, const CandidateOrders& orders, bool force_qr) {
   if (s.cols == 0) {
     s.solver = "none";
     return;
@@ -997,11 +1035,7 @@ void Factor(StepSystem<Scalar>& s, const std::vector<double>& coords, bool force
     // factor has dense fronts: many flops per factor entry.
     SerialCholmod();
     s.supernodal = std::make_unique<SupernodalCholesky<Scalar>>();
-    Dissection dissection;
-    if (!coords.empty())
-      dissection = CoordinateDissection(s.cols, s.normal.outerIndexPtr(), s.normal.innerIndexPtr(), coords.data(), 3,
-                                        kDissectionLeaf);
-    const bool analyzed = s.supernodal->Analyze(s.normal, dissection.set.empty() ? nullptr : dissection.set.data());
+    const bool analyzed = s.supernodal->Analyze(s.normal, orders);
     s.dissected = s.supernodal->Dissected();
     if (analyzed &&
         s.supernodal->Flops() >= kSupernodalFlopsPerEntry * s.supernodal->FactorNonZeros()) {
@@ -1348,15 +1382,17 @@ void PathEditPrecompute(const PathEditProblem& p, std::shared_ptr<PathEditData>&
   }
   AddSoftRows(p, *d, d->rows1);
   d->rows1.Finish();
-  // The two steps' systems are independent until solved: a large problem builds and
-  // factors the second on another thread while this one does the first.
-  auto step1 = [&] {
+  // The two steps' systems are independent until solved: a large problem builds them on
+  // two threads, orders step 1 two ways on two threads, then factors both steps at once
+  // (when the BLAS may be called from two threads). Group of 100 agents x 43 key frames:
+  // the dissection's order and AMD's each take 2 to 3 ms, and step 1's factorization
+  // (17 ms) is the longer of the two.
+  auto assemble1 = [&] {
     BuildElimination(*d, true, d->elim1);
     AssembleStep(d->rows1, d->elim1, d->step1);
     FindBetaRows(d->rows1, d->elim1, d->step1);
-    Factor(d->step1, ColumnCoordinates(*d, d->elim1), p.force_qr);
   };
-  auto step2 = [&] {
+  auto assemble2 = [&] {
     // Step 2 rows: edges, then soft handles and links.
     for (Eigen::Index e = 0; e < p.edges.rows(); ++e) {
       const int j = p.edges(e, 0), k = p.edges(e, 1);
@@ -1376,16 +1412,24 @@ void PathEditPrecompute(const PathEditProblem& p, std::shared_ptr<PathEditData>&
     BuildElimination(*d, false, d->elim2);
     AssembleStep(d->rows2, d->elim2, d->step2);
     FindBetaRows(d->rows2, d->elim2, d->step2);
-    // In AMD order: step 2's edges (no triangles) fill less, and a dissection measured no
-    // fewer flops (group of 100 agents x 43 key frames: 1.67e7 against 1.68e7) for 1 ms
-    // more analysis.
-    Factor(d->step2, {}, p.force_qr);
   };
-  if (n >= kParallelStepsVertices && Blas().concurrent) {
-    OnTwoThreads(step1, step2);
+  const bool large = n >= kParallelStepsVertices;
+  if (large) {
+    OnTwoThreads(assemble1, assemble2);
   } else {
-    step1();
-    step2();
+    assemble1();
+    assemble2();
+  }
+  // Step 2 in CHOLMOD's AMD order: its edges (no triangles) fill less, and a dissection
+  // measured no fewer flops (group of 100 agents x 43 key frames: 1.67e7 against 1.68e7).
+  const CandidateOrders orders1 = OrderCandidates(d->step1, *d, d->elim1, large);
+  auto factor1 = [&] { Factor(d->step1, orders1, p.force_qr); };
+  auto factor2 = [&] { Factor(d->step2, CandidateOrders{}, p.force_qr); };
+  if (large && Blas().concurrent) {
+    OnTwoThreads(factor1, factor2);
+  } else {
+    factor1();
+    factor2();
   }
   if (p.precompute_responses) PrecomputeResponses(*d);
   out = std::move(d);
