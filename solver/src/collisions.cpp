@@ -1,4 +1,5 @@
 #include "mocapedit/collisions.h"
+#include "mocapedit/two_threads.h"
 
 #include <algorithm>
 #include <cmath>
@@ -255,14 +256,7 @@ std::vector<Partial> OverSamples(const Problem& p, int threads, Fn fn) {
     const int last = static_cast<int>(static_cast<int64_t>(p.samples) * (t + 1) / threads);
     fn(first, last, &parts[static_cast<size_t>(t)]);
   };
-  if (threads == 1) {
-    work(0);
-  } else {
-    std::vector<std::thread> pool;
-    for (int t = 1; t < threads; ++t) pool.emplace_back(work, t);
-    work(0);
-    for (auto& th : pool) th.join();
-  }
+  OnThreads(threads, work);
   return parts;
 }
 

@@ -1,5 +1,6 @@
 #include "mocapedit/separation.h"
 #include "mocapedit/skyline_ldlt.h"
+#include "mocapedit/two_threads.h"
 
 #include <Eigen/SparseCholesky>
 #include <Eigen/SparseCore>
@@ -203,16 +204,9 @@ double Seconds() {
 template <typename Fn>
 void ParallelFor(int count, int threads, Fn fn) {
   threads = std::max(1, std::min(threads, count));
-  if (threads == 1) {
-    for (int i = 0; i < count; ++i) fn(i);
-    return;
-  }
-  std::vector<std::thread> pool;
-  for (int t = 0; t < threads; ++t)
-    pool.emplace_back([&, t] {
-      for (int i = t; i < count; i += threads) fn(i);
-    });
-  for (auto& th : pool) th.join();
+  OnThreads(threads, [&](int t) {
+    for (int i = t; i < count; i += threads) fn(i);
+  });
 }
 
 int ThreadCount(int requested, int64_t work) {

@@ -1,14 +1,17 @@
-// Two independent pieces of work at once: `there` on a thread of its own, `here` on the
-// calling one. Both always finish; an exception from `here` is rethrown first, as if the
-// two had run in turn.
+// Independent pieces of work at once, each on a thread of its own but the first, which runs
+// on the calling thread. All always finish (threads are joined) before an exception from
+// one of them is rethrown: the first piece's, as if they had run in turn.
 #pragma once
 
 #include <exception>
+#include <system_error>
 #include <thread>
 #include <utility>
+#include <vector>
 
 namespace mocapedit {
 
+// `here` on the calling thread, `there` on a thread of its own.
 template <typename Here, typename There>
 void OnTwoThreads(Here&& here, There&& there) {
   std::exception_ptr error_there;
@@ -28,6 +31,38 @@ void OnTwoThreads(Here&& here, There&& there) {
   other.join();
   if (error_here) std::rethrow_exception(error_here);
   if (error_there) std::rethrow_exception(error_there);
+}
+
+// work(t) for t = 0 .. threads - 1: t = 0 on the calling thread, the others on threads of
+// their own (in turn on the calling thread, after its own, if the system has no thread to
+// give). Rethrows the exception of the lowest t that threw.
+template <typename Work>
+void OnThreads(int threads, Work&& work) {
+  if (threads <= 1) {
+    work(0);
+    return;
+  }
+  std::vector<std::exception_ptr> errors(static_cast<size_t>(threads));
+  auto run = [&](int t) {
+    try {
+      work(t);
+    } catch (...) {
+      errors[static_cast<size_t>(t)] = std::current_exception();
+    }
+  };
+  std::vector<std::thread> pool;
+  pool.reserve(static_cast<size_t>(threads - 1));
+  int started = 1;
+  try {
+    for (; started < threads; ++started) pool.emplace_back(run, started);
+  } catch (const std::system_error&) {
+    // No more threads: the rest run here.
+  }
+  run(0);
+  for (int t = started; t < threads; ++t) run(t);
+  for (auto& th : pool) th.join();
+  for (const auto& e : errors)
+    if (e) std::rethrow_exception(e);
 }
 
 }  // namespace mocapedit
