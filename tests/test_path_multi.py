@@ -168,6 +168,35 @@ def test_a_formation_turned_by_one_edit_keeps_its_neighbours(tmp_path):
     assert np.mean(skate) < 0.085
 
 
+def test_a_large_formation_is_solved_end_to_end_in_a_dissection_order(tmp_path, monkeypatch):
+    # 8 x 8 members of 480 frames: 2,600 key vertices, factored by CHOLMOD in the nested
+    # dissection's order (mocapedit/nested_dissection.h), which here fills less than AMD's.
+    # What is written is the same as in AMD's order.
+    frames, rows, cols = 480, 8, 8
+    clip = walker.walk(frames=frames, fps=FPS, speed=1.25, name="walk20")   # 20 m along +Z
+    specs = [examples.AgentSpec(f"m{r}{c}", clip, (1.0 * c, 0.0, -1.2 * r)) for r in range(rows) for c in range(cols)]
+    stage = _stage(tmp_path, specs)
+    names = [f"{CROWD}/m{r}{c}" for r in range(rows) for c in range(cols)]
+    examples.add_group(stage, "/Edits/block", names)
+    z = clip.translations[:, 0, 2].astype(float)
+    lead, half = names[0], frames // 2
+    examples.add_position_constraint(stage, "/Edits/start", lead, 0, (0.0, 0.0, 0.0))
+    examples.add_position_constraint(stage, "/Edits/half", lead, half, (0.0, 0.0, z[half]))
+    examples.add_position_constraint(stage, "/Edits/turn", lead, frames - 1, (z[-1] - z[half], 0.0, z[half]))
+    result, src, out = _solve(tmp_path, stage)
+    assert {result.report.agents[n]["solver"] for n in names} == {
+        "CHOLMOD supernodal (nested dissection); CHOLMOD supernodal"}
+    positions = [c for c in result.report.constraints if c["kind"] == "position"]
+    assert len(positions) == 3 and max(c["residual"] for c in positions) < 1e-6
+    np.testing.assert_allclose(_root(out, lead, [frames - 1])[0], [z[-1] - z[half], -z[half]], atol=1e-6)
+    monkeypatch.setattr(path_edit.ComponentProblem, "_vertex_times", lambda self: None)
+    reference, _, amd = _solve(tmp_path, stage)
+    assert result.report.agents[lead]["solver"] != reference.report.agents[lead]["solver"]
+    sampled = np.arange(frames)
+    for n in names[::7]:
+        np.testing.assert_allclose(_root(out, n, sampled), _root(amd, n, sampled), rtol=0, atol=1e-5)  # float32 at 20 m
+
+
 def test_the_relay_holds_every_hand_over(tmp_path):
     stages = _load_stages()
     stages.path_relay(tmp_path)
