@@ -216,6 +216,7 @@ class SupernodalCholesky {
 
   SupernodalCholesky() {
     cholmod_start(&c_);
+    c_.print = 0;  // failures are reported by the return values (and fall back to QR)
     c_.supernodal = CHOLMOD_SUPERNODAL;
     c_.final_asis = 1;
     c_.quick_return_if_not_posdef = 1;
@@ -270,6 +271,7 @@ class SupernodalCholesky {
     bd.dtype = CHOLMOD_DOUBLE;
     cholmod_common c;
     cholmod_start(&c);
+    c.print = 0;
     cholmod_dense* y = cholmod_solve(CHOLMOD_A, f_, &bd, &c);
     if (!y) {
       cholmod_finish(&c);
