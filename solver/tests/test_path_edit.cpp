@@ -542,6 +542,22 @@ TEST(PathEdit, WideMeshesKeepMinimumDegreeWhenTheDissectionFillsMore) {
   EXPECT_LE((kept.positions - amd.positions).cwiseAbs().maxCoeff(), 1e-12);
 }
 
+TEST(PathEdit, SingularWideMeshesFallBackToQR) {
+  // A vertex in no term: its column of the normal matrix is zero, CHOLMOD's factorization
+  // fails, and QR takes over, in either order; the mesh is still solved.
+  Trajectory2 h;
+  PathEditProblem p = WideMesh(h);
+  const Eigen::Index n = p.rest.rows();
+  p.rest.conservativeResize(n + 1, 2);
+  p.rest.row(n) << -50.0, -50.0;
+  for (bool times : {false, true}) {
+    if (times) p.vertex_times = Eigen::VectorXd::LinSpaced(n + 1, 0, 1);
+    const PathEditResult r = Solve(p, h);
+    EXPECT_EQ(r.step1.solver, "SPQR (singular)");
+    EXPECT_LE((Rows(r.positions, p.handles) - h).cwiseAbs().maxCoeff(), 1e-9);
+  }
+}
+
 TEST(PathEdit, RejectsBadVertexTimes) {
   Trajectory2 h;
   PathEditProblem p = WideMesh(h, 2, 2, 10);
