@@ -197,6 +197,30 @@ def test_a_large_formation_is_solved_end_to_end_in_a_dissection_order(tmp_path, 
         np.testing.assert_allclose(_root(out, n, sampled), _root(amd, n, sampled), rtol=0, atol=1e-5)  # float32 at 20 m
 
 
+def test_a_group_in_two_blocks_and_a_member_of_another_time_solve_end_to_end(tmp_path, walk_clip):
+    # Blocks 10 m apart: the group mesh joins them, so the far block follows the edit. A
+    # second group pairs a far-block member with one whose clip plays after it (no shared
+    # time): it joins nothing, and the later one, held by nothing, is left as it was.
+    spots = [(0.0, 0.0), (1.0, 0.0), (0.0, -1.2), (1.0, -1.2), (10.0, 0.0), (11.0, 0.0), (10.0, -1.2), (11.0, -1.2)]
+    specs = [examples.AgentSpec(f"m{i}", walk_clip, (x, 0.0, z)) for i, (x, z) in enumerate(spots)]
+    specs.append(examples.AgentSpec("late", walk_clip, (5.0, 0.0, 0.0), time_offset=500.0))
+    stage = _stage(tmp_path, specs)
+    names = [f"{CROWD}/{s.name}" for s in specs]
+    examples.add_group(stage, "/Edits/blocks", names[:8])
+    examples.add_group(stage, "/Edits/apart_in_time", [names[4], names[8]])
+    lead = names[0]
+    examples.add_position_constraint(stage, "/Edits/start", lead, 0, (0.0, 0.0, 0.0))
+    examples.add_position_constraint(stage, "/Edits/end", lead, 120, (-2.0, 0.0, 5.5))
+    result, src, out = _solve(tmp_path, stage)
+    assert max(c["residual"] for c in result.report.constraints if c["kind"] == "position") < 1e-6
+    solvers = {result.report.agents[n]["solver"] for n in names[:8]}
+    assert not any(s.startswith("SPQR") for s in solvers), solvers
+    frames = np.arange(121)
+    far = [np.abs(_root(out, n, frames) - _root(src, n, frames)).max() for n in names[4:8]]
+    assert min(far) > 0.5
+    np.testing.assert_allclose(_root(out, names[8], 500 + frames), _root(src, names[8], 500 + frames), atol=1e-6)
+
+
 def test_the_relay_holds_every_hand_over(tmp_path):
     stages = _load_stages()
     stages.path_relay(tmp_path)

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from mocapedit import _solver, metrics, path_edit
 
@@ -51,17 +53,42 @@ def ref_frame_partners(rest, offsets, min_baseline):
     return out
 
 
-def ref_group_mesh(rest, vert, k, partner):
-    """Each member to its k nearest at every sampled time (a stable sort of distances)."""
+def ref_group_mesh(rest, vert, k, partner, connect=True):
+    """Each member to its k nearest at every sampled time (a stable sort of distances); then,
+    while the joined members fall into several clusters, each cluster to its nearest other
+    cluster (smallest squared distance, then members) by the k nearest pairs between them."""
     pairs = []
     m = len(vert)
     for t in range(vert.shape[1]):
         p = rest[vert[:, t]]
         d = np.linalg.norm(p[:, None] - p[None], axis=-1)
         d[np.arange(m), np.arange(m)] = np.inf
+        joined = []
         for a in range(m):
             for b in np.argsort(d[a], kind="stable")[:k]:
-                pairs.append((min(vert[a, t], vert[b, t]), max(vert[a, t], vert[b, t])))
+                joined.append((a, int(b)))
+        if k > 0 and connect:
+            dx, dy = p[:, None, 0] - p[None, :, 0], p[:, None, 1] - p[None, :, 1]
+            sq = dx * dx + dy * dy
+            while True:
+                label = np.arange(m)
+                for _ in range(m):   # clusters of the joined pairs
+                    for a, b in joined:
+                        label[a] = label[b] = min(label[a], label[b])
+                best = {}
+                for a in range(m):
+                    for b in range(a + 1, m):
+                        if label[a] != label[b]:
+                            for c in (label[a], label[b]):
+                                best[c] = min(best.get(c, (np.inf, m, m)), (sq[a, b], a, b))
+                if not best:
+                    break
+                for pair in sorted({tuple(sorted((label[a], label[b]))) for _, a, b in best.values()}):
+                    across = sorted((sq[a, b], a, b) for a in range(m) for b in range(a + 1, m)
+                                    if {label[a], label[b]} == set(pair))
+                    joined += [(a, b) for _, a, b in across[:k]]
+        for a, b in joined:
+            pairs.append((min(vert[a, t], vert[b, t]), max(vert[a, t], vert[b, t])))
     edg = np.unique(np.array(pairs, np.int64).reshape(-1, 2), axis=0)
     tri = [(v, w, partner[w]) for v, w in np.concatenate([edg, edg[:, ::-1]])
            if partner[w] >= 0 and np.linalg.norm(rest[v] - rest[w]) > 0]
@@ -281,11 +308,12 @@ def test_group_sample_frames_match_searchsorted():
     assert (got[1] == -1).all() and (got[2] >= 0).all() and (got[0] == -1).sum() == 2  # before its first and after its last
 
 
-@pytest.mark.parametrize("layout", ["grid", "jittered", "coincident", "large"])
+@pytest.mark.parametrize("layout", ["grid", "jittered", "coincident", "large", "clusters"])
 def test_group_mesh_terms_match_a_stable_sort(layout):
     rng = np.random.default_rng(4)
     # "large": 60 members x 43 sampled times, enough for the search to split the times
-    # between two threads.
+    # between two threads. "clusters": four blocks of six, 10 m apart, whose nearest
+    # neighbours stay inside each block.
     members, frames = (60, 300) if layout == "large" else (24, 30)
     if layout == "large":
         layout = "jittered"
@@ -294,6 +322,8 @@ def test_group_mesh_terms_match_a_stable_sort(layout):
         origin += rng.normal(scale=0.3, size=origin.shape)
     if layout == "coincident":
         origin[5] = origin[4]
+    if layout == "clusters":
+        origin = np.array([(1.0 * (m % 3) + 10.0 * (m // 6), -1.2 * ((m // 3) % 2)) for m in range(members)])
     rest = np.concatenate([_walk(frames, o) for o in origin])
     offsets = np.cumsum([0] + [frames] * members).astype(np.int32)
     partner = _solver.frame_partners(rest, offsets, 0.01)
@@ -303,6 +333,12 @@ def test_group_mesh_terms_match_a_stable_sort(layout):
         ref_tri, ref_edg = ref_group_mesh(rest, vert, k, partner)
         np.testing.assert_array_equal(edg, ref_edg)
         np.testing.assert_array_equal(tri, ref_tri)
+        # At every sampled time the edges join all the members into one piece.
+        at = edg[:, 0] % frames
+        for f in range(0, frames, 7):
+            e = edg[at == f] // frames
+            joined = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(members, members))
+            assert connected_components(joined, directed=False)[0] == 1, (layout, k, f)
     with pytest.raises(ValueError, match="neighbours"):
         _solver.group_mesh_terms(rest, vert, members, partner)
 
@@ -322,8 +358,10 @@ def test_group_mesh_ties_go_to_the_earlier_member():
     partner = np.full(len(rest), -1, np.int32)
     _, edg = _solver.group_mesh_terms(rest, vert, 1, partner)
     np.testing.assert_array_equal(edg, ref_group_mesh(rest, vert, 1, partner)[1])
-    assert [0, 1] in (edg // 3).tolist() and [5, 6] in (edg // 3).tolist()
-    assert [0, 2] not in (edg // 3).tolist() and [5, 7] not in (edg // 3).tolist()
+    # The nearest-neighbour joins (before the pieces they leave are joined):
+    nearest = (ref_group_mesh(rest, vert, 1, partner, connect=False)[1] // 3).tolist()
+    assert [0, 1] in nearest and [5, 6] in nearest
+    assert [0, 2] not in nearest and [5, 7] not in nearest
 
 
 def _similarity_system(rng, bodies, rows, coincide):
@@ -579,3 +617,41 @@ def test_vertex_times_must_match_the_vertices():
         _solver.path_edit_precompute(rest, vertex_times=np.zeros(9))
     with pytest.raises(ValueError, match="vertex times must be finite"):
         _solver.path_edit_precompute(rest, vertex_times=np.full(10, np.nan))
+
+
+def test_a_group_in_blocks_apart_moves_as_one():
+    # Two blocks of four, 10 m apart: each member's three nearest neighbours are in its own
+    # block, so the nearest-neighbour mesh alone left the far block free (a singular system,
+    # solved by QR, the far block moving wherever the least-squares answer put it). The
+    # mesh now joins the blocks.
+    frames = 200
+    origins = [(0, 0), (1, 0), (0, -1.2), (1, -1.2), (10, 0), (11, 0), (10, -1.2), (11, -1.2)]
+    agents = [_agent(f"/m{i}", _walk(frames, o)) for i, o in enumerate(origins)]
+    lead, half = agents[0], frames // 2
+    handles = [path_edit.Handle(lead.path, 0, lead.rest[0], np.inf, "start"),
+               path_edit.Handle(lead.path, half, lead.rest[half], np.inf, "half"),
+               path_edit.Handle(lead.path, frames - 1, lead.rest[half] + [-1.4 / FPS * (frames - 1 - half), 0.0],
+                                np.inf, "turn")]
+    group = path_edit.Group([a.path for a in agents], 1.0, "/group")
+    result = path_edit.ComponentProblem(agents, handles, [], [group], SETTINGS).solve()
+    assert not result.solver.startswith("SPQR") and not result.notes
+    source = np.array([a.rest for a in agents])
+    edited = np.array([result.agents[a.path].ground for a in agents])
+    apart = lambda p: np.linalg.norm(p[4:].mean(axis=0) - p[:4].mean(axis=0), axis=1)   # noqa: E731
+    assert np.abs(apart(edited) / apart(source) - 1).mean() < 0.03
+    assert np.linalg.norm(edited[4:, -1] - source[4:, -1], axis=1).min() > 5.0   # it turned with the group
+
+
+def test_a_group_whose_members_share_no_time_leaves_the_unheld_ones_alone():
+    # No sampled time joins them: each member is its own body, and one nothing holds stays
+    # where it is (the two used to be one body, and the solve failed).
+    frames = 100
+    a = _agent("/a", _walk(frames, (0.0, 0.0)))
+    b = _agent("/b", _walk(frames, (2.0, 0.0)), times=np.arange(frames, dtype=np.float64) + 500.0)
+    handles = [path_edit.Handle("/a", 0, a.rest[0], np.inf, "start"),
+               path_edit.Handle("/a", frames - 1, a.rest[-1] + [1.0, 0.0], np.inf, "end")]
+    result = path_edit.ComponentProblem([a, b], handles, [], [path_edit.Group(["/a", "/b"], 1.0, "/g")],
+                                        SETTINGS).solve()
+    np.testing.assert_array_equal(result.agents["/b"].ground, b.rest)
+    np.testing.assert_allclose(result.agents["/a"].ground[-1], a.rest[-1] + [1.0, 0.0], atol=1e-9)
+

@@ -197,9 +197,17 @@ class ComponentProblem:
         self._samples: dict[int, np.ndarray] = {}   # group -> (M,T) frame of each member, -1 none
         self._sel = None                             # (V,) frame of each solve vertex
         self._red_stationary = [a.stationary for a in self._inputs]
-        active = [(n, g, [self.index[m] for m in g.members if m in self.index])
-                  for n, g in enumerate(self.groups) if g.stiffness > 0]
-        members = sorted({i for _, _, ids in active for i in ids})
+        # Groups that join their members: at least two of them present, sharing some time.
+        active = []
+        for n, g in enumerate(self.groups):
+            ids = [self.index[m] for m in g.members if m in self.index]
+            if g.stiffness <= 0 or len(ids) < 2:
+                continue
+            times = [self._inputs[i].sample_times for i in ids]
+            start, end = max(float(t[0]) for t in times), min(float(t[-1]) for t in times)
+            if end >= start:
+                active.append((n, ids, times, start, end))
+        members = sorted({i for _, ids, *_ in active for i in ids})
         self._members = members
         if not members:
             self.rest = self._rest_full
@@ -209,13 +217,7 @@ class ComponentProblem:
         is_member = np.zeros(len(self._inputs), np.int32)
         is_member[members] = 1
         forced = []
-        for n, g, ids in active:
-            if not ids:
-                continue
-            times = [self._inputs[i].sample_times for i in ids]
-            start, end = max(float(t[0]) for t in times), min(float(t[-1]) for t in times)
-            if end < start:
-                continue
+        for n, ids, times, start, end in active:
             frames = _solver.group_sample_frames(
                 np.concatenate(times, dtype=np.float64),
                 np.cumsum([0] + [len(t) for t in times], dtype=np.int32),
@@ -332,8 +334,9 @@ class ComponentProblem:
     # ---- the freedom the constraints leave -------------------------------------------
 
     def _bodies(self) -> list[list[int]]:
-        """Agent indices of each body: a group joins its members, an agent is its own."""
-        if not any(g.stiffness > 0 for g in self.groups):
+        """Agent indices of each body: a group whose mesh joins its members (they share some
+        time) makes them one, an agent is its own."""
+        if not self._samples:
             return [[i] for i in range(len(self.order))]
         parent = list(range(len(self.order)))
 
@@ -342,9 +345,9 @@ class ComponentProblem:
                 parent[i] = parent[parent[i]]
                 i = parent[i]
             return i
-        for g in self.groups:
+        for n, g in enumerate(self.groups):
             ids = [self.index[m] for m in g.members if m in self.index]
-            if g.stiffness > 0:
+            if n in self._samples:
                 for k in ids[1:]:
                     parent[find(k)] = find(ids[0])
         out: dict[int, list[int]] = {}
@@ -386,6 +389,14 @@ class ComponentProblem:
         anchors = [sorted(x) for x in held]
         places = self._count_places(anchors)
         ro = self._red_offset
+        # A body nothing holds (a group member whose group joins nothing, its members sharing
+        # no time) is not edited: it stays where it is.
+        for k, body in enumerate(bodies):
+            if not anchors[k]:
+                v = ro[body[0]]
+                self._append_handle(v, self.rest[v], HARD, None)
+                held[k].add(v), hard[k].add(v)
+                anchors[k], places[k] = [v], 1
         self.translate_only = set()
         self.rigid, self.rigid_refs = [], []
         for body, anchor, n in zip(bodies, anchors, places):

@@ -219,7 +219,68 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
     // Members bucketed in a grid of about one member per cell; each one's candidates are met
     // ring by ring around its cell, until the next ring is farther than the (k+1)-th nearest.
     std::vector<int> cell_of(static_cast<size_t>(m)), start, items(static_cast<size_t>(m));
+    // Clusters of the members joined so far at this time (union-find, path halving).
+    std::vector<int> root(static_cast<size_t>(m));
+    const auto find = [&](int a) {
+      while (root[a] != a) a = root[a] = root[root[a]];
+      return a;
+    };
+    Eigen::Index now = 0;  // the sampled time being joined
+    const auto join = [&](int a, int b) {
+      const uint64_t va = static_cast<uint32_t>(members(a, now)), vb = static_cast<uint32_t>(members(b, now));
+      pairs.push_back(std::min(va, vb) << 32 | std::max(va, vb));
+      root[find(a)] = find(b);
+    };
+    // Nearest neighbours can keep to separate clusters (a group walking as two blocks apart),
+    // each of which would then be free to move on its own. Each round finds every cluster's
+    // nearest other cluster (Boruvka; pairs ranked by squared distance, then member) and
+    // joins the two by their `neighbours` nearest pairs, so that each holds the other as
+    // firmly as a member holds its neighbours; until one cluster is left. Only groups in
+    // pieces pay this search, m^2 per round.
+    std::vector<std::array<double, 3>> best;  // per cluster root: squared distance, a, b
+    std::vector<std::array<double, 3>> across;
+    const auto connect_clusters = [&] {
+      for (;;) {
+        int clusters = 0;
+        for (int a = 0; a < m; ++a) clusters += find(a) == a;
+        if (clusters <= 1) return;
+        best.assign(static_cast<size_t>(m), {std::numeric_limits<double>::infinity(), -1, -1});
+        for (int a = 0; a < m; ++a)
+          for (int b = a + 1; b < m; ++b) {
+            const int ra = find(a), rb = find(b);
+            if (ra == rb) continue;
+            const std::array<double, 3> e{squared(a, b), static_cast<double>(a), static_cast<double>(b)};
+            if (e < best[ra]) best[ra] = e;
+            if (e < best[rb]) best[rb] = e;
+          }
+        // The cluster pairs to join, as (smaller root, larger root), once each.
+        std::vector<std::pair<int, int>> joins;
+        for (int r = 0; r < m; ++r)
+          if (best[r][1] >= 0) {
+            const int ra = find(static_cast<int>(best[r][1])), rb = find(static_cast<int>(best[r][2]));
+            joins.emplace_back(std::min(ra, rb), std::max(ra, rb));
+          }
+        std::sort(joins.begin(), joins.end());
+        joins.erase(std::unique(joins.begin(), joins.end()), joins.end());
+        std::vector<std::array<double, 3>> chosen;
+        for (const auto& [r1, r2] : joins) {
+          across.clear();
+          for (int a = 0; a < m; ++a)
+            for (int b = a + 1; b < m; ++b) {
+              const int ra = find(a), rb = find(b);
+              if ((ra == r1 && rb == r2) || (ra == r2 && rb == r1))
+                across.push_back({squared(a, b), static_cast<double>(a), static_cast<double>(b)});
+            }
+          const size_t keep = std::min(across.size(), static_cast<size_t>(neighbours));
+          std::partial_sort(across.begin(), across.begin() + static_cast<std::ptrdiff_t>(keep), across.end());
+          chosen.insert(chosen.end(), across.begin(), across.begin() + static_cast<std::ptrdiff_t>(keep));
+        }
+        for (const auto& e : chosen) join(static_cast<int>(e[1]), static_cast<int>(e[2]));
+      }
+    };
     for (Eigen::Index t = t_begin; t < t_end && neighbours > 0; ++t) {
+      now = t;
+      for (int a = 0; a < m; ++a) root[a] = a;
       double x0 = std::numeric_limits<double>::infinity(), y0 = x0, x1 = -x0, y1 = -x0;
       for (Eigen::Index a = 0; a < m; ++a) {
         x[a] = rest(members(a, t), 0), y[a] = rest(members(a, t), 1);
@@ -288,10 +349,10 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
           std::partial_sort(close.begin(), close.begin() + neighbours, close.end());
         }
         for (int k = 0; k < neighbours; ++k) {
-          const uint64_t va = static_cast<uint32_t>(members(a, t)), vb = static_cast<uint32_t>(members(close[k].second, t));
-          pairs.push_back(std::min(va, vb) << 32 | std::max(va, vb));
+          join(a, close[k].second);
         }
       }
+      connect_clusters();
     }
   };
   std::vector<uint64_t> pairs;
