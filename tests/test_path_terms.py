@@ -308,7 +308,7 @@ def test_group_sample_frames_match_searchsorted():
     assert (got[1] == -1).all() and (got[2] >= 0).all() and (got[0] == -1).sum() == 2  # before its first and after its last
 
 
-@pytest.mark.parametrize("layout", ["grid", "jittered", "coincident", "large", "clusters"])
+@pytest.mark.parametrize("layout", ["grid", "jittered", "coincident", "large", "clusters", "clumps"])
 def test_group_mesh_terms_match_a_stable_sort(layout):
     rng = np.random.default_rng(4)
     # "large": 60 members x 43 sampled times, enough for the search to split the times
@@ -324,6 +324,8 @@ def test_group_mesh_terms_match_a_stable_sort(layout):
         origin[5] = origin[4]
     if layout == "clusters":
         origin = np.array([(1.0 * (m % 3) + 10.0 * (m // 6), -1.2 * ((m // 3) % 2)) for m in range(members)])
+    if layout == "clumps":   # eight clumps of three scattered over 60 m: several rounds of joins
+        origin = np.repeat(rng.uniform(0.0, 60.0, (8, 2)), 3, axis=0) + rng.normal(scale=0.3, size=(members, 2))
     rest = np.concatenate([_walk(frames, o) for o in origin])
     offsets = np.cumsum([0] + [frames] * members).astype(np.int32)
     partner = _solver.frame_partners(rest, offsets, 0.01)

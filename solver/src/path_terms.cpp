@@ -219,6 +219,18 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
     // Members bucketed in a grid of about one member per cell; each one's candidates are met
     // ring by ring around its cell, until the next ring is farther than the (k+1)-th nearest.
     std::vector<int> cell_of(static_cast<size_t>(m)), start, items(static_cast<size_t>(m));
+    // visit(cx, cy) for each cell of the square ring `ring` cells around (ax, ay) in an
+    // nx by ny grid.
+    const auto for_ring = [](int ax, int ay, int ring, int nx, int ny, auto&& visit) {
+      for (int cy = std::max(ay - ring, 0); cy <= std::min(ay + ring, ny - 1); ++cy) {
+        if (cy == ay - ring || cy == ay + ring) {
+          for (int cx = std::max(ax - ring, 0); cx <= std::min(ax + ring, nx - 1); ++cx) visit(cx, cy);
+        } else {
+          if (ax - ring >= 0) visit(ax - ring, cy);
+          if (ax + ring < nx) visit(ax + ring, cy);
+        }
+      }
+    };
     // Clusters of the members joined so far at this time (union-find, path halving).
     std::vector<int> root(static_cast<size_t>(m));
     const auto find = [&](int a) {
@@ -236,44 +248,73 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
     // nearest other cluster (Boruvka; pairs ranked by squared distance, then member) and
     // joins the two by their `neighbours` nearest pairs, so that each holds the other as
     // firmly as a member holds its neighbours; until one cluster is left. Only groups in
-    // pieces pay this search, m^2 per round.
+    // pieces pay this search: each member looks, ring by ring in the grid below, for the
+    // nearest member of another cluster, no farther than the best its cluster has found.
+    // 1,000 members, 20 sampled times: 6 ms in a block (one piece), 21 ms at random, 60 ms in
+    // clumps of five far apart.
     std::vector<std::array<double, 3>> best;  // per cluster root: squared distance, a, b
-    std::vector<std::array<double, 3>> across;
-    const auto connect_clusters = [&] {
+    std::vector<int> cluster(static_cast<size_t>(m)), first(static_cast<size_t>(m) + 1), listed(static_cast<size_t>(m));
+    const auto connect_clusters = [&](int nx, int ny, double h) {
       for (;;) {
         int clusters = 0;
-        for (int a = 0; a < m; ++a) clusters += find(a) == a;
+        std::fill(first.begin(), first.end(), 0);
+        for (int a = 0; a < m; ++a) {
+          cluster[a] = find(a);
+          clusters += cluster[a] == a;
+          ++first[cluster[a] + 1];
+        }
         if (clusters <= 1) return;
+        // Each cluster's members, listed by root.
+        for (int r = 0; r < m; ++r) first[r + 1] += first[r];
+        {
+          std::vector<int> next(first.begin(), first.end() - 1);
+          for (int a = 0; a < m; ++a) listed[next[cluster[a]]++] = a;
+        }
         best.assign(static_cast<size_t>(m), {std::numeric_limits<double>::infinity(), -1, -1});
-        for (int a = 0; a < m; ++a)
-          for (int b = a + 1; b < m; ++b) {
-            const int ra = find(a), rb = find(b);
-            if (ra == rb) continue;
-            const std::array<double, 3> e{squared(a, b), static_cast<double>(a), static_cast<double>(b)};
-            if (e < best[ra]) best[ra] = e;
-            if (e < best[rb]) best[rb] = e;
+        for (int a = 0; a < m; ++a) {
+          const int ax = cell_of[a] % nx, ay = cell_of[a] / nx;
+          std::array<double, 3>& mine = best[cluster[a]];
+          for (int ring = 0;; ++ring) {
+            // As in the neighbour search: members outside the rings so far are at least
+            // (ring - 1) cells away.
+            const double reach = (ring - 1) * h * (1 - 1e-9);
+            if (ring > 0 && reach > 0 && reach * reach > mine[0] * (1 + 1e-13)) break;
+            if (ax - ring < 0 && ay - ring < 0 && ax + ring >= nx && ay + ring >= ny) break;
+            const auto visit = [&](int cx, int cy) {
+              const int c = cy * nx + cx;
+              for (int i = start[c]; i < start[c + 1]; ++i) {
+                const int b = items[i];
+                if (cluster[b] == cluster[a]) continue;
+                const int lo = std::min(a, b), hi = std::max(a, b);
+                const std::array<double, 3> e{squared(lo, hi), static_cast<double>(lo), static_cast<double>(hi)};
+                if (e < mine) mine = e;
+                if (e < best[cluster[b]]) best[cluster[b]] = e;
+              }
+            };
+            for_ring(ax, ay, ring, nx, ny, visit);
           }
-        // The cluster pairs to join, as (smaller root, larger root), once each.
+        }
+        // The cluster pairs to join, as (smaller root, larger root), once each, and the
+        // member pairs across each.
         std::vector<std::pair<int, int>> joins;
         for (int r = 0; r < m; ++r)
           if (best[r][1] >= 0) {
-            const int ra = find(static_cast<int>(best[r][1])), rb = find(static_cast<int>(best[r][2]));
+            const int ra = cluster[static_cast<int>(best[r][1])], rb = cluster[static_cast<int>(best[r][2])];
             joins.emplace_back(std::min(ra, rb), std::max(ra, rb));
           }
         std::sort(joins.begin(), joins.end());
         joins.erase(std::unique(joins.begin(), joins.end()), joins.end());
-        std::vector<std::array<double, 3>> chosen;
+        std::vector<std::array<double, 3>> chosen, across;
         for (const auto& [r1, r2] : joins) {
           across.clear();
-          for (int a = 0; a < m; ++a)
-            for (int b = a + 1; b < m; ++b) {
-              const int ra = find(a), rb = find(b);
-              if ((ra == r1 && rb == r2) || (ra == r2 && rb == r1))
-                across.push_back({squared(a, b), static_cast<double>(a), static_cast<double>(b)});
+          for (int i = first[r1]; i < first[r1 + 1]; ++i)
+            for (int j = first[r2]; j < first[r2 + 1]; ++j) {
+              const int lo = std::min(listed[i], listed[j]), hi = std::max(listed[i], listed[j]);
+              across.push_back({squared(lo, hi), static_cast<double>(lo), static_cast<double>(hi)});
             }
-          const size_t keep = std::min(across.size(), static_cast<size_t>(neighbours));
-          std::partial_sort(across.begin(), across.begin() + static_cast<std::ptrdiff_t>(keep), across.end());
-          chosen.insert(chosen.end(), across.begin(), across.begin() + static_cast<std::ptrdiff_t>(keep));
+          const size_t take = std::min(across.size(), static_cast<size_t>(neighbours));
+          std::partial_sort(across.begin(), across.begin() + static_cast<std::ptrdiff_t>(take), across.end());
+          chosen.insert(chosen.end(), across.begin(), across.begin() + static_cast<std::ptrdiff_t>(take));
         }
         for (const auto& e : chosen) join(static_cast<int>(e[1]), static_cast<int>(e[2]));
       }
@@ -327,14 +368,7 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
               near[at] = e;
             }
           };
-          for (int cy = std::max(ay - ring, 0); cy <= std::min(ay + ring, ny - 1); ++cy) {
-            if (cy == ay - ring || cy == ay + ring) {
-              for (int cx = std::max(ax - ring, 0); cx <= std::min(ax + ring, nx - 1); ++cx) visit(cx, cy);
-            } else {
-              if (ax - ring >= 0) visit(ax - ring, cy);
-              if (ax + ring < nx) visit(ax + ring, cy);
-            }
-          }
+          for_ring(ax, ay, ring, nx, ny, visit);
         }
         // ... and the k nearest as a stable sort of the distances themselves would rank them:
         // two squared distances may differ and their square roots not, so when the next one
@@ -352,7 +386,7 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
           join(a, close[k].second);
         }
       }
-      connect_clusters();
+      connect_clusters(nx, ny, h);
     }
   };
   std::vector<uint64_t> pairs;
