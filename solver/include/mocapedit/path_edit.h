@@ -44,13 +44,15 @@
 //    entry (dense fronts: group meshes) CHOLMOD's supernodal Cholesky factors it with BLAS,
 //    its OpenMP regions kept on the calling thread (its four threads on two busy cores
 //    measured 1.3 to 2 times slower). Calls into BLAS hold the lock of
-//    mocapedit/blas_lock.h. The order: with vertex times, a nested dissection by position
-//    about the centroid at each time and by time (mocapedit/nested_dissection.h), CAMD
-//    within its parts; without, CHOLMOD's AMD (several times faster than Eigen's). Group of
-//    100 agents x 43 key frames, step 1 (4,298 complex unknowns): 7.2e7 flops against
-//    1.25e8 in AMD order; analysis and factorization, best of 40 interleaved: 26 against
-//    30 ms. METIS (through CHOLMOD) reaches 6.6e7 flops but takes 21 ms to order; a
-//    reverse Cuthill-McKee band or a level-set dissection costs more flops than AMD.
+//    mocapedit/blas_lock.h. The order of step 1, given vertex times: a nested dissection
+//    by position about the centroid at each time and by time (mocapedit/nested_dissection.h)
+//    with CAMD within its parts, or AMD's, whichever AMD's and CAMD's own counts say costs
+//    fewer flops (AMD wins on long thin and on wide short formations); otherwise, and for
+//    step 2, CHOLMOD's AMD (several times faster than Eigen's). Group of 100 agents x 43
+//    key frames, step 1 (4,298 complex unknowns): 7.24e7 flops against 1.43e8 in AMD order;
+//    its factorization 18 to 30 ms against 28 to 37 ms in interleaved runs. METIS (through
+//    CHOLMOD) reaches 6.6e7 flops but takes 21 ms to order; a reverse Cuthill-McKee band or
+//    a level-set dissection costs more flops than AMD.
 //  - Else Eigen's simplicial LDLT in AMD order (small components with scattered links).
 // UMFPACK LU and CHOLMOD on single paths measured 5 to 30 times slower than a banded LDLT.
 //
