@@ -21,10 +21,10 @@ normal equations), measured in the same run on the same terms:
   measured over the source's contact frames) before and after, and the length ratio.
 
 Times are the best of many runs (solves: 500 or 2,000 runs; groups and relays: 41, whose
-median is recorded too; their peers 3 to 30). The shared two-core machine this was developed on runs the same code in two
-speed modes, for spells of milliseconds to seconds: 2,000 re-solves in blocks of 250 took at
-best 39 us in every block, with block medians of either 40 or 60-65 us. A best of few runs
-can fall entirely in the slow mode.
+median is recorded too; their peers 3 to 30). The shared two-core machine this was
+developed on runs the same code in two speed modes, for spells of milliseconds to seconds:
+2,000 re-solves in blocks of 250 took at best 39 us in every block, with block medians of
+either 40 or 60-65 us. A best of few runs can fall entirely in the slow mode.
 """
 from __future__ import annotations
 
@@ -290,7 +290,8 @@ def _component(ctx, inputs, hs, links, groups, target):
         "agents": len(inputs), "frames": inputs[0].frames, "unknownVertices": len(problem.rest),
         "triangles": len(problem.triangles), "edges": len(problem.edges), "solver": result.solver,
         "seconds": seconds, "medianSeconds": split["medianSeconds"], "pythonSeconds": split["pythonSeconds"],
-        "solverSeconds": split["solverSeconds"], "peerSeconds": peer_seconds, "speedupVsPeer": round(peer_seconds / seconds, 1),
+        "solverSeconds": split["solverSeconds"], "peerSeconds": peer_seconds,
+        "speedupVsPeer": round(peer_seconds / seconds, 1),
         "target": target, "maxDifferenceVsPeer": float(np.abs(ours - _peer_solve(problem, peer)).max()),
         "hardResidual": float(max([np.linalg.norm(result.agents[h.agent].ground[h.frame] - h.position)
                                    for h in hs] + [0.0])),

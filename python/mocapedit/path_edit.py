@@ -11,9 +11,10 @@ per frame:
 - position constraints are handles, relative constraints links (hard ones eliminated,
   so they hold exactly);
 - a group joins its members' paths at sampled shared times (every ``group_step`` time
-  codes, and the last shared time: ``group_sample_times``): each member is linked to its nearest neighbours there, its position kept in
-  their local path frames (step 1) and its distance to them kept (step 2), weighted by the
-  group's stiffness (Kwon et al. 2008). Group members are solved on key frames only (the
+  codes, and the last shared time: ``group_sample_times``): each member is linked to its
+  nearest neighbours there (and clusters of members apart to each other), its position kept
+  in their local path frames (step 1) and its distance to them kept (step 2), weighted by
+  the group's stiffness (Kwon et al. 2008). Group members are solved on key frames only (the
   sampled times, constrained frames, stationary ranges, the ends); each frame between two
   keys follows them by their similarity, blended with the neighbouring keys' so that the
   path turns smoothly through a key (``_solver.expand_key_frames``); it keeps its shape and
@@ -395,7 +396,8 @@ class ComponentProblem:
             if not anchors[k]:
                 v = ro[body[0]]
                 self._append_handle(v, self.rest[v], HARD, None)
-                held[k].add(v), hard[k].add(v)
+                held[k].add(v)
+                hard[k].add(v)
                 anchors[k], places[k] = [v], 1
         self.translate_only = set()
         self.rigid, self.rigid_refs = [], []

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "mocapedit/two_threads.h"
+#include "union_find.h"
 
 namespace mocapedit {
 
@@ -210,61 +211,102 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
   const auto pairs_at = [&](Eigen::Index t_begin, Eigen::Index t_end, std::vector<uint64_t>& pairs) {
     pairs.reserve(static_cast<size_t>(m * (t_end - t_begin) * neighbours));
     std::vector<double> x(static_cast<size_t>(m)), y(static_cast<size_t>(m));
-    const int keep = neighbours + 1;
-    std::vector<std::pair<double, int>> near(static_cast<size_t>(keep)), close, met;
     const auto squared = [&](int a, int b) {  // as Distance, squared
       const double dx = x[a] - x[b], dy = y[a] - y[b];
       return dx * dx + dy * dy;
     };
-    // Members bucketed in a grid of about one member per cell; each one's candidates are met
-    // ring by ring around its cell, until the next ring is farther than the (k+1)-th nearest.
+    // Members bucketed in a grid of about one member per cell (rebuilt at each time).
     std::vector<int> cell_of(static_cast<size_t>(m)), start, items(static_cast<size_t>(m));
-    // visit(cx, cy) for each cell of the square ring `ring` cells around (ax, ay) in an
-    // nx by ny grid.
-    const auto for_ring = [](int ax, int ay, int ring, int nx, int ny, auto&& visit) {
-      for (int cy = std::max(ay - ring, 0); cy <= std::min(ay + ring, ny - 1); ++cy) {
-        if (cy == ay - ring || cy == ay + ring) {
-          for (int cx = std::max(ax - ring, 0); cx <= std::min(ax + ring, nx - 1); ++cx) visit(cx, cy);
-        } else {
-          if (ax - ring >= 0) visit(ax - ring, cy);
-          if (ax + ring < nx) visit(ax + ring, cy);
+    int nx = 0, ny = 0;
+    double h = 1.0;
+    // visit(b) for the members b != a met ring by ring around a's cell, until the next ring
+    // is farther than bound() (a squared distance). Members outside the rings so far are at
+    // least (ring - 1) cells away along x or y. (Margins: the cells are found in rounded
+    // arithmetic, and every member at the bound itself must be met, for the ties.)
+    const auto search = [&](int a, auto&& bound, auto&& visit) {
+      const int ax = cell_of[a] % nx, ay = cell_of[a] / nx;
+      const auto cell = [&](int cx, int cy) {
+        const int c = cy * nx + cx;
+        for (int i = start[c]; i < start[c + 1]; ++i)
+          if (items[i] != a) visit(items[i]);
+      };
+      for (int ring = 0;; ++ring) {
+        const double reach = (ring - 1) * h * (1 - 1e-9);
+        if (ring > 0 && reach > 0 && reach * reach > bound() * (1 + 1e-13)) return;
+        if (ax - ring < 0 && ay - ring < 0 && ax + ring >= nx && ay + ring >= ny) return;
+        for (int cy = std::max(ay - ring, 0); cy <= std::min(ay + ring, ny - 1); ++cy) {
+          if (cy == ay - ring || cy == ay + ring) {
+            for (int cx = std::max(ax - ring, 0); cx <= std::min(ax + ring, nx - 1); ++cx) cell(cx, cy);
+          } else {
+            if (ax - ring >= 0) cell(ax - ring, cy);
+            if (ax + ring < nx) cell(ax + ring, cy);
+          }
         }
       }
     };
-    // Clusters of the members joined so far at this time (union-find, path halving).
-    std::vector<int> root(static_cast<size_t>(m));
-    const auto find = [&](int a) {
-      while (root[a] != a) a = root[a] = root[root[a]];
-      return a;
-    };
-    Eigen::Index now = 0;  // the sampled time being joined
+    // The members joined so far at the time being joined.
+    detail::UnionFind joined;
+    Eigen::Index now = 0;
     const auto join = [&](int a, int b) {
       const uint64_t va = static_cast<uint32_t>(members(a, now)), vb = static_cast<uint32_t>(members(b, now));
       pairs.push_back(std::min(va, vb) << 32 | std::max(va, vb));
-      root[find(a)] = find(b);
+      joined.Unite(a, b);
+    };
+    const int keep = neighbours + 1;
+    std::vector<std::pair<double, int>> near(static_cast<size_t>(keep)), close, met;
+    // Each member to its `neighbours` nearest.
+    const auto join_nearest = [&] {
+      for (int a = 0; a < m; ++a) {
+        // The k+1 smallest squared distances, ties to the earlier member...
+        int count = 0;
+        met.clear();
+        search(
+            a, [&] { return count == keep ? near[keep - 1].first : std::numeric_limits<double>::infinity(); },
+            [&](int b) {
+              const std::pair<double, int> e{squared(a, b), b};
+              met.push_back(e);
+              if (count == keep && !(e < near[count - 1])) return;
+              int at = count < keep ? count++ : count - 1;
+              for (; at > 0 && e < near[at - 1]; --at) near[at] = near[at - 1];
+              near[at] = e;
+            });
+        // ... and the k nearest as a stable sort of the distances themselves would rank them:
+        // two squared distances may differ and their square roots not, so when the next one
+        // is that close to the k-th, every member whose distance may equal the k-th is
+        // ranked by (distance, member).
+        const double bound = near[neighbours - 1].first * (1 + 1e-14);
+        close.assign(near.begin(), near.begin() + neighbours);
+        if (count > neighbours && near[neighbours].first <= bound) {
+          close.clear();
+          for (const auto& [sq, b] : met)
+            if (sq <= bound) close.emplace_back(std::sqrt(sq), b);
+          std::partial_sort(close.begin(), close.begin() + neighbours, close.end());
+        }
+        for (int k = 0; k < neighbours; ++k) join(a, close[k].second);
+      }
     };
     // Nearest neighbours can keep to separate clusters (a group walking as two blocks apart),
     // each of which would then be free to move on its own. Each round finds every cluster's
     // nearest other cluster (Boruvka; pairs ranked by squared distance, then member) and
     // joins the two by their `neighbours` nearest pairs, so that each holds the other as
     // firmly as a member holds its neighbours; until one cluster is left. Only groups in
-    // pieces pay this search: each member looks, ring by ring in the grid below, for the
-    // nearest member of another cluster, no farther than the best its cluster has found.
-    // 1,000 members, 20 sampled times: 6 ms in a block (one piece), 21 ms at random, 60 ms in
-    // clumps of five far apart.
-    std::vector<std::array<double, 3>> best;  // per cluster root: squared distance, a, b
+    // pieces pay this search: each member looks, ring by ring, for the nearest member of
+    // another cluster, no farther than the best its cluster has found. 1,000 members, 20
+    // sampled times: 6 ms in a block (one piece), 21 ms at random, 60 ms in clumps of five
+    // far apart.
+    std::vector<std::array<double, 3>> best;  // per cluster: squared distance, a, b
     std::vector<int> cluster(static_cast<size_t>(m)), first(static_cast<size_t>(m) + 1), listed(static_cast<size_t>(m));
-    const auto connect_clusters = [&](int nx, int ny, double h) {
+    const auto join_clusters = [&] {
       for (;;) {
         int clusters = 0;
         std::fill(first.begin(), first.end(), 0);
         for (int a = 0; a < m; ++a) {
-          cluster[a] = find(a);
+          cluster[a] = joined.Find(a);
           clusters += cluster[a] == a;
           ++first[cluster[a] + 1];
         }
         if (clusters <= 1) return;
-        // Each cluster's members, listed by root.
+        // Each cluster's members, listed by cluster.
         for (int r = 0; r < m; ++r) first[r + 1] += first[r];
         {
           std::vector<int> next(first.begin(), first.end() - 1);
@@ -272,30 +314,19 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
         }
         best.assign(static_cast<size_t>(m), {std::numeric_limits<double>::infinity(), -1, -1});
         for (int a = 0; a < m; ++a) {
-          const int ax = cell_of[a] % nx, ay = cell_of[a] / nx;
           std::array<double, 3>& mine = best[cluster[a]];
-          for (int ring = 0;; ++ring) {
-            // As in the neighbour search: members outside the rings so far are at least
-            // (ring - 1) cells away.
-            const double reach = (ring - 1) * h * (1 - 1e-9);
-            if (ring > 0 && reach > 0 && reach * reach > mine[0] * (1 + 1e-13)) break;
-            if (ax - ring < 0 && ay - ring < 0 && ax + ring >= nx && ay + ring >= ny) break;
-            const auto visit = [&](int cx, int cy) {
-              const int c = cy * nx + cx;
-              for (int i = start[c]; i < start[c + 1]; ++i) {
-                const int b = items[i];
-                if (cluster[b] == cluster[a]) continue;
+          search(
+              a, [&] { return mine[0]; },
+              [&](int b) {
+                if (cluster[b] == cluster[a]) return;
                 const int lo = std::min(a, b), hi = std::max(a, b);
                 const std::array<double, 3> e{squared(lo, hi), static_cast<double>(lo), static_cast<double>(hi)};
                 if (e < mine) mine = e;
                 if (e < best[cluster[b]]) best[cluster[b]] = e;
-              }
-            };
-            for_ring(ax, ay, ring, nx, ny, visit);
-          }
+              });
         }
-        // The cluster pairs to join, as (smaller root, larger root), once each, and the
-        // member pairs across each.
+        // The cluster pairs to join, as (smaller, larger), once each, and the member pairs
+        // across each.
         std::vector<std::pair<int, int>> joins;
         for (int r = 0; r < m; ++r)
           if (best[r][1] >= 0) {
@@ -321,7 +352,7 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
     };
     for (Eigen::Index t = t_begin; t < t_end && neighbours > 0; ++t) {
       now = t;
-      for (int a = 0; a < m; ++a) root[a] = a;
+      joined.Reset(static_cast<int>(m));
       double x0 = std::numeric_limits<double>::infinity(), y0 = x0, x1 = -x0, y1 = -x0;
       for (Eigen::Index a = 0; a < m; ++a) {
         x[a] = rest(members(a, t), 0), y[a] = rest(members(a, t), 1);
@@ -329,8 +360,8 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
         x0 = std::min(x0, x[a]), x1 = std::max(x1, x[a]), y0 = std::min(y0, y[a]), y1 = std::max(y1, y[a]);
       }
       const double extent = std::max(x1 - x0, y1 - y0);
-      const double h = extent > 0 ? std::max(extent / std::ceil(std::sqrt(static_cast<double>(m))), extent * 1e-6) : 1.0;
-      const int nx = static_cast<int>((x1 - x0) / h) + 1, ny = static_cast<int>((y1 - y0) / h) + 1;
+      h = extent > 0 ? std::max(extent / std::ceil(std::sqrt(static_cast<double>(m))), extent * 1e-6) : 1.0;
+      nx = static_cast<int>((x1 - x0) / h) + 1, ny = static_cast<int>((y1 - y0) / h) + 1;
       start.assign(static_cast<size_t>(nx) * ny + 1, 0);
       for (int a = 0; a < m; ++a) {
         const int cx = std::min(static_cast<int>((x[a] - x0) / h), nx - 1);
@@ -343,50 +374,8 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
         std::vector<int> next(start.begin(), start.end() - 1);
         for (int a = 0; a < m; ++a) items[next[cell_of[a]]++] = a;
       }
-      for (int a = 0; a < m; ++a) {
-        // The k+1 smallest squared distances, ties to the earlier member...
-        int count = 0;
-        met.clear();
-        const int ax = cell_of[a] % nx, ay = cell_of[a] / nx;
-        for (int ring = 0;; ++ring) {
-          // Members outside the rings so far are at least (ring - 1) cells away along x or y.
-          // (Margins: the cells are found in rounded arithmetic, and the ties below must all
-          // have been met.)
-          const double reach = (ring - 1) * h * (1 - 1e-9);
-          if (ring > 0 && count == keep && reach > 0 && reach * reach > near[keep - 1].first * (1 + 1e-13)) break;
-          if (ax - ring < 0 && ay - ring < 0 && ax + ring >= nx && ay + ring >= ny) break;
-          const auto visit = [&](int cx, int cy) {
-            const int c = cy * nx + cx;
-            for (int i = start[c]; i < start[c + 1]; ++i) {
-              const int b = items[i];
-              if (b == a) continue;
-              const std::pair<double, int> e{squared(a, b), b};
-              met.push_back(e);
-              if (count == keep && !(e < near[count - 1])) continue;
-              int at = count < keep ? count++ : count - 1;
-              for (; at > 0 && e < near[at - 1]; --at) near[at] = near[at - 1];
-              near[at] = e;
-            }
-          };
-          for_ring(ax, ay, ring, nx, ny, visit);
-        }
-        // ... and the k nearest as a stable sort of the distances themselves would rank them:
-        // two squared distances may differ and their square roots not, so when the next one
-        // is that close to the k-th, every member whose distance may equal the k-th is
-        // ranked by (distance, member).
-        const double bound = near[neighbours - 1].first * (1 + 1e-14);
-        close.assign(near.begin(), near.begin() + neighbours);
-        if (count > neighbours && near[neighbours].first <= bound) {
-          close.clear();
-          for (const auto& [sq, b] : met)
-            if (sq <= bound) close.emplace_back(std::sqrt(sq), b);
-          std::partial_sort(close.begin(), close.begin() + neighbours, close.end());
-        }
-        for (int k = 0; k < neighbours; ++k) {
-          join(a, close[k].second);
-        }
-      }
-      connect_clusters(nx, ny, h);
+      join_nearest();
+      join_clusters();
     }
   };
   std::vector<uint64_t> pairs;

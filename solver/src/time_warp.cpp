@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "mocapedit/blas_lock.h"
+#include "union_find.h"
 
 namespace mocapedit {
 
@@ -47,24 +48,7 @@ struct SoftRow {
   double sqrt_weight;
 };
 
-class UnionFind {
- public:
-  explicit UnionFind(int n) : parent_(static_cast<size_t>(n)) { std::iota(parent_.begin(), parent_.end(), 0); }
-  int Find(int x) {
-    while (parent_[x] != x) x = parent_[x] = parent_[parent_[x]];
-    return x;
-  }
-  bool Unite(int a, int b) {
-    a = Find(a);
-    b = Find(b);
-    if (a == b) return false;
-    parent_[std::max(a, b)] = std::min(a, b);
-    return true;
-  }
-
- private:
-  std::vector<int> parent_;
-};
+using detail::UnionFind;
 
 // The spanning forest of a set of equality edges over nodes 0..nodes-1 (the last node is
 // the ground). Each tree is one class of nodes whose times are tied together; a class

@@ -46,12 +46,20 @@ void Load(SkylineLdlt<Scalar>& f, const std::vector<int>& first, const Matrix& a
     }
 }
 
+// A random matrix in the envelope `first` (as Random), loaded into f (not yet factored).
+template <typename Scalar>
+Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic> LoadRandom(SkylineLdlt<Scalar>& f, const std::vector<int>& first,
+                                                                 unsigned seed) {
+  const auto a = Random<Scalar>(first, seed);
+  Load(f, first, a);
+  return a;
+}
+
 template <typename Scalar>
 void CheckAgainstDense(const std::vector<int>& first, unsigned seed) {
   const int n = static_cast<int>(first.size());
-  const auto a = Random<Scalar>(first, seed);
   SkylineLdlt<Scalar> f;
-  Load(f, first, a);
+  const auto a = LoadRandom(f, first, seed);
   const double rowsum = a.cwiseAbs().rowwise().sum().maxCoeff();
   EXPECT_GE(f.GershgorinBound(), rowsum * (1 - 1e-12));
   EXPECT_LE(f.GershgorinBound(), rowsum * std::sqrt(2.0));
@@ -136,9 +144,8 @@ TEST(SkylineLdlt, IndefiniteOrSingularMatricesAreRefused) {
 template <typename Scalar>
 void CheckInverseColumns(const std::vector<int>& first, unsigned seed) {
   const int n = static_cast<int>(first.size());
-  const auto a = Random<Scalar>(first, seed);
   SkylineLdlt<Scalar> f;
-  Load(f, first, a);
+  const auto a = LoadRandom(f, first, seed);
   ASSERT_TRUE(f.Factor());
   const Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic> inverse = a.inverse();
   for (int column : {0, n / 3, n - 1})

@@ -113,9 +113,10 @@ void FramePartners(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<c
 // walking as blocks apart), each cluster is also joined to its nearest other cluster by
 // their `neighbours` nearest pairs, round after round until the members are one piece:
 // otherwise a cluster would be free to move on its own. Every joined pair becomes one edge
-// (a, b), a < b, listed once over all times, sorted. Each edge (v, w) then gives the triangles (v; w, partner[w]) and
-// (w; v, partner[v]), the first orientation of every edge before the second, where the
-// partner exists and v and w are apart: v in the local frame of w's path.
+// (a, b), a < b, listed once over all times, sorted. Each edge (v, w) then gives the
+// triangles (v; w, partner[w]) and (w; v, partner[v]), the first orientation of every edge
+// before the second, where the partner exists and v and w are apart: v in the local frame
+// of w's path.
 //
 // Inputs:
 //   rest        #V by 2 rest positions
