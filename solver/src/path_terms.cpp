@@ -292,7 +292,7 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
     // firmly as a member holds its neighbours; until one cluster is left. Only groups in
     // pieces pay this search: each member looks, ring by ring, for the nearest member of
     // another cluster, no farther than the best its cluster has found. 1,000 members, 20
-    // sampled times: 6 ms in a block (one piece), 21 ms at random, 60 ms in clumps of five
+    // sampled times: 6 ms in a block (one piece), 19 ms at random, 59 ms in clumps of five
     // far apart.
     std::vector<std::array<double, 3>> best;  // per cluster: squared distance, a, b
     std::vector<int> cluster(static_cast<size_t>(m)), first(static_cast<size_t>(m) + 1), listed(static_cast<size_t>(m));
