@@ -472,10 +472,10 @@ def _bad_stage(tmp_path, case):
     ("weight-sampled", r"</Layers/L>\.weight: weight must be within \[0, 1\], got 1\.2 at time 10"),
     ("no-animation", r"</Layers/L>\.animation: has no animation"),
     ("not-an-animation", r"</Layers/L>\.animation: targets </World>, which is not a SkelAnimation"),
-    ("missing-prim", r"</Layers/L>\.animation: targets </Layers/Nowhere>, which is not a SkelAnimation"),
+    ("missing-prim", r"</Layers/L>\.animation: targets </Layers/Nowhere>, which does not exist"),
     ("animation-without-samples", r"</Layers/L>\.animation: animation </Layers/Empty> cannot be layered: "
                                   r".*clip has no samples"),
-    ("not-an-agent", r"</Layers/L>\.agents: targets </World>, which is not an active agent"),
+    ("not-an-agent", r"</Layers/L>\.agents: targets </World>, which is not an agent \(no MocapAgentAPI\)"),
     ("mode", r"</Layers/L>\.mode: must be one of blend, additive, got 'multiply'"),
 ])
 def test_bad_layers_fail_naming_the_layer_prim_and_write_nothing(tmp_path, case, needle):
