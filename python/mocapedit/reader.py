@@ -290,16 +290,19 @@ class StageReader:
                 return (spec.layer.identifier, str(spec.path))
         return None
 
-    def _clip(self, anim: Usd.Prim):
-        """(clip key, composed stage times of the clip's frames); reads the clip on first use."""
-        attrs = [anim.GetAttribute(n) for n in ("translations", "rotations", "scales")]
+    def _clip(self, anim: Usd.Prim, all_channels: bool = True):
+        """(clip key, composed stage times of the clip's frames); reads the clip on first use.
+
+        An agent's own clip must author translations, rotations and scales (UsdSkel poses an
+        animation only then); a layer clip (``all_channels=False``) may author only some."""
+        attrs = [anim.GetAttribute(n) for n in model.CHANNELS]
         times = np.unique(np.concatenate(
             [np.asarray(a.GetTimeSamples(), dtype=np.float64) for a in attrs if a] + [np.zeros(0)]))
         if times.size == 0:
             raise prim_error(anim.GetPath(), "clip has no samples: translations, rotations and scales "
                              "hold no time samples", "translations")
-        for name, attr in zip(("translations", "rotations", "scales"), attrs):
-            if not attr or not attr.HasValue():
+        for name, attr in zip(model.CHANNELS, attrs):
+            if all_channels and (not attr or not attr.HasValue()):
                 raise prim_error(anim.GetPath(), "has no value; UsdSkel poses an animation only when "
                                  "translations, rotations and scales are all authored", name)
         anim_joints = tuple(str(j) for j in (_get(anim, "joints") or []))
@@ -336,10 +339,13 @@ class StageReader:
         if not np.all(np.isfinite(translations)):
             raise prim_error(anim.GetPath(), "holds non-finite values", "translations")
         scales = read("scales", 3, 1.0)
+        if not np.all(np.isfinite(scales)):
+            raise prim_error(anim.GetPath(), "holds non-finite values", "scales")
         src = key[1][0] or key[1][1]
+        channels = tuple(n for n in model.CHANNELS if anim.GetAttribute(n).HasAuthoredValue())
         return model.Clip(key=key, source=f"{src[0]}@{src[1]}" if src else str(anim.GetPath()),
                           joints=list(joints), times=times, translations=translations,
-                          rotations=rotations, scales=scales)
+                          rotations=rotations, scales=scales, channels=channels)
 
     def _stationary(self, anim: Usd.Prim, frame_count: int):
         tags = []
@@ -543,7 +549,7 @@ class StageReader:
             raise prim_error(prim.GetPath(), "has no animation", "animation")
         anim = self._target_prim(prim, "animation", anims[0], UsdSkel.Animation, "SkelAnimation")
         try:
-            key, times = self._clip(anim)
+            key, times = self._clip(anim, all_channels=False)
         except MocapEditError as exc:
             raise prim_error(prim.GetPath(), f"animation <{anim.GetPath()}> cannot be layered: {exc}",
                              "animation") from None
