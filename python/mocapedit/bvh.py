@@ -527,6 +527,13 @@ class SkeletonPose:
         from .kinematics import compose_trs
         return compose_trs(self.rest_translations, self.rest_rotations)
 
+    def height(self, translations: np.ndarray, rotations: np.ndarray, up_axis: str) -> float:
+        """From the lowest to the highest joint along up, stage units, of one pose given as
+        (J,3) joint-local translations and (J,4) rotations (what the Converter gives)."""
+        from .kinematics import compose_trs, skel_space
+        skel = skel_space(compose_trs(translations, rotations), self.parents)
+        return float(np.ptp(skel[:, 3, 2 if up_axis == "Z" else 1]))
+
 
 class Converter:
     """Turns BVH channel values into joint-local USD transforms, chunk after chunk.

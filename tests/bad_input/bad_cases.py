@@ -405,27 +405,7 @@ shot("detect-output-is-input", "", r"shot\.usda", outputs=("shot.usda",), comman
 
 
 # ---- BVH files broken at each section ---------------------------------------------------------------
-GOOD_BVH = """HIERARCHY
-ROOT Hips
-{
-  OFFSET 0 90 0
-  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
-  JOINT Spine
-  {
-    OFFSET 0 10 0
-    CHANNELS 3 Zrotation Xrotation Yrotation
-    End Site
-    {
-      OFFSET 0 10 0
-    }
-  }
-}
-MOTION
-Frames: 2
-Frame Time: 0.0333333
-0 90 0 0 0 0 0 0 0
-1 90 0 0 5 0 0 0 0
-"""
+GOOD_BVH = (Path(__file__).parent / "good.bvh").read_text()
 
 
 def bvh(id: str, text: str, needle: str, args: tuple[str, ...] = (), name: str = "clip.bvh",

@@ -112,8 +112,8 @@ def _inputs(args) -> tuple[list[str], bool]:
 
 def _check_height(result, progress) -> None:
     if not 0.3 <= result.height_m <= 3.0:
-        progress.message(f"  note: {os.path.basename(result.source)} stands {result.height_m:.2f} m tall in its "
-                         "rest pose; check --unit/--scale and --meters-per-unit")
+        progress.message(f"  note: {os.path.basename(result.source)} stands {result.height_m:.2f} m tall in "
+                         "frame 0; check --unit/--scale and --meters-per-unit")
 
 
 def run(args) -> int:
