@@ -209,6 +209,40 @@ def remaining_overlaps(crowd: Crowd, progress=None, reach: float = 0.0) -> tuple
             overlaps.min_clearance(found, len(crowd.agents)))
 
 
+def foot_skate_figures(ctx) -> None:
+    """Adds ``footSkateSource`` and ``footSkateEdited`` to every agent the edits move: the
+    mean horizontal foot speed (stage units per second) while a foot is planted, by UsdSkel
+    forward kinematics (:func:`mocapedit.metrics.foot_skate`) on the input stage and on the
+    input with the moved agents' edits over it. The edited stage is measured over the
+    frames where the source feet were planted; an agent whose timing changed, over its own.
+    An agent without joints named like feet gets no figure."""
+    from pxr import Sdf, Usd
+
+    from . import writer
+    moved = sorted(p for p, e in ctx.edits.items() if e.xform_op is not None)
+    root = Sdf.Layer.Find(ctx.data.info.root_layer)
+    if not moved or root is None:
+        return
+    edits = writer.build_layer(writer.LayerContent(info=ctx.data.info, agents=ctx.data.agents,
+                                                   edits={p: ctx.edits[p] for p in moved}))
+    over = Sdf.Layer.CreateAnonymous(".usda")
+    over.subLayerPaths.append(edits.identifier)
+    source, edited = Usd.Stage.Open(root), Usd.Stage.Open(root, over)
+    for path in moved:
+        try:
+            before = metrics.foot_skate(source, path)
+        except ValueError:
+            continue
+        if path in ctx.time_maps:
+            after = metrics.foot_skate(edited, path)
+        else:
+            after = metrics.foot_skate(edited, path, times=before.times, contact=before.contact)
+        if np.isfinite(before.mean) and np.isfinite(after.mean):
+            entry = ctx.report.agent(path)
+            entry.setdefault("footSkateSource", before.mean)
+            entry.setdefault("footSkateEdited", after.mean)
+
+
 def complete_report(ctx, crowd: Crowd) -> Remaining | None:
     """Adds the figures no pass measured: path length ratio and displacement of each
     edited agent; overlaps left and nearest clearance when no collision pass ran.
