@@ -492,5 +492,21 @@ command("detect-animation-missing", r"/Nowhere", lambda f: ["detect-stationary",
 command("solve-missing-input", r"gone\.usda: no such file", lambda f: ["solve", str(f / "gone.usda"), "-o",
                                                                        str(f / "out.usda")])
 
+
+
+def preview(id: str, needle: str, *args: str, output: str = "out.png") -> None:
+    command(f"preview-{id}", needle, lambda f: ["preview", str(f / "shot.usda"), "-o", str(f / output), *args],
+            outputs=(output,))
+
+
+preview("resolution-zero", r"--resolution: expected N or WxH", "--resolution", "0")
+preview("resolution-huge", r"--resolution: at most 8192 pixels a side", "--resolution", "100000")
+preview("resolution-huge-height", r"--resolution: at most 8192 pixels a side", "--resolution", "64x90000")
+preview("bounds-inverted", r"--bounds: the maximum must exceed the minimum", "--bounds", "5", "5", "1", "1")
+preview("step-zero", r"--step must be positive", "--step", "0")
+preview("step-nan", r"--step must be positive", "--step", "nan")
+preview("edits-missing", r"nothere\.usda: no such file", "--edits", "nothere.usda")
+preview("output-jpg", r"out\.jpg: the preview is written as \.png or \.exr", output="out.jpg")
+
 IDS = [c.id for c in CASES]
 assert len(IDS) == len(set(IDS)), sorted(i for i in IDS if IDS.count(i) > 1)

@@ -52,7 +52,7 @@ def check(case, tmp_path, subprocess: bool) -> None:
         code, err = proc.returncode, proc.stderr
     else:
         code, err = _run_in_process(argv)
-    assert "Traceback" not in err, err
+    assert "Traceback" not in err and "RuntimeWarning" not in err, err
     assert code == 1, err
     lines = [line for line in err.splitlines() if line.startswith("mocapedit: error: ")]
     assert lines, err
