@@ -8,6 +8,8 @@ raises :class:`~mocapedit.errors.MocapEditError` naming the prim and property.
 """
 from __future__ import annotations
 
+import re
+
 import numpy as np
 from pxr import Sdf, Usd, UsdGeom, UsdSkel
 
@@ -43,8 +45,17 @@ def check_composition(stage: Usd.Stage) -> None:
     ``timeCodesPerSecond`` than the root layer, which the stage follows alone."""
     errors = stage.GetCompositionErrors()
     if errors:
-        raise MocapEditError(f"{stage.GetRootLayer().identifier}: the stage does not compose: " +
-                             "; ".join(str(e).strip().rstrip(".") for e in errors))
+        # One missing clip file referenced by a thousand agents is one problem: group by
+        # what failed, and name a few of the prims where.
+        where: dict[str, list[str]] = {}
+        for error in errors:
+            text = str(error).strip().rstrip(".")
+            arc = re.fullmatch(r"(.* introduced by @[^@]*@)(<[^>]*>)", text)
+            where.setdefault(arc[1] if arc else text, []).extend([arc[2]] if arc else [])
+        parts = [what if not sites else what + sites[0] if len(sites) == 1 else
+                 f"{what} at {len(sites)} prims ({', '.join(sites[:3])}{', ...' if len(sites) > 3 else ''})"
+                 for what, sites in where.items()]
+        raise MocapEditError(f"{stage.GetRootLayer().identifier}: the stage does not compose: " + "; ".join(parts))
     root = stage.GetRootLayer()
     stage_says = {"upAxis": str(UsdGeom.GetStageUpAxis(stage)),
                   "metersPerUnit": float(UsdGeom.GetStageMetersPerUnit(stage)),

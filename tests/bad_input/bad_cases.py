@@ -189,6 +189,23 @@ shot("layer-missing-sublayer", "", r"shot\.usda.*does not compose.*sublayer @mis
 shot("layer-missing-clip-reference", agent_over('over "Skel"\n{\n    over "Anim" (prepend references = '
                                                 '@walk_clip.usda@</Anim>)\n    {\n    }\n}'),
      r"does not compose.*walk_clip\.usda.*</World/agent0/Skel/Anim>")
+shot("layer-missing-clip-two-agents", """over "World"
+{
+    over "agent0"
+    {
+        over "Skel" (prepend references = @walk_clip.usda@</Skel>)
+        {
+        }
+    }
+    over "agent1"
+    {
+        over "Skel" (prepend references = @walk_clip.usda@</Skel>)
+        {
+        }
+    }
+}
+""", r"does not compose: Could not open asset @.*walk_clip\.usda@ for reference introduced by @.*shot\.usda@ at 2 "
+     r"prims \(</World/agent0/Skel>, </World/agent1/Skel>\)$")
 shot("layer-up-axis", "", r"base\.usda: sublayer says upAxis = Z, but the root layer .*shot\.usda says upAxis = Y",
      header=SHOT_HEADER.replace('upAxis = "Z"', 'upAxis = "Y"'))
 shot("layer-meters-per-unit", "", r"base\.usda: sublayer says metersPerUnit = 0\.01.*root layer.*says metersPerUnit = 1",
