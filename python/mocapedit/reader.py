@@ -132,7 +132,8 @@ def _check_finite(prim: Usd.Prim, name: str, value) -> None:
     except (TypeError, ValueError):
         return
     if not np.all(np.isfinite(numbers)):
-        raise prim_error(prim.GetPath(), f"must be a finite number, got {value}", name)
+        shown = f"got {value}" if numbers.size <= 4 else "some of its values are not"
+        raise prim_error(prim.GetPath(), f"must be a finite number, {shown}", name)
 
 
 def _get(prim: Usd.Prim, name: str, default=None):
