@@ -156,7 +156,7 @@ def _get(prim: Usd.Prim, name: str, default=None):
     value = attr.Get()
     if value is None:
         return default
-    if not isinstance(value, (str, bool, int)):
+    if not isinstance(value, (str, bool, int)) and _kind(attr.GetTypeName())[0] not in ("text", "bool"):
         _check_finite(prim, name, value)
     return value
 
