@@ -620,3 +620,19 @@ def test_a_layer_clip_with_rotations_only_leaves_translations_and_scales_to_the_
     if mode == "blend":  # at weight 1 the chest turns as the clip says, at its samples
         for f, q in enumerate(rotations):
             assert _rotation_difference(got_r[12 * f], q) < 1e-5
+
+
+def test_a_layer_clip_from_another_rig_stops_the_solve_before_any_other_pass(tmp_path, monkeypatch):
+    path, walk = street(tmp_path, offsets=(0.0, 0.0))
+    stage = Usd.Stage.Open(str(path))
+    add_clip(stage, "/Layers/Alien", ["Tentacle"], np.zeros((2, 1, 3)), np.tile([0, 0, 0, 1.0], (2, 1, 1)))
+    add_layer(stage, "/Layers/L", ["/World/Crowd/a0"], "/Layers/Alien")
+    stage.GetRootLayer().Save()
+    ran = []
+    processor.load_passes()
+    monkeypatch.setattr(processor, "PASSES", [
+        (order, name, lambda ctx, fn=fn, name=name: (ran.append(name), fn(ctx))) for order, name, fn in processor.PASSES])
+    with pytest.raises(MocapEditError, match=r"</Layers/L>\.animation: layer clip </Layers/Alien> shares no joint"):
+        solve(str(path), output=str(tmp_path / "e.usda"), collisions=True)
+    assert ran == ["layering-check"], "path edits, time warp and collision avoidance must not run first"
+    assert not (tmp_path / "e.usda").exists()

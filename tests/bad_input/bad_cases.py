@@ -80,6 +80,7 @@ NOD = prim("SkelAnimation", "Nod", 'uniform token[] joints = ["Root/Hips"]\n'
            "float3[] translations = [(0, 0, 90)]\nhalf3[] scales = [(1, 1, 1)]")
 LAYER = "rel agents = </World/agent0>\nrel animation = </Nod>\nuniform token mode = \"additive\""
 SETTINGS = "uniform bool collisionAvoidance = true"
+INACTIVE_AGENT1 = agent_over("", "agent1").replace('over "agent1"', 'over "agent1" (active = false)')
 
 
 def replace(lines: str, prop: str, new: str | None) -> str:
@@ -324,8 +325,7 @@ prop_cases("MocapAgentGroup", "Team", GROUP, {
     "stiffness-inf": ("stiffness", "uniform double stiffness = inf", G + r"stiffness: must be a finite number"),
     "stiffness-string": ("stiffness", 'uniform string stiffness = "stiff"', G + r"stiffness: is authored as string"),
 })
-shot("team-member-inactive", prim("MocapAgentGroup", "Team", GROUP) +
-     agent_over("", "agent1").replace('over "agent1"', 'over "agent1" (active = false)'),
+shot("team-member-inactive", prim("MocapAgentGroup", "Team", GROUP) + INACTIVE_AGENT1,
      G + r"members: member </World/agent1> is inactive")
 
 # ---- avoid regions ----------------------------------------------------------------------------
@@ -379,6 +379,16 @@ shot("nodding-other-rig-before-collisions",
      prim("MocapAnimationLayer", "Nodding", LAYER.replace("</Nod>", "</Alien>")) +
      prim("MocapSolveSettings", "Settings", SETTINGS + "\nuniform int maxIterations = 1000000"),
      L + r"animation: layer clip </Alien> shares no joint", args=("--collisions",))
+shot("nodding-animation-inactive", NOD.replace('def SkelAnimation "Nod"', 'def SkelAnimation "Nod" (active = false)') +
+     prim("MocapAnimationLayer", "Nodding", LAYER), L + r"animation: targets </Nod>, which is inactive")
+shot("nodding-agent-inactive", NOD + prim("MocapAnimationLayer", "Nodding", LAYER.replace("agent0", "agent1")) +
+     INACTIVE_AGENT1, L + r"agents: targets </World/agent1>, which is inactive")
+shot("fountain-agent-inactive", prim("MocapAvoidRegion", "Fountain", REGION + "\nrel agents = </World/agent1>") +
+     INACTIVE_AGENT1, AR + r"agents: targets </World/agent1>, which is inactive")
+shot("rel-target-inactive", prim("MocapRelativeConstraint", "Rel", REL) + INACTIVE_AGENT1,
+     r"</Rel>\.target: targets </World/agent1>, which is inactive")
+shot("sync-target-inactive", prim("MocapSyncConstraint", "Sync", SYNC) + INACTIVE_AGENT1,
+     r"</Sync>\.target: targets </World/agent1>, which is inactive")
 shot("nodding-clip-no-samples", prim("SkelAnimation", "Empty", 'uniform token[] joints = ["Root/Hips"]') +
      prim("MocapAnimationLayer", "Nodding", LAYER.replace("</Nod>", "</Empty>")),
      L + r"animation: animation </Empty> cannot be layered: .*clip has no samples")
