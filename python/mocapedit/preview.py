@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import ground, inspection, overlaps, reader, trajectory, writer
+from . import ground, inspection, outputs, overlaps, reader, trajectory, writer
 from .errors import MocapEditError
 from .inspection import Crowd, Remaining
 from .progress import Progress, Silent
@@ -394,7 +394,7 @@ def write_exr(scene: Scene, path: str, resolution=None, bounds: np.ndarray | Non
                      f"{grid.pixel:g} stage units square. Channels: path densities (agents per pixel), "
                      "displacement (stage units), overlap count (agent pairs x time samples)."),
     }
-    writer.save_with(path, lambda tmp: OpenEXR.File(header, channels).write(tmp))
+    outputs.save_with(path, lambda tmp: OpenEXR.File(header, channels).write(tmp))
     return grid
 
 
@@ -604,7 +604,7 @@ def write_png(scene: Scene, path: str, resolution=None, bounds: np.ndarray | Non
     to_pixel = (flip @ affine).T                           # row-vector convention, row 0 at the top
     meta = {"mocapedit:worldToPixel": json.dumps(to_pixel.tolist()),
             "mocapedit:planAxes": "x z" if up == "Y" else "x y", "Software": "mocapedit"}
-    writer.save_with(path, lambda tmp: fig.savefig(tmp, format="png", dpi=dpi, metadata=meta))
+    outputs.save_with(path, lambda tmp: fig.savefig(tmp, format="png", dpi=dpi, metadata=meta))
     task.done()
     return to_pixel
 

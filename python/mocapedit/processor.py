@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 from pxr import Sdf, Usd, Vt
 
-from . import animation, guides, inspection, reader, trajectory, writer
+from . import animation, guides, inspection, outputs, reader, trajectory, writer
 from .errors import MocapEditError
 from .model import StageData
 from .progress import Progress, Silent
@@ -204,20 +204,23 @@ class SolveResult:
 
 def solve(stage_or_path, output: str | None = None, composed: str | None = None,
           guides: bool = True, collisions: bool | None = None, progress: Progress | None = None,
-          **overrides) -> SolveResult:
+          report_json: str | None = None, **overrides) -> SolveResult:
     """Solves every edit authored on a stage and returns the edits layer and a report.
 
     Args:
       stage_or_path: a ``Usd.Stage`` or the path of a stage file. The input is read only.
       output: if given, the edits layer is saved there (``.usda`` or ``.usdc``), atomically.
       composed: if given (needs ``output``), a stage that sub-layers the edits over the input.
+      report_json: if given (needs ``output``), the report is saved there as JSON. The edits, the composed stage
+        and the report are renamed into place together, after all three are written.
       guides: author guide geometry under ``/MocapEdit/Guides``.
       collisions: force collision avoidance on or off; None follows MocapSolveSettings.
       progress: a :class:`~mocapedit.progress.Progress`; silent by default.
       overrides: MocapSolveSettings values by their Python names (``max_iterations=...``).
 
     Raises:
-      MocapEditError: bad input, naming the prim and property. Nothing is written.
+      MocapEditError: bad input, naming the prim and property; an output path that names
+        the input, a layer it uses, another output or a folder. Nothing is written.
     """
     progress = progress or Silent()
     timings: dict[str, float] = {}
@@ -226,8 +229,16 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
         stage, input_name = stage_or_path, stage_or_path.GetRootLayer().identifier
     else:
         stage, input_name = reader.open_stage(str(stage_or_path)), str(stage_or_path)
-    if composed and not output:
-        raise MocapEditError("--composed needs an output path for the edits layer (-o)")
+    if (composed or report_json) and not output:
+        raise MocapEditError("a composed stage or a report needs an output path for the edits layer (-o)")
+    input_file = stage.GetRootLayer().realPath if isinstance(stage_or_path, Usd.Stage) else input_name
+    if composed and not input_file:
+        raise MocapEditError("a composed stage sub-layers the input file, but this stage is in memory; "
+                             "save it first or leave out the composed stage")
+    outputs.check_outputs([outputs.Output(output, "edits layer"),
+                           outputs.Output(composed, "composed stage"),
+                           outputs.Output(report_json, "report", kind="text")],
+                          outputs.input_files(stage))
 
     data = reader.read_stage(stage, progress)
     for key, value in overrides.items():
@@ -272,11 +283,16 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
         info=data.info, agents=data.agents, edits=ctx.edits, guides=ctx.guides,
         provenance=provenance, stats=report.stats, report=report.to_layer_dict()))
     if output:
-        writer.save_layer(layer, output)
-        if composed:
-            default_prim = stage.GetRootLayer().defaultPrim or None
-            writer.save_composed(composed, output, input_name if not isinstance(stage_or_path, Usd.Stage)
-                                 else stage.GetRootLayer().realPath, data.info, default_prim)
+        timings["write"] = time.perf_counter() - t
+        timings["total"] = time.perf_counter() - t0
+        report.timings = dict(timings)
+        with outputs.Writes() as w:
+            w.add(output, writer.export_layer(layer))
+            if composed:
+                w.add(composed, writer.export_layer(writer.composed_layer(
+                    composed, output, input_file, data.info, stage.GetRootLayer().defaultPrim or None)))
+            if report_json:
+                w.add(report_json, outputs.write_text(report.to_json() + "\n"))
     timings["write"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     report.timings = timings
