@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 from pxr import Sdf, Usd, Vt
 
-from . import animation, guides, inspection, outputs, reader, trajectory, writer
+from . import animation, guides, inspection, limits, outputs, reader, trajectory, writer
 from .errors import MocapEditError
 from .model import StageData
 from .progress import Progress, Silent
@@ -245,6 +245,8 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
         if not hasattr(data.settings, key):
             raise MocapEditError(f"unknown solve setting '{key}'")
         setattr(data.settings, key, value)
+    limits.check_settings(data)
+    limits.check_constraint_times(data)
     timings["read"] = time.perf_counter() - t0
 
     report = Report(input=input_name, output=output)
