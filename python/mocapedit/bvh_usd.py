@@ -68,7 +68,7 @@ class ImportResult:
     frames: int
     fps: float
     joints: int
-    height_m: float                    # standing height of the rest pose, metres
+    height_m: float                    # height of the pose of frame 0 (lowest to highest joint), metres
     position_modes: dict[str, str] = field(default_factory=dict)  # joints with position channels
 
 
@@ -203,11 +203,12 @@ def build_clip(source: str, settings: ImportSettings | None = None, progress: Pr
             if with_positions:
                 provenance["positionChannels"] = with_positions
             builder = ClipLayerBuilder(name, pose, settings, fps, provenance, root_joint, hip_joint)
-        builder.add(*converter(values))
+        translations, rotations = converter(values)
+        if builder.frames == 0:  # the character as it stands in frame 0, not its rest pose
+            height = pose.height(translations[0], rotations[0], settings.up_axis) * settings.meters_per_unit
+        builder.add(translations, rotations)
         task.update(builder.frames)
     layer = builder.finish()
-    up = 2 if settings.up_axis == "Z" else 1
-    height = float(np.ptp(converter.pose.bind_transforms[:, 3, up])) * settings.meters_per_unit
     task.done(f"{converter.joint_count} joints, {fps:g} fps")
     return ImportResult(source=source, output=None, layer=layer, prim=str(builder.root),
                         skeleton=str(builder.skel_path), animation=str(builder.anim_path), frames=builder.frames,

@@ -624,22 +624,33 @@ def foot_skate(stage: Usd.Stage, agent_path: PathLike, times: Iterable | None = 
                              "ankle; pass foot_joints")
     else:
         feet = [skel.joint_index(j) for j in foot_joints]
-    up = UsdGeom.GetStageUpAxis(stage)
-    if contact_height is None:
-        contact_height = 0.02 / UsdGeom.GetStageMetersPerUnit(stage)
-    seconds_per_code = 1.0 / stage.GetTimeCodesPerSecond()
-
     pos = np.empty((len(t), len(feet), 3))
     xfc = UsdGeom.XformCache()
     for k, tc in enumerate(t):
         xfc.SetTime(Usd.TimeCode(tc))
         pos[k] = skel.world_translations(xfc)[feet]
-
     if len(skel.sample_times):
         first, last = skel.sample_times[0], skel.sample_times[-1]
         in_clip = (t >= first - 1e-9) & (t <= last + 1e-9)
     else:
         in_clip = np.ones(len(t), dtype=bool)
+    return foot_skate_of_positions(pos, t, UsdGeom.GetStageUpAxis(stage), UsdGeom.GetStageMetersPerUnit(stage),
+                                   stage.GetTimeCodesPerSecond(), tuple(skel.joints[f] for f in feet),
+                                   in_clip, contact_height, contact)
+
+
+def foot_skate_of_positions(pos: np.ndarray, t: np.ndarray, up, meters_per_unit: float,
+                            time_codes_per_second: float, joints: tuple[str, ...] = (),
+                            in_clip: np.ndarray | None = None, contact_height: float | None = None,
+                            contact: np.ndarray | None = None) -> FootSkate:
+    """:func:`foot_skate` of feet whose world positions are known: ``pos`` (T, F, 3) stage
+    units at increasing time codes ``t`` (T,); ``in_clip`` (T,) marks the samples inside
+    the clip (default: all). The other arguments are :func:`foot_skate`'s."""
+    t = np.asarray(t, dtype=np.float64)
+    if contact_height is None:
+        contact_height = 0.02 / meters_per_unit
+    seconds_per_code = 1.0 / time_codes_per_second
+    in_clip = np.ones(len(t), dtype=bool) if in_clip is None else np.asarray(in_clip, dtype=bool)
     height = pos[..., ground_axes(up)[0]]
     if contact is not None:
         contact = np.asarray(contact, dtype=bool)
@@ -662,4 +673,4 @@ def foot_skate(stage: Usd.Stage, agent_path: PathLike, times: Iterable | None = 
     speeds = np.where(duration > 0, slide / np.where(duration > 0, duration, 1.0), np.nan)
     total = float(duration.sum())
     mean = float(slide.sum() / total) if total > 0 else float("nan")
-    return FootSkate(tuple(skel.joints[f] for f in feet), speeds, duration, contact, t, mean)
+    return FootSkate(tuple(joints), speeds, duration, contact, t, mean)

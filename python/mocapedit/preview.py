@@ -229,18 +229,22 @@ def bounds_from_plan(values: list[float], up_axis: str) -> np.ndarray:
     return np.array([corners.min(axis=0), corners.max(axis=0)])
 
 
+#: The longest side a preview may have: at 8192 x 8192 the four float channels of an EXR take 1 GiB.
+MAX_RESOLUTION = 8192
+
+
 def parse_resolution(text: str | int | None) -> tuple[int | None, int | None, int]:
     """'N' (the longer side) or 'WxH' -> (width or None, height or None, longer side)."""
     if text is None:
         return None, None, DEFAULT_RESOLUTION
     text = str(text).lower()
     try:
-        if "x" in text:
-            w, h = (int(v) for v in text.split("x", 1))
-            if w > 0 and h > 0:
-                return w, h, max(w, h)
-        elif int(text) > 0:
-            return None, None, int(text)
+        w, h = (int(v) for v in text.split("x", 1)) if "x" in text else (None, None)
+        longest = max(w, h) if w is not None else int(text)
+        if (w is None or min(w, h) > 0) and 0 < longest <= MAX_RESOLUTION:
+            return w, h, longest
+        if longest > MAX_RESOLUTION:
+            raise MocapEditError(f"--resolution: at most {MAX_RESOLUTION} pixels a side, got '{text}'")
     except ValueError:
         pass
     raise MocapEditError(f"--resolution: expected N or WxH (pixels), got '{text}'")

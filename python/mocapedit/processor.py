@@ -163,6 +163,7 @@ def _with_parent(agent, parent_to_world):
 def inspect(ctx: SolveContext) -> None:
     """After every pass: the report figures no pass measured, and the guides."""
     crowd = inspection.from_context(ctx)
+    inspection.foot_skate_figures(ctx)
     remaining = inspection.complete_report(ctx, crowd)
     guides.build(ctx, crowd, remaining)
 

@@ -61,26 +61,28 @@ def joint_skel_space(agent: Agent, clip: Clip, joint: int) -> np.ndarray:
     return m
 
 
-def joint_world(agent: Agent, clip: Clip, joint: int) -> np.ndarray:
-    """(F,4,4) world matrices of one joint at every source frame."""
-    return joint_skel_space(agent, clip, joint) @ agent.skel_to_world
+def joint_world(agent: Agent, clip: Clip, joint: int, cache: dict | None = None) -> np.ndarray:
+    """(F,4,4) world matrices of one joint at every source frame.
+
+    ``cache`` (optional, shared across agents) keeps the skeleton-space chains of clips
+    that many agents play, so a crowd of re-used clips is composed once per clip."""
+    key = (agent.clip_key, tuple(agent.joints), joint)
+    skel = cache.get(key) if cache is not None else None
+    if skel is None:
+        skel = joint_skel_space(agent, clip, joint)
+        if cache is not None:
+            cache[key] = skel
+    return skel @ agent.skel_to_world
 
 
 def extract(agent: Agent, clip: Clip, up_axis: str, meters_per_unit: float,
             cache: dict | None = None) -> Trajectory:
     """The agent's ground trajectory, its heading and height at each source frame.
 
-    ``cache`` (optional, shared across agents) keeps the skeleton-space chains of clips
-    that many agents play, so a crowd of re-used clips is composed once per clip.
+    ``cache``: see :func:`joint_world`.
     """
     def world(joint):
-        key = (agent.clip_key, tuple(agent.joints), joint)
-        skel = cache.get(key) if cache is not None else None
-        if skel is None:
-            skel = joint_skel_space(agent, clip, joint)
-            if cache is not None:
-                cache[key] = skel
-        return skel @ agent.skel_to_world
+        return joint_world(agent, clip, joint, cache)
 
     root = world(agent.root_joint)
     pos = root[:, 3, :3]

@@ -73,8 +73,10 @@ def run(args) -> int:
         progress.message(f"<{clip.animation}> ({clip.frames} frames, measured on {clip.joint.rsplit('/', 1)[-1]}): "
                          f"{len(clip.ranges)} stationary range{'s' if len(clip.ranges) != 1 else ''}")
         for name, r in zip(clip.names, clip.ranges):
+            bridged = (f"; bridges {r.bridged} frame{'s' if r.bridged != 1 else ''} of shorter gaps (--max-gap) "
+                       f"reaching {r.bridged_max_speed:.3f} m/s, {r.bridged_max_turn:.1f} deg/s") if r.bridged else ""
             progress.message(f"  {name}: frames {r.first}-{r.last} ({r.duration:.2f} s at {fps:g} fps), "
-                             f"speed <= {r.max_speed:.3f} m/s, turning <= {r.max_turn:.1f} deg/s")
+                             f"speed <= {r.max_speed:.3f} m/s, turning <= {r.max_turn:.1f} deg/s{bridged}")
     if not args.quiet:
         print(f"wrote {os.path.abspath(args.output)}", file=sys.stderr)
     return 0

@@ -66,7 +66,6 @@ def _conflict_error(exc, agents: list[str], ctx: SolveContext):
         else:
             message = (f"hard time and sync constraints {named} fix the same frame's time twice and "
                        f"disagree by {info['mismatch']:g} time codes")
-        prop = "time" if times else "offset"
     else:
         if info["agent"] >= 0:
             agent = agents[info["agent"]]
@@ -80,7 +79,9 @@ def _conflict_error(exc, agents: list[str], ctx: SolveContext):
             message = (f"hard constraints {named} would make time run backwards (or faster than "
                        f"minTimeInterval {ctx.data.settings.min_time_interval:g} allows) for one of "
                        f"the agents they tie together")
-        prop = "time" if times else "offset"
+    # The prim named first is given its own property: a time constraint's time, a sync
+    # constraint's offset.
+    prop = "time" if prims[0] in {c.path for c in times} else "offset"
     return prim_error(prims[0], message, prop)
 
 
