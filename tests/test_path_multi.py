@@ -301,3 +301,31 @@ def test_example_edits_keep_foot_skate_low(tmp_path, builder, stage):
         before = metrics.foot_skate(src, agent)
         after = metrics.foot_skate(out, agent, times=before.times, contact=before.contact)
         assert after.mean - before.mean < 0.04, f"{agent}: {before.mean:.3f} -> {after.mean:.3f} m/s"
+
+
+def test_a_long_stand_bent_by_handles_turns_the_body_smoothly(tmp_path):
+    """A 60 fps, Z-up centimetre walk with a 4 s untagged stand whose root jitters, bent by
+    three handles (one inside the stand): the body turns with the bend, never spins, and the
+    handles hold. With the heading taken from the edited path's tangent, the stand spins by
+    up to 177 degrees in one frame."""
+    stages = _load_stages()
+    stages.path_long_stand(tmp_path)
+    result, src, out = _solve(tmp_path, Usd.Stage.Open(str(tmp_path / "path_long_stand.usda")))
+    agent = f"{CROWD}/stander"
+    for c in result.report.constraints:
+        assert c["residual"] < 1e-6, c
+    p = metrics.plausibility(src, out, agent)
+    assert p.spin_frames == 0
+    assert p.max_extra_facing_rate < 60.0                    # under 1 degree per frame at 60 fps
+    assert p.max_direction_deviation < 20.0 and not p.reverses
+    assert p.foot_skate_ratio < 1.5
+    # The stand turns with the handle inside it: by about the bend there, in one smooth sweep.
+    _, (first, last) = stages.long_stand_clip()
+    t, ms = metrics.joint_world_matrices(src, agent)
+    _, me = metrics.joint_world_matrices(out, agent)
+    turn = np.degrees(metrics.body_facing(me, "Z") - metrics.body_facing(ms, "Z"))
+    assert np.abs(np.diff(turn[first:last + 1])).max() < 0.2
+    # It turns with the bend (about 11 degrees), between the turns of the walks around it.
+    before, after = turn[first - 60:first].mean(), turn[last + 1:last + 61].mean()
+    assert turn[first:last + 1].mean() > 5.0
+    assert min(before, after) - 1.0 < turn[first:last + 1].min() <= turn[first:last + 1].max() < max(before, after) + 1.0

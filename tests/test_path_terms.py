@@ -540,10 +540,9 @@ def test_component_problems_match_the_reference_build(name):
         elif result.solver == "rigid":
             assert np.ptp(r.heading - a.source_heading) < 1e-12
         else:
-            fixed = [tuple(map(int, s)) for s in a.stationary]
-            fallback = np.array([a.source_heading[f] + t for (f, _), t in zip(fixed, r.range_turn)])
-            np.testing.assert_array_equal(r.heading, _solver.tangent_headings(r.ground, fixed, fallback,
-                                                                              SETTINGS.still))
+            # The component's headings, computed for all agents at once, are each agent's own.
+            np.testing.assert_allclose(r.heading, path_edit.edited_heading(a, r.ground, r.range_turn, SETTINGS),
+                                       rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("start, end, expected", [
