@@ -315,6 +315,14 @@ def test_a_long_stand_bent_by_handles_turns_the_body_smoothly(tmp_path):
     for c in result.report.constraints:
         assert c["residual"] < 1e-6, c
     p = metrics.plausibility(src, out, agent)
+    # The solve reports the same figures as UsdSkel FK on the composed stage gives.
+    reported = result.report.agents[agent]["plausibility"]
+    assert reported["maxExtraFacingRate"] == pytest.approx(p.max_extra_facing_rate, abs=0.5)
+    assert reported["maxDirectionDeviation"] == pytest.approx(p.max_direction_deviation, abs=0.01)
+    assert reported["lengthRatio"] == pytest.approx(p.length_ratio, rel=1e-4)
+    assert reported["footSkateRatio"] == pytest.approx(p.foot_skate_ratio, rel=1e-3)
+    assert reported["spinFrames"] == 0 and result.report.stats["plausibility"]["spinningAgents"] == 0
+    assert "largest extra turn" in result.report.summary()
     assert p.spin_frames == 0
     assert p.max_extra_facing_rate < 60.0                    # under 1 degree per frame at 60 fps
     assert p.max_direction_deviation < 20.0 and not p.reverses

@@ -33,7 +33,7 @@ __all__ = [
     "FootSkate", "foot_skate",
     "SPIN_DEGREES_AT_60FPS", "CHORD_SECONDS", "default_facing_joint", "joint_world_matrices",
     "body_facing", "facing_change_per_second", "spin_threshold", "spins", "direction_deviation",
-    "Plausibility", "plausibility", "shot_plausibility", "worst_plausibility",
+    "Plausibility", "plausibility_of", "plausibility", "shot_plausibility", "skate_of_positions", "worst_plausibility",
 ]
 
 PathLike = Union[str, Sdf.Path]
@@ -603,6 +603,42 @@ class FootSkate:
     mean: float
 
 
+def skate_of_positions(pos, times, up_axis, seconds_per_code: float, contact_height: float,
+                       clip_range=None, contact=None):
+    """The figures of :func:`foot_skate` from foot world positions ``pos`` ``(T, F, 3)`` at time
+    codes ``times`` ``(T,)``: ``(speeds (F,), contact seconds (F,), contact (T, F), mean)``.
+    ``clip_range``: (first, last) time code of the clip's samples, outside which no foot touches
+    (None: every time is inside); ``contact``: a (T, F) mask to use instead of the height test."""
+    pos = np.asarray(pos, dtype=np.float64)
+    t = np.asarray(times, dtype=np.float64)
+    if clip_range is not None:
+        in_clip = (t >= clip_range[0] - 1e-9) & (t <= clip_range[1] + 1e-9)
+    else:
+        in_clip = np.ones(len(t), dtype=bool)
+    height = pos[..., ground_axes(up_axis)[0]]
+    if contact is not None:
+        contact = np.asarray(contact, dtype=bool)
+        if contact.shape != height.shape:
+            raise ValueError(f"contact mask has shape {contact.shape}; expected {height.shape} "
+                             "(times, feet)")
+    elif in_clip.any():
+        lowest = height[in_clip].min(axis=0)
+        contact = in_clip[:, None] & (height - lowest <= contact_height)
+    else:
+        contact = np.zeros(height.shape, dtype=bool)
+
+    ground = to_ground(pos, up_axis)
+    step = np.linalg.norm(np.diff(ground, axis=0), axis=2)          # (T-1, F)
+    dt = (np.diff(t) * seconds_per_code)[:, None]                    # (T-1, 1)
+    both = contact[1:] & contact[:-1]
+    slide = np.where(both, step, 0.0).sum(axis=0)
+    duration = np.where(both, dt, 0.0).sum(axis=0)
+    speeds = np.where(duration > 0, slide / np.where(duration > 0, duration, 1.0), np.nan)
+    total = float(duration.sum())
+    mean = float(slide.sum() / total) if total > 0 else float("nan")
+    return speeds, duration, contact, mean
+
+
 def foot_skate(stage: Usd.Stage, agent_path: PathLike, times: Iterable | None = None,
                foot_joints: Sequence[Union[int, str]] | None = None,
                contact_height: float | None = None,
@@ -641,33 +677,9 @@ def foot_skate(stage: Usd.Stage, agent_path: PathLike, times: Iterable | None = 
         xfc.SetTime(Usd.TimeCode(tc))
         pos[k] = skel.world_translations(xfc)[feet]
 
-    if len(skel.sample_times):
-        first, last = skel.sample_times[0], skel.sample_times[-1]
-        in_clip = (t >= first - 1e-9) & (t <= last + 1e-9)
-    else:
-        in_clip = np.ones(len(t), dtype=bool)
-    height = pos[..., ground_axes(up)[0]]
-    if contact is not None:
-        contact = np.asarray(contact, dtype=bool)
-        if contact.shape != height.shape:
-            raise ValueError(f"contact mask has shape {contact.shape}; expected {height.shape} "
-                             "(times, feet)")
-    elif in_clip.any():
-        contact = np.zeros(height.shape, dtype=bool)
-        lowest = height[in_clip].min(axis=0)
-        contact = in_clip[:, None] & (height - lowest <= contact_height)
-    else:
-        contact = np.zeros(height.shape, dtype=bool)
-
-    ground = to_ground(pos, up)
-    step = np.linalg.norm(np.diff(ground, axis=0), axis=2)          # (T-1, F)
-    dt = (np.diff(t) * seconds_per_code)[:, None]                    # (T-1, 1)
-    both = contact[1:] & contact[:-1]
-    slide = np.where(both, step, 0.0).sum(axis=0)
-    duration = np.where(both, dt, 0.0).sum(axis=0)
-    speeds = np.where(duration > 0, slide / np.where(duration > 0, duration, 1.0), np.nan)
-    total = float(duration.sum())
-    mean = float(slide.sum() / total) if total > 0 else float("nan")
+    clip_range = (skel.sample_times[0], skel.sample_times[-1]) if len(skel.sample_times) else None
+    speeds, duration, contact, mean = skate_of_positions(pos, t, up, seconds_per_code, contact_height,
+                                                        clip_range, contact)
     return FootSkate(tuple(skel.joints[f] for f in feet), speeds, duration, contact, t, mean)
 
 
@@ -835,46 +847,59 @@ def _pair(source: np.ndarray, count: int) -> np.ndarray:
         (count,) + source.shape[1:])
 
 
-def plausibility(source_stage: Usd.Stage, edited_stage: Usd.Stage, agent_path: PathLike,
-                 joint: Union[int, str, None] = None, foot_joints=None) -> Plausibility:
-    """Plausibility of one agent: its edited motion on ``edited_stage`` (the input with the edits
-    layer on top) against its source on ``source_stage``, both by UsdSkel FK at their own composed
-    samples, paired by frame. ``joint``: the facing joint (default :func:`default_facing_joint`)."""
-    up = UsdGeom.GetStageUpAxis(source_stage)
-    mpu = UsdGeom.GetStageMetersPerUnit(source_stage)
-    ts, ms = joint_world_matrices(source_stage, agent_path, None, joint)
-    te, me = joint_world_matrices(edited_stage, agent_path, None, joint)
-    ss = ts / source_stage.GetTimeCodesPerSecond()
-    se = te / edited_stage.GetTimeCodesPerSecond()
-    fs, fe = body_facing(ms, up), body_facing(me, up)
-    gs, ge = to_ground(ms[:, 3, :3], up), to_ground(me[:, 3, :3], up)
-    if len(te) >= 2 and len(ts) >= 2:
+def _ratio(edited: float, source: float) -> float:
+    if not (np.isfinite(edited) and np.isfinite(source)):
+        return float("nan")
+    if source > 0:
+        return edited / source
+    return 1.0 if edited == 0 else float("inf")
+
+
+def plausibility_of(agent: str, source_seconds, source_hip, edited_seconds, edited_hip, up_axis,
+                    meters_per_unit: float, foot_skate_source: float = float("nan"),
+                    foot_skate_edited: float = float("nan")) -> Plausibility:
+    """:class:`Plausibility` from the facing joint's world matrices of the source ``(T, 4, 4)``
+    at ``source_seconds`` ``(T,)`` and of the edited agent ``(T', 4, 4)`` at ``edited_seconds``
+    (paired by frame; resampled by frame fraction when T' differs), and the two foot skate means
+    (stage units per second). :func:`plausibility` measures these on stages by FK."""
+    ss, se = np.asarray(source_seconds, np.float64), np.asarray(edited_seconds, np.float64)
+    ms, me = np.asarray(source_hip, np.float64), np.asarray(edited_hip, np.float64)
+    fs, fe = body_facing(ms, up_axis), body_facing(me, up_axis)
+    gs, ge = to_ground(ms[:, 3, :3], up_axis), to_ground(me[:, 3, :3], up_axis)
+    if len(se) >= 2 and len(ss) >= 2:
         rate_e = facing_change_per_second(fe, se)
         rate_s = _pair(facing_change_per_second(fs, ss), len(rate_e))
-        warp = np.diff(se) / _pair(np.diff(ss), len(te) - 1)
+        warp = np.diff(se) / _pair(np.diff(ss), len(se) - 1)
         extra = float(np.max(rate_e - rate_s))
         spin = int(np.count_nonzero(spins(rate_s, rate_e)))
-        dev = direction_deviation(_pair(gs, len(ge)), ge, _pair(ss, len(se)), WALKING_SPEED_M / mpu)
+        dev = direction_deviation(_pair(gs, len(ge)), ge, _pair(ss, len(se)), WALKING_SPEED_M / meters_per_unit)
         max_dev = float(np.nanmax(dev)) if np.isfinite(dev).any() else float("nan")
         rates = (float(rate_e.max()), float(rate_s.max()))
         warp_range = (float(warp.min()), float(warp.max()))
     else:
         rates, extra, spin, max_dev, warp_range = (0.0, 0.0), 0.0, 0, float("nan"), (1.0, 1.0)
+    return Plausibility(agent=str(agent), max_facing_rate=rates[0], source_max_facing_rate=rates[1],
+                        max_extra_facing_rate=extra, spin_frames=spin, max_direction_deviation=max_dev,
+                        length_ratio=length_ratio(ge, gs),
+                        time_warp=warp_range, foot_skate_source=float(foot_skate_source),
+                        foot_skate_edited=float(foot_skate_edited),
+                        foot_skate_ratio=_ratio(float(foot_skate_edited), float(foot_skate_source)))
+
+
+def plausibility(source_stage: Usd.Stage, edited_stage: Usd.Stage, agent_path: PathLike,
+                 joint: Union[int, str, None] = None, foot_joints=None) -> Plausibility:
+    """Plausibility of one agent: its edited motion on ``edited_stage`` (the input with the edits
+    layer on top) against its source on ``source_stage``, both by UsdSkel FK at their own composed
+    samples, paired by frame. ``joint``: the facing joint (default :func:`default_facing_joint`)."""
+    ts, ms = joint_world_matrices(source_stage, agent_path, None, joint)
+    te, me = joint_world_matrices(edited_stage, agent_path, None, joint)
     skate_s = foot_skate(source_stage, agent_path, foot_joints=foot_joints)
     contact = skate_s.contact if len(skate_s.times) == len(te) else None
     skate_e = foot_skate(edited_stage, agent_path, times=te if contact is not None else None,
                          foot_joints=foot_joints, contact=contact)
-    a, b = skate_e.mean, skate_s.mean
-    if not (np.isfinite(a) and np.isfinite(b)):
-        ratio = float("nan")
-    elif b > 0:
-        ratio = a / b
-    else:
-        ratio = 1.0 if a == 0 else float("inf")
-    return Plausibility(agent=str(agent_path), max_facing_rate=rates[0], source_max_facing_rate=rates[1],
-                        max_extra_facing_rate=extra, spin_frames=spin, max_direction_deviation=max_dev,
-                        length_ratio=length_ratio(ge, gs), time_warp=warp_range,
-                        foot_skate_source=b, foot_skate_edited=a, foot_skate_ratio=ratio)
+    return plausibility_of(str(agent_path), ts / source_stage.GetTimeCodesPerSecond(), ms,
+                           te / edited_stage.GetTimeCodesPerSecond(), me, UsdGeom.GetStageUpAxis(source_stage),
+                           UsdGeom.GetStageMetersPerUnit(source_stage), skate_s.mean, skate_e.mean)
 
 
 def shot_plausibility(source_stage: Usd.Stage, edited_stage: Usd.Stage,

@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 from pxr import Sdf, Usd, Vt
 
-from . import animation, guides, inspection, reader, trajectory, writer
+from . import animation, guides, inspection, metrics, reader, trajectory, writer
 from .errors import MocapEditError
 from .model import StageData
 from .progress import Progress, Silent
@@ -155,6 +155,56 @@ def compose_edits(ctx: SolveContext) -> None:
             ctx.edits[path] = edit
 
 
+def measure_plausibility(ctx: SolveContext) -> None:
+    """Per edited agent, and for the shot (``stats["plausibility"]``), the figures of
+    :func:`metrics.plausibility_of`: the facing and walking direction of the edited body against
+    its source, path length, time warp and foot skate. They come from the same motions the edits
+    layer authors, by numpy forward kinematics of the hip and the feet (the composed stage plays
+    the same, so FK on it gives the same figures); layered poses are left out."""
+    info = ctx.data.info
+    up, chains, figures = info.up_axis, {}, []
+    for path in sorted(ctx.edits):
+        if path not in ctx.paths and path not in ctx.time_maps:
+            continue
+        agent, traj = ctx.data.agents[path], ctx.trajectories[path]
+        clip = ctx.data.clip_of(agent)
+        hip = metrics.default_facing_joint(agent.joints)
+        feet = metrics.default_foot_joints(agent.joints)
+        joints = [hip] + feet
+        key = (agent.clip_key, tuple(agent.joints))
+        if key not in chains:
+            chains[key] = np.stack([trajectory.joint_skel_space(agent, clip, j) for j in joints], axis=1)
+        source = chains[key] @ agent.skel_to_world[:, None]               # (F, 1 + feet, 4, 4)
+        times, frames = output_frames(ctx, path)
+        edited = animation.interp_frames(source, frames)
+        moved = ctx.paths.get(path)
+        if moved is not None:
+            edited = edited @ trajectory.ground_motion(
+                animation.interp_frames(traj.ground, frames), animation.interp_frames(traj.heading, frames),
+                animation.interp_frames(moved.ground, frames), animation.interp_frames(moved.heading, frames),
+                up)[:, None]
+        seconds = 1.0 / info.time_codes_per_second
+        skate = [float("nan"), float("nan")]
+        if feet:
+            height = 0.02 / info.meters_per_unit
+            span = (agent.sample_times[0], agent.sample_times[-1])
+            _, _, contact, skate[0] = metrics.skate_of_positions(source[:, 1:, 3, :3], agent.sample_times, up,
+                                                                 seconds, height, span)
+            mask = contact if len(times) == len(agent.sample_times) else None
+            skate[1] = metrics.skate_of_positions(edited[:, 1:, 3, :3], times, up, seconds, height,
+                                                  (times[0], times[-1]), mask)[3]
+        p = metrics.plausibility_of(path, agent.sample_times * seconds, source[:, 0], times * seconds, edited[:, 0],
+                                    up, info.meters_per_unit, *skate)
+        figures.append(p)
+        ctx.report.agent(path)["plausibility"] = {
+            "maxFacingRate": p.max_facing_rate, "sourceMaxFacingRate": p.source_max_facing_rate,
+            "maxExtraFacingRate": p.max_extra_facing_rate, "spinFrames": p.spin_frames,
+            "maxDirectionDeviation": p.max_direction_deviation, "lengthRatio": p.length_ratio,
+            "timeWarp": list(p.time_warp), "footSkateRatio": p.foot_skate_ratio}
+    if figures:
+        ctx.report.stats["plausibility"] = metrics.worst_plausibility(figures)
+
+
 def _with_parent(agent, parent_to_world):
     import dataclasses
     return dataclasses.replace(agent, agent_parent_to_world=parent_to_world)
@@ -251,6 +301,7 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
     compose_edits(ctx)
     t = time.perf_counter()
     inspect(ctx)
+    measure_plausibility(ctx)
     timings["inspect"] = time.perf_counter() - t
 
     constraint_count = sum(len(x) for x in (data.position_constraints, data.relative_constraints,
