@@ -337,3 +337,33 @@ def test_a_long_stand_bent_by_handles_turns_the_body_smoothly(tmp_path):
     before, after = turn[first - 60:first].mean(), turn[last + 1:last + 61].mean()
     assert turn[first:last + 1].mean() > 5.0
     assert min(before, after) - 1.0 < turn[first:last + 1].min() <= turn[first:last + 1].max() < max(before, after) + 1.0
+
+
+def test_backward_walks_and_turns_on_the_spot_keep_their_facing(tmp_path):
+    """A walk played backwards (the body faces +Z while the root goes -Z) bent 1 m sideways keeps
+    facing +Z, turned only by the bend; a slow turn on the spot dragged 1 m keeps its own turn."""
+    import dataclasses
+    walk = walker.walk(frames=97, fps=24.0, speed=1.25, name="forward")
+    back = dataclasses.replace(walk, name="backward", translations=walk.translations[::-1].copy(),
+                               rotations=walk.rotations[::-1].copy(), foot_contacts=walk.foot_contacts[::-1].copy())
+    spot = walker.turn(frames=96, fps=24.0, speed=0.02, turn_rate=90.0, name="spot")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("back", back),
+                                                                examples.AgentSpec("spot", spot, (3.0, 0.0, 0.0))],
+                                       fps=24.0, clips_dir=tmp_path / "clips")
+    b, s = f"{CROWD}/back", f"{CROWD}/spot"
+    for f in (0, 48, 96):
+        x, _, z = (float(v) for v in back.translations[f, 0])
+        examples.add_position_constraint(stage, f"/Edits/back{f}", b, f, (x + (1.0 if f == 48 else 0.0), 0.0, z))
+    x, _, z = (float(v) for v in spot.translations[0, 0])
+    examples.add_position_constraint(stage, "/Edits/spot", s, 0, (x + 4.0, 0.0, z + 1.0))
+    result, src, out = _solve(tmp_path, stage)
+    for agent, most in ((b, 35.0), (s, 1e-6)):
+        p = metrics.plausibility(src, out, agent)
+        assert p.spin_frames == 0
+        _, ms = metrics.joint_world_matrices(src, agent)
+        _, me = metrics.joint_world_matrices(out, agent)
+        turn = np.degrees(metrics.body_facing(me, "Y") - metrics.body_facing(ms, "Y"))
+        assert np.abs(turn).max() < most, agent      # never turned round to face its path
+        if agent == b:                               # the bend turns the two halves both ways
+            assert abs(turn[48]) < 2.0 and turn[0] * turn[-1] < 0
+    assert p.source_max_facing_rate > 80.0             # the spot turn is there, and kept
