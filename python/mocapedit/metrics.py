@@ -811,7 +811,8 @@ class Plausibility:
     the source never walks). ``length_ratio``: edited over source ground path of the facing joint.
     ``time_warp``: smallest and largest edited over source frame interval. ``foot_skate_source``
     and ``foot_skate_edited``: mean foot speed in contact (stage units per second, over the
-    source's contact frames), ``foot_skate_ratio`` their ratio (1 when both are 0)."""
+    source's contact frames), ``foot_skate_ratio`` their ratio (1 when both are 0).
+    ``worst_turn_frame`` and ``worst_direction_frame``: the edited samples where those happen."""
 
     agent: str
     max_facing_rate: float
@@ -824,6 +825,8 @@ class Plausibility:
     foot_skate_source: float
     foot_skate_edited: float
     foot_skate_ratio: float
+    worst_turn_frame: int = -1        # edited sample where the extra turn is largest (interval start)
+    worst_direction_frame: int = -1   # edited sample where the direction deviates most (-1: none)
 
     @property
     def spins(self) -> bool:
@@ -870,20 +873,24 @@ def plausibility_of(agent: str, source_seconds, source_hip, edited_seconds, edit
         rate_e = facing_change_per_second(fe, se)
         rate_s = _pair(facing_change_per_second(fs, ss), len(rate_e))
         warp = np.diff(se) / _pair(np.diff(ss), len(se) - 1)
-        extra = float(np.max(rate_e - rate_s))
+        turn_frame = int(np.argmax(rate_e - rate_s))
+        extra = float(rate_e[turn_frame] - rate_s[turn_frame])
         spin = int(np.count_nonzero(spins(rate_s, rate_e)))
         dev = direction_deviation(_pair(gs, len(ge)), ge, _pair(ss, len(se)), WALKING_SPEED_M / meters_per_unit)
-        max_dev = float(np.nanmax(dev)) if np.isfinite(dev).any() else float("nan")
+        dev_frame = int(np.nanargmax(dev)) if np.isfinite(dev).any() else -1
+        max_dev = float(dev[dev_frame]) if dev_frame >= 0 else float("nan")
         rates = (float(rate_e.max()), float(rate_s.max()))
         warp_range = (float(warp.min()), float(warp.max()))
     else:
         rates, extra, spin, max_dev, warp_range = (0.0, 0.0), 0.0, 0, float("nan"), (1.0, 1.0)
+        turn_frame, dev_frame = -1, -1
     return Plausibility(agent=str(agent), max_facing_rate=rates[0], source_max_facing_rate=rates[1],
                         max_extra_facing_rate=extra, spin_frames=spin, max_direction_deviation=max_dev,
                         length_ratio=length_ratio(ge, gs),
                         time_warp=warp_range, foot_skate_source=float(foot_skate_source),
                         foot_skate_edited=float(foot_skate_edited),
-                        foot_skate_ratio=_ratio(float(foot_skate_edited), float(foot_skate_source)))
+                        foot_skate_ratio=_ratio(float(foot_skate_edited), float(foot_skate_source)),
+                        worst_turn_frame=turn_frame, worst_direction_frame=dev_frame)
 
 
 def plausibility(source_stage: Usd.Stage, edited_stage: Usd.Stage, agent_path: PathLike,

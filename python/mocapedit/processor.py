@@ -200,7 +200,10 @@ def measure_plausibility(ctx: SolveContext) -> None:
             "maxFacingRate": p.max_facing_rate, "sourceMaxFacingRate": p.source_max_facing_rate,
             "maxExtraFacingRate": p.max_extra_facing_rate, "spinFrames": p.spin_frames,
             "maxDirectionDeviation": p.max_direction_deviation, "lengthRatio": p.length_ratio,
-            "timeWarp": list(p.time_warp), "footSkateRatio": p.foot_skate_ratio}
+            "timeWarp": list(p.time_warp), "footSkateRatio": p.foot_skate_ratio,
+            # Source frames where the largest extra turn and direction change happen (previews mark them).
+            "worstTurnFrame": int(round(frames[max(p.worst_turn_frame, 0)])),
+            "worstDirectionFrame": int(round(frames[p.worst_direction_frame])) if p.worst_direction_frame >= 0 else -1}
     if figures:
         ctx.report.stats["plausibility"] = metrics.worst_plausibility(figures)
 
