@@ -122,83 +122,30 @@ def turn_window(fps: float) -> int:
     return max(1, int(round(TURN_WINDOW_S * float(fps))))
 
 
-def _box(values: np.ndarray, first: np.ndarray, last: np.ndarray) -> np.ndarray:
-    """Sums of ``values`` over the inclusive index ranges ``first..last`` (per row)."""
-    c = np.concatenate([np.zeros((1,) + values.shape[1:], values.dtype), np.cumsum(values, axis=0)])
-    return c[last + 1] - c[first]
-
-
 def deformation_turns(source: np.ndarray, edited: np.ndarray, offsets, fixed=(), fixed_turn=(),
                       window: int = 2, min_travel: float = 0.0) -> np.ndarray:
     """(F,) turn of each frame's heading (radians, counter-clockwise) when paths go from source
-    to edited: the local rotation the edit applies to the path around the frame.
-
-    The rotation of frame ``i`` is the least-squares rotation taking the source steps near it
-    onto the edited ones: the angle of the sum of ``conj(s_k) e_k`` (steps as complex numbers)
-    over the steps within two nested box windows of ``window`` frames each side, so each step
-    counts by the product of its lengths and a step that barely moves cannot flip it. Where the
-    source moves less than ``min_travel`` (stage units) from ``window`` frames before to
-    ``window`` frames after (a stand, a turn on the spot, the top of a jump: a displacement, so
-    the jitter of a standing root is no travel) the turn is interpolated, by frame, from the
-    moving frames around it (held beyond the first and last). Each fixed range turns by its
-    own angle, as one rigid body, and anchors the frames around it. An unedited path turns by
+    to edited: the local rotation the edit applies to the path around the frame (the least-squares
+    rotation of the source steps onto the edited ones within two nested windows of ``window``
+    frames each side; where the source moves less than ``min_travel`` stage units across the
+    window, interpolated from the moving frames around it; each fixed range by its own turn). See
+    ``DeformationTurns`` in ``solver/include/mocapedit/trajectory.h``. An unedited path turns by
     exactly 0, a rigidly turned one by its angle.
 
       source, edited  (F,2) ground paths of one or more agents, concatenated
       offsets         (B+1,) first frame of each agent's block, then F
-      fixed           (R,3) (block, first, last) inclusive frame ranges within the blocks
+      fixed           (R,3) (block, first, last) inclusive frame ranges within the blocks, by block
       fixed_turn      (R,) turn of each fixed range
     """
-    s = np.asarray(source, dtype=np.float64)
-    e = np.asarray(edited, dtype=np.float64)
-    off = np.asarray(offsets, dtype=np.int64)
-    if s.shape != e.shape or s.ndim != 2 or s.shape[1] != 2 or off[-1] != len(s):
+    s = np.ascontiguousarray(source, dtype=np.float64)
+    e = np.ascontiguousarray(edited, dtype=np.float64)
+    off = np.asarray(offsets, dtype=np.int32)
+    if s.shape != e.shape or s.ndim != 2 or s.shape[1] != 2 or len(off) < 1 or off[-1] != len(s):
         raise ValueError(f"source {s.shape} and edited {e.shape} must be (F,2) with offsets ending at F")
-    n, h = len(s), max(1, int(window))
-    out = np.zeros(n)
-    if n == 0:
-        return out
-    block = np.repeat(np.arange(len(off) - 1), np.diff(off))
-    begin, end = off[block], off[block + 1] - 1          # each frame's block, inclusive
-    # Steps k -> k+1; the last frame of a block has none. conj(s) e = (s.e) + i (s x e).
-    step_s = np.zeros((n, 2))
-    step_e = np.zeros((n, 2))
-    inner = np.flatnonzero(np.arange(n) < end)
-    step_s[inner] = s[inner + 1] - s[inner]
-    step_e[inner] = e[inner + 1] - e[inner]
-    pair = np.stack((step_s[:, 0] * step_e[:, 0] + step_s[:, 1] * step_e[:, 1],
-                     step_s[:, 0] * step_e[:, 1] - step_s[:, 1] * step_e[:, 0]), axis=1)
-    i = np.arange(n)
-    lo, hi = np.maximum(i - h, begin), np.minimum(i + h, end)
-    # Travel is the displacement across the window, not its arc length: jitter adds none.
-    travel = np.hypot(s[hi, 0] - s[lo, 0], s[hi, 1] - s[lo, 1])
-    z = _box(_box(pair, lo, np.maximum(hi - 1, lo - 1)), lo, hi)   # a block of one frame has no step
-    known = (travel >= min_travel) & ((z[:, 0] != 0) | (z[:, 1] != 0))
-    value = np.arctan2(z[:, 1], z[:, 0])
-    ranges = np.asarray(fixed, dtype=np.int64).reshape(-1, 3)
+    blocks = np.ascontiguousarray(np.stack((off[:-1], off[1:]), axis=1))
+    ranges = np.ascontiguousarray(np.asarray(fixed, dtype=np.int32).reshape(-1, 3))
     turns = np.asarray(fixed_turn, dtype=np.float64).reshape(-1)
-    if len(ranges) != len(turns):
-        raise ValueError("one turn is needed per fixed range")
-    in_range = np.zeros(n, bool)
-    for (b, first, last), t in zip(ranges.tolist(), turns.tolist()):
-        a, z_ = off[b] + first, off[b] + last
-        # The frames next to a rigid range blend from its turn into the moving frames'.
-        known[max(a - h, off[b]):min(z_ + h, off[b + 1] - 1) + 1] = False
-        in_range[a:z_ + 1] = True
-        value[a:z_ + 1] = t
-    known |= in_range
-    for b in range(len(off) - 1):
-        a, z_ = int(off[b]), int(off[b + 1])
-        k = np.flatnonzero(known[a:z_])
-        if len(k) == 0:
-            continue                                       # nothing moves: no turn
-        v = np.unwrap(value[a:z_][k])
-        fixed_here = in_range[a:z_][k]
-        if fixed_here.any():                               # ranges keep their own angle exactly
-            j = int(np.flatnonzero(fixed_here)[0])
-            v += value[a + k[j]] - v[j]
-        out[a:z_] = np.interp(np.arange(z_ - a), k, v) if len(k) < z_ - a else v
-    return out
+    return _solver.block_deformation_turns(s, e, blocks, ranges, turns, int(window), float(min_travel))
 
 
 def ground_motion(src_uv: np.ndarray, src_heading: np.ndarray, new_uv: np.ndarray,
