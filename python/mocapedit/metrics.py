@@ -809,7 +809,8 @@ class Plausibility:
     frame (divide by 60 for degrees per frame at 60 fps); ``spin_frames`` how many frames spin
     (:func:`spins`). ``max_direction_deviation``: degrees (:func:`direction_deviation`; NaN when
     the source never walks). ``length_ratio``: edited over source ground path of the facing joint.
-    ``time_warp``: smallest and largest edited over source frame interval. ``foot_skate_source``
+    ``time_warp``: smallest and largest shot time per source time (from the time map when the
+    caller gives ``edited_frames``, else the ratio of edited to source sample intervals). ``foot_skate_source``
     and ``foot_skate_edited``: mean foot speed in contact (stage units per second, over the
     source's contact frames), ``foot_skate_ratio`` their ratio (1 when both are 0).
     ``worst_turn_frame`` and ``worst_direction_frame``: the edited samples where those happen."""
@@ -838,16 +839,21 @@ class Plausibility:
         return bool(self.max_direction_deviation > 90.0)
 
 
+def _resample(values: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Per-sample ``values`` ``(N, ...)`` linearly interpolated at fractional sample indices."""
+    values = np.asarray(values, dtype=np.float64)
+    x = np.arange(len(values), dtype=np.float64)
+    flat = values.reshape(len(values), -1)
+    out = np.stack([np.interp(at, x, flat[:, c]) for c in range(flat.shape[1])], axis=1)
+    return out.reshape((len(at),) + values.shape[1:])
+
+
 def _pair(source: np.ndarray, count: int) -> np.ndarray:
     """Source samples paired with ``count`` edited samples: the same ones when the counts agree,
     else resampled over the clip by frame fraction (an edit that re-sampled the time)."""
     if len(source) == count:
         return source
-    x = np.linspace(0.0, 1.0, len(source))
-    xi = np.linspace(0.0, 1.0, count)
-    flat = source.reshape(len(source), -1)
-    return np.stack([np.interp(xi, x, flat[:, c]) for c in range(flat.shape[1])], axis=1).reshape(
-        (count,) + source.shape[1:])
+    return _resample(source, np.linspace(0.0, len(source) - 1.0, count))
 
 
 def _ratio(edited: float, source: float) -> float:
@@ -860,23 +866,46 @@ def _ratio(edited: float, source: float) -> float:
 
 def plausibility_of(agent: str, source_seconds, source_hip, edited_seconds, edited_hip, up_axis,
                     meters_per_unit: float, foot_skate_source: float = float("nan"),
-                    foot_skate_edited: float = float("nan")) -> Plausibility:
+                    foot_skate_edited: float = float("nan"), edited_frames=None) -> Plausibility:
     """:class:`Plausibility` from the facing joint's world matrices of the source ``(T, 4, 4)``
-    at ``source_seconds`` ``(T,)`` and of the edited agent ``(T', 4, 4)`` at ``edited_seconds``
-    (paired by frame; resampled by frame fraction when T' differs), and the two foot skate means
-    (stage units per second). :func:`plausibility` measures these on stages by FK."""
+    at ``source_seconds`` ``(T,)`` and of the edited agent ``(T', 4, 4)`` at ``edited_seconds``,
+    and the two foot skate means (stage units per second). ``edited_frames`` ``(T',)``: the
+    (fractional) source frame each edited sample plays, as a time warp knows it; the source is
+    then compared at those frames and the time warp is shot time per source time. Without it,
+    edited samples pair with source samples by frame (resampled by frame fraction when T'
+    differs) and the time warp is the ratio of their intervals. :func:`plausibility` measures
+    these on stages by FK."""
     ss, se = np.asarray(source_seconds, np.float64), np.asarray(edited_seconds, np.float64)
     ms, me = np.asarray(source_hip, np.float64), np.asarray(edited_hip, np.float64)
     fs, fe = body_facing(ms, up_axis), body_facing(me, up_axis)
     gs, ge = to_ground(ms[:, 3, :3], up_axis), to_ground(me[:, 3, :3], up_axis)
     if len(se) >= 2 and len(ss) >= 2:
         rate_e = facing_change_per_second(fe, se)
-        rate_s = _pair(facing_change_per_second(fs, ss), len(rate_e))
-        warp = np.diff(se) / _pair(np.diff(ss), len(se) - 1)
+        if edited_frames is None:
+            rate_s = _pair(facing_change_per_second(fs, ss), len(rate_e))
+            warp = np.diff(se) / _pair(np.diff(ss), len(se) - 1)
+            gs_at, ss_at = _pair(gs, len(ge)), _pair(ss, len(se))
+        else:
+            f = np.asarray(edited_frames, dtype=np.float64)
+            if f.shape != se.shape:
+                raise ValueError(f"edited_frames {f.shape} must pair with edited_seconds {se.shape}")
+            # The source's turn over each edited interval, per second of the source.
+            d_frames = np.diff(f)
+            moving = d_frames > 1e-9
+            src_turn = np.abs(np.diff(_resample(fs, f)))
+            src_dt = np.diff(_resample(ss, f))
+            rate_s = np.where(moving, np.degrees(src_turn) / np.where(moving, src_dt, 1.0), 0.0)
+            warp = (np.diff(se) / np.where(moving, src_dt, 1.0))[moving] if moving.any() else np.ones(1)
+            gs_at, ss_at = _resample(gs, f), _resample(ss, f)
         turn_frame = int(np.argmax(rate_e - rate_s))
         extra = float(rate_e[turn_frame] - rate_s[turn_frame])
         spin = int(np.count_nonzero(spins(rate_s, rate_e)))
-        dev = direction_deviation(_pair(gs, len(ge)), ge, _pair(ss, len(se)), WALKING_SPEED_M / meters_per_unit)
+        if np.all(np.diff(ss_at) > 0):
+            dev = direction_deviation(gs_at, ge, ss_at, WALKING_SPEED_M / meters_per_unit)
+        else:   # held ends of a warped clip: measure on the frames that advance
+            keep = np.r_[True, np.diff(ss_at) > 0]
+            dev = np.full(len(ge), np.nan)
+            dev[keep] = direction_deviation(gs_at[keep], ge[keep], ss_at[keep], WALKING_SPEED_M / meters_per_unit)
         dev_frame = int(np.nanargmax(dev)) if np.isfinite(dev).any() else -1
         max_dev = float(dev[dev_frame]) if dev_frame >= 0 else float("nan")
         rates = (float(rate_e.max()), float(rate_s.max()))

@@ -194,7 +194,7 @@ def measure_plausibility(ctx: SolveContext) -> None:
             skate[1] = metrics.skate_of_positions(edited[:, 1:, 3, :3], times, up, seconds, height,
                                                   (times[0], times[-1]), mask)[3]
         p = metrics.plausibility_of(path, agent.sample_times * seconds, source[:, 0], times * seconds, edited[:, 0],
-                                    up, info.meters_per_unit, *skate)
+                                    up, info.meters_per_unit, *skate, edited_frames=frames)
         figures.append(p)
         ctx.report.agent(path)["plausibility"] = {
             "maxFacingRate": p.max_facing_rate, "sourceMaxFacingRate": p.source_max_facing_rate,
