@@ -189,6 +189,7 @@ class ComponentProblem:
         self._resolve_freedom()
         self._needs_headings = any(k.space == "target" for k in self.links)
         self._rest_headings: dict[int, np.ndarray] = {}
+        self._source_full: np.ndarray | None = None   # every agent's source path, concatenated
         self.data = _solver.path_edit_precompute(
             self.rest, self.triangles, self.triangle_weights, self.edges, self.edge_weights, self.rigid,
             self.handle_vertex, self.handle_weight, self.link_vertex, self.link_weight,
@@ -634,7 +635,9 @@ class ComponentProblem:
         if turned:
             blocks = [(fo[i], fo[i + 1]) for i in turned]
             if len(turned) == len(self._inputs):
-                source, edited = self._source_full(), ground
+                if self._source_full is None:
+                    self._source_full = np.concatenate([a.source for a in self._inputs], dtype=np.float64)
+                source, edited = self._source_full, ground
             else:
                 source = np.concatenate([self._inputs[i].source for i in turned])
                 edited = np.concatenate([ground[b:e] for b, e in blocks])
@@ -644,11 +647,6 @@ class ComponentProblem:
             for k, i in enumerate(turned):
                 out[i] = np.asarray(self._inputs[i].source_heading, dtype=np.float64) + h[offsets[k]:offsets[k + 1]]
         return out
-
-    def _source_full(self) -> np.ndarray:
-        if not hasattr(self, "_source_cache"):
-            self._source_cache = np.concatenate([a.source for a in self._inputs]).astype(np.float64)
-        return self._source_cache
 
     def _agents(self, result) -> dict[str, AgentResult]:
         ground, turn_of = self._ground(result)
