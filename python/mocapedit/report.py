@@ -49,6 +49,7 @@ class Report:
         lines = [f"agents: {s.get('agents', 0)} read, {s.get('editedAgents', 0)} edited; "
                  f"clips: {s.get('clips', 0)}; constraints: {s.get('constraints', 0)}"]
         lines.extend(overview(s, self.constraints))
+        lines.extend(plausibility_lines(s.get("plausibility")))
         lines.extend(f"note: {n}" for n in self.notes)
         return "\n".join(lines)
 
@@ -81,6 +82,22 @@ def overview(stats: dict, constraints: list[dict]) -> list[str]:
     elif "remainingOverlaps" in stats:
         lines.append(f"overlapping agent pairs left: {stats['remainingOverlaps']}")
     return lines
+
+
+def plausibility_lines(p: dict | None) -> list[str]:
+    """The shot's worst plausibility figures (``stats["plausibility"]``), as ``solve`` prints them."""
+    if not p or not p.get("agents"):
+        return []
+    lo, hi = p["lengthRatioRange"]
+    wlo, whi = p["timeWarpRange"]
+    return [
+        f"plausibility of {p['agents']} moved agents: largest extra turn {p['maxExtraTurnPerFrameAt60fps']:.1f} "
+        f"deg/frame at 60 fps ({p['maxExtraFacingRateAgent']}), {p['spinningAgents']} spinning (over 15)",
+        f"  largest walking direction change {p['maxDirectionDeviation']:.1f} deg"
+        + (f" ({p['maxDirectionDeviationAgent']})" if p.get("maxDirectionDeviationAgent") else "")
+        + f", {p['reversingAgents']} reversing (over 90)",
+        f"  path length ratio mean {p['meanLengthRatio']:.3f} ({lo:.3f}..{hi:.3f}); time warp {wlo:.3f}..{whi:.3f}; "
+        f"foot skate ratio mean {p['meanFootSkateRatio']:.2f} (max {p['maxFootSkateRatio']:.2f})"]
 
 
 def _plain(value):
@@ -182,7 +199,7 @@ _UNIT_NAMES = {1.0: "m", 0.01: "cm", 0.001: "mm", 0.1: "dm", 1000.0: "km"}
 _TIME_KINDS = ("time", "sync")
 _KNOWN_FIGURES = ("frames", "edited", "lengthRatio", "maxDisplacement", "meanDisplacement", "shapeChange",
                   "footSkateSource", "footSkateEdited", "minSeparation", "minInterval", "solver", "notes",
-                  "trajectoryJoint")
+                  "plausibility", "trajectoryJoint")
 
 
 def _num(value, digits: int = 4) -> str:
@@ -219,7 +236,8 @@ def format_text(stored: StoredReport, show_all: bool = False) -> str:
     lines.extend(overview(s, r.constraints))
     others = {k: v for k, v in sorted(s.items()) if k not in (
         "agents", "editedAgents", "clips", "constraints", "groups", "avoidRegions", "animationLayers",
-        "remainingOverlaps")}
+        "remainingOverlaps", "plausibility")}
+    lines.extend(plausibility_lines(s.get("plausibility")))
     if others:
         lines.append("stats: " + ", ".join(f"{k} {_num(v)}" for k, v in others.items()))
     lines.extend(f"note: {n}" for n in r.notes)
@@ -245,6 +263,11 @@ def format_text(stored: StoredReport, show_all: bool = False) -> str:
             parts.append(f"displacement max {_num(fig.get('maxDisplacement'))}, mean {_num(fig.get('meanDisplacement'))}")
         if "shapeChange" in fig:
             parts.append(f"shape change {_num(fig['shapeChange'])}")
+        if "plausibility" in fig:
+            p = fig["plausibility"]
+            parts.append(f"extra turn {_num(p['maxExtraFacingRate'] / 60.0)} deg/frame at 60 fps"
+                         f" ({p['spinFrames']} spinning frames), walking direction change "
+                         f"{_num(p['maxDirectionDeviation'])} deg, foot skate ratio {_num(p['footSkateRatio'])}")
         if "footSkateSource" in fig or "footSkateEdited" in fig:
             a, b = fig.get("footSkateSource"), fig.get("footSkateEdited")
             change = f" ({'+' if b - a >= 0 else ''}{_num(b - a)})" if a is not None and b is not None else ""

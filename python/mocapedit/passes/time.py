@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import _solver, ground, retime
+from .. import _solver, ground, limits, retime
 from ..errors import prim_error
 from ..processor import SolveContext, register_pass
 
@@ -140,6 +140,8 @@ def time_pass(ctx: SolveContext) -> None:
         time_map = result["time_maps"][i]
         if np.array_equal(time_map, agent.sample_times):
             continue
+        limits.check_time_map(path, agent.sample_times, time_map,
+                              [c for c in tc if c.agent == path] + [c for c in sc if path in (c.agent, c.target)])
         ctx.time_maps[path] = time_map
         times = retime.shot_times(time_map, keys[path])
         if path in ctx.out_times:
