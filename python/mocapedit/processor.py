@@ -160,7 +160,10 @@ def measure_plausibility(ctx: SolveContext) -> None:
     :func:`metrics.plausibility_of`: the facing and walking direction of the edited body against
     its source, path length, time warp and foot skate. They come from the same motions the edits
     layer authors, by numpy forward kinematics of the hip and the feet (the composed stage plays
-    the same, so FK on it gives the same figures); layered poses are left out."""
+    the same, so FK on it gives the same figures); layered poses are left out. The foot skate
+    (``footSkateSource``, ``footSkateEdited``: what :func:`metrics.foot_skate` measures on the
+    input and on the composed stage, the edited agent over the frames where its source feet
+    are planted when its timing is kept) goes in the agent's entry as well."""
     info = ctx.data.info
     up, chains, figures = info.up_axis, {}, []
     for path in sorted(ctx.edits):
@@ -194,7 +197,10 @@ def measure_plausibility(ctx: SolveContext) -> None:
         p = metrics.plausibility_of(path, agent.sample_times * seconds, source[:, 0], times * seconds, edited[:, 0],
                                     up, info.meters_per_unit, *skate, edited_frames=frames)
         figures.append(p)
-        ctx.report.agent(path)["plausibility"] = {
+        entry = ctx.report.agent(path)
+        if np.isfinite(skate).all():
+            entry["footSkateSource"], entry["footSkateEdited"] = skate
+        entry["plausibility"] = {
             "maxFacingRate": p.max_facing_rate, "sourceMaxFacingRate": p.source_max_facing_rate,
             "maxExtraFacingRate": p.max_extra_facing_rate, "spinFrames": p.spin_frames,
             "maxDirectionDeviation": p.max_direction_deviation, "lengthRatio": p.length_ratio,
@@ -214,7 +220,6 @@ def _with_parent(agent, parent_to_world):
 def inspect(ctx: SolveContext) -> None:
     """After every pass: the report figures no pass measured, and the guides."""
     crowd = inspection.from_context(ctx)
-    inspection.foot_skate_figures(ctx)
     remaining = inspection.complete_report(ctx, crowd)
     guides.build(ctx, crowd, remaining)
 

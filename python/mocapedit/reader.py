@@ -52,9 +52,10 @@ def check_composition(stage: Usd.Stage) -> None:
             text = str(error).strip().rstrip(".")
             arc = re.fullmatch(r"(.* introduced by @[^@]*@)(<[^>]*>)", text)
             where.setdefault(arc[1] if arc else text, []).extend([arc[2]] if arc else [])
+        where = {what: sorted(set(sites)) for what, sites in where.items()}  # USD reports in no set order
         parts = [what if not sites else what + sites[0] if len(sites) == 1 else
                  f"{what} at {len(sites)} prims ({', '.join(sites[:3])}{', ...' if len(sites) > 3 else ''})"
-                 for what, sites in where.items()]
+                 for what, sites in sorted(where.items())]
         raise MocapEditError(f"{stage.GetRootLayer().identifier}: the stage does not compose: " + "; ".join(parts))
     root = stage.GetRootLayer()
     stage_says = {"upAxis": str(UsdGeom.GetStageUpAxis(stage)),
