@@ -9,7 +9,7 @@ raises :class:`~mocapedit.errors.MocapEditError` naming the prim and property.
 from __future__ import annotations
 
 import numpy as np
-from pxr import Usd, UsdGeom, UsdSkel
+from pxr import Sdf, Usd, UsdGeom, UsdSkel
 
 from . import model
 from .errors import MocapEditError, prim_error
@@ -247,9 +247,17 @@ class StageReader:
             raise prim_error(anim.GetPath(), "holds non-finite values", "translations")
         scales = read("scales", 3, 1.0)
         src = key[1][0] or key[1][1]
-        return model.Clip(key=key, source=f"{src[0]}@{src[1]}" if src else str(anim.GetPath()),
+        clip = model.Clip(key=key, source=f"{src[0]}@{src[1]}" if src else str(anim.GetPath()),
                           joints=list(joints), times=times, translations=translations,
                           rotations=rotations, scales=scales)
+        spec = clip.sample_spec
+        layer = Sdf.Layer.Find(spec[0]) if spec else None
+        if layer:
+            # The frames' own times in that layer, for value clips that re-time it.
+            own = np.unique(np.concatenate([np.asarray(layer.ListTimeSamplesForPath(s[1]), dtype=np.float64)
+                                            for s in key[1] if s is not None]))
+            clip.spec_times = own if own.size == n else None
+        return clip
 
     def _stationary(self, anim: Usd.Prim, frame_count: int):
         tags = []
