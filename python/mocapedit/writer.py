@@ -34,7 +34,7 @@ import tempfile
 from dataclasses import dataclass, field
 
 import numpy as np
-from pxr import Gf, Sdf, UsdGeom, Vt
+from pxr import Sdf, UsdGeom, Vt
 
 from . import __version__
 from .model import Agent, StageInfo
@@ -142,8 +142,10 @@ def _author_xform_op(layer: Sdf.Layer, agent: Agent, edit: AgentEdit) -> None:
     order.insert(at, EDIT_OP)
     _attr(spec, "xformOpOrder", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(order), uniform=True)
     attr = _attr(spec, EDIT_OP, Sdf.ValueTypeNames.Matrix4d)
-    for t, m in zip(edit.times, edit.xform_op):
-        layer.SetTimeSample(attr.path, float(t), Gf.Matrix4d(m.tolist()))
+    # One conversion of the whole (T,4,4) array: per-sample Gf.Matrix4d(list) took half the time.
+    values = Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(edit.xform_op, dtype=np.float64))
+    for t, m in zip(np.asarray(edit.times, dtype=np.float64).tolist(), values):
+        layer.SetTimeSample(attr.path, t, m)
 
 
 def _animation_key(anim: BakedAnimation, digests: dict[int, bytes]) -> tuple:
