@@ -145,10 +145,11 @@ def compose_edits(ctx: SolveContext) -> None:
                 rotations=pose.rotations, scales=pose.scales)
         edited = ctx.paths.get(path)
         if edited is not None:
-            motion = trajectory.ground_motion(
-                animation.interp_frames(traj.ground, frames), animation.interp_frames(traj.heading, frames),
-                animation.interp_frames(edited.ground, frames), animation.interp_frames(edited.heading, frames),
-                up)
+            # Untimed agents are written at their own frames: nothing to interpolate.
+            whole = len(frames) == len(traj.ground) and np.array_equal(frames, np.arange(len(frames)))
+            at = (lambda values: values) if whole else (lambda values: animation.interp_frames(values, frames))
+            motion = trajectory.ground_motion(at(traj.ground), at(traj.heading), at(edited.ground),
+                                              at(edited.heading), up)
             # A path moved by less than a nanometre (numerical noise of a solve that had nothing
             # to do) is not an edit: the agent is not written.
             still = 1e-9 / ctx.data.info.meters_per_unit
@@ -270,7 +271,9 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
         t = time.perf_counter()
         fn(ctx)
         timings[name] = time.perf_counter() - t
+    t = time.perf_counter()
     compose_edits(ctx)
+    timings["compose"] = time.perf_counter() - t
     t = time.perf_counter()
     inspect(ctx)
     timings["inspect"] = time.perf_counter() - t
