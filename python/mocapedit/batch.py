@@ -5,7 +5,8 @@ work starts (:func:`plan`), then run as one task per shot (:func:`solve_shot`) o
 cluster: a local cluster of worker processes by default, or any running scheduler by its
 address (``dask scheduler`` / ``dask worker``, dask-jobqueue on a farm, Kubernetes). Each
 task is an ordinary :func:`mocapedit.processor.solve` writing its edits layer atomically,
-so a batch result is byte for byte what ``mocapedit solve`` writes for that shot.
+so a batch result is byte for byte what ``mocapedit solve`` writes for that shot named by
+its absolute path (the layer records the input path as given).
 
 One failing shot does not stop the others: its error goes into its :class:`ShotResult`.
 A shot whose output already holds the same input content hash and the same options is
@@ -144,8 +145,12 @@ def connect(scheduler: str | None, workers: int | None):
                                  "`dask scheduler` or check the address") from None
         except ValueError as exc:
             raise MocapEditError(f"--scheduler {scheduler}: {exc}") from None
+    import dask
     n = workers or max(1, min(os.cpu_count() or 1, 8))
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
+    # Workers forked from a fresh server process start in about a second; spawned ones, which
+    # import everything again, took four (and a batch of small shots waits for them).
+    with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
     return Client(cluster), cluster
 
 
