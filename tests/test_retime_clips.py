@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from pxr import Sdf, Usd, UsdSkel
 
-from mocapedit import examples, walker
+from mocapedit import bvh_usd, examples, walker
 from mocapedit.processor import solve
 
-from conftest import world_joints
+from conftest import SHARED_MOCAP, world_joints
 
 CROWD = "/World/Crowd"
 FRAMES = 60
@@ -62,10 +62,11 @@ def _anim_times(stage, agent):
     return np.asarray(anim.GetAttribute("rotations").GetTimeSamples())
 
 
-#: Metres. Between two source samples USD interpolates the clip's float quaternions in
-#: single precision, the baked form in double before rounding to float: at 120 fps, where
-#: neighbouring samples are close, the poses differ by up to 2e-6 m (measured); on the
-#: source samples themselves the two are the same to 1e-6.
+#: Metres. Between two source samples the value clip plays the source as USD interpolates
+#: it (GfSlerp on float quaternions), the baked form holds the project's own slerp rounded
+#: to float: they differ by up to 2e-6 m on these clips at 120 fps (measured), and by up to
+#: 4.4e-5 m on a CMU walk at 60 fps played at 24 fps. On the source samples themselves the
+#: two are the same to 1e-6.
 BETWEEN_SAMPLES = 5e-6
 
 
@@ -94,6 +95,12 @@ def test_value_clips_play_what_the_baked_samples_play(tmp_path, up, mpu, fps, st
         assert np.abs(a - b).max() < BETWEEN_SAMPLES, agent
         # The edit did something: the source plays otherwise.
         assert np.abs(_world(src, path, times) * mpu - a).max() > 1e-3
+        # And it is the source as USD plays it, at the source time the time map gives.
+        clip = layer.GetPrimAtPath(f"/MocapEdit/Animations/World_Crowd_{agent}")
+        pairs = np.asarray(clip.GetInfo("clips")["default"]["times"])
+        source_times = np.interp(times, pairs[:, 0], _anim_times(src, path))
+        source = np.concatenate([_world(src, path, [t]) for t in source_times]) * mpu
+        assert np.abs(source - a).max() < 1e-9, agent
     # A constrained frame plays exactly the source frame, exactly at its time.
     frame_time = {"a": (30, 30 * scale + 6.5), "b": (40, 7 + 40 * scale - 4.0)}
     for agent, (frame, t) in frame_time.items():
@@ -126,3 +133,60 @@ def test_layered_and_in_memory_clips_are_still_baked(tmp_path):
     spec = result.layer.GetPrimAtPath("/MocapEdit/Animations").nameChildren[0]
     assert not spec.HasInfo("clips")
     assert result.layer.GetNumTimeSamplesForPath(spec.path.AppendProperty("rotations")) > 0
+
+
+def test_a_clip_the_input_already_retimes_with_value_clips_is_baked(tmp_path):
+    clip = walker.walk(frames=FRAMES, name="walk")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)])
+    # The input plays the clip at half speed through its own value clip.
+    anim = stage.GetPrimAtPath(f"{CROWD}/a/Skel/Anim")
+    clips = Usd.ClipsAPI(anim)
+    clips.SetClipAssetPaths([Sdf.AssetPath("./clips/walk.usda")])
+    clips.SetClipPrimPath("/Skel/Anim")
+    clips.SetClipActive([(0.0, 0.0)])
+    clips.SetClipTimes([(0.0, 0.0), (2.0 * (FRAMES - 1), FRAMES - 1.0)])
+    examples.add_time_constraint(stage, "/Edits/late", f"{CROWD}/a", 30, 40.0)
+    stage.GetRootLayer().Save()
+    result = solve(str(tmp_path / "shot.usda"), guides=False)
+    spec = result.layer.GetPrimAtPath("/MocapEdit/Animations").nameChildren[0]
+    assert not spec.HasInfo("clips")
+    assert result.layer.GetNumTimeSamplesForPath(spec.path.AppendProperty("rotations")) > 0
+    assert max(c["residual"] for c in result.report.constraints) < 1e-6
+
+
+MOCAP_WALK = SHARED_MOCAP / "cc_cmu07_01_walk.bvh"
+
+
+@pytest.mark.realdata
+@pytest.mark.skipif(not MOCAP_WALK.exists(), reason="../shared/mocap is absent")
+def test_a_cmu_walk_retimed_on_a_24_fps_z_up_stage_plays_the_source_at_its_new_times(tmp_path):
+    """The CMU walk (60 fps, the 100-joint CC rig) referenced 10 time codes late into a 24 fps,
+    Z-up centimetre shot; one frame pushed 8 time codes later."""
+    bvh_usd.import_bvh(str(MOCAP_WALK), str(tmp_path / "walk.usda"),
+                       bvh_usd.ImportSettings(up_axis="Z", scale=1 / 0.45 * 2.54, meters_per_unit=0.01))
+    layer = Sdf.Layer.CreateNew(str(tmp_path / "shot.usda"))
+    layer.timeCodesPerSecond = layer.framesPerSecond = 24
+    layer.pseudoRoot.SetInfo("upAxis", "Z")
+    layer.pseudoRoot.SetInfo("metersPerUnit", 0.01)
+    layer.Save()
+    stage = Usd.Stage.Open(layer)
+    stage.DefinePrim(f"{CROWD}/walker", "SkelRoot").ApplyAPI("MocapAgentAPI")
+    stage.DefinePrim(f"{CROWD}/walker/Skel").GetReferences().AddReference(
+        "./walk.usda", "/Skel", Sdf.LayerOffset(10.0, 1.0))
+    times = _anim_times(stage, f"{CROWD}/walker")
+    examples.add_time_constraint(stage, "/Edits/late", f"{CROWD}/walker", 120, float(times[120] + 8.0))
+    stage.GetRootLayer().Save()
+    _, out, layer_path = _composed(tmp_path, str(tmp_path / "shot.usda"), "clips")
+    _, ref, _ = _composed(tmp_path, str(tmp_path / "shot.usda"), "baked", bake_timing=True)
+    edits = Sdf.Layer.FindOrOpen(str(layer_path))
+    pairs = np.asarray(edits.GetPrimAtPath("/MocapEdit/Animations/World_Crowd_walker").GetInfo("clips")
+                       ["default"]["times"])
+    shot = np.arange(np.ceil(pairs[0, 0]), np.floor(pairs[-1, 0]) + 1)
+    src = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    path = f"{CROWD}/walker"
+    edited = _world(out, path, shot)
+    source = np.concatenate([_world(src, path, [t]) for t in np.interp(shot, pairs[:, 0], times)])
+    assert np.abs(edited - source).max() * 0.01 < 1e-9
+    # The baked form, on the same shot frames: 4.4e-5 m apart at most (measured), see BETWEEN_SAMPLES.
+    assert np.abs(edited - _world(ref, path, shot)).max() * 0.01 < 1e-4
+    assert np.abs(_world(src, path, shot) - edited).max() * 0.01 > 0.1   # it was retimed
