@@ -65,10 +65,10 @@ def add_layer(stage, path, agents, animation_path, joint="", mode="additive", we
     return layer
 
 
-def compose(tmp_path, stage):
+def compose(tmp_path, stage, **options):
     stage.GetRootLayer().Save()
     edits, composed = tmp_path / "edits.usda", tmp_path / "composed.usda"
-    result = solve(stage.GetRootLayer().realPath, output=str(edits), composed=str(composed))
+    result = solve(stage.GetRootLayer().realPath, output=str(edits), composed=str(composed), **options)
     return result, Usd.Stage.Open(str(composed))
 
 
@@ -564,7 +564,8 @@ def test_with_the_time_pass_layering_applies_to_the_warped_pose(tmp_path):
     examples.add_time_constraint(stage, "/Edits/Late", "/World/Crowd/a0", 20, 31.5)
     stage.GetRootLayer().Save()
     (tmp_path / "time").mkdir()
-    _, warped = compose(tmp_path / "time", stage)
+    # Baked, so its samples sit on the shot times the layered result is baked at.
+    _, warped = compose(tmp_path / "time", stage, bake_timing=True)
     phone = gestures.phone_call(frames=24)
     add_clip(stage, "/Layers/Phone", phone.joints, phone.translations, phone.rotations)
     weight = {4: 0.0, 16: 1.0}

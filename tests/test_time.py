@@ -108,12 +108,11 @@ def test_three_beats_play_exactly_at_their_times(tmp_path, up, mpu):
     agent = result.report.agents[f"{CROWD}/dancer"]
     assert agent["solver"] == "LDLT"
     assert 0.1 <= agent["minInterval"] < 1.0
-    # The baked clip holds the shot's whole frames and the beats between them.
+    # The re-timed clip plays each source frame at its time on the map, the beats among them.
     anim = out.GetPrimAtPath("/MocapEdit/Animations").GetChildren()[0]
     samples = np.asarray(anim.GetAttribute("rotations").GetTimeSamples())
     assert 30.5 in samples and 90.25 in samples and 52.0 in samples
-    assert np.all(np.diff(samples) > 0)
-    assert set(np.arange(np.ceil(samples[0]), np.floor(samples[-1]) + 1)) <= set(samples)
+    assert np.all(np.diff(samples) > 0) and len(samples) == FRAMES
 
 
 def test_one_time_constraint_shifts_the_clip_without_stretching_it(tmp_path):

@@ -39,6 +39,9 @@ class SolveOptions:
     guides: bool = True
     collisions: bool | None = None     # None: follow MocapSolveSettings.collisionAvoidance
     overrides: dict = field(default_factory=dict)  # settings overrides by python field name
+    # Bake time-only edits into SkelAnimation samples instead of re-timing the source clip
+    # with value clips (the two play the same motion; the baked form is the reference).
+    bake_timing: bool = False
 
 
 @dataclass
@@ -126,8 +129,15 @@ def compose_edits(ctx: SolveContext) -> None:
         agent, traj = ctx.data.agents[path], ctx.trajectories[path]
         times, frames = output_frames(ctx, path)
         edit = writer.AgentEdit()
-        if path in ctx.time_maps or path in ctx.pose_edits:
-            pose = animation.sample_pose(ctx.data.clip_of(agent), frames)
+        clip = ctx.data.clip_of(agent)
+        spec = clip.sample_spec if path not in ctx.pose_edits and not ctx.options.bake_timing else None
+        if (path in ctx.time_maps and spec and clip.spec_times is not None
+                and not Sdf.Layer.IsAnonymousLayerIdentifier(spec[0])):
+            # Only the timing changed: the source clip plays on the time map, nothing is baked.
+            edit.retimed = writer.RetimedClip(layer=spec[0], prim_path=spec[1], joints=list(clip.joints),
+                                              stage_times=ctx.time_maps[path], clip_times=clip.spec_times)
+        elif path in ctx.time_maps or path in ctx.pose_edits:
+            pose = animation.sample_pose(clip, frames)
             for fn in ctx.pose_edits.get(path, []):
                 pose = fn(pose, times, frames)
             edit.animation = writer.BakedAnimation(
@@ -135,10 +145,11 @@ def compose_edits(ctx: SolveContext) -> None:
                 rotations=pose.rotations, scales=pose.scales)
         edited = ctx.paths.get(path)
         if edited is not None:
-            motion = trajectory.ground_motion(
-                animation.interp_frames(traj.ground, frames), animation.interp_frames(traj.heading, frames),
-                animation.interp_frames(edited.ground, frames), animation.interp_frames(edited.heading, frames),
-                up)
+            # Untimed agents are written at their own frames: nothing to interpolate.
+            whole = len(frames) == len(traj.ground) and np.array_equal(frames, np.arange(len(frames)))
+            at = (lambda values: values) if whole else (lambda values: animation.interp_frames(values, frames))
+            motion = trajectory.ground_motion(at(traj.ground), at(traj.heading), at(edited.ground),
+                                              at(edited.heading), up)
             # A path moved by less than a nanometre (numerical noise of a solve that had nothing
             # to do) is not an edit: the agent is not written.
             still = 1e-9 / ctx.data.info.meters_per_unit
@@ -151,7 +162,7 @@ def compose_edits(ctx: SolveContext) -> None:
                 else:
                     agent_view = agent
                 edit.xform_op = trajectory.agent_xform_op(agent_view, motion)
-        if edit.animation is not None or edit.xform_op is not None:
+        if edit.animation is not None or edit.retimed is not None or edit.xform_op is not None:
             ctx.edits[path] = edit
 
 
@@ -252,6 +263,16 @@ def input_layers(stage: Usd.Stage) -> list[str]:
     return [root] + others
 
 
+def options_text(guides: bool = True, collisions: bool | None = None, bake_timing: bool = False,
+                 **overrides) -> str:
+    """The solve options as the edits layer records them (``customLayerData`` mocapedit
+    ``options``): compact JSON with sorted keys, so a re-run can tell whether an existing
+    output was made with the same options."""
+    import json
+    options = dict(overrides, guides=guides, collisions=collisions, bake_timing=bake_timing)
+    return json.dumps(options, sort_keys=True, separators=(",", ":"))
+
+
 @dataclass
 class SolveResult:
     layer: Sdf.Layer
@@ -261,7 +282,7 @@ class SolveResult:
 
 def solve(stage_or_path, output: str | None = None, composed: str | None = None,
           guides: bool = True, collisions: bool | None = None, progress: Progress | None = None,
-          report_json: str | None = None, **overrides) -> SolveResult:
+          report_json: str | None = None, bake_timing: bool = False, **overrides) -> SolveResult:
     """Solves every edit authored on a stage and returns the edits layer and a report.
 
     Args:
@@ -273,6 +294,8 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
       guides: author guide geometry under ``/MocapEdit/Guides``.
       collisions: force collision avoidance on or off; None follows MocapSolveSettings.
       progress: a :class:`~mocapedit.progress.Progress`; silent by default.
+      bake_timing: bake agents whose only edit is timing into SkelAnimation samples instead
+        of re-timing their source clips with value clips (the same motion, a larger layer).
       overrides: MocapSolveSettings values by their Python names (``max_iterations=...``).
 
     Raises:
@@ -308,7 +331,7 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
 
     report = Report(input=input_name, output=output)
     ctx = SolveContext(data=data, options=SolveOptions(guides=guides, collisions=collisions,
-                                                       overrides=overrides),
+                                                       overrides=overrides, bake_timing=bake_timing),
                        report=report, progress=progress)
     t = time.perf_counter()
     extract_trajectories(ctx)
@@ -318,7 +341,9 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
         t = time.perf_counter()
         fn(ctx)
         timings[name] = time.perf_counter() - t
+    t = time.perf_counter()
     compose_edits(ctx)
+    timings["compose"] = time.perf_counter() - t
     t = time.perf_counter()
     inspect(ctx)
     timings["inspect"] = time.perf_counter() - t
@@ -340,10 +365,12 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
             entry.setdefault("trajectoryJoint", data.agents[path].joints[traj.joint])
 
     t = time.perf_counter()
-    provenance = {"inputs": Vt.StringArray(input_layers(stage)), "contentHash": content_hash(stage)}
+    provenance = {"inputs": Vt.StringArray(input_layers(stage)), "contentHash": content_hash(stage),
+                  "options": options_text(guides, collisions, bake_timing, **overrides)}
     layer = writer.build_layer(writer.LayerContent(
         info=data.info, agents=data.agents, edits=ctx.edits, guides=ctx.guides,
-        provenance=provenance, stats=report.stats, report=report.to_layer_dict()))
+        provenance=provenance, stats=report.stats, report=report.to_layer_dict(),
+        anchor=os.path.dirname(os.path.abspath(output)) if output else None))
     if output:
         timings["write"] = time.perf_counter() - t
         timings["total"] = time.perf_counter() - t0

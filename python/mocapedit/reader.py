@@ -162,6 +162,13 @@ def _get(prim: Usd.Prim, name: str, default=None):
     return value
 
 
+def _ancestors(prim: Usd.Prim):
+    """The prim and its ancestors up to (not including) the pseudo-root."""
+    while prim and not prim.IsPseudoRoot():
+        yield prim
+        prim = prim.GetParent()
+
+
 def _leaf(joint_path: str) -> str:
     return joint_path.rsplit("/", 1)[-1]
 
@@ -228,6 +235,7 @@ class StageReader:
         self.clips: dict[tuple, model.Clip] = {}
         self.agents: dict[str, model.Agent] = {}
         self._skeletons: dict[str, tuple] = {}
+        self._same_times: dict[tuple, bool] = {}
 
     # ---- agents ---------------------------------------------------------------------
 
@@ -303,14 +311,30 @@ class StageReader:
                 return (spec.layer.identifier, str(spec.path))
         return None
 
+    def _composed_times(self, attrs: list, specs: tuple) -> np.ndarray:
+        """The union of the attributes' composed sample times. Attributes sampled at the same
+        times on one layer compose to the same times, so one of them is asked (a crowd's
+        agents share a few clips: the check is cached per spec)."""
+        sampled = [(a, s) for a, s in zip(attrs, specs) if s is not None]
+        same = self._same_times.get(specs) if sampled else False
+        if same is None:
+            layer = Sdf.Layer.Find(sampled[0][1][0])
+            same = bool(layer) and all(s[0] == sampled[0][1][0] for _, s in sampled) and len(
+                {tuple(layer.ListTimeSamplesForPath(s[1])) for _, s in sampled}) == 1
+            self._same_times[specs] = same
+        if same:
+            return np.asarray(sampled[0][0].GetTimeSamples(), dtype=np.float64)
+        return np.unique(np.concatenate(
+            [np.asarray(a.GetTimeSamples(), dtype=np.float64) for a in attrs if a] + [np.zeros(0)]))
+
     def _clip(self, anim: Usd.Prim, all_channels: bool = True):
         """(clip key, composed stage times of the clip's frames); reads the clip on first use.
 
         An agent's own clip must author translations, rotations and scales (UsdSkel poses an
         animation only then); a layer clip (``all_channels=False``) may author only some."""
         attrs = [anim.GetAttribute(n) for n in model.CHANNELS]
-        times = np.unique(np.concatenate(
-            [np.asarray(a.GetTimeSamples(), dtype=np.float64) for a in attrs if a] + [np.zeros(0)]))
+        specs = tuple(self._sampled_spec(a) if a else None for a in attrs)
+        times = self._composed_times(attrs, specs)
         if times.size == 0:
             raise prim_error(anim.GetPath(), "clip has no samples: translations, rotations and scales "
                              "hold no time samples", "translations")
@@ -321,7 +345,7 @@ class StageReader:
         anim_joints = tuple(str(j) for j in (_get(anim, "joints") or []))
         if not anim_joints:
             raise prim_error(anim.GetPath(), "SkelAnimation has no joints", "joints")
-        key = (anim_joints, tuple(self._sampled_spec(a) if a else None for a in attrs), times.size)
+        key = (anim_joints, specs, times.size)
         if key not in self.clips:
             self.clips[key] = self._read_clip(anim, key, anim_joints, times)
         return key, times
@@ -356,9 +380,18 @@ class StageReader:
             raise prim_error(anim.GetPath(), "holds non-finite values", "scales")
         src = key[1][0] or key[1][1]
         channels = tuple(n for n in model.CHANNELS if anim.GetAttribute(n).HasAuthoredValue())
-        return model.Clip(key=key, source=f"{src[0]}@{src[1]}" if src else str(anim.GetPath()),
+        clip = model.Clip(key=key, source=f"{src[0]}@{src[1]}" if src else str(anim.GetPath()),
                           joints=list(joints), times=times, translations=translations,
                           rotations=rotations, scales=scales, channels=channels)
+        spec = clip.sample_spec
+        layer = Sdf.Layer.Find(spec[0]) if spec else None
+        # A clip that value clips already re-time is not one spec's samples.
+        if layer and not any(p.HasAuthoredMetadata("clips") for p in _ancestors(anim)):
+            # The frames' own times in that layer, for value clips that re-time it.
+            own = np.unique(np.concatenate([np.asarray(layer.ListTimeSamplesForPath(s[1]), dtype=np.float64)
+                                            for s in key[1] if s is not None]))
+            clip.spec_times = own if own.size == n else None
+        return clip
 
     def _stationary(self, anim: Usd.Prim, frame_count: int):
         tags = []

@@ -377,7 +377,7 @@ shot("nodding-other-rig", prim("SkelAnimation", "Alien", 'uniform token[] joints
 shot("nodding-other-rig-before-collisions",
      prim("SkelAnimation", "Alien", 'uniform token[] joints = ["Tentacle"]\nquatf[] rotations.timeSamples = {0: [(1, 0, 0, 0)]}') +
      prim("MocapAnimationLayer", "Nodding", LAYER.replace("</Nod>", "</Alien>")) +
-     prim("MocapSolveSettings", "Settings", SETTINGS + "\nuniform int maxIterations = 500"),
+     prim("MocapSolveSettings", "Settings", SETTINGS + "\nuniform int maxIterations = 1000"),
      L + r"animation: layer clip </Alien> shares no joint", args=("--collisions",))
 shot("nodding-animation-inactive", NOD.replace('def SkelAnimation "Nod"', 'def SkelAnimation "Nod" (active = false)') +
      prim("MocapAnimationLayer", "Nodding", LAYER), L + r"animation: targets </Nod>, which is inactive")
