@@ -418,18 +418,22 @@ prop_cases("MocapSolveSettings", "Settings", SETTINGS, {
 }, extra=prim("MocapTimeConstraint", "Beat", TIME))
 
 # ---- output paths ------------------------------------------------------------------------------------
-shot("output-is-input", "", r"shot\.usda", outputs=("shot.usda",))
-shot("output-composed-is-input", "", r"shot\.usda", args=("--composed", "shot.usda"))
-shot("output-composed-is-base", "", r"base\.usda", args=("--composed", "base.usda"))
-shot("output-report-is-input", "", r"shot\.usda", args=("--report", "shot.usda"))
-shot("output-composed-is-output", "", r"out\.usda", args=("--composed", "out.usda"))
-shot("output-txt", "", r"out\.txt", outputs=("out.txt",))
-shot("output-usdz", "", r"out\.usdz", outputs=("out.usdz",))
+shot("output-is-input", "", r"edits layer .*shot\.usda: names a file the input uses", outputs=("shot.usda",))
+shot("output-composed-is-input", "", r"composed stage .*shot\.usda: names a file the input uses",
+     args=("--composed", "shot.usda"))
+shot("output-composed-is-base", "", r"composed stage .*base\.usda: names a file the input uses",
+     args=("--composed", "base.usda"))
+shot("output-report-is-input", "", r"report .*shot\.usda: names a file the input uses", args=("--report", "shot.usda"))
+shot("output-composed-is-output", "", r"composed stage .*out\.usda: edits layer names the same file",
+     args=("--composed", "out.usda"))
+shot("output-txt", "", r"edits layer .*out\.txt: a USD layer is written as", outputs=("out.txt",))
+shot("output-usdz", "", r"edits layer .*out\.usdz: USD cannot write a \.usdz", outputs=("out.usdz",))
 shot("output-missing-folder", "", r"folder .*missing does not exist", outputs=("missing/../out.usda",))
 shot("output-folder-is-a-file", "", r"base\.usda is a file, not a folder", outputs=("base.usda/out.usda",))
-shot("output-existing-folder", "", r"base\.usda|folder|directory", outputs=("sub",),
+shot("output-existing-folder", "", r"edits layer .*sub: is a folder", outputs=("sub",),
      base=lambda folder: (__import__("bad_base").write_base(folder), (folder / "sub").mkdir()))
-shot("detect-output-is-input", "", r"shot\.usda", outputs=("shot.usda",), command="detect-stationary")
+shot("detect-output-is-input", "", r"-o .*shot\.usda: names a file the input uses", outputs=("shot.usda",),
+     command="detect-stationary")
 
 
 # ---- BVH files broken at each section ---------------------------------------------------------------
@@ -490,7 +494,7 @@ for vid, (line, new, needle) in {
     bvh(vid, bvh_line(line, new), needle)
 bvh("empty", "", r"clip\.bvh: empty file")
 bvh("root-joint-missing", GOOD_BVH, r"clip\.bvh: root joint 'Pelvis' is not a joint", args=("--root-joint", "Pelvis"))
-bvh("output-is-input", GOOD_BVH, r"clip\.bvh", output="clip.bvh")
+bvh("output-is-input", GOOD_BVH, r"-o .*clip\.bvh: ", output="clip.bvh")
 bvh("missing-file", GOOD_BVH, r"nothere\.bvh: no such file", name="nothere.bvh")
 CASES[-1] = Case(CASES[-1].id, CASES[-1].needle,
                  lambda folder: ["import-bvh", str(folder / "nothere.bvh"), "-o", str(folder / "clip.usda")],
