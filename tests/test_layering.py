@@ -637,3 +637,32 @@ def test_a_layer_clip_from_another_rig_stops_the_solve_before_any_other_pass(tmp
         solve(str(path), output=str(tmp_path / "e.usda"), collisions=True)
     assert ran == ["layering-check"], "path edits, time warp and collision avoidance must not run first"
     assert not (tmp_path / "e.usda").exists()
+
+
+def test_a_partial_layer_between_full_ones_keeps_the_channels_of_the_layers_below(tmp_path):
+    path, walk = street(tmp_path, offsets=(0.0, 0.0))
+    stage = Usd.Stage.Open(str(path))
+    idle = walker.idle(frames=FRAMES, phase=0.4)
+    add_clip(stage, "/Layers/Idle", idle.joints, idle.translations, idle.rotations)
+    nod = UsdSkel.Animation.Define(stage, "/Layers/Nod")
+    nod.GetJointsAttr().Set([CHEST])
+    nod.GetRotationsAttr().Set(Vt.QuatfArray.FromNumpy(np.array([quat(40.0, (1, 0, 0))], np.float32)), 0.0)
+    # a0: the idle blended on the spine, then the nod on the chest, then the idle added again;
+    # a1: the same without the nod.
+    add_layer(stage, "/Layers/A", ["/World/Crowd/a0", "/World/Crowd/a1"], "/Layers/Idle", "Spine", "blend", weight=0.7)
+    add_layer(stage, "/Layers/B", ["/World/Crowd/a0"], "/Layers/Nod", "", "blend")
+    add_layer(stage, "/Layers/C", ["/World/Crowd/a0", "/World/Crowd/a1"], "/Layers/Idle", "Spine", "additive",
+              weight=0.5)
+    result, out = compose(tmp_path, stage)
+    joints = joints_of(out, "/World/Crowd/a0")
+    chest = joints.index(CHEST)
+    times = np.arange(FRAMES)
+    with_nod = layering.trs_from_matrices(local_matrices(out, "/World/Crowd/a0", times))
+    without = layering.trs_from_matrices(local_matrices(out, "/World/Crowd/a1", times))
+    # The nod leaves every translation and scale, and every joint but the chest, as the layers
+    # around it make them; the chest's rotation is the nod's, then layer C's delta on top.
+    np.testing.assert_allclose(with_nod[0], without[0], atol=1e-6)
+    np.testing.assert_allclose(with_nod[2], without[2], atol=1e-6)
+    others = np.arange(len(joints)) != chest
+    assert _rotation_difference(with_nod[1][:, others], without[1][:, others]) < 1e-6
+    assert _rotation_difference(with_nod[1][:, chest], without[1][:, chest]) > 0.05
