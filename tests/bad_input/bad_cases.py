@@ -317,6 +317,7 @@ shot("sync-cycle", prim("MocapSyncConstraint", "Sync", SYNC) +
 G = r"</Team>\."
 prop_cases("MocapAgentGroup", "Team", GROUP, {
     "one-member": ("members", "rel members = </World/agent0>", G + r"members: a group needs at least two members"),
+    "no-members": ("members", None, G + r"members: a group needs at least two members, got 0"),
     "member-missing": ("members", "rel members = [</World/agent0>, </Ghost>]", G + r"members: member </Ghost> does not exist"),
     "member-not-agent": ("members", "rel members = [</World/agent0>, </World>]", G + r"members: .*not an agent"),
     "stiffness-zero": ("stiffness", "uniform double stiffness = 0", G + r"stiffness: stiffness must be positive"),
