@@ -48,7 +48,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args) -> int:
     from .. import batch
     from ..errors import MocapEditError
-    from ..writer import save_text
+    from ..outputs import save_text
 
     if args.workers is not None and args.workers < 1:
         raise MocapEditError(f"--workers must be at least 1, got {args.workers}")
