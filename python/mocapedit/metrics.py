@@ -29,7 +29,7 @@ __all__ = [
     "Separation", "capsule_clearance", "min_separation",
     "time_intervals_positive",
     "joint_world_positions", "agent_root_positions", "default_foot_joints",
-    "FootSkate", "foot_skate",
+    "FootSkate", "foot_skate", "skate_speeds",
 ]
 
 PathLike = Union[str, Sdf.Path]
@@ -653,13 +653,23 @@ def foot_skate(stage: Usd.Stage, agent_path: PathLike, times: Iterable | None = 
     else:
         contact = np.zeros(height.shape, dtype=bool)
 
-    ground = to_ground(pos, up)
+    speeds, duration, mean = skate_speeds(to_ground(pos, up), contact, t * seconds_per_code)
+    return FootSkate(tuple(skel.joints[f] for f in feet), speeds, duration, contact, t, mean)
+
+
+def skate_speeds(ground: np.ndarray, contact: np.ndarray, seconds: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """The numbers of :func:`foot_skate` from positions already known.
+
+    ``ground``: (T, F, 2) ground positions of F feet; ``contact``: (T, F) contact flags;
+    ``seconds``: (T,) increasing sample times. Returns (per-foot mean speed during contact,
+    NaN without contact; per-foot contact seconds; the mean over all feet, NaN without any).
+    """
     step = np.linalg.norm(np.diff(ground, axis=0), axis=2)          # (T-1, F)
-    dt = (np.diff(t) * seconds_per_code)[:, None]                    # (T-1, 1)
+    dt = np.diff(seconds)[:, None]                                   # (T-1, 1)
     both = contact[1:] & contact[:-1]
     slide = np.where(both, step, 0.0).sum(axis=0)
     duration = np.where(both, dt, 0.0).sum(axis=0)
     speeds = np.where(duration > 0, slide / np.where(duration > 0, duration, 1.0), np.nan)
     total = float(duration.sum())
     mean = float(slide.sum() / total) if total > 0 else float("nan")
-    return FootSkate(tuple(skel.joints[f] for f in feet), speeds, duration, contact, t, mean)
+    return speeds, duration, mean

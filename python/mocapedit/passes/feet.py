@@ -1,0 +1,297 @@
+"""Pass 500: foot locking, after every other edit (path, time warp, avoidance, layering).
+
+For each edited agent with two legs (found by name or set by ``mocap:leftLegJoints`` /
+``mocap:rightLegJoints``), the pose every earlier pass produced is evaluated by forward
+kinematics and carried by the agent's edited ground motion. Each foot contact of the
+source clip (authored with ``MocapFootContactAPI``, else detected) gets one plant
+(:mod:`mocapedit.footlock`); the solver's foot-locking job moves the legs of all agents
+at once. Agents whose legs change get a pose edit that replaces their hip, knee and ankle
+rotations (and the skeleton root's translation where the pelvis is lowered), so the writer
+bakes their animation.
+
+The report gets, per agent, the foot skate (mean ground speed of the ankles during
+contacts, stage units per second) of the source, after the edits and after locking, the
+contacts locked, the largest pelvis drop and the largest IK correction (stage units).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .. import animation, contacts, footlock, ground, kinematics, metrics, processor, trajectory
+from ..errors import MocapEditError
+from ..layering import trs_from_matrices
+from ..model import Agent
+
+#: Seconds over which a lock blends in before a contact and out after it.
+BLEND_SECONDS = 0.1
+#: Ankle corrections below this (metres) leave a leg as it is.
+STILL_M = 1e-6
+
+
+def _skel_space(agent: Agent, pose: animation.Pose, joints: list[int]) -> dict[int, np.ndarray]:
+    """(T,4,4) skeleton-space matrices of the given joints and their ancestors, from a pose
+    whose joint order may differ from the skeleton's (joints it lacks take the rest pose)."""
+    column = {name: k for k, name in enumerate(pose.joints)}
+    count = pose.translations.shape[0]
+    out: dict[int, np.ndarray] = {}
+
+    def world(j: int) -> np.ndarray:
+        if j not in out:
+            k = column.get(agent.joints[j])
+            if k is None:
+                local = np.broadcast_to(agent.rest_transforms[j], (count, 4, 4))
+            else:
+                local = kinematics.compose_trs(pose.translations[:, k], pose.rotations[:, k], pose.scales[:, k])
+            p = int(agent.parents[j])
+            out[j] = local if p < 0 else local @ world(p)
+        return out[j]
+
+    for j in joints:
+        world(j)
+    return out
+
+
+def _top(agent: Agent, joint: int) -> int:
+    while int(agent.parents[joint]) >= 0:
+        joint = int(agent.parents[joint])
+    return joint
+
+
+def _ramp(frames: np.ndarray, first: int, last: int, blend: float) -> np.ndarray:
+    """1 inside [first, last], easing to 0 over ``blend`` frames outside (smoothstep)."""
+    outside = np.maximum(first - frames, 0.0) + np.maximum(frames - last, 0.0)
+    x = np.clip(1.0 - outside / blend, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+class _AgentLock:
+    """One agent's side of the job: what it needs, and what it gets back."""
+
+    def __init__(self, ctx: processor.SolveContext, path: str, source_contacts: list, source_skate: float):
+        data = ctx.data
+        self.source_skate = source_skate
+        info = data.info
+        self.path = path
+        agent = self.agent = data.agents[path]
+        self.legs = agent.legs
+        self.times, self.frames = processor.output_frames(ctx, path)
+        pose = animation.sample_pose(data.clip_of(agent), self.frames)
+        for fn in ctx.pose_edits.get(path, []):
+            pose = fn(pose, self.times, self.frames)
+        self.pose = pose
+        self.columns = {name: k for k, name in enumerate(pose.joints)}
+        self.root = _top(agent, self.legs[0].hip)
+        needed = [j for leg in self.legs for j in (leg.hip, leg.knee, leg.ankle)]
+        skel = _skel_space(agent, pose, needed)
+        to_world = agent.skel_to_world
+        if to_world.shape[0] > 1:
+            to_world = animation.interp_frames(to_world, self.frames)
+        self.to_world = to_world
+        # The edited ground motion (identity without a path edit) and its turn.
+        edited = ctx.paths.get(path)
+        count = len(self.times)
+        if edited is None:
+            motion = np.broadcast_to(np.eye(4), (count, 4, 4))
+            turn = np.zeros(count)
+        else:
+            traj = ctx.trajectories[path]
+            src_h = animation.interp_frames(traj.heading, self.frames)
+            new_h = animation.interp_frames(edited.heading, self.frames)
+            motion = trajectory.ground_motion(
+                animation.interp_frames(traj.ground, self.frames), src_h,
+                animation.interp_frames(edited.ground, self.frames), new_h, info.up_axis)
+            turn = new_h - src_h
+        posed = {j: m @ to_world for j, m in skel.items()}          # world, before the ground motion
+        world = {j: m @ motion for j, m in posed.items()}           # world, as edited
+        rot = {j: trs_from_matrices(m)[1].astype(np.float64) for j, m in world.items()}
+        pos = {j: m[:, 3, :3] for j, m in world.items()}
+
+        def per_leg(values, key):
+            return np.stack([values[getattr(leg, key)] for leg in self.legs], axis=1)
+
+        self.hip, self.knee, self.ankle = (per_leg(pos, k) for k in ("hip", "knee", "ankle"))
+        self.hip_rot, self.knee_rot, self.ankle_rot = (per_leg(rot, k) for k in ("hip", "knee", "ankle"))
+        parent_rot = []
+        for leg in self.legs:
+            p = int(agent.parents[leg.hip])
+            parent_rot.append(rot[p] if p >= 0 else trs_from_matrices(to_world @ motion)[1].astype(np.float64))
+        self.parent_rot = np.stack(parent_rot, axis=1)
+
+        # Plants: per contact, the source foot carried by one turn and one ground translation.
+        fps = info.time_codes_per_second
+        step = np.median(np.diff(agent.sample_times)) if agent.frame_count > 1 else 1.0
+        blend = max(2.0, BLEND_SECONDS * fps / max(step, 1e-9))
+        self.blend_frames = int(np.ceil(blend))
+        self.target = self.ankle.copy()
+        self.target_rot = self.ankle_rot.copy()
+        self.weight = np.zeros((count, len(self.legs)))
+        self.contact = np.zeros((count, len(self.legs)), dtype=bool)
+        self.locked = 0
+        up = ground.up_index(info.up_axis)
+        for k, leg in enumerate(self.legs):
+            src_pos = posed[leg.ankle][:, 3, :3]
+            src_rot = posed[leg.ankle]
+            for first, last in source_contacts[k]:
+                inside = (self.frames >= first - 1e-9) & (self.frames <= last + 1e-9)
+                if not inside.any():
+                    continue
+                self.locked += 1
+                self.contact[:, k] |= inside
+                yaw = float(np.arctan2(np.sin(turn[inside]).mean(), np.cos(turn[inside]).mean()))
+                spin = kinematics.yaw_matrix(np.array(yaw), info.up_axis)
+                carried = src_pos @ spin[:3, :3]
+                shift = (pos[leg.ankle][inside] - carried[inside]).mean(axis=0)
+                shift[up] = 0.0  # feet stay at their source height: never below their ground
+                w = _ramp(self.frames, first, last, blend)
+                take = w > self.weight[:, k]
+                self.weight[take, k] = w[take]
+                self.target[take, k] = carried[take] + shift
+                self.target_rot[take, k] = trs_from_matrices(src_rot[take] @ spin)[1]
+
+    def inputs(self) -> dict:
+        return {"hip": self.hip, "knee": self.knee, "ankle": self.ankle, "parent_rot": self.parent_rot,
+                "hip_rot": self.hip_rot, "knee_rot": self.knee_rot, "ankle_rot": self.ankle_rot,
+                "target": self.target, "target_rot": self.target_rot, "weight": self.weight}
+
+    def writable(self) -> str | None:
+        """Why the legs cannot be baked into this agent's pose, or None."""
+        for leg in self.legs:
+            for j in (leg.hip, leg.knee, leg.ankle):
+                if self.agent.joints[j] not in self.columns:
+                    return f"leg joint '{self.agent.joints[j]}' is not animated by the clip"
+        return None
+
+    def apply(self, out: footlock.LegOutputs, lo: int, hi: int, up: np.ndarray,
+              meters_per_unit: float) -> animation.Pose | None:
+        """The locked pose, or None when locking leaves the legs as they are."""
+        pose = self.pose
+        rotations = pose.rotations.copy()
+        translations = pose.translations.copy()
+        for k, leg in enumerate(self.legs):
+            for j, new in ((leg.hip, out.hip_local), (leg.knee, out.knee_local), (leg.ankle, out.ankle_local)):
+                rotations[:, self.columns[self.agent.joints[j]]] = new[lo:hi, k]
+        drop = out.drop[lo:hi]
+        if np.any(drop > 0):
+            root = self.columns.get(self.agent.joints[self.root])
+            if root is None:
+                raise MocapEditError(
+                    f"<{self.path}>: the pelvis must be lowered but the skeleton root "
+                    f"'{self.agent.joints[self.root]}' is not animated by the clip")
+            # World offset -drop * up, in the root's parent space (the skeleton's).
+            inv = np.linalg.inv(self.to_world[:, :3, :3])
+            translations[:, root] += (-drop[:, None] * up) @ inv if inv.ndim == 2 else \
+                np.einsum("ti,tij->tj", -drop[:, None] * up, inv)
+        correction = np.linalg.norm(out.reached[lo:hi] - self.ankle, axis=-1)
+        self.max_correction = float(correction.max(initial=0.0))
+        self.max_drop = float(drop.max(initial=0.0))
+        self.reached = out.reached[lo:hi]
+        still = STILL_M / meters_per_unit
+        if self.max_correction <= still and self.max_drop <= still:
+            return None
+        return animation.Pose(joints=list(pose.joints), translations=translations.astype(np.float32),
+                              rotations=rotations.astype(np.float32), scales=pose.scales)
+
+
+def _source_contacts(ctx, agent: Agent, cache: dict) -> list[list[tuple[int, int]]]:
+    """Per leg, the inclusive frame ranges of its foot contacts on the source clip."""
+    if agent.foot_contacts is not None:
+        return [[(a, b) for _, ankle, a, b in agent.foot_contacts if ankle == leg.ankle] for leg in agent.legs]
+    key = (agent.clip_key, tuple(agent.joints), tuple(leg.joints for leg in agent.legs))
+    hit = cache.get(key)
+    if hit is None:
+        hit = cache[key] = detect_agent(ctx.data, agent)
+    return hit
+
+
+def detect_agent(data, agent: Agent, settings: contacts.DetectSettings | None = None) -> list[list[tuple[int, int]]]:
+    """Detected contact ranges of each leg of an agent, on its source clip."""
+    info = data.info
+    clip = data.clip_of(agent)
+    seconds = agent.sample_times / info.time_codes_per_second
+    out = []
+    for leg in agent.legs:
+        ankle = trajectory.joint_world(agent, clip, leg.ankle)[:, 3, :3]
+        toe = trajectory.joint_world(agent, clip, leg.toe)[:, 3, :3] if leg.toe is not None else None
+        out.append(contacts.detect_leg(seconds, ankle, toe, info.up_axis, info.meters_per_unit, settings))
+    return out
+
+
+def _skate(positions, contact, times, info) -> float:
+    return metrics.skate_speeds(ground.to_ground(positions, info.up_axis), contact,
+                                np.asarray(times, dtype=np.float64) / info.time_codes_per_second)[2]
+
+
+def foot_locking_pass(ctx: processor.SolveContext) -> None:
+    data = ctx.data
+    info = data.info
+    if not data.settings.foot_locking:
+        return
+    touched = sorted(set(ctx.paths) | set(ctx.time_maps) | set(ctx.pose_edits))
+    cache: dict = {}
+    locks: list[_AgentLock] = []
+    task = ctx.progress.task("foot locking", len(touched))
+    for i, path in enumerate(touched):
+        agent = data.agents[path]
+        entry = ctx.report.agent(path)
+        if not agent.foot_locking:
+            entry.setdefault("notes", []).append("foot locking off (mocap:footLocking = false)")
+        elif len(agent.legs) != 2:
+            entry.setdefault("notes", []).append(
+                "foot locking skipped: legs not found by name; set mocap:leftLegJoints and mocap:rightLegJoints")
+        else:
+            found = _source_contacts(ctx, agent, cache)
+            lock = _AgentLock(ctx, path, found, _source_skate(data, agent, found))
+            why = lock.writable()
+            if why:
+                entry.setdefault("notes", []).append(f"foot locking skipped: {why}")
+            elif lock.locked:
+                locks.append(lock)
+        task.update(i + 1)
+    task.done()
+    if not locks:
+        return
+    up = np.zeros(3)
+    up[ground.up_index(info.up_axis)] = 1.0
+    offsets = np.cumsum([0] + [len(lock.times) for lock in locks])
+    parts = [lock.inputs() for lock in locks]
+    inputs = footlock.LegInputs(
+        offsets=offsets.astype(np.int64), smooth=np.array([lock.blend_frames for lock in locks], dtype=np.int64),
+        up=up, **{k: np.concatenate([p[k] for p in parts]) for k in parts[0]})
+    out = footlock.lock_feet(inputs)
+    changed = contacts_locked = 0
+    for lock, lo, hi in zip(locks, offsets[:-1], offsets[1:]):
+        locked_pose = lock.apply(out, int(lo), int(hi), up, info.meters_per_unit)
+        entry = ctx.report.agent(lock.path)
+        edited = _skate(lock.ankle, lock.contact, lock.times, info)
+        after = _skate(lock.reached, lock.contact, lock.times, info) if locked_pose is not None else edited
+        entry["footSkateSource"] = lock.source_skate
+        entry["footSkateEdited"] = edited
+        entry["footSkateLocked"] = after
+        entry["footContactsLocked"] = lock.locked
+        entry["maxPelvisDrop"] = lock.max_drop
+        entry["maxFootCorrection"] = lock.max_correction
+        contacts_locked += lock.locked
+        if locked_pose is not None:
+            changed += 1
+            ctx.pose_edits.setdefault(lock.path, []).append(
+                lambda pose, out_times, src_frames, locked=locked_pose, lock=lock: _replace_legs(pose, locked, lock))
+    ctx.report.stats["footLockedAgents"] = changed
+    ctx.report.stats["footContactsLocked"] = contacts_locked
+
+
+def _replace_legs(pose: animation.Pose, locked: animation.Pose, lock: _AgentLock) -> animation.Pose:
+    """The pose with the locked legs (and lowered root) of ``locked``, whose joints it shares."""
+    if pose.joints != locked.joints or pose.rotations.shape != locked.rotations.shape:
+        raise MocapEditError(f"<{lock.path}>: foot locking was computed for another pose")
+    return locked
+
+
+def _source_skate(data, agent: Agent, found) -> float:
+    clip = data.clip_of(agent)
+    info = data.info
+    ankles = np.stack([trajectory.joint_world(agent, clip, leg.ankle)[:, 3, :3] for leg in agent.legs], 1)
+    mask = np.stack([contacts.mask_of(r, agent.frame_count) for r in found], 1)
+    return _skate(ankles, mask, agent.sample_times, info)
+
+
+processor.register_pass(500, "foot locking", foot_locking_pass)
