@@ -174,12 +174,18 @@ def _random_legs(rng, agents=3, poses=40):
         knee_rot=quats(0.3), ankle_rot=quats(0.3), target=target, target_rot=quats(0.4), weight=weight)
 
 
-def test_the_solver_job_matches_numpy():
+@pytest.mark.parametrize("keep", [False, True])
+def test_the_solver_job_matches_numpy(keep):
     inputs = _random_legs(np.random.default_rng(7))
+    if keep:  # a stationary range: no pelvis drop there, easing back in around it
+        inputs.keep = np.zeros(len(inputs.hip), np.uint8)
+        inputs.keep[50:60] = 1
     fast, slow = footlock.lock_feet(inputs), footlock.lock_feet_numpy(inputs)
     for name in ("hip_local", "knee_local", "ankle_local", "drop", "reached"):
         np.testing.assert_allclose(getattr(fast, name), getattr(slow, name), atol=1e-9, err_msg=name)
     assert fast.drop[5] > 0.2 and fast.drop[5] >= fast.drop[:40].max()
+    if keep:
+        assert np.all(fast.drop[50:60] == 0) and fast.drop[40:100].max() > 0
 
 
 def test_the_job_keeps_bones_reaches_its_targets_and_never_overstretches():
@@ -327,3 +333,24 @@ def test_a_real_walk_edited_by_a_handle_keeps_its_feet(tmp_path):
     mpu = UsdGeom.GetStageMetersPerUnit(shot_stage)
     assert (after.mean - source.mean) * mpu <= 0.005, (source.mean, after.mean, up)
     assert result.report.agents[a]["footContactsLocked"] > 0
+
+
+def test_detect_contacts_writes_a_layer_that_the_solve_uses(tmp_path, walk_clip):
+    _bent_path_stage(tmp_path, walk_clip)
+    out = run_cli("detect-contacts", tmp_path / "shot.usda", "-o", tmp_path / "contacts.usda",
+                  "--composed", tmp_path / "reviewed.usda")
+    assert out.returncode == 0, out.stderr
+    assert "contacts left" in out.stderr
+    reviewed = Usd.Stage.Open(str(tmp_path / "reviewed.usda"))
+    anim = next(p for p in reviewed.Traverse() if p.IsA(UsdSkel.Animation))
+    names = [s.split(":", 1)[1] for s in anim.GetAppliedSchemas() if s.startswith("MocapFootContactAPI:")]
+    assert sum(n.startswith("left") for n in names) >= 6 and sum(n.startswith("right") for n in names) >= 6
+    first, last = anim.GetAttribute(f"footContact:{names[0]}:frames").Get()
+    assert 0 <= first <= last < walk_clip.num_frames
+    detected = solve(str(tmp_path / "shot.usda"), foot_locking=True).report
+    authored = solve(str(tmp_path / "reviewed.usda")).report
+    a = f"{CROWD}/a"
+    assert authored.agents[a]["footContactsLocked"] == detected.agents[a]["footContactsLocked"] == len(names)
+    assert authored.agents[a]["footSkateLocked"] == pytest.approx(detected.agents[a]["footSkateLocked"], abs=1e-9)
+    bad = run_cli("detect-contacts", tmp_path / "shot.usda", "-o", tmp_path / "x.usda", "--height", "-1")
+    assert bad.returncode == 1 and "height" in bad.stderr and not (tmp_path / "x.usda").exists()

@@ -18,7 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import ground
+from . import ground, trajectory
+from .model import Agent, Clip, StageInfo
 from .stationary import runs
 
 SIDES = ("left", "right")
@@ -165,6 +166,18 @@ def detect_leg(seconds: np.ndarray, ankle: np.ndarray, toe: np.ndarray | None, u
     return clean_ranges(mask, seconds, settings)
 
 
+def detect_agent(agent: Agent, clip: Clip, info: StageInfo,
+                 settings: DetectSettings | None = None) -> list[list[tuple[int, int]]]:
+    """Detected contact ranges of each leg of an agent (``agent.legs``), on its source clip."""
+    seconds = agent.sample_times / info.time_codes_per_second
+    out = []
+    for leg in agent.legs:
+        ankle = trajectory.joint_world(agent, clip, leg.ankle)[:, 3, :3]
+        toe = trajectory.joint_world(agent, clip, leg.toe)[:, 3, :3] if leg.toe is not None else None
+        out.append(detect_leg(seconds, ankle, toe, info.up_axis, info.meters_per_unit, settings))
+    return out
+
+
 def mask_of(ranges, frame_count: int) -> np.ndarray:
     """(F,) bool mask of inclusive frame ranges."""
     out = np.zeros(frame_count, dtype=bool)
@@ -173,5 +186,5 @@ def mask_of(ranges, frame_count: int) -> np.ndarray:
     return out
 
 
-__all__ = ["Leg", "SIDES", "find_legs", "chain_problem", "DetectSettings", "detect_leg", "detect_joint",
+__all__ = ["Leg", "SIDES", "find_legs", "chain_problem", "DetectSettings", "detect_leg", "detect_joint", "detect_agent",
            "clean_ranges", "mask_of", "ground_speed"]

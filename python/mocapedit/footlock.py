@@ -49,10 +49,12 @@ class LegInputs:
     target: np.ndarray         # (N,2,3) planted ankle position
     target_rot: np.ndarray     # (N,2,4) planted ankle rotation
     weight: np.ndarray         # (N,2) how much of the plant to reach, in [0, 1]
+    keep: np.ndarray | None = None  # (N,) uint8: poses the pelvis drop must not touch (stationary ranges)
 
     def arrays(self) -> tuple:
+        keep = np.zeros(len(self.hip), np.uint8) if self.keep is None else self.keep.astype(np.uint8)
         return (self.offsets, self.smooth, self.up, self.hip, self.knee, self.ankle, self.parent_rot,
-                self.hip_rot, self.knee_rot, self.ankle_rot, self.target, self.target_rot, self.weight)
+                self.hip_rot, self.knee_rot, self.ankle_rot, self.target, self.target_rot, self.weight, keep)
 
 
 @dataclass
@@ -135,6 +137,17 @@ def smooth_drop(required: np.ndarray, frames: int) -> np.ndarray:
     return np.convolve(padded, np.full(2 * frames + 1, 1.0 / (2 * frames + 1)), mode="valid")
 
 
+def keep_ramp(keep: np.ndarray, frames: int) -> np.ndarray:
+    """(T,) 0 at kept poses, rising linearly to 1 over ``frames`` + 1 poses away from them."""
+    n = len(keep)
+    index = np.arange(n, dtype=np.float64)
+    kept = np.flatnonzero(keep)
+    if not len(kept):
+        return np.ones(n)
+    distance = np.abs(index[:, None] - kept[None, :]).min(axis=1)
+    return np.minimum(distance / (frames + 1), 1.0)
+
+
 def lock_feet_numpy(inputs: LegInputs) -> LegOutputs:
     """:func:`lock_feet` in vectorised numpy (float64): the same results to within rounding."""
     up = np.asarray(inputs.up, dtype=np.float64)
@@ -154,6 +167,8 @@ def lock_feet_numpy(inputs: LegInputs) -> LegOutputs:
     for a in range(len(inputs.offsets) - 1):
         lo, hi = int(inputs.offsets[a]), int(inputs.offsets[a + 1])
         drop[lo:hi] = smooth_drop(required[lo:hi], int(inputs.smooth[a]))
+        if inputs.keep is not None and np.any(inputs.keep[lo:hi]):
+            drop[lo:hi] *= keep_ramp(inputs.keep[lo:hi], int(inputs.smooth[a]))
     shift = -drop[:, None, None] * up
     hip, knee, ankle = hip + shift, knee + shift, ankle + shift
 

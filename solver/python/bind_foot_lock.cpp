@@ -41,7 +41,8 @@ MOCAPEDIT_BINDINGS(BindFootLock) {
       [](const py::handle& offsets_in, const py::handle& smooth_in, const py::handle& up_in, const py::handle& hip_in,
          const py::handle& knee_in, const py::handle& ankle_in, const py::handle& parent_rot_in,
          const py::handle& hip_rot_in, const py::handle& knee_rot_in, const py::handle& ankle_rot_in,
-         const py::handle& target_in, const py::handle& target_rot_in, const py::handle& weight_in, int threads) {
+         const py::handle& target_in, const py::handle& target_rot_in, const py::handle& weight_in,
+         const py::handle& keep_in, int threads) {
         const IndexArray offsets = IndexArray::ensure(offsets_in), smooth = IndexArray::ensure(smooth_in);
         const DoubleArray up = DoubleArray::ensure(up_in);
         if (!offsets || offsets.ndim() != 1 || offsets.size() < 1)
@@ -66,6 +67,11 @@ MOCAPEDIT_BINDINGS(BindFootLock) {
         job.parent_rot = View(parent_rot), job.hip_rot = View(hip_rot), job.knee_rot = View(knee_rot);
         job.ankle_rot = View(ankle_rot), job.target = View(target), job.target_rot = View(target_rot);
         job.weight = View(weight);
+        using KeepArray = py::array_t<std::uint8_t, py::array::c_style | py::array::forcecast>;
+        const KeepArray keep = KeepArray::ensure(keep_in);
+        if (!keep || keep.ndim() != 1 || (keep.size() != 0 && keep.size() != n))
+          throw std::invalid_argument("keep: expected shape (" + std::to_string(n) + ",) or (0,)");
+        job.keep = Span<const std::uint8_t>(keep.data(), static_cast<std::size_t>(keep.size()));
         job.threads = threads;
         job.hip_local = View(hip_local), job.knee_local = View(knee_local), job.ankle_local = View(ankle_local);
         job.drop = View(drop), job.reached = View(reached);
@@ -80,11 +86,12 @@ MOCAPEDIT_BINDINGS(BindFootLock) {
       },
       py::arg("offsets"), py::arg("smooth"), py::arg("up"), py::arg("hip"), py::arg("knee"), py::arg("ankle"),
       py::arg("parent_rot"), py::arg("hip_rot"), py::arg("knee_rot"), py::arg("ankle_rot"), py::arg("target"),
-      py::arg("target_rot"), py::arg("weight"), py::arg("threads") = 0,
+      py::arg("target_rot"), py::arg("weight"), py::arg("keep"), py::arg("threads") = 0,
       "Holds planted feet in place by two-bone leg IK (the C++ FootLockJob), for many agents.\n\n"
       "offsets (A+1,) int64 pose offsets per agent; smooth (A,) frames of pelvis easing; up (3,)\n"
       "unit world up; hip, knee, ankle (N,2,3) world positions; parent_rot, hip_rot, knee_rot,\n"
       "ankle_rot (N,2,4) world quaternions xyzw; target (N,2,3), target_rot (N,2,4) planted ankle;\n"
-      "weight (N,2) in [0,1]. Returns (hip_local, knee_local, ankle_local (N,2,4) joint-local\n"
+      "weight (N,2) in [0,1]; keep (N,) uint8 poses the pelvis drop must not touch, or (0,).\n"
+      "Returns (hip_local, knee_local, ankle_local (N,2,4) joint-local\n"
       "quaternions, drop (N,) pelvis drop along -up, reached (N,2,3) ankle positions).");
 }

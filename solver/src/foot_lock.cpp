@@ -118,6 +118,7 @@ bool FootLockJob::Validate(std::string* error) const {
       return Fail(error, std::string(in.name) + " must hold " + std::to_string(n * 2 * in.w) + " values");
   for (std::size_t i = 0; i < n * 2; ++i)
     if (!(weight[i] >= 0.0 && weight[i] <= 1.0)) return Fail(error, "weights must be within [0, 1]");
+  if (keep.size != 0 && (keep.size != n || !keep.data)) return Fail(error, "keep must be empty or hold #N flags");
   if (!(max_reach > 0.0 && max_reach < 1.0)) return Fail(error, "max_reach must be within (0, 1)");
   if (!(soft_reach > 0.0 && soft_reach <= max_reach)) return Fail(error, "soft_reach must be within (0, max_reach]");
   const struct { Span<double> s; std::size_t size; const char* name; } outputs[] = {
@@ -175,7 +176,8 @@ struct Agent {
       any = any || required[t] > 0;
     }
     if (!any || s == 0 || n == 0) {
-      std::copy(required.begin(), required.end(), &job.drop[lo]);
+      std::copy(required.begin(), required.end(), job.drop.data + lo);
+      KeepStill(s);
       return;
     }
     peak.assign(n, 0.0);
@@ -191,6 +193,27 @@ struct Agent {
         sum += peak[static_cast<std::size_t>(std::clamp<std::ptrdiff_t>(k, 0, n - 1))];
       job.drop[lo + t] = sum / count;
     }
+    KeepStill(s);
+  }
+
+  // The drop is 0 at kept poses and rises linearly over s + 1 poses away from them.
+  void KeepStill(std::size_t s) {
+    if (job.keep.empty()) return;
+    const std::size_t n = hi - lo;
+    const double far = static_cast<double>(n) + static_cast<double>(s) + 2.0;
+    std::vector<double> distance(n, far);
+    double last = -far;
+    for (std::size_t t = 0; t < n; ++t) {
+      if (job.keep[lo + t]) last = static_cast<double>(t);
+      distance[t] = static_cast<double>(t) - last;
+    }
+    last = 2.0 * far;
+    for (std::size_t t = n; t-- > 0;) {
+      if (job.keep[lo + t]) last = static_cast<double>(t);
+      distance[t] = std::min(distance[t], last - static_cast<double>(t));
+    }
+    for (std::size_t t = 0; t < n; ++t)
+      job.drop[lo + t] *= std::min(distance[t] / static_cast<double>(s + 1), 1.0);
   }
 
   void SolveLeg(std::size_t pose, std::size_t leg, const Vec& up) const {

@@ -128,6 +128,9 @@ class _AgentLock:
         self.contact = np.zeros((count, len(self.legs)), dtype=bool)
         self.locked = 0
         up = ground.up_index(info.up_axis)
+        stationary = self.keep = np.zeros(count, dtype=bool)
+        for _, first, last in agent.stationary:
+            stationary |= (self.frames >= first - 1e-9) & (self.frames <= last + 1e-9)
         for k, leg in enumerate(self.legs):
             src_pos = posed[leg.ankle][:, 3, :3]
             src_rot = posed[leg.ankle]
@@ -137,10 +140,14 @@ class _AgentLock:
                     continue
                 self.locked += 1
                 self.contact[:, k] |= inside
-                yaw = float(np.arctan2(np.sin(turn[inside]).mean(), np.cos(turn[inside]).mean()))
+                # Where the contact meets a stationary range, the body moves rigidly there: the
+                # plant is that motion, so the range keeps its shape (no correction inside it).
+                rigid = inside & stationary
+                chosen = rigid if rigid.any() else inside
+                yaw = float(np.arctan2(np.sin(turn[chosen]).mean(), np.cos(turn[chosen]).mean()))
                 spin = kinematics.yaw_matrix(np.array(yaw), info.up_axis)
                 carried = src_pos @ spin[:3, :3]
-                shift = (pos[leg.ankle][inside] - carried[inside]).mean(axis=0)
+                shift = (pos[leg.ankle][chosen] - carried[chosen]).mean(axis=0)
                 shift[up] = 0.0  # feet stay at their source height: never below their ground
                 w = _ramp(self.frames, first, last, blend)
                 take = w > self.weight[:, k]
@@ -151,7 +158,7 @@ class _AgentLock:
     def inputs(self) -> dict:
         return {"hip": self.hip, "knee": self.knee, "ankle": self.ankle, "parent_rot": self.parent_rot,
                 "hip_rot": self.hip_rot, "knee_rot": self.knee_rot, "ankle_rot": self.ankle_rot,
-                "target": self.target, "target_rot": self.target_rot, "weight": self.weight}
+                "target": self.target, "target_rot": self.target_rot, "weight": self.weight, "keep": self.keep}
 
     def writable(self) -> str | None:
         """Why the legs cannot be baked into this agent's pose, or None."""
@@ -199,21 +206,8 @@ def _source_contacts(ctx, agent: Agent, cache: dict) -> list[list[tuple[int, int
     key = (agent.clip_key, tuple(agent.joints), tuple(leg.joints for leg in agent.legs))
     hit = cache.get(key)
     if hit is None:
-        hit = cache[key] = detect_agent(ctx.data, agent)
+        hit = cache[key] = contacts.detect_agent(agent, ctx.data.clip_of(agent), ctx.data.info)
     return hit
-
-
-def detect_agent(data, agent: Agent, settings: contacts.DetectSettings | None = None) -> list[list[tuple[int, int]]]:
-    """Detected contact ranges of each leg of an agent, on its source clip."""
-    info = data.info
-    clip = data.clip_of(agent)
-    seconds = agent.sample_times / info.time_codes_per_second
-    out = []
-    for leg in agent.legs:
-        ankle = trajectory.joint_world(agent, clip, leg.ankle)[:, 3, :3]
-        toe = trajectory.joint_world(agent, clip, leg.toe)[:, 3, :3] if leg.toe is not None else None
-        out.append(contacts.detect_leg(seconds, ankle, toe, info.up_axis, info.meters_per_unit, settings))
-    return out
 
 
 def _skate(positions, contact, times, info) -> float:

@@ -62,6 +62,10 @@ struct FootLockJob {
   Span<const double> target;
   Span<const double> target_rot;
   Span<const double> weight;
+  // Optional, #N flags (or empty): poses the pelvis drop must not touch (a stationary range
+  // that must keep its shape). The drop is 0 there and eases back in linearly over
+  // `smooth[a]` + 1 poses on each side.
+  Span<const std::uint8_t> keep;
 
   double soft_reach = 0.97;   // fraction of a leg's length where the reach starts to soften
   double max_reach = 0.9995;  // fraction of a leg's length never exceeded
@@ -79,7 +83,7 @@ struct FootLockJob {
   //    or one is negative;
   //  - up does not hold 3 finite values of unit length (to 1e-6);
   //  - an input does not hold #N * 2 entries of its width, or an output #N * 2 (drop: #N);
-  //  - a weight is not within [0, 1] (or is NaN);
+  //  - a weight is not within [0, 1] (or is NaN); keep is neither empty nor #N flags;
   //  - soft_reach is not within (0, max_reach], or max_reach not within (0, 1);
   //  - an output overlaps an input or another output.
   // #N may be 0 (nothing to do).
