@@ -151,27 +151,11 @@ def test_detection_thresholds_follow_meters_per_unit(walk_clip):
 
 
 def _random_legs(rng, agents=3, poses=40):
-    n = agents * poses
-    hip = np.zeros((n, 2, 3))
-    hip[:, 0, 0], hip[:, 1, 0] = 0.1, -0.1
-    hip[:, :, 1] = 0.9 + 0.02 * rng.standard_normal((n, 1))
-    bend = rng.uniform(0.05, 0.6, (n, 2))
-    thigh, shin = 0.45, 0.42
-    knee = hip + np.stack([np.zeros_like(bend), -thigh * np.cos(bend), thigh * np.sin(bend)], -1)
-    ankle = knee + np.stack([np.zeros_like(bend), -shin * np.cos(bend), -shin * np.sin(bend)], -1)
-
-    def quats(scale):
-        q = np.concatenate([scale * rng.standard_normal((n, 2, 3)), np.ones((n, 2, 1))], -1)
-        return q / np.linalg.norm(q, axis=-1, keepdims=True)
-
-    target = ankle + 0.15 * rng.standard_normal((n, 2, 3))
-    target[5, 0] = hip[5, 0] + (0, -1.2, 0.1)        # out of reach: the pelvis must drop
-    weight = np.clip(rng.uniform(-0.5, 1.5, (n, 2)), 0, 1)
-    weight[5, 0] = 1.0
-    return footlock.LegInputs(
-        offsets=np.arange(0, n + 1, poses, dtype=np.int64), smooth=np.array([0, 2, 4], dtype=np.int64),
-        up=np.array([0.0, 1.0, 0.0]), hip=hip, knee=knee, ankle=ankle, parent_rot=quats(0.2), hip_rot=quats(0.3),
-        knee_rot=quats(0.3), ankle_rot=quats(0.3), target=target, target_rot=quats(0.4), weight=weight)
+    weights = np.clip(rng.uniform(-0.5, 1.5, (agents * poses, 2)), 0, 1)
+    weights[5, 0] = 1.0
+    inputs = examples.leg_inputs(rng, agents, poses, 0.15, [0, 2, 4], weights)
+    inputs.target[5, 0] = inputs.hip[5, 0] + (0, -1.2, 0.1)        # out of reach: the pelvis must drop
+    return inputs
 
 
 @pytest.mark.parametrize("keep", [False, True])

@@ -104,9 +104,17 @@ def _arc(a, b):
 
 
 def _twist(axis, a, b):
-    """Unit quaternions turning (…,3) a about the unit axis onto b's direction around it."""
-    angle = np.arctan2(np.sum(np.cross(a, b) * axis, -1), np.sum(a * b, -1))[..., None]
-    return np.concatenate([axis * np.sin(angle / 2), np.cos(angle / 2)], -1)
+    """Unit quaternions turning (…,3) a about the unit axis onto b's direction around it: with
+    (c, s) the cosine and sine of that angle, (s axis, 1 + c) normalised."""
+    c = np.sum(a * b, -1, keepdims=True)
+    s = np.sum(np.cross(a, b) * axis, -1, keepdims=True)
+    r = np.hypot(c, s)
+    none = r < 1e-300
+    r = np.where(none, 1.0, r)
+    c, s = np.where(none, 1.0, c / r), np.where(none, 0.0, s / r)
+    half = 1.0 + c < 1e-12
+    q = np.where(half, np.concatenate([axis, np.zeros_like(c)], -1), np.concatenate([axis * s, 1.0 + c], -1))
+    return _normalize(q)
 
 
 def _frame_delta(u0, n0, u1, n1):

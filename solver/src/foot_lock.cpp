@@ -46,11 +46,16 @@ Quat Arc(const Vec& a, const Vec& b) {
   return UnitQ(Quat(1.0 + d, axis.x(), axis.y(), axis.z()));
 }
 
-// The turn about unit `axis` taking a's direction around it onto b's.
+// The turn about unit `axis` taking a's direction around it onto b's: with (c, s) the cosine
+// and sine of that angle, the half-angle quaternion is (s axis, 1 + c), normalised.
 Quat Twist(const Vec& axis, const Vec& a, const Vec& b) {
-  const double half = 0.5 * std::atan2(a.cross(b).dot(axis), a.dot(b));
-  const Vec v = axis * std::sin(half);
-  return Quat(std::cos(half), v.x(), v.y(), v.z());
+  double c = a.dot(b), s = a.cross(b).dot(axis);
+  const double r = std::hypot(c, s);
+  if (r < 1e-300) return Quat::Identity();
+  c /= r, s /= r;
+  if (1.0 + c < 1e-12) return Quat(0.0, axis.x(), axis.y(), axis.z());  // half a turn
+  const Vec v = axis * s;
+  return UnitQ(Quat(1.0 + c, v.x(), v.y(), v.z()));
 }
 
 // The rotation taking the orthonormal pair (u0, n0) to (u1, n1).
@@ -61,6 +66,7 @@ Quat FrameDelta(const Vec& u0, const Vec& n0, const Vec& u1, const Vec& n1) {
 
 // Normalised shortest-arc slerp (trigonometric; linear when the angle is tiny).
 Quat SlerpQ(const Quat& a, Quat b, double t) {
+  if (t == 0.0) return UnitQ(a);
   double dot = a.coeffs().dot(b.coeffs());
   if (dot < 0) b.coeffs() = -b.coeffs(), dot = -dot;
   const double theta = std::acos(std::min(dot, 1.0));
@@ -143,35 +149,31 @@ namespace {
 struct Agent {
   const FootLockJob& job;
   std::size_t lo, hi;
-  std::vector<double> required, peak;
+  std::size_t agent_index = 0;
+  // Per leg of each pose (2 per pose): blended target, full length, soft and hard reach limits.
+  std::vector<Vec> target;
+  std::vector<double> full, soft, limit, required, peak;
 
-  Vec Target(std::size_t i) const {
-    const double w = std::clamp(job.weight[i], 0.0, 1.0);
-    const Vec a = V(&job.ankle[3 * i]);
-    return a + w * (V(&job.target[3 * i]) - a);
-  }
-
-  double Stretch(std::size_t i) const { return (V(&job.ankle[3 * i]) - V(&job.hip[3 * i])).norm(); }
-
-  // A leg already stretched further than the soft limit in its own pose keeps that stretch.
-  double Soft(std::size_t i, double full) const { return std::max(Stretch(i), job.soft_reach * full); }
-
-  double Full(std::size_t i) const {
-    const Vec h = V(&job.hip[3 * i]), k = V(&job.knee[3 * i]), a = V(&job.ankle[3 * i]);
-    return (k - h).norm() + (a - k).norm();
-  }
-
-  // The least drop along -up that lets both legs reach, then eased over `smooth` frames.
+  // Blends the targets and measures each leg; the least drop along -up that lets both legs
+  // reach, then eased over `smooth` frames.
   void LowerPelvis(const Vec& up) {
     const std::size_t n = hi - lo;
     const auto s = static_cast<std::size_t>(job.smooth[agent_index]);
+    target.resize(2 * n), full.resize(2 * n), soft.resize(2 * n), limit.resize(2 * n);
     required.assign(n, 0.0);
     bool any = false;
     for (std::size_t t = 0; t < n; ++t) {
       for (std::size_t leg = 0; leg < 2; ++leg) {
-        const std::size_t i = 2 * (lo + t) + leg;
-        const double d = RequiredDrop(V(&job.hip[3 * i]), Target(i), Soft(i, Full(i)), up);
-        required[t] = std::max(required[t], d);
+        const std::size_t i = 2 * (lo + t) + leg, k = 2 * t + leg;
+        const Vec h = V(&job.hip[3 * i]), kn = V(&job.knee[3 * i]), a = V(&job.ankle[3 * i]);
+        const double w = std::clamp(job.weight[i], 0.0, 1.0);
+        target[k] = a + w * (V(&job.target[3 * i]) - a);
+        full[k] = (kn - h).norm() + (a - kn).norm();
+        // A leg already stretched further than the soft limit in its own pose keeps that stretch.
+        const double stretch = (a - h).norm();
+        soft[k] = std::max(stretch, job.soft_reach * full[k]);
+        limit[k] = std::max(stretch, job.max_reach * full[k]);
+        required[t] = std::max(required[t], RequiredDrop(h, target[k], soft[k], up));
       }
       any = any || required[t] > 0;
     }
@@ -217,19 +219,17 @@ struct Agent {
   }
 
   void SolveLeg(std::size_t pose, std::size_t leg, const Vec& up) const {
-    const std::size_t i = 2 * pose + leg;
+    const std::size_t i = 2 * pose + leg, k = 2 * (pose - lo) + leg;
     const Vec shift = -job.drop[pose] * up;
-    const Vec target = Target(i);
-    const double full = Full(i);
-    const double soft = Soft(i, full);
+    const Vec& goal = target[k];
     const Vec hip = V(&job.hip[3 * i]) + shift, knee = V(&job.knee[3 * i]) + shift,
               ankle = V(&job.ankle[3 * i]) + shift;
     const double l1 = (knee - hip).norm(), l2 = (ankle - knee).norm();
 
-    const Vec to_target = target - hip;
+    const Vec to_target = goal - hip;
     const double dist = to_target.norm();
-    const double room = std::max(std::max(Stretch(i), job.max_reach * full) - soft, 1e-12);
-    double reach = dist > soft ? soft + room * (1.0 - std::exp(-(dist - soft) / room)) : dist;
+    const double room = std::max(limit[k] - soft[k], 1e-12);
+    double reach = dist > soft[k] ? soft[k] + room * (1.0 - std::exp(-(dist - soft[k]) / room)) : dist;
     reach = std::max(reach, std::abs(l1 - l2) * 1.0001 + 1e-9);
     const Vec d = Unit(to_target);
 
@@ -256,8 +256,6 @@ struct Agent {
     Put(Local(new_knee_rot, ankle_rot), &job.ankle_local[4 * i]);
     Put(new_ankle, &job.reached[3 * i]);
   }
-
-  std::size_t agent_index = 0;
 };
 
 }  // namespace
@@ -279,8 +277,7 @@ bool FootLockJob::Run(std::string* error) const {
   }
   OnThreads(count, [&](int t) {
     for (std::size_t a = split[static_cast<std::size_t>(t)]; a < split[static_cast<std::size_t>(t) + 1]; ++a) {
-      Agent agent{*this, static_cast<std::size_t>(offsets[a]), static_cast<std::size_t>(offsets[a + 1]), {}, {}};
-      agent.agent_index = a;
+      Agent agent{*this, static_cast<std::size_t>(offsets[a]), static_cast<std::size_t>(offsets[a + 1]), a};
       agent.LowerPelvis(up_v);
       for (std::size_t p = agent.lo; p < agent.hi; ++p)
         for (std::size_t leg = 0; leg < 2; ++leg) agent.SolveLeg(p, leg, up_v);

@@ -19,7 +19,7 @@ import numpy as np
 
 from .. import animation, contacts, footlock, ground, kinematics, metrics, processor, trajectory
 from ..errors import MocapEditError
-from ..layering import trs_from_matrices
+from ..layering import quat_multiply, trs_from_matrices
 from ..model import Agent
 
 #: Seconds over which a lock blends in before a contact and out after it.
@@ -51,6 +51,35 @@ def _skel_space(agent: Agent, pose: animation.Pose, joints: list[int]) -> dict[i
     return out
 
 
+def _yaw_quat(angle: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """(T,4) quaternions turning by ``angle`` (radians, counter-clockwise) about the unit ``up``."""
+    half = 0.5 * np.asarray(angle, dtype=np.float64)[:, None]
+    return np.concatenate([np.sin(half) * up, np.cos(half)], axis=1)
+
+
+def _posed_legs(ctx, path: str, frames: np.ndarray, times: np.ndarray, shared: dict):
+    """(pose after the earlier passes, skeleton-space positions (T,3) and rotations (T,4) of the
+    leg joints and the hips' parents). Agents that play one clip at the same frames without
+    pose edits share them."""
+    agent = ctx.data.agents[path]
+    edits = ctx.pose_edits.get(path, [])
+    needed = sorted({j for leg in agent.legs for j in (leg.hip, leg.knee, leg.ankle, int(agent.parents[leg.hip]))
+                     if j >= 0})
+    key = None if edits else (agent.clip_key, tuple(agent.joints), agent.rest_transforms.tobytes(),
+                              tuple(needed), frames.tobytes())
+    hit = shared.get(key) if key is not None else None
+    if hit is None:
+        pose = animation.sample_pose(ctx.data.clip_of(agent), frames)
+        for fn in edits:
+            pose = fn(pose, times, frames)
+        skel = _skel_space(agent, pose, needed)
+        hit = (pose, {j: skel[j][:, 3, :3] for j in needed},
+               {j: trs_from_matrices(skel[j])[1].astype(np.float64) for j in needed})
+        if key is not None:
+            shared[key] = hit
+    return hit
+
+
 def _top(agent: Agent, joint: int) -> int:
     while int(agent.parents[joint]) >= 0:
         joint = int(agent.parents[joint])
@@ -67,7 +96,8 @@ def _ramp(frames: np.ndarray, first: int, last: int, blend: float) -> np.ndarray
 class _AgentLock:
     """One agent's side of the job: what it needs, and what it gets back."""
 
-    def __init__(self, ctx: processor.SolveContext, path: str, source_contacts: list, source_skate: float):
+    def __init__(self, ctx: processor.SolveContext, path: str, source_contacts: list, source_skate: float,
+                 shared: dict):
         data = ctx.data
         self.source_skate = source_skate
         info = data.info
@@ -75,21 +105,19 @@ class _AgentLock:
         agent = self.agent = data.agents[path]
         self.legs = agent.legs
         self.times, self.frames = processor.output_frames(ctx, path)
-        pose = animation.sample_pose(data.clip_of(agent), self.frames)
-        for fn in ctx.pose_edits.get(path, []):
-            pose = fn(pose, self.times, self.frames)
+        self.root = _top(agent, self.legs[0].hip)
+        pose, skel_pos, skel_rot = _posed_legs(ctx, path, self.frames, self.times, shared)
         self.pose = pose
         self.columns = {name: k for k, name in enumerate(pose.joints)}
-        self.root = _top(agent, self.legs[0].hip)
-        needed = [j for leg in self.legs for j in (leg.hip, leg.knee, leg.ankle)]
-        skel = _skel_space(agent, pose, needed)
         to_world = agent.skel_to_world
         if to_world.shape[0] > 1:
             to_world = animation.interp_frames(to_world, self.frames)
         self.to_world = to_world
-        # The edited ground motion (identity without a path edit) and its turn.
-        edited = ctx.paths.get(path)
         count = len(self.times)
+        up_vector = np.zeros(3)
+        up_vector[ground.up_index(info.up_axis)] = 1.0
+        # The edited ground motion (identity without a path edit): a turn about up, then a shift.
+        edited = ctx.paths.get(path)
         if edited is None:
             motion = np.broadcast_to(np.eye(4), (count, 4, 4))
             turn = np.zeros(count)
@@ -101,10 +129,13 @@ class _AgentLock:
                 animation.interp_frames(traj.ground, self.frames), src_h,
                 animation.interp_frames(edited.ground, self.frames), new_h, info.up_axis)
             turn = new_h - src_h
-        posed = {j: m @ to_world for j, m in skel.items()}          # world, before the ground motion
-        world = {j: m @ motion for j, m in posed.items()}           # world, as edited
-        rot = {j: trs_from_matrices(m)[1].astype(np.float64) for j, m in world.items()}
-        pos = {j: m[:, 3, :3] for j, m in world.items()}
+        turn_q = _yaw_quat(turn, up_vector)
+        world_q = trs_from_matrices(to_world)[1].astype(np.float64)        # (1 or T, 4)
+        # World, before the ground motion (the posed source) and as edited.
+        posed = {j: np.einsum("ti,tij->tj", p, to_world[:, :3, :3]) + to_world[:, 3, :3] for j, p in skel_pos.items()}
+        pos = {j: np.einsum("ti,tij->tj", p, motion[:, :3, :3]) + motion[:, 3, :3] for j, p in posed.items()}
+        posed_rot = {j: quat_multiply(world_q, q) for j, q in skel_rot.items()}
+        rot = {j: quat_multiply(turn_q, q) for j, q in posed_rot.items()}
 
         def per_leg(values, key):
             return np.stack([values[getattr(leg, key)] for leg in self.legs], axis=1)
@@ -114,7 +145,7 @@ class _AgentLock:
         parent_rot = []
         for leg in self.legs:
             p = int(agent.parents[leg.hip])
-            parent_rot.append(rot[p] if p >= 0 else trs_from_matrices(to_world @ motion)[1].astype(np.float64))
+            parent_rot.append(rot[p] if p >= 0 else quat_multiply(turn_q, np.broadcast_to(world_q, turn_q.shape)))
         self.parent_rot = np.stack(parent_rot, axis=1)
 
         # Plants: per contact, the source foot carried by one turn and one ground translation.
@@ -132,8 +163,7 @@ class _AgentLock:
         for _, first, last in agent.stationary:
             stationary |= (self.frames >= first - 1e-9) & (self.frames <= last + 1e-9)
         for k, leg in enumerate(self.legs):
-            src_pos = posed[leg.ankle][:, 3, :3]
-            src_rot = posed[leg.ankle]
+            src_pos = posed[leg.ankle]
             for first, last in source_contacts[k]:
                 inside = (self.frames >= first - 1e-9) & (self.frames <= last + 1e-9)
                 if not inside.any():
@@ -153,7 +183,8 @@ class _AgentLock:
                 take = w > self.weight[:, k]
                 self.weight[take, k] = w[take]
                 self.target[take, k] = carried[take] + shift
-                self.target_rot[take, k] = trs_from_matrices(src_rot[take] @ spin)[1]
+                self.target_rot[take, k] = quat_multiply(_yaw_quat(np.array([yaw]), up_vector),
+                                                         posed_rot[leg.ankle][take])
 
     def inputs(self) -> dict:
         return {"hip": self.hip, "knee": self.knee, "ankle": self.ankle, "parent_rot": self.parent_rot,
@@ -199,14 +230,25 @@ class _AgentLock:
                               rotations=rotations.astype(np.float32), scales=pose.scales)
 
 
-def _source_contacts(ctx, agent: Agent, cache: dict) -> list[list[tuple[int, int]]]:
-    """Per leg, the inclusive frame ranges of its foot contacts on the source clip."""
-    if agent.foot_contacts is not None:
-        return [[(a, b) for _, ankle, a, b in agent.foot_contacts if ankle == leg.ankle] for leg in agent.legs]
-    key = (agent.clip_key, tuple(agent.joints), tuple(leg.joints for leg in agent.legs))
+def _source(ctx, agent: Agent, cache: dict) -> tuple[list[list[tuple[int, int]]], float]:
+    """(per leg, the inclusive frame ranges of its foot contacts on the source clip; the source
+    foot skate over them, stage units per second). Agents that play one clip share them."""
+    place = agent.skel_to_world
+    # A static placement's translation changes neither the contacts nor the skate.
+    placement = place[:, :3, :3].tobytes() if place.shape[0] == 1 else place.tobytes()
+    key = (agent.clip_key, tuple(agent.joints), tuple(leg.joints for leg in agent.legs),
+           tuple(agent.foot_contacts or ()), placement)
     hit = cache.get(key)
     if hit is None:
-        hit = cache[key] = contacts.detect_agent(agent, ctx.data.clip_of(agent), ctx.data.info)
+        info = ctx.data.info
+        clip = ctx.data.clip_of(agent)
+        if agent.foot_contacts is not None:
+            found = [[(a, b) for _, ankle, a, b in agent.foot_contacts if ankle == leg.ankle] for leg in agent.legs]
+        else:
+            found = contacts.detect_agent(agent, clip, info)
+        ankles = np.stack([trajectory.joint_world(agent, clip, leg.ankle)[:, 3, :3] for leg in agent.legs], 1)
+        mask = np.stack([contacts.mask_of(r, agent.frame_count) for r in found], 1)
+        hit = cache[key] = (found, _skate(ankles, mask, agent.sample_times, info))
     return hit
 
 
@@ -222,6 +264,7 @@ def foot_locking_pass(ctx: processor.SolveContext) -> None:
         return
     touched = sorted(set(ctx.paths) | set(ctx.time_maps) | set(ctx.pose_edits))
     cache: dict = {}
+    shared: dict = {}
     locks: list[_AgentLock] = []
     task = ctx.progress.task("foot locking", len(touched))
     for i, path in enumerate(touched):
@@ -233,8 +276,8 @@ def foot_locking_pass(ctx: processor.SolveContext) -> None:
             entry.setdefault("notes", []).append(
                 "foot locking skipped: legs not found by name; set mocap:leftLegJoints and mocap:rightLegJoints")
         else:
-            found = _source_contacts(ctx, agent, cache)
-            lock = _AgentLock(ctx, path, found, _source_skate(data, agent, found))
+            found, skate = _source(ctx, agent, cache)
+            lock = _AgentLock(ctx, path, found, skate, shared)
             why = lock.writable()
             if why:
                 entry.setdefault("notes", []).append(f"foot locking skipped: {why}")
@@ -278,14 +321,6 @@ def _replace_legs(pose: animation.Pose, locked: animation.Pose, lock: _AgentLock
     if pose.joints != locked.joints or pose.rotations.shape != locked.rotations.shape:
         raise MocapEditError(f"<{lock.path}>: foot locking was computed for another pose")
     return locked
-
-
-def _source_skate(data, agent: Agent, found) -> float:
-    clip = data.clip_of(agent)
-    info = data.info
-    ankles = np.stack([trajectory.joint_world(agent, clip, leg.ankle)[:, 3, :3] for leg in agent.legs], 1)
-    mask = np.stack([contacts.mask_of(r, agent.frame_count) for r in found], 1)
-    return _skate(ankles, mask, agent.sample_times, info)
 
 
 processor.register_pass(500, "foot locking", foot_locking_pass)
