@@ -49,6 +49,12 @@ class Report:
         if self.constraints:
             worst = max((c.get("residual", 0.0) for c in self.constraints), default=0.0)
             lines.append(f"worst constraint residual: {worst:.3g}")
+        if "footContactsLocked" in s:
+            lines.append(f"feet: {s['footContactsLocked']} contacts locked on {s.get('footLockedAgents', 0)} agents; "
+                         f"skate {_num(s.get('footSkateSource'))} source, {_num(s.get('footSkateEdited'))} edited, "
+                         f"{_num(s.get('footSkateLocked'))} locked (stage units/s, mean over agents); "
+                         f"largest pelvis drop {_num(s.get('maxPelvisDrop'))}, "
+                         f"largest foot correction {_num(s.get('maxFootCorrection'))}")
         lines.extend(f"note: {n}" for n in self.notes)
         return "\n".join(lines)
 
@@ -151,7 +157,8 @@ def select(stored: StoredReport, patterns: list[str] | None = None) -> StoredRep
 _UNIT_NAMES = {1.0: "m", 0.01: "cm", 0.001: "mm", 0.1: "dm", 1000.0: "km"}
 _TIME_KINDS = ("time", "sync")
 _KNOWN_FIGURES = ("frames", "edited", "lengthRatio", "maxDisplacement", "meanDisplacement", "shapeChange",
-                  "footSkateSource", "footSkateEdited", "minSeparation", "minInterval", "solver", "notes",
+                  "footSkateSource", "footSkateEdited", "footSkateLocked", "footContactsLocked", "maxPelvisDrop",
+                  "maxFootCorrection", "minSeparation", "minInterval", "solver", "notes",
                   "trajectoryJoint")
 
 
@@ -225,7 +232,11 @@ def format_text(stored: StoredReport, show_all: bool = False) -> str:
         if "footSkateSource" in fig or "footSkateEdited" in fig:
             a, b = fig.get("footSkateSource"), fig.get("footSkateEdited")
             change = f" ({'+' if b - a >= 0 else ''}{_num(b - a)})" if a is not None and b is not None else ""
-            parts.append(f"foot skate {_num(a)} -> {_num(b)}{change}")
+            locked = f" -> locked {_num(fig['footSkateLocked'])}" if "footSkateLocked" in fig else ""
+            parts.append(f"foot skate {_num(a)} -> {_num(b)}{change}{locked}")
+        if "footContactsLocked" in fig:
+            parts.append(f"contacts locked {fig['footContactsLocked']}, pelvis drop {_num(fig.get('maxPelvisDrop'))}, "
+                         f"foot correction {_num(fig.get('maxFootCorrection'))}")
         if "minSeparation" in fig:
             sep = fig["minSeparation"]
             parts.append(f"min separation {_num(sep)}" + ("  OVERLAP" if sep is not None and sep < 0 else ""))

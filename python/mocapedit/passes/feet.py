@@ -312,8 +312,17 @@ def foot_locking_pass(ctx: processor.SolveContext) -> None:
             changed += 1
             ctx.pose_edits.setdefault(lock.path, []).append(
                 lambda pose, out_times, src_frames, locked=locked_pose, lock=lock: _replace_legs(pose, locked, lock))
-    ctx.report.stats["footLockedAgents"] = changed
-    ctx.report.stats["footContactsLocked"] = contacts_locked
+    stats = ctx.report.stats
+    stats["footLockedAgents"] = changed
+    stats["footContactsLocked"] = contacts_locked
+    # The shot's figures: mean skate over the agents with contacts, the largest corrections.
+    for key in ("footSkateSource", "footSkateEdited", "footSkateLocked"):
+        values = [ctx.report.agent(lock.path)[key] for lock in locks]
+        values = [v for v in values if np.isfinite(v)]
+        if values:
+            stats[key] = float(np.mean(values))
+    stats["maxPelvisDrop"] = max(lock.max_drop for lock in locks)
+    stats["maxFootCorrection"] = max(lock.max_correction for lock in locks)
 
 
 def _replace_legs(pose: animation.Pose, locked: animation.Pose, lock: _AgentLock) -> animation.Pose:
