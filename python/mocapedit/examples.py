@@ -442,4 +442,5 @@ def leg_inputs(rng: np.random.Generator, agents: int, poses: int, reach: float, 
         offsets=np.arange(0, n + 1, poses, dtype=np.int64), smooth=np.asarray(smooth, dtype=np.int64),
         up=np.array([0.0, 1.0, 0.0]), hip=hip, knee=knee, ankle=ankle, parent_rot=quats(0.2), hip_rot=quats(0.3),
         knee_rot=quats(0.3), ankle_rot=quats(0.3), target=ankle + reach * rng.standard_normal((n, 2, 3)),
-        target_rot=quats(0.4), weight=np.asarray(weights, dtype=np.float64))
+        target_rot=quats(0.4), weight=np.asarray(weights, dtype=np.float64),
+        hinge=np.cross(knee - hip, ankle - hip))

@@ -31,6 +31,10 @@ from .layering import quat_multiply
 SOFT_REACH = 0.97
 #: The largest fraction of a leg's full length an IK leg ever reaches.
 MAX_REACH = 0.9995
+#: Knee bends (sine of the angle between thigh and shin) below BEND_NOISE take their plane from
+#: the hinge axis; above BEND_NOISE + BEND_TRUST, from the pose; in between, a blend.
+BEND_NOISE = 0.05
+BEND_TRUST = 0.2
 
 
 @dataclass
@@ -49,12 +53,14 @@ class LegInputs:
     target: np.ndarray         # (N,2,3) planted ankle position
     target_rot: np.ndarray     # (N,2,4) planted ankle rotation
     weight: np.ndarray         # (N,2) how much of the plant to reach, in [0, 1]
+    hinge: np.ndarray          # (N,2,3) the knee's hinge axis in world space (the normal of its bend plane)
     keep: np.ndarray | None = None  # (N,) uint8: poses the pelvis drop must not touch (stationary ranges)
 
     def arrays(self) -> tuple:
         keep = np.zeros(len(self.hip), np.uint8) if self.keep is None else self.keep.astype(np.uint8)
         return (self.offsets, self.smooth, self.up, self.hip, self.knee, self.ankle, self.parent_rot,
-                self.hip_rot, self.knee_rot, self.ankle_rot, self.target, self.target_rot, self.weight, keep)
+                self.hip_rot, self.knee_rot, self.ankle_rot, self.target, self.target_rot, self.weight, self.hinge,
+                keep)
 
 
 @dataclass
@@ -115,6 +121,24 @@ def _twist(axis, a, b):
     half = 1.0 + c < 1e-12
     q = np.where(half, np.concatenate([axis, np.zeros_like(c)], -1), np.concatenate([axis * s, 1.0 + c], -1))
     return _normalize(q)
+
+
+def knee_hinge(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, knee_rot: np.ndarray) -> np.ndarray:
+    """(3,) a leg's knee hinge axis in the knee joint's own frame, learned from (T,3) positions and
+    (T,4) world rotations of a clip: the normals of the bend planes, weighted by the square of the
+    bend, so the clearly bent poses decide."""
+    cross = np.cross(knee - hip, ankle - hip)
+    local = _rotate(_conj(np.asarray(knee_rot, dtype=np.float64)), cross)
+    axis = local.sum(axis=0) if len(local) else np.zeros(3)
+    weight = np.linalg.norm(cross, axis=-1) / np.maximum(
+        np.linalg.norm(knee - hip, axis=-1) * np.linalg.norm(ankle - knee, axis=-1), 1e-30)
+    axis = np.sum(local * weight[:, None], axis=0) if len(local) else axis
+    return _normalize(axis) if np.linalg.norm(axis) > 0 else np.array([1.0, 0.0, 0.0])
+
+
+def world_hinge(knee_rot: np.ndarray, local: np.ndarray) -> np.ndarray:
+    """(...,3) the knee hinge in world space from (…,4) knee world rotations."""
+    return _rotate(np.asarray(knee_rot, dtype=np.float64), np.broadcast_to(local, np.shape(knee_rot)[:-1] + (3,)))
 
 
 def _frame_delta(u0, n0, u1, n1):
@@ -191,9 +215,12 @@ def lock_feet_numpy(inputs: LegInputs) -> LegOutputs:
 
     # The knee's plane: its normal from the pose before locking, kept perpendicular to the new
     # hip-ankle line; the knee bends to the same side as before (never backwards).
-    normal = np.cross(knee - hip, ankle - hip)
-    hinge = _rotate(np.asarray(inputs.knee_rot, dtype=np.float64), np.array([1.0, 0.0, 0.0]))
-    weak = np.linalg.norm(normal, axis=-1) < 1e-9 * np.maximum(l1 * l2, 1e-30)
+    # A nearly straight knee says little about its plane: there the hinge axis takes over.
+    cross = np.cross(knee - hip, ankle - hip)
+    trust = np.clip((np.linalg.norm(cross, axis=-1) / np.maximum(l1 * l2, 1e-30) - BEND_NOISE) / BEND_TRUST, 0.0, 1.0)
+    hinge = _normalize(np.asarray(inputs.hinge, dtype=np.float64))
+    normal = trust[..., None] * _normalize(cross) + (1.0 - trust[..., None]) * hinge
+    weak = np.linalg.norm(normal, axis=-1) < 1e-6
     normal = _normalize(np.where(weak[..., None], hinge, normal))
     n1 = _normalize(normal - np.sum(normal * d, -1, keepdims=True) * d)
     bend = np.cross(d, n1)
@@ -220,5 +247,6 @@ def lock_feet_numpy(inputs: LegInputs) -> LegOutputs:
                       drop, new_ankle)
 
 
-__all__ = ["LegInputs", "LegOutputs", "lock_feet", "lock_feet_numpy", "required_drop", "smooth_drop",
+__all__ = ["LegInputs", "LegOutputs", "lock_feet", "lock_feet_numpy", "required_drop", "smooth_drop", "knee_hinge",
+           "world_hinge",
            "SOFT_REACH", "MAX_REACH"]

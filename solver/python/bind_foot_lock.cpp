@@ -42,7 +42,7 @@ MOCAPEDIT_BINDINGS(BindFootLock) {
          const py::handle& knee_in, const py::handle& ankle_in, const py::handle& parent_rot_in,
          const py::handle& hip_rot_in, const py::handle& knee_rot_in, const py::handle& ankle_rot_in,
          const py::handle& target_in, const py::handle& target_rot_in, const py::handle& weight_in,
-         const py::handle& keep_in, int threads) {
+         const py::handle& hinge_in, const py::handle& keep_in, int threads) {
         const IndexArray offsets = IndexArray::ensure(offsets_in), smooth = IndexArray::ensure(smooth_in);
         const DoubleArray up = DoubleArray::ensure(up_in);
         if (!offsets || offsets.ndim() != 1 || offsets.size() < 1)
@@ -55,7 +55,8 @@ MOCAPEDIT_BINDINGS(BindFootLock) {
                           ankle = Legs(ankle_in, n, 3, "ankle"), parent_rot = Legs(parent_rot_in, n, 4, "parent_rot"),
                           hip_rot = Legs(hip_rot_in, n, 4, "hip_rot"), knee_rot = Legs(knee_rot_in, n, 4, "knee_rot"),
                           ankle_rot = Legs(ankle_rot_in, n, 4, "ankle_rot"), target = Legs(target_in, n, 3, "target"),
-                          target_rot = Legs(target_rot_in, n, 4, "target_rot"), weight = Legs(weight_in, n, 1, "weight");
+                          target_rot = Legs(target_rot_in, n, 4, "target_rot"), weight = Legs(weight_in, n, 1, "weight"),
+                          hinge = Legs(hinge_in, n, 3, "hinge");
         DoubleArray hip_local({n, py::ssize_t{2}, py::ssize_t{4}}), knee_local({n, py::ssize_t{2}, py::ssize_t{4}}),
             ankle_local({n, py::ssize_t{2}, py::ssize_t{4}}), drop(std::vector<py::ssize_t>{n}),
             reached({n, py::ssize_t{2}, py::ssize_t{3}});
@@ -67,6 +68,7 @@ MOCAPEDIT_BINDINGS(BindFootLock) {
         job.parent_rot = View(parent_rot), job.hip_rot = View(hip_rot), job.knee_rot = View(knee_rot);
         job.ankle_rot = View(ankle_rot), job.target = View(target), job.target_rot = View(target_rot);
         job.weight = View(weight);
+        job.hinge = View(hinge);
         using KeepArray = py::array_t<std::uint8_t, py::array::c_style | py::array::forcecast>;
         const KeepArray keep = KeepArray::ensure(keep_in);
         if (!keep || keep.ndim() != 1 || (keep.size() != 0 && keep.size() != n))
@@ -86,12 +88,12 @@ MOCAPEDIT_BINDINGS(BindFootLock) {
       },
       py::arg("offsets"), py::arg("smooth"), py::arg("up"), py::arg("hip"), py::arg("knee"), py::arg("ankle"),
       py::arg("parent_rot"), py::arg("hip_rot"), py::arg("knee_rot"), py::arg("ankle_rot"), py::arg("target"),
-      py::arg("target_rot"), py::arg("weight"), py::arg("keep"), py::arg("threads") = 0,
+      py::arg("target_rot"), py::arg("weight"), py::arg("hinge"), py::arg("keep"), py::arg("threads") = 0,
       "Holds planted feet in place by two-bone leg IK (the C++ FootLockJob), for many agents.\n\n"
       "offsets (A+1,) int64 pose offsets per agent; smooth (A,) frames of pelvis easing; up (3,)\n"
       "unit world up; hip, knee, ankle (N,2,3) world positions; parent_rot, hip_rot, knee_rot,\n"
       "ankle_rot (N,2,4) world quaternions xyzw; target (N,2,3), target_rot (N,2,4) planted ankle;\n"
-      "weight (N,2) in [0,1]; keep (N,) uint8 poses the pelvis drop must not touch, or (0,).\n"
+      "weight (N,2) in [0,1]; hinge (N,2,3) knee hinge axes, world; keep (N,) uint8 poses the pelvis drop must not touch, or (0,).\n"
       "Returns (hip_local, knee_local, ankle_local (N,2,4) joint-local\n"
       "quaternions, drop (N,) pelvis drop along -up, reached (N,2,3) ankle positions).");
 }

@@ -118,7 +118,7 @@ bool FootLockJob::Validate(std::string* error) const {
   const struct { Span<const double> s; std::size_t w; const char* name; } inputs[] = {
       {hip, 3, "hip"}, {knee, 3, "knee"}, {ankle, 3, "ankle"}, {parent_rot, 4, "parent_rot"},
       {hip_rot, 4, "hip_rot"}, {knee_rot, 4, "knee_rot"}, {ankle_rot, 4, "ankle_rot"},
-      {target, 3, "target"}, {target_rot, 4, "target_rot"}, {weight, 1, "weight"}};
+      {target, 3, "target"}, {target_rot, 4, "target_rot"}, {weight, 1, "weight"}, {hinge, 3, "hinge"}};
   for (const auto& in : inputs)
     if (!Sized(in.s, n * 2 * in.w))
       return Fail(error, std::string(in.name) + " must hold " + std::to_string(n * 2 * in.w) + " values");
@@ -127,6 +127,7 @@ bool FootLockJob::Validate(std::string* error) const {
   if (keep.size != 0 && (keep.size != n || !keep.data)) return Fail(error, "keep must be empty or hold #N flags");
   if (!(max_reach > 0.0 && max_reach < 1.0)) return Fail(error, "max_reach must be within (0, 1)");
   if (!(soft_reach > 0.0 && soft_reach <= max_reach)) return Fail(error, "soft_reach must be within (0, max_reach]");
+  if (!(bend_noise >= 0.0 && bend_trust > 0.0)) return Fail(error, "bend_noise must be >= 0 and bend_trust > 0");
   const struct { Span<double> s; std::size_t size; const char* name; } outputs[] = {
       {hip_local, n * 8, "hip_local"}, {knee_local, n * 8, "knee_local"}, {ankle_local, n * 8, "ankle_local"},
       {drop, n, "drop"}, {reached, n * 6, "reached"}};
@@ -234,9 +235,13 @@ struct Agent {
     const Vec d = Unit(to_target);
 
     const Quat knee_rot = Q(&job.knee_rot[4 * i]);
-    Vec normal = (knee - hip).cross(ankle - hip);
-    if (normal.norm() < 1e-9 * std::max(l1 * l2, 1e-30)) normal = knee_rot * Vec(1, 0, 0);
-    normal = Unit(normal);
+    // A nearly straight knee says little about its plane: there the hinge axis takes over.
+    const Vec cross = (knee - hip).cross(ankle - hip);
+    const double trust =
+        std::clamp((cross.norm() / std::max(l1 * l2, 1e-30) - job.bend_noise) / job.bend_trust, 0.0, 1.0);
+    const Vec hinge = Unit(V(&job.hinge[3 * i]));
+    Vec normal = trust * Unit(cross) + (1.0 - trust) * hinge;
+    normal = normal.norm() < 1e-6 ? hinge : Unit(normal);
     const Vec n1 = Unit(normal - normal.dot(d) * d);
     const Vec bend = d.cross(n1);
     const double along = (l1 * l1 - l2 * l2 + reach * reach) / (2.0 * reach);

@@ -20,7 +20,7 @@ struct Legs {
   std::size_t poses;
   std::vector<std::int64_t> offsets, smooth;
   std::vector<double> up{0, 1, 0};
-  std::vector<double> hip, knee, ankle, parent_rot, hip_rot, knee_rot, ankle_rot, target, target_rot, weight;
+  std::vector<double> hip, knee, ankle, parent_rot, hip_rot, knee_rot, ankle_rot, target, target_rot, weight, hinge;
   std::vector<double> hip_local, knee_local, ankle_local, drop, reached;
 
   explicit Legs(std::size_t t) : poses(t), offsets{0, static_cast<std::int64_t>(t)}, smooth{2} {
@@ -30,6 +30,7 @@ struct Legs {
         Push(hip, {x, 0.9, 0}), Push(knee, {x, 0.451, 0.02}), Push(ankle, {x, 0.032, 0.0});
         for (auto* r : {&parent_rot, &hip_rot, &knee_rot, &ankle_rot, &target_rot}) Push(*r, {0, 0, 0, 1});
         Push(target, {x, 0.032, 0.0});
+        Push(hinge, {1.0, 0.0, 0.0});
         weight.push_back(0.0);
       }
     hip_local.resize(t * 8), knee_local.resize(t * 8), ankle_local.resize(t * 8), drop.resize(t), reached.resize(t * 6);
@@ -41,7 +42,7 @@ struct Legs {
     job.offsets = offsets, job.smooth = smooth, job.up = up;
     job.hip = hip, job.knee = knee, job.ankle = ankle, job.parent_rot = parent_rot, job.hip_rot = hip_rot;
     job.knee_rot = knee_rot, job.ankle_rot = ankle_rot, job.target = target, job.target_rot = target_rot;
-    job.weight = weight;
+    job.weight = weight, job.hinge = hinge;
     job.hip_local = hip_local, job.knee_local = knee_local, job.ankle_local = ankle_local, job.drop = drop;
     job.reached = reached;
     return job;

@@ -24,6 +24,10 @@ from ..model import Agent
 
 #: Seconds over which a lock blends in before a contact and out after it.
 BLEND_SECONDS = 0.1
+#: Metres a plant may lie from where the edit puts the foot before it is dragged along.
+LEASH_M = 0.08
+#: Degrees a plant may be turned from the edited foot before it is turned along.
+LEASH_DEGREES = 20.0
 #: Ankle corrections below this (metres) leave a leg as it is.
 STILL_M = 1e-6
 
@@ -84,6 +88,27 @@ def _top(agent: Agent, joint: int) -> int:
     while int(agent.parents[joint]) >= 0:
         joint = int(agent.parents[joint])
     return joint
+
+
+def _leash(offset: np.ndarray, shift: np.ndarray, inside: np.ndarray, radius: float) -> np.ndarray:
+    """(T,D) plant shifts (or turns, D = 1) over one contact (frames ``inside``, in order): the least-squares
+    ``shift`` while the edited foot stays within ``radius`` of it; where the edit drags the body
+    further (a long idle moved by a path edit), the plant follows at that distance, so the legs
+    never stretch beyond it. Frames before and after the contact take its first and last shift."""
+    gap = offset[inside] - shift
+    out = np.broadcast_to(shift, offset.shape).copy()
+    if not len(inside) or np.linalg.norm(gap, axis=-1).max() <= radius:
+        return out
+    current = shift.copy()
+    for i in inside:
+        v = offset[i] - current
+        d = float(np.linalg.norm(v))
+        if d > radius:
+            current = offset[i] - v * (radius / d)
+        out[i] = current
+    out[:inside[0]] = out[inside[0]]
+    out[inside[-1] + 1:] = out[inside[-1]]
+    return out
 
 
 def _ramp(frames: np.ndarray, first: int, last: int, blend: float) -> np.ndarray:
@@ -147,6 +172,8 @@ class _AgentLock:
             p = int(agent.parents[leg.hip])
             parent_rot.append(rot[p] if p >= 0 else quat_multiply(turn_q, np.broadcast_to(world_q, turn_q.shape)))
         self.parent_rot = np.stack(parent_rot, axis=1)
+        self.hinge = np.stack([footlock.world_hinge(rot[leg.knee], footlock.knee_hinge(
+            skel_pos[leg.hip], skel_pos[leg.knee], skel_pos[leg.ankle], skel_rot[leg.knee])) for leg in self.legs], 1)
 
         # Plants: per contact, the source foot carried by one turn and one ground translation.
         fps = info.time_codes_per_second
@@ -158,6 +185,10 @@ class _AgentLock:
         self.weight = np.zeros((count, len(self.legs)))
         self.contact = np.zeros((count, len(self.legs)), dtype=bool)
         self.locked = 0
+        pos_sum = np.zeros((count, len(self.legs), 3))
+        rot_sum = np.zeros((count, len(self.legs), 4))
+        rot_sum[..., 3] = 1e-12  # the sign reference of the first plant
+        w_sum = np.zeros((count, len(self.legs)))
         up = ground.up_index(info.up_axis)
         stationary = self.keep = np.zeros(count, dtype=bool)
         for _, first, last in agent.stationary:
@@ -175,21 +206,33 @@ class _AgentLock:
                 rigid = inside & stationary
                 chosen = rigid if rigid.any() else inside
                 yaw = float(np.arctan2(np.sin(turn[chosen]).mean(), np.cos(turn[chosen]).mean()))
-                spin = kinematics.yaw_matrix(np.array(yaw), info.up_axis)
-                carried = src_pos @ spin[:3, :3]
-                shift = (pos[leg.ankle][chosen] - carried[chosen]).mean(axis=0)
-                shift[up] = 0.0  # feet stay at their source height: never below their ground
+                yaw = np.full(count, yaw)
+                if not rigid.any():  # an edit that turns the body far during a contact turns the plant too
+                    apart = np.angle(np.exp(1j * (turn - yaw)))[:, None]
+                    yaw = yaw + _leash(apart, np.zeros(1), np.flatnonzero(inside), np.radians(LEASH_DEGREES))[:, 0]
+                spin = kinematics.yaw_matrix(yaw, info.up_axis)[:, :3, :3]
+                carried = np.einsum("ti,tij->tj", src_pos, spin)
+                offset = pos[leg.ankle] - carried
+                offset[:, up] = 0.0  # feet stay at their source height: never below their ground
+                shift = np.broadcast_to(offset[chosen].mean(axis=0), offset.shape)
+                if not rigid.any():
+                    shift = _leash(offset, shift[0], np.flatnonzero(inside), LEASH_M / info.meters_per_unit)
                 w = _ramp(self.frames, first, last, blend)
-                take = w > self.weight[:, k]
-                self.weight[take, k] = w[take]
-                self.target[take, k] = carried[take] + shift
-                self.target_rot[take, k] = quat_multiply(_yaw_quat(np.array([yaw]), up_vector),
-                                                         posed_rot[leg.ankle][take])
+                plant_rot = quat_multiply(_yaw_quat(yaw, up_vector), posed_rot[leg.ankle])
+                plant_rot *= np.where(np.sum(plant_rot * rot_sum[:, k], -1) < 0, -1.0, 1.0)[:, None]
+                # Where the ramps of two contacts meet, their plants blend by weight: no jump.
+                pos_sum[:, k] += w[:, None] * (carried + shift)
+                rot_sum[:, k] += w[:, None] * plant_rot
+                w_sum[:, k] += w
+                self.weight[:, k] = np.maximum(self.weight[:, k], w)
+        some = w_sum > 0
+        self.target[some] = pos_sum[some] / w_sum[some][:, None]
+        self.target_rot[some] = footlock._normalize(rot_sum[some])
 
     def inputs(self) -> dict:
         return {"hip": self.hip, "knee": self.knee, "ankle": self.ankle, "parent_rot": self.parent_rot,
                 "hip_rot": self.hip_rot, "knee_rot": self.knee_rot, "ankle_rot": self.ankle_rot,
-                "target": self.target, "target_rot": self.target_rot, "weight": self.weight, "keep": self.keep}
+                "target": self.target, "target_rot": self.target_rot, "weight": self.weight, "hinge": self.hinge, "keep": self.keep}
 
     def writable(self) -> str | None:
         """Why the legs cannot be baked into this agent's pose, or None."""

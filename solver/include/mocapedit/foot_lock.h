@@ -20,7 +20,8 @@
 // What the pipeline guarantees:
 //  - bone lengths are those of the input pose (only rotations and one pelvis translation
 //    change);
-//  - the knee bends in the plane of the input pose, to the same side (never backwards), and
+//  - the knee bends in the plane of the input pose (of its hinge when nearly straight), to
+//    the same side (never backwards), and
 //    never straightens with a snap: a reach beyond `soft_reach` of the leg's length (or the
 //    input pose's own stretch, if larger) is squeezed smoothly towards `max_reach` (or that
 //    stretch, if larger);
@@ -62,6 +63,9 @@ struct FootLockJob {
   Span<const double> target;
   Span<const double> target_rot;
   Span<const double> weight;
+  // The knee's hinge axis in world space (3 each, any length but 0): the normal of its bend
+  // plane where the pose is too straight to say (see bend_noise).
+  Span<const double> hinge;
   // Optional, #N flags (or empty): poses the pelvis drop must not touch (a stationary range
   // that must keep its shape). The drop is 0 there and eases back in linearly over
   // `smooth[a]` + 1 poses on each side.
@@ -69,6 +73,10 @@ struct FootLockJob {
 
   double soft_reach = 0.97;   // fraction of a leg's length where the reach starts to soften
   double max_reach = 0.9995;  // fraction of a leg's length never exceeded
+  // The knee's plane is the input pose's where the sine of its bend exceeds bend_noise +
+  // bend_trust, the hinge's where it is below bend_noise, and a blend in between.
+  double bend_noise = 0.05;
+  double bend_trust = 0.2;
   int threads = 0;            // 0: up to two, as the machine allows
 
   // Outputs.
@@ -84,7 +92,8 @@ struct FootLockJob {
   //  - up does not hold 3 finite values of unit length (to 1e-6);
   //  - an input does not hold #N * 2 entries of its width, or an output #N * 2 (drop: #N);
   //  - a weight is not within [0, 1] (or is NaN); keep is neither empty nor #N flags;
-  //  - soft_reach is not within (0, max_reach], or max_reach not within (0, 1);
+  //  - soft_reach is not within (0, max_reach], or max_reach not within (0, 1); bend_noise is
+//    negative or bend_trust not positive;
   //  - an output overlaps an input or another output.
   // #N may be 0 (nothing to do).
   bool Validate(std::string* error = nullptr) const;
