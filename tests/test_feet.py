@@ -55,10 +55,13 @@ def _fk(stage, agent, times):
     return np.array(world), np.array(local), skel.joints
 
 
-def _leg_quality(src, out, agent, times, leg_names, fps):
-    """Figures of the legs on the composed stage against the source."""
+def _leg_quality(src, out, agent, times, leg_names, fps, unlocked=None):
+    """(largest bone length change, knee flips, largest joint angular speed over the source's) of
+    the legs on a composed stage. Knee sides are compared with ``unlocked`` (the same edit without
+    foot locking, whose turns of the whole body are not flips), by default the source."""
     w0, l0, joints = _fk(src, agent, times)
     w1, l1, _ = _fk(out, agent, times)
+    wr = w0 if unlocked is None else _fk(unlocked, agent, times)[0]
     index = [[next(i for i, j in enumerate(joints) if j.endswith("/" + n) or j == n) for n in leg] for leg in leg_names]
     bones, bend_flip, speed_ratio = 0.0, 0, 0.0
     for hip, knee, ankle in index:
@@ -66,15 +69,13 @@ def _leg_quality(src, out, agent, times, leg_names, fps):
             d0 = np.linalg.norm(w0[:, a, 3, :3] - w0[:, b, 3, :3], axis=-1)
             d1 = np.linalg.norm(w1[:, a, 3, :3] - w1[:, b, 3, :3], axis=-1)
             bones = max(bones, float(np.abs(d1 - d0).max()))
-        # The knee bends to the same side of the hip-ankle line as in the source, about the
-        # knee's own hinge axis: never backwards.
-        for w, sign in ((w0, None), (w1, None)):
-            pass
-        side = []
-        for w in (w0, w1):
-            h, k, a_ = (w[:, j, 3, :3] for j in (hip, knee, ankle))
-            side.append(np.sign(np.einsum("ti,ti->t", np.cross(k - h, a_ - k), w0[:, knee, 0, :3])))
-        bend_flip += int(np.sum(side[0] != side[1]))
+        # Wherever the source knee is clearly bent (sine of the bend over 0.05), the locked knee
+        # bends to the same side: never backwards.
+        bends = [np.cross(w[:, knee, 3, :3] - w[:, hip, 3, :3], w[:, ankle, 3, :3] - w[:, knee, 3, :3]) for w in (wr, w1)]
+        lengths = np.linalg.norm(wr[:, knee, 3, :3] - wr[:, hip, 3, :3], axis=-1) * \
+            np.linalg.norm(wr[:, ankle, 3, :3] - wr[:, knee, 3, :3], axis=-1)
+        bent = np.linalg.norm(bends[0], axis=-1) > 0.05 * lengths
+        bend_flip += int(np.sum(bent & (np.einsum("ti,ti->t", bends[0], bends[1]) <= 0)))
         for j in (hip, knee, ankle):
             q0, q1 = trs_from_matrices(l0[:, j])[1], trs_from_matrices(l1[:, j])[1]
             speed = [2 * np.arccos(np.clip(np.abs(np.sum(q[1:] * q[:-1], -1)), 0, 1)) * fps for q in (q0, q1)]
@@ -217,8 +218,12 @@ def test_a_bent_path_keeps_the_planted_feet_where_they_are(tmp_path, walk_clip):
     after = metrics.foot_skate(out, a, times=source.times, foot_joints=feet, contact=source.contact)
     assert before.mean > source.mean + 0.02          # the edit alone slides the feet
     assert after.mean <= source.mean + 0.005         # locked: the source's skate, within 0.5 cm/s
-    bones, flips, speed = _leg_quality(src, out, a, source.times, LEGS, FPS)
+    bones, flips, speed = _leg_quality(src, out, a, source.times, LEGS, FPS, unlocked=free_stage)
     assert bones < 1e-6 and flips == 0 and speed < 1.5
+    # No foot goes below the ground it stood on.
+    heights = [metrics.joint_world_positions(st, a, source.times)[..., 1] for st in (src, out)]
+    ankles = [walk_clip.joint_index(n) for n in ("LeftFoot", "RightFoot", "LeftToe", "RightToe")]
+    assert np.all(heights[1][:, ankles] >= heights[0][:, ankles].min(axis=0) - 1e-6)
     # The constraints still hold.
     assert all(c["met"] and c["residual"] < 1e-6 for c in locked.report.constraints)
     entry = locked.report.agents[a]
@@ -338,3 +343,25 @@ def test_detect_contacts_writes_a_layer_that_the_solve_uses(tmp_path, walk_clip)
     assert authored.agents[a]["footSkateLocked"] == pytest.approx(detected.agents[a]["footSkateLocked"], abs=1e-9)
     bad = run_cli("detect-contacts", tmp_path / "shot.usda", "-o", tmp_path / "x.usda", "--height", "-1")
     assert bad.returncode == 1 and "height" in bad.stderr and not (tmp_path / "x.usda").exists()
+
+
+def test_a_dragged_idle_drags_the_plant_along_without_a_pop(tmp_path):
+    clip, (first, last) = walker.walk_idle_walk(frames=150, fps=FPS, stop_frame=60, idle_frames=36, name="stop_go")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)], up_axis="Y",
+                                       fps=FPS, clips_dir=tmp_path / "clips")
+    a = f"{CROWD}/a"
+    reach = float(clip.translations[first, 0, 2])
+    examples.add_position_constraint(stage, "/Edits/start", a, 0, (0.0, 0.0, 0.0))
+    # No stationary tag: the path edit slides the idle 0.5 m sideways while the feet are planted.
+    examples.add_position_constraint(stage, "/Edits/in", a, first, (0.0, 0.0, reach))
+    examples.add_position_constraint(stage, "/Edits/out", a, last, (0.5, 0.0, reach))
+    stage.GetRootLayer().Save()
+    _, free = _solve(tmp_path, "free", foot_locking=False)
+    result, out = _solve(tmp_path)
+    entry = result.report.agents[a]
+    assert entry["maxFootCorrection"] <= 0.08 + 1e-9          # the leash: legs never strained further
+    src = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    times = metrics._Skel(src, a).sample_times
+    bones, flips, speed = _leg_quality(src, out, a, times, LEGS, FPS, unlocked=free)
+    assert bones < 1e-6 and flips == 0 and speed < 1.5
+    assert entry["footSkateLocked"] < entry["footSkateEdited"]

@@ -27,7 +27,7 @@ BLEND_SECONDS = 0.1
 #: Metres a plant may lie from where the edit puts the foot before it is dragged along.
 LEASH_M = 0.08
 #: Degrees a plant may be turned from the edited foot before it is turned along.
-LEASH_DEGREES = 20.0
+LEASH_DEGREES = 10.0
 #: Ankle corrections below this (metres) leave a leg as it is.
 STILL_M = 1e-6
 
@@ -90,22 +90,29 @@ def _top(agent: Agent, joint: int) -> int:
     return joint
 
 
-def _leash(offset: np.ndarray, shift: np.ndarray, inside: np.ndarray, radius: float) -> np.ndarray:
-    """(T,D) plant shifts (or turns, D = 1) over one contact (frames ``inside``, in order): the least-squares
-    ``shift`` while the edited foot stays within ``radius`` of it; where the edit drags the body
-    further (a long idle moved by a path edit), the plant follows at that distance, so the legs
-    never stretch beyond it. Frames before and after the contact take its first and last shift."""
-    gap = offset[inside] - shift
-    out = np.broadcast_to(shift, offset.shape).copy()
-    if not len(inside) or np.linalg.norm(gap, axis=-1).max() <= radius:
+def _leash(offset: np.ndarray, base: np.ndarray, inside: np.ndarray, rigid: np.ndarray, radius: float) -> np.ndarray:
+    """(T,D) plant shifts (or turns, D = 1) over one contact (frames ``inside``, increasing).
+
+    The plant stays at ``base`` while the edited foot (``offset``, (T,D)) stays within ``radius``
+    of it; where the edit drags the body further (a long idle moved by a path edit), the plant
+    follows at that distance, so the legs never stretch beyond it. Frames ``rigid`` (a stationary
+    range, inside the contact) keep ``base``, and the plant is followed from them outwards.
+    Frames before and after the contact take its first and last plant."""
+    out = np.broadcast_to(base, offset.shape).copy()
+    if not len(inside):
         return out
-    current = shift.copy()
-    for i in inside:
-        v = offset[i] - current
-        d = float(np.linalg.norm(v))
-        if d > radius:
-            current = offset[i] - v * (radius / d)
-        out[i] = current
+    if len(rigid):
+        runs = [inside[inside < rigid[0]][::-1], inside[inside > rigid[-1]]]
+    else:
+        runs = [inside]
+    for run in runs:
+        current = base.copy()
+        for i in run:
+            v = offset[i] - current
+            d = float(np.linalg.norm(v))
+            if d > radius:
+                current = offset[i] - v * (radius / d)
+            out[i] = current
     out[:inside[0]] = out[inside[0]]
     out[inside[-1] + 1:] = out[inside[-1]]
     return out
@@ -206,17 +213,18 @@ class _AgentLock:
                 rigid = inside & stationary
                 chosen = rigid if rigid.any() else inside
                 yaw = float(np.arctan2(np.sin(turn[chosen]).mean(), np.cos(turn[chosen]).mean()))
-                yaw = np.full(count, yaw)
-                if not rigid.any():  # an edit that turns the body far during a contact turns the plant too
-                    apart = np.angle(np.exp(1j * (turn - yaw)))[:, None]
-                    yaw = yaw + _leash(apart, np.zeros(1), np.flatnonzero(inside), np.radians(LEASH_DEGREES))[:, 0]
+                # An edit that turns the body far during a contact turns the plant too.
+                inside_at, rigid_at = np.flatnonzero(inside), np.flatnonzero(rigid)
+                apart = np.angle(np.exp(1j * (turn - yaw)))[:, None]
+                yaw = yaw + _leash(apart, np.zeros(1), inside_at, rigid_at, np.radians(LEASH_DEGREES))[:, 0]
                 spin = kinematics.yaw_matrix(yaw, info.up_axis)[:, :3, :3]
-                carried = np.einsum("ti,tij->tj", src_pos, spin)
+                # Turned about the planted foot itself, so a plant that turns along does not slide.
+                pivot = src_pos[chosen].mean(axis=0)
+                base = kinematics.yaw_matrix(np.array(yaw[chosen].mean()), info.up_axis)[:3, :3]
+                carried = np.einsum("ti,tij->tj", src_pos - pivot, spin) + pivot @ base
                 offset = pos[leg.ankle] - carried
                 offset[:, up] = 0.0  # feet stay at their source height: never below their ground
-                shift = np.broadcast_to(offset[chosen].mean(axis=0), offset.shape)
-                if not rigid.any():
-                    shift = _leash(offset, shift[0], np.flatnonzero(inside), LEASH_M / info.meters_per_unit)
+                shift = _leash(offset, offset[chosen].mean(axis=0), inside_at, rigid_at, LEASH_M / info.meters_per_unit)
                 w = _ramp(self.frames, first, last, blend)
                 plant_rot = quat_multiply(_yaw_quat(yaw, up_vector), posed_rot[leg.ankle])
                 plant_rot *= np.where(np.sum(plant_rot * rot_sum[:, k], -1) < 0, -1.0, 1.0)[:, None]
