@@ -231,6 +231,8 @@ def test_a_bent_path_keeps_the_planted_feet_where_they_are(tmp_path, walk_clip):
     assert entry["footSkateLocked"] <= entry["footSkateSource"] + 1e-6 < entry["footSkateEdited"]
     assert 0 < entry["maxFootCorrection"] < 0.1 and 0 <= entry["maxPelvisDrop"] < 0.05
     assert locked.report.stats["footLockedAgents"] == 1
+    plants = locked.layer.GetPrimAtPath("/MocapEdit/Guides/FootPlants")
+    assert plants and len(plants.attributes["points"].default) == entry["footContactsLocked"]
 
 
 def test_locking_is_off_by_setting_and_by_agent(tmp_path, walk_clip):

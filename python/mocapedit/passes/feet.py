@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import animation, contacts, footlock, ground, kinematics, metrics, processor, trajectory
+from .. import animation, contacts, footlock, ground, kinematics, metrics, processor, trajectory, writer
 from ..errors import MocapEditError
 from ..layering import quat_multiply, trs_from_matrices
 from ..model import Agent
@@ -363,6 +363,8 @@ def foot_locking_pass(ctx: processor.SolveContext) -> None:
             changed += 1
             ctx.pose_edits.setdefault(lock.path, []).append(
                 lambda pose, out_times, src_frames, locked=locked_pose, lock=lock: _replace_legs(pose, locked, lock))
+    if ctx.options.guides:
+        _plant_guides(ctx, [lock for lock in locks if lock.path in ctx.pose_edits])
     stats = ctx.report.stats
     stats["footLockedAgents"] = changed
     stats["footContactsLocked"] = contacts_locked
@@ -374,6 +376,27 @@ def foot_locking_pass(ctx: processor.SolveContext) -> None:
             stats[key] = float(np.mean(values))
     stats["maxPelvisDrop"] = max(lock.max_drop for lock in locks)
     stats["maxFootCorrection"] = max(lock.max_correction for lock in locks)
+
+
+#: Guide colours of the left and right feet's plants.
+PLANT_COLORS = np.array([[0.2, 0.5, 1.0], [1.0, 0.55, 0.1]])
+
+
+def _plant_guides(ctx, locks: list) -> None:
+    """Guide points where the locked feet are planted: the ankle at the first fully locked frame
+    of each contact, blue for left feet and orange for right."""
+    points, colors = [], []
+    for lock in locks:
+        for k, leg in enumerate(lock.legs):
+            full = lock.weight[:, k] >= 1.0
+            starts = np.flatnonzero(full & ~np.concatenate([[False], full[:-1]]))
+            points.append(lock.target[starts, k])
+            colors.append(np.tile(PLANT_COLORS[0 if leg.side == "left" else 1], (len(starts), 1)))
+    if points:
+        ctx.guides.append(writer.GuidePoints(
+            name="FootPlants", points=np.concatenate(points), colors=np.concatenate(colors),
+            width=ctx.data.info.metres(0.06),
+            doc="Where foot locking plants each contact of the locked agents: left feet blue, right orange."))
 
 
 def _replace_legs(pose: animation.Pose, locked: animation.Pose, lock: _AgentLock) -> animation.Pose:
