@@ -28,8 +28,10 @@ BLEND_SECONDS = 0.1
 LEASH_M = 0.08
 #: Degrees a plant may be turned from the edited foot before it is turned along.
 LEASH_DEGREES = 10.0
-#: Ankle corrections below this (metres) leave a leg as it is.
-STILL_M = 1e-6
+#: Agents whose ankles all stay within this of where the edit puts them, and whose pelvis
+#: drops less, keep their legs (metres): over the shortest contact that slides a foot by less
+#: than the 0.5 cm/s foot locking aims for, and their animation need not be baked.
+STILL_M = 0.002
 
 
 def _skel_space(agent: Agent, pose: animation.Pose, joints: list[int]) -> dict[int, np.ndarray]:
@@ -99,7 +101,7 @@ def _leash(offset: np.ndarray, base: np.ndarray, inside: np.ndarray, rigid: np.n
     range, inside the contact) keep ``base``, and the plant is followed from them outwards.
     Frames before and after the contact take its first and last plant."""
     out = np.broadcast_to(base, offset.shape).copy()
-    if not len(inside):
+    if not len(inside) or np.linalg.norm(offset[inside] - base, axis=-1).max() <= radius:
         return out
     if len(rigid):
         runs = [inside[inside < rigid[0]][::-1], inside[inside > rigid[-1]]]
@@ -115,6 +117,16 @@ def _leash(offset: np.ndarray, base: np.ndarray, inside: np.ndarray, rigid: np.n
             out[i] = current
     out[:inside[0]] = out[inside[0]]
     out[inside[-1] + 1:] = out[inside[-1]]
+    return out
+
+
+def _leash_rows(offset: np.ndarray, base: np.ndarray, inside: np.ndarray, rigid: np.ndarray,
+                radius: float) -> np.ndarray:
+    """:func:`_leash` for many contacts at once: (C,W,D) offsets, (C,D) bases, (C,W) masks."""
+    out = np.broadcast_to(base[:, None], offset.shape).copy()
+    far = np.where(inside, np.linalg.norm(offset - base[:, None], axis=-1), 0.0).max(axis=1) > radius
+    for c in np.flatnonzero(far):
+        out[c] = _leash(offset[c], base[c], np.flatnonzero(inside[c]), np.flatnonzero(rigid[c]), radius)
     return out
 
 
@@ -194,45 +206,61 @@ class _AgentLock:
         self.locked = 0
         pos_sum = np.zeros((count, len(self.legs), 3))
         rot_sum = np.zeros((count, len(self.legs), 4))
-        rot_sum[..., 3] = 1e-12  # the sign reference of the first plant
         w_sum = np.zeros((count, len(self.legs)))
         up = ground.up_index(info.up_axis)
         stationary = self.keep = np.zeros(count, dtype=bool)
         for _, first, last in agent.stationary:
             stationary |= (self.frames >= first - 1e-9) & (self.frames <= last + 1e-9)
+        radius = LEASH_M / info.meters_per_unit
         for k, leg in enumerate(self.legs):
-            src_pos = posed[leg.ankle]
-            for first, last in source_contacts[k]:
-                inside = (self.frames >= first - 1e-9) & (self.frames <= last + 1e-9)
-                if not inside.any():
-                    continue
-                self.locked += 1
-                self.contact[:, k] |= inside
-                # Where the contact meets a stationary range, the body moves rigidly there: the
-                # plant is that motion, so the range keeps its shape (no correction inside it).
-                rigid = inside & stationary
-                chosen = rigid if rigid.any() else inside
-                yaw = float(np.arctan2(np.sin(turn[chosen]).mean(), np.cos(turn[chosen]).mean()))
-                # An edit that turns the body far during a contact turns the plant too.
-                inside_at, rigid_at = np.flatnonzero(inside), np.flatnonzero(rigid)
-                apart = np.angle(np.exp(1j * (turn - yaw)))[:, None]
-                yaw = yaw + _leash(apart, np.zeros(1), inside_at, rigid_at, np.radians(LEASH_DEGREES))[:, 0]
-                spin = kinematics.yaw_matrix(yaw, info.up_axis)[:, :3, :3]
-                # Turned about the planted foot itself, so a plant that turns along does not slide.
-                pivot = src_pos[chosen].mean(axis=0)
-                base = kinematics.yaw_matrix(np.array(yaw[chosen].mean()), info.up_axis)[:3, :3]
-                carried = np.einsum("ti,tij->tj", src_pos - pivot, spin) + pivot @ base
-                offset = pos[leg.ankle] - carried
-                offset[:, up] = 0.0  # feet stay at their source height: never below their ground
-                shift = _leash(offset, offset[chosen].mean(axis=0), inside_at, rigid_at, LEASH_M / info.meters_per_unit)
-                w = _ramp(self.frames, first, last, blend)
-                plant_rot = quat_multiply(_yaw_quat(yaw, up_vector), posed_rot[leg.ankle])
-                plant_rot *= np.where(np.sum(plant_rot * rot_sum[:, k], -1) < 0, -1.0, 1.0)[:, None]
-                # Where the ramps of two contacts meet, their plants blend by weight: no jump.
-                pos_sum[:, k] += w[:, None] * (carried + shift)
-                rot_sum[:, k] += w[:, None] * plant_rot
-                w_sum[:, k] += w
-                self.weight[:, k] = np.maximum(self.weight[:, k], w)
+            ranges = np.array(source_contacts[k], dtype=np.float64).reshape(-1, 2)
+            # The contacts of this foot at once, one row each over the frames its ramp reaches.
+            inside = (self.frames >= ranges[:, :1] - 1e-9) & (self.frames <= ranges[:, 1:] + 1e-9)   # (C,T)
+            used = inside.any(axis=1)
+            ranges, inside = ranges[used], inside[used]
+            if not len(ranges):
+                continue
+            self.locked += len(ranges)
+            self.contact[:, k] = inside.any(axis=0)
+            w_all = _ramp(self.frames, ranges[:, :1], ranges[:, 1:], blend)                          # (C,T)
+            reached = w_all > 0
+            lo = reached.argmax(axis=1)
+            width = int((reached.sum(axis=1)).max())
+            at = lo[:, None] + np.arange(width)                                                      # (C,W)
+            valid = at < count
+            at = np.minimum(at, count - 1)
+            valid &= np.take_along_axis(reached, at, axis=1)
+            w = np.where(valid, np.take_along_axis(w_all, at, axis=1), 0.0)
+            inside = np.take_along_axis(inside, at, axis=1) & valid
+            # Where a contact meets a stationary range, the body moves rigidly there: the plant
+            # is that motion, so the range keeps its shape (no correction inside it).
+            rigid = inside & stationary[at]
+            chosen = np.where(rigid.any(axis=1, keepdims=True), rigid, inside)
+            n_chosen = chosen.sum(axis=1)[:, None]
+            turn_c = turn[at]
+            yaw0 = np.arctan2((np.sin(turn_c) * chosen).sum(1), (np.cos(turn_c) * chosen).sum(1))[:, None]
+            # An edit that turns the body far during a contact turns the plant too.
+            apart = np.angle(np.exp(1j * (turn_c - yaw0)))
+            yaw = yaw0 + _leash_rows(apart[..., None], np.zeros((len(at), 1)), inside, rigid,
+                                     np.radians(LEASH_DEGREES))[..., 0]
+            spin = kinematics.yaw_matrix(yaw, info.up_axis)[..., :3, :3]
+            # Turned about the planted foot itself, so a plant that turns along does not slide.
+            foot = posed[leg.ankle][at]                                                               # (C,W,3)
+            pivot = (foot * chosen[..., None]).sum(1) / n_chosen
+            base = kinematics.yaw_matrix((yaw * chosen).sum(1) / n_chosen[:, 0], info.up_axis)[:, :3, :3]
+            carried = np.einsum("cti,ctij->ctj", foot - pivot[:, None], spin) + np.einsum("ci,cij->cj", pivot, base)[:, None]
+            offset = pos[leg.ankle][at] - carried
+            offset[..., up] = 0.0  # feet stay at their source height: never below their ground
+            shift = _leash_rows(offset, (offset * chosen[..., None]).sum(1) / n_chosen, inside, rigid, radius)
+            plant_rot = quat_multiply(_yaw_quat(yaw.reshape(-1), up_vector).reshape(yaw.shape + (4,)),
+                                      posed_rot[leg.ankle][at])
+            plant_rot *= np.where(np.sum(plant_rot * rot[leg.ankle][at], -1) < 0, -1.0, 1.0)[..., None]
+            # Where the ramps of two contacts meet, their plants blend by weight: no jump.
+            rows = at[valid]
+            np.add.at(pos_sum[:, k], rows, (w[..., None] * (carried + shift))[valid])
+            np.add.at(rot_sum[:, k], rows, (w[..., None] * plant_rot)[valid])
+            np.add.at(w_sum[:, k], rows, w[valid])
+            np.maximum.at(self.weight[:, k], rows, w[valid])
         some = w_sum > 0
         self.target[some] = pos_sum[some] / w_sum[some][:, None]
         self.target_rot[some] = footlock._normalize(rot_sum[some])
@@ -285,8 +313,11 @@ def _source(ctx, agent: Agent, cache: dict) -> tuple[list[list[tuple[int, int]]]
     """(per leg, the inclusive frame ranges of its foot contacts on the source clip; the source
     foot skate over them, stage units per second). Agents that play one clip share them."""
     place = agent.skel_to_world
-    # A static placement's translation changes neither the contacts nor the skate.
-    placement = place[:, :3, :3].tobytes() if place.shape[0] == 1 else place.tobytes()
+    # A static placement's translation and turn about up change neither the contacts nor the
+    # skate: what matters is how it maps the skeleton to height (its up column) and its scale.
+    up = ground.up_index(ctx.data.info.up_axis)
+    placement = (np.round(place[0, :3, up], 12).tobytes(), round(float(np.linalg.norm(place[0, 0, :3])), 12)) \
+        if place.shape[0] == 1 else place.tobytes()
     key = (agent.clip_key, tuple(agent.joints), tuple(leg.joints for leg in agent.legs),
            tuple(agent.foot_contacts or ()), placement)
     hit = cache.get(key)
