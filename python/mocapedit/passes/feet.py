@@ -27,7 +27,7 @@ BLEND_SECONDS = 0.1
 #: Metres a plant may lie from where the edit puts the foot before it is dragged along.
 LEASH_M = 0.08
 #: Degrees a plant may be turned from the edited foot before it is turned along.
-LEASH_DEGREES = 10.0
+LEASH_DEGREES = 15.0
 #: Agents whose ankles all stay within this of where the edit puts them, and whose pelvis
 #: drops less, keep their legs (metres): over the shortest contact that slides a foot by less
 #: than the 0.5 cm/s foot locking aims for, and their animation need not be baked.
