@@ -367,3 +367,31 @@ def test_a_dragged_idle_drags_the_plant_along_without_a_pop(tmp_path):
     bones, flips, speed = _leg_quality(src, out, a, times, LEGS, FPS, unlocked=free)
     assert bones < 1e-6 and flips == 0 and speed < 1.5
     assert entry["footSkateLocked"] < entry["footSkateEdited"]
+
+
+def test_a_z_up_centimetre_stage_at_60_fps_with_a_time_offset(tmp_path):
+    fps = 60.0
+    clip = walker.walk(frames=481, fps=fps, speed=1.25, up="Z", meters_per_unit=0.01, name="zwalk")
+    stage = examples.build_crowd_stage(
+        tmp_path / "shot.usda", [examples.AgentSpec("a", clip, (300.0, -200.0, 0.0), yaw=30.0, time_offset=12.0)],
+        up_axis="Z", meters_per_unit=0.01, fps=fps, clips_dir=tmp_path / "clips")
+    a = f"{CROWD}/a"
+    times = metrics._Skel(stage, a).sample_times
+    assert times[0] == 12.0
+    root = metrics.agent_root_positions(stage, a, times[[0, 240, 480]])
+    for k, (f, p) in enumerate(zip((0, 240, 480), root)):
+        examples.add_position_constraint(stage, f"/Edits/c{k}", a, f, p + (np.array([120.0, 0.0, 0.0]) if k == 1 else 0))
+    stage.GetRootLayer().Save()
+    _, free = _solve(tmp_path, "free", foot_locking=False)
+    result, out = _solve(tmp_path)
+    src = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    feet = ["LeftFoot", "LeftToe", "RightFoot", "RightToe"]
+    source = metrics.foot_skate(src, a, foot_joints=feet)
+    before = metrics.foot_skate(free, a, times=source.times, foot_joints=feet, contact=source.contact)
+    after = metrics.foot_skate(out, a, times=source.times, foot_joints=feet, contact=source.contact)
+    assert before.mean > source.mean + 2.0                       # cm/s
+    assert after.mean <= source.mean + 0.5
+    bones, flips, speed = _leg_quality(src, out, a, source.times, LEGS, fps, unlocked=free)
+    assert bones < 1e-4 and flips == 0 and speed < 1.5          # 1e-4 cm = 1e-6 m
+    entry = result.report.agents[a]
+    assert entry["maxFootCorrection"] <= 8.0 + 1e-6 and entry["footContactsLocked"] >= 12
