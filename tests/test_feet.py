@@ -249,6 +249,13 @@ def test_locking_is_off_by_setting_and_by_agent(tmp_path, walk_clip):
     result, _ = _solve(tmp_path, "opt_out")
     assert "footSkateLocked" not in result.report.agents[a]
     assert any("mocap:footLocking = false" in n for n in result.report.agents[a]["notes"])
+    stage.GetPrimAtPath(a).GetAttribute("mocap:footLocking").Set(True)
+    stage.GetRootLayer().Save()
+    for flags, locked in (([], True), (["--no-foot-locking"], False)):
+        out = run_cli("solve", tmp_path / "shot.usda", "-o", tmp_path / "cli.usda", "--report", tmp_path / "cli.json", *flags)
+        assert out.returncode == 0, out.stderr
+        assert ("feet:" in out.stderr) == locked
+        assert ("footSkateLocked" in (tmp_path / "cli.json").read_text()) == locked
 
 
 def test_authored_contacts_replace_detection(tmp_path, walk_clip):

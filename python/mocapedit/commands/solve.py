@@ -37,6 +37,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "(MocapSolveSettings.matchSpeed)")
     p.add_argument("--no-match-speed", dest="match_speed", action="store_false",
                    help="keep the source timing on edited paths even if MocapSolveSettings asks to match speed")
+    p.add_argument("--no-foot-locking", dest="foot_locking", action="store_false", default=None,
+                   help="leave the feet as the edits put them (MocapSolveSettings.footLocking off)")
     p.add_argument("--report", metavar="JSON", help="also write the solve report as JSON")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(run=run)
@@ -49,6 +51,8 @@ def run(args) -> int:
 
     progress = Progress(quiet=args.quiet)
     overrides = {} if args.match_speed is None else {"match_speed": args.match_speed}
+    if args.foot_locking is not None:
+        overrides["foot_locking"] = args.foot_locking
     result = solve(args.stage, output=args.output, composed=args.composed, guides=args.guides,
                    collisions=args.collisions, progress=progress, **overrides)
     if args.report:
