@@ -139,6 +139,19 @@ def test_walker_contacts_alternate_and_hold_still(walk_clip):
     assert both.all()
 
 
+def test_a_run_has_contacts_on_both_feet_in_turn():
+    clip = walker.run(frames=120, fps=60.0, speed=3.5)
+    world = walker.joint_world_positions(clip)
+    seconds = np.arange(clip.num_frames) / 60.0
+    found = [contacts.detect_leg(seconds, world[:, clip.joint_index(s + "Foot")],
+                                 world[:, clip.joint_index(s + "Toe")], "Y", 1.0) for s in ("Left", "Right")]
+    assert all(len(r) >= 2 for r in found)
+    left, right = (contacts.mask_of(r, clip.num_frames) for r in found)
+    assert not np.any(left & right)                   # a run never has both feet down
+    with pytest.raises(ValueError, match="relative-speed"):
+        contacts.DetectSettings(relative_speed=-1.0).validate()
+
+
 def test_detection_thresholds_follow_meters_per_unit(walk_clip):
     world = walker.joint_world_positions(walk_clip)
     seconds = np.arange(walk_clip.num_frames) / FPS

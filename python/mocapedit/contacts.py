@@ -8,7 +8,8 @@ and Mixamo ``LeftUpLeg/LeftLeg/LeftFoot/LeftToeBase``, Character Creator
 
 A foot is planted when its ankle or its toe is near the lowest height that joint reaches
 in the clip and barely moves over the ground. The test has hysteresis (stricter to enter
-a contact than to stay in it) and a minimum duration; a contact then extends over the
+a contact than to stay in it; the speeds grow with a fast clip's mean foot speed) and a
+minimum duration; a contact then extends over the
 landing and the lift-off while the joint stays under the release height. Thresholds are
 in metres and seconds, converted with ``metersPerUnit`` and the clip's frame times.
 """
@@ -95,6 +96,7 @@ class DetectSettings:
     release_speed: float = 0.45   # metres per second, to stay
     min_duration: float = 0.06    # seconds a contact must last
     max_gap: float = 0.04         # seconds: shorter breaks between two contacts are bridged
+    relative_speed: float = 0.2   # the speed thresholds grow to this fraction of the joint's mean ground speed
 
     def validate(self) -> None:
         for name in ("height", "speed", "min_duration"):
@@ -105,6 +107,8 @@ class DetectSettings:
             raise ValueError("release thresholds must not be below the entry thresholds")
         if not (np.isfinite(self.max_gap) and self.max_gap >= 0):
             raise ValueError(f"max-gap must be zero or positive, got {self.max_gap}")
+        if not (np.isfinite(self.relative_speed) and self.relative_speed >= 0):
+            raise ValueError(f"relative-speed must be zero or positive, got {self.relative_speed}")
 
 
 def ground_speed(seconds: np.ndarray, points: np.ndarray, up_axis: str) -> np.ndarray:
@@ -130,8 +134,10 @@ def detect_joint(seconds: np.ndarray, points: np.ndarray, up_axis: str, meters_p
     h = ground.height(points, up_axis) * meters_per_unit
     h = h - h.min() if len(h) else h
     v = ground_speed(seconds, points, up_axis) * meters_per_unit
-    mask = _hysteresis((h <= settings.height) & (v <= settings.speed),
-                       (h <= settings.release_height) & (v <= settings.release_speed))
+    # Speeds relative to the clip: a running foot that slips a little while planted is still planted.
+    scale = max(1.0, settings.relative_speed * float(v.mean()) / settings.speed) if len(v) else 1.0
+    mask = _hysteresis((h <= settings.height) & (v <= settings.speed * scale),
+                       (h <= settings.release_height) & (v <= settings.release_speed * scale))
     # A contact reaches out over the landing and the lift-off, while the joint is still low:
     # the lock carries the source foot's own motion there, and blends where the foot is in the air.
     low = h <= settings.height

@@ -35,6 +35,7 @@ THRESHOLDS = (
     ("release_speed", "M_PER_S", "ground speed to stay in a contact, metres per second"),
     ("min_duration", "SECONDS", "shortest contact, seconds"),
     ("max_gap", "SECONDS", "bridge breaks shorter than this between two contacts, seconds"),
+    ("relative_speed", "FRACTION", "the speeds grow to this fraction of the foot's mean ground speed in the clip"),
 )
 
 
