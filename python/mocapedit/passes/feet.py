@@ -3,9 +3,10 @@
 For each edited agent with two legs (found by name or set by ``mocap:leftLegJoints`` /
 ``mocap:rightLegJoints``), the pose every earlier pass produced is evaluated by forward
 kinematics and carried by the agent's edited ground motion. Each foot contact of the
-source clip (authored with ``MocapFootContactAPI``, else detected) gets one plant
-(:mod:`mocapedit.footlock`); the solver's foot-locking job moves the legs of all agents
-at once. Agents whose legs change get a pose edit that replaces their hip, knee and ankle
+source clip (authored with ``MocapFootContactAPI``, else detected) gets one plant: the
+source foot carried by one turn and one ground shift, chosen by least squares where the
+edit puts the foot, and leashed to stay within ``LEASH_M`` and ``LEASH_DEGREES`` of it. The
+solver's foot-locking job (:mod:`mocapedit.footlock`) moves the legs of all agents at once. Agents whose legs change get a pose edit that replaces their hip, knee and ankle
 rotations (and the skeleton root's translation where the pelvis is lowered), so the writer
 bakes their animation.
 
@@ -29,8 +30,8 @@ LEASH_M = 0.08
 #: Degrees a plant may be turned from the edited foot before it is turned along.
 LEASH_DEGREES = 15.0
 #: Agents whose ankles all stay within this of where the edit puts them, and whose pelvis
-#: drops less, keep their legs (metres): over the shortest contact that slides a foot by less
-#: than the 0.5 cm/s foot locking aims for, and their animation need not be baked.
+#: drops less, keep their legs (metres): locking would move a foot by less than this over a
+#: whole contact, and leaving them saves baking their animation.
 STILL_M = 0.002
 
 
