@@ -331,6 +331,11 @@ def test_a_real_walk_edited_by_a_handle_keeps_its_feet(tmp_path):
     root = metrics.agent_root_positions(stage, a, frames[[0, mid, -1]])
     shot = Sdf.Layer.CreateNew(str(tmp_path / "shot.usda"))
     shot.subLayerPaths = ["clip.usda"]
+    clip_layer = stage.GetRootLayer()   # a stage follows its root layer's time and units
+    shot.timeCodesPerSecond = clip_layer.timeCodesPerSecond
+    shot.framesPerSecond = clip_layer.framesPerSecond
+    for key in ("upAxis", "metersPerUnit"):
+        shot.pseudoRoot.SetInfo(key, clip_layer.pseudoRoot.GetInfo(key))
     shot.Save()
     shot_stage = Usd.Stage.Open(str(tmp_path / "shot.usda"))
     up = UsdGeom.GetStageUpAxis(shot_stage)

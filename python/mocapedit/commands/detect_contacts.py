@@ -6,7 +6,7 @@ import os
 import sys
 
 from ..contacts import DetectSettings
-from .detect_stationary import add_review_options, review_parser, save_review
+from .detect_stationary import add_review_options, check_review_outputs, review_parser, save_review
 
 HELP = "find where feet are planted in clips and write MocapFootContactAPI contacts for review"
 DESCRIPTION = """\
@@ -56,6 +56,7 @@ def run(args) -> int:
     progress = Progress(quiet=args.quiet)
     settings = DetectSettings(**{field: getattr(args, field) for field, _, _ in THRESHOLDS})
     stage = reader.open_stage(args.stage)
+    check_review_outputs(args, stage)
     clips, info = contact_tags.detect(stage, settings, animation=args.animation, prefix=args.prefix)
     save_review(args, stage, contact_tags.build_layer(clips, info, settings), info)
     for clip in clips:

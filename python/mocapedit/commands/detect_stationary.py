@@ -61,13 +61,21 @@ def add_review_options(p: argparse.ArgumentParser, prefix: str, prefix_help: str
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
 
 
+def check_review_outputs(args, stage) -> None:
+    """Refuses, before any work, outputs that name the input or a layer it uses (see outputs)."""
+    from .. import outputs
+    outputs.check_outputs([outputs.Output(args.output, "-o"), outputs.Output(args.composed, "--composed")],
+                          outputs.input_files(stage))
+
+
 def save_review(args, stage, layer, info) -> None:
-    """Writes the proposed tags (and with --composed, a stage to review them on)."""
-    from .. import writer
-    writer.save_layer(layer, args.output)
-    if args.composed:
-        writer.save_composed(args.composed, args.output, args.stage, info,
-                             stage.GetRootLayer().defaultPrim or None)
+    """Writes the proposed tags (and with --composed, a stage to review them on), together."""
+    from .. import outputs, writer
+    with outputs.Writes() as w:
+        w.add(args.output, writer.export_layer(layer))
+        if args.composed:
+            w.add(args.composed, writer.export_layer(writer.composed_layer(
+                args.composed, args.output, args.stage, info, stage.GetRootLayer().defaultPrim or None)))
 
 
 def run(args) -> int:
@@ -78,6 +86,7 @@ def run(args) -> int:
     settings = DetectSettings(max_speed=args.max_speed, max_turn=args.max_turn, min_duration=args.min_duration,
                               window=args.window, max_gap=args.max_gap)
     stage = reader.open_stage(args.stage)
+    check_review_outputs(args, stage)
     clips, info = tags.detect(stage, settings, root_joint=args.root_joint, animation=args.animation,
                               prefix=args.prefix)
     save_review(args, stage, tags.build_layer(clips, info, settings), info)
@@ -86,8 +95,10 @@ def run(args) -> int:
         progress.message(f"<{clip.animation}> ({clip.frames} frames, measured on {clip.joint.rsplit('/', 1)[-1]}): "
                          f"{len(clip.ranges)} stationary range{'s' if len(clip.ranges) != 1 else ''}")
         for name, r in zip(clip.names, clip.ranges):
+            bridged = (f"; bridges {r.bridged} frame{'s' if r.bridged != 1 else ''} of shorter gaps (--max-gap) "
+                       f"reaching {r.bridged_max_speed:.3f} m/s, {r.bridged_max_turn:.1f} deg/s") if r.bridged else ""
             progress.message(f"  {name}: frames {r.first}-{r.last} ({r.duration:.2f} s at {fps:g} fps), "
-                             f"speed <= {r.max_speed:.3f} m/s, turning <= {r.max_turn:.1f} deg/s")
+                             f"speed <= {r.max_speed:.3f} m/s, turning <= {r.max_turn:.1f} deg/s{bridged}")
     if not args.quiet:
         print(f"wrote {os.path.abspath(args.output)}", file=sys.stderr)
     return 0

@@ -336,8 +336,8 @@ def _source(ctx, agent: Agent, cache: dict) -> tuple[list[list[tuple[int, int]]]
 
 
 def _skate(positions, contact, times, info) -> float:
-    return metrics.skate_speeds(ground.to_ground(positions, info.up_axis), contact,
-                                np.asarray(times, dtype=np.float64) / info.time_codes_per_second)[2]
+    return metrics.foot_skate_of_positions(positions, times, info.up_axis, info.meters_per_unit,
+                                           info.time_codes_per_second, contact=contact).mean
 
 
 def foot_locking_pass(ctx: processor.SolveContext) -> None:
