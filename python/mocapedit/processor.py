@@ -208,7 +208,8 @@ def measure_plausibility(ctx: SolveContext) -> None:
         entry = ctx.report.agent(path)
         if np.isfinite(skate).all():
             # Mean foot speed while in contact (stage units per second), over the source's contacts.
-            entry["footSkateSource"], entry["footSkateEdited"] = skate
+            entry.setdefault("footSkateSource", skate[0])
+            entry.setdefault("footSkateEdited", skate[1])
         entry["plausibility"] = {
             "maxFacingRate": p.max_facing_rate, "sourceMaxFacingRate": p.source_max_facing_rate,
             "maxExtraFacingRate": p.max_extra_facing_rate, "spinFrames": p.spin_frames,
