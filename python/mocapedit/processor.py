@@ -171,10 +171,7 @@ def measure_plausibility(ctx: SolveContext) -> None:
     :func:`metrics.plausibility_of`: the facing and walking direction of the edited body against
     its source, path length, time warp and foot skate. They come from the same motions the edits
     layer authors, by numpy forward kinematics of the hip and the feet (the composed stage plays
-    the same, so FK on it gives the same figures); layered poses are left out. The foot skate
-    (``footSkateSource``, ``footSkateEdited``: what :func:`metrics.foot_skate` measures on the
-    input and on the composed stage, the edited agent over the frames where its source feet
-    are planted when its timing is kept) goes in the agent's entry as well."""
+    the same, so FK on it gives the same figures); layered poses are left out."""
     info = ctx.data.info
     up, chains, figures = info.up_axis, {}, []
     for path in sorted(ctx.edits):
@@ -210,7 +207,9 @@ def measure_plausibility(ctx: SolveContext) -> None:
         figures.append(p)
         entry = ctx.report.agent(path)
         if np.isfinite(skate).all():
-            entry["footSkateSource"], entry["footSkateEdited"] = skate
+            # Mean foot speed while in contact (stage units per second), over the source's contacts.
+            entry.setdefault("footSkateSource", skate[0])
+            entry.setdefault("footSkateEdited", skate[1])
         entry["plausibility"] = {
             "maxFacingRate": p.max_facing_rate, "sourceMaxFacingRate": p.source_max_facing_rate,
             "maxExtraFacingRate": p.max_extra_facing_rate, "spinFrames": p.spin_frames,
