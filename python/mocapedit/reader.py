@@ -348,6 +348,7 @@ class StageReader:
 
         An agent's own clip must author translations, rotations and scales (UsdSkel poses an
         animation only then); a layer clip (``all_channels=False``) may author only some."""
+        _check_value_clips(anim)
         attrs = [anim.GetAttribute(n) for n in model.CHANNELS]
         specs = tuple(self._sampled_spec(a) if a else None for a in attrs)
         times = self._composed_times(attrs, specs)
@@ -750,6 +751,20 @@ class StageReader:
             if agent.path_curve and agent.path_curve not in data.curves:
                 data.curves[agent.path_curve] = self.read_curve(agent.path, agent.path_curve)
         return data
+
+
+def _check_value_clips(prim: Usd.Prim) -> None:
+    """A value clip file that cannot be opened is an error naming the prim's ``clips``: USD
+    only warns and plays the prim without it."""
+    api = Usd.ClipsAPI(prim)
+    clips = api.GetClips()
+    if not clips:
+        return
+    for name in sorted(clips.keys()):
+        for asset in api.ComputeClipAssetPaths(name):
+            if not asset.resolvedPath:
+                raise prim_error(prim.GetPath(), f"value clip set '{name}' plays @{asset.path}@, which cannot be "
+                                 "opened (a missing file?)", "clips")
 
 
 def _guess_hip(joints: list[str], parents: np.ndarray, root_joint: int) -> int | None:

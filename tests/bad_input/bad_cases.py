@@ -179,6 +179,12 @@ shot("clip-nan-rotations", anim_over("quatf[] rotations.timeSamples = {4: [(nan,
 shot("clip-inf-translations", anim_over("float3[] translations.timeSamples = {4: [(inf, 0, 0), (0, 0, 90), "
                                         "(10, 0, -90), (-10, 0, -90)]}"),
      r"</World/agent0/Skel/Anim>\.translations: holds non-finite values")
+shot("clip-value-clip-missing", anim_over("", 'clips = {\n    dictionary default = {\n'
+                                            '        asset[] assetPaths = [@anim_clip.usda@]\n'
+                                            '        string primPath = "/Anim"\n'
+                                            '        double2[] active = [(0, 0)]\n'
+                                            '        double2[] times = [(0, 0), (23, 23)]\n    }\n}'),
+     r"</World/agent0/Skel/Anim>\.clips: value clip set 'default' plays @anim_clip\.usda@, which cannot be opened")
 shot("clip-no-scales", "", r"</World/agent0/Skel/Anim>\.scales: has no value",
      base=lambda folder: __import__("bad_base").write_base(folder, no_scales=True))
 shot("clip-no-samples", "", r"</World/agent0/Skel/Anim>\.translations: clip has no samples",
