@@ -283,8 +283,7 @@ def test_the_report_gives_the_foot_skate_of_moved_agents_source_and_edited(tmp_p
     # The solve measures by forward kinematics in double precision, UsdSkel from float samples.
     assert moved["footSkateSource"] == pytest.approx(source.mean, rel=1e-4)
     assert moved["footSkateEdited"] == pytest.approx(edited.mean, rel=1e-4)
-    assert moved["footSkateUnlocked"] > moved["footSkateSource"]   # the bent path alone slides the feet
-    assert moved["footSkateEdited"] < moved["footSkateUnlocked"]    # foot locking holds them
+    assert moved["footSkateEdited"] > moved["footSkateSource"]
     text = report.format_text(report.load(str(edits)))
     assert f"foot skate {report._num(moved['footSkateSource'])} -> {report._num(moved['footSkateEdited'])}" in text
 
