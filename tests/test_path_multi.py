@@ -166,6 +166,16 @@ def test_a_formation_turned_by_one_edit_keeps_its_neighbours(tmp_path):
     # at each key: 0.094 m/s).
     skate = [metrics.foot_skate(out, n).mean - metrics.foot_skate(src, n).mean for n in names]
     assert np.mean(skate) < 0.085
+    # The turn is the artist's: no member walks back against it. Handles at the corner and at
+    # the end level with it make the leader's rounded corner overshoot (its walk deviates by
+    # more than 90 degrees from the unturned source), but against the turn the edit makes every
+    # member's walk stays within 45 degrees, and none turns round (a loop).
+    figures = metrics.shot_plausibility(src, out, names)
+    assert figures[lead].max_direction_deviation > 90.0
+    assert max(f.max_turned_deviation for f in figures) < 45.0
+    assert max(f.max_edit_turn for f in figures) < 135.0
+    assert not any(f.reverses for f in figures)
+    assert result.report.stats["plausibility"]["reversingAgents"] == 0
 
 
 def test_a_large_formation_is_solved_end_to_end_in_a_dissection_order(tmp_path, monkeypatch):
