@@ -697,6 +697,9 @@ WALKING_SPEED_M = 0.2
 #: frame: long enough to span a gait cycle and a rounded corner's overshoot, short enough to
 #: follow a deliberate turn.
 EDIT_TURN_SECONDS = 2.0
+#: An edit that turns a walk by more than this (degrees) sends it back the way it came: half
+#: way between a right-angle turn and a full reversal.
+REVERSE_TURN_DEGREES = 135.0
 
 _FACING_NAMES = ("hips", "hip", "pelvis")
 
@@ -851,7 +854,8 @@ class Plausibility:
     on purpose measures 90. ``max_turned_deviation``: degrees, against the source's direction
     turned by the edit's own turn (:func:`edit_turn`): a hook, zig-zag or small loop that walks
     back against where the edit sends the agent. ``max_edit_turn``: degrees, the largest turn the
-    edit gives the walk (a loop turns it past 180). ``length_ratio``: edited over source ground path of the facing joint.
+    edit gives the walk (:func:`edit_turn`; a walk sent back turns by 180, a loop past it).
+    ``length_ratio``: edited over source ground path of the facing joint.
     ``time_warp``: smallest and largest shot time per source time (from the time map when the
     caller gives ``edited_frames``, else the ratio of edited to source sample intervals). ``foot_skate_source``
     and ``foot_skate_edited``: mean foot speed in contact (stage units per second, over the
@@ -881,10 +885,11 @@ class Plausibility:
     @property
     def reverses(self) -> bool:
         """Walks back: more than 90 degrees away from its source direction as the edit turns it
-        (``max_turned_deviation``), or turned round past the opposite of its source direction
-        (``max_edit_turn`` over 180: a loop). A deliberate turn of up to 180 degrees, the rounded
-        corner of a group turned 90 degrees included, is not a reversal."""
-        return bool(self.max_turned_deviation > 90.0 or self.max_edit_turn > 180.0)
+        (``max_turned_deviation``: a hook, a zig-zag), or turned by the edit nearer to the way
+        it came than to a right angle (``max_edit_turn`` over ``REVERSE_TURN_DEGREES``: sent
+        back, or a loop). A deliberate turn of 90 degrees, the overshoot of its rounded corner
+        included, is not a reversal."""
+        return bool(self.max_turned_deviation > 90.0 or self.max_edit_turn > REVERSE_TURN_DEGREES)
 
 
 def _resample(values: np.ndarray, at: np.ndarray) -> np.ndarray:
@@ -1001,7 +1006,8 @@ def worst_plausibility(figures: Sequence[Plausibility]) -> dict:
     """The shot's worst figures over agents' :class:`Plausibility`: the largest extra facing rate
     (degrees per second, and per frame at 60 fps) and its agent, how many agents spin, the largest
     direction deviation and its agent, the largest deviation from the direction the edit turns the
-    walk to (``maxTurnedDirectionDeviation``) and its agent, how many agents reverse
+    walk to (``maxTurnedDirectionDeviation``) and its agent, the largest turn an edit gives a walk
+    (``maxEditTurn``), how many agents reverse
     (:attr:`Plausibility.reverses`), the mean and
     extreme path length ratios, the time-warp range, and the mean and largest foot skate ratio."""
     figs = list(figures)
@@ -1025,6 +1031,7 @@ def worst_plausibility(figures: Sequence[Plausibility]) -> dict:
         "maxDirectionDeviationAgent": dev.agent if dev else None,
         "maxTurnedDirectionDeviation": back.max_turned_deviation if back else float("nan"),
         "maxTurnedDirectionDeviationAgent": back.agent if back else None,
+        "maxEditTurn": max(f.max_edit_turn for f in figs),
         "reversingAgents": sum(f.reverses for f in figs),
         "meanLengthRatio": float(lengths.mean()),
         "lengthRatioRange": (float(lengths.min()), float(lengths.max())),

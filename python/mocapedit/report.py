@@ -98,7 +98,8 @@ def plausibility_lines(p: dict | None) -> list[str]:
         + (f", {p['maxTurnedDirectionDeviation']:.1f} deg against the edit's own turn"
            + (f" ({p['maxTurnedDirectionDeviationAgent']})" if p.get("maxTurnedDirectionDeviationAgent") else "")
            if "maxTurnedDirectionDeviation" in p else "")
-        + f", {p['reversingAgents']} reversing (over 90)",
+        + f", {p['reversingAgents']} reversing"
+        + (" (over 90 against the edit's turn, or turned over 135)" if "maxEditTurn" in p else " (over 90)"),
         f"  path length ratio mean {p['meanLengthRatio']:.3f} ({lo:.3f}..{hi:.3f}); time warp {wlo:.3f}..{whi:.3f}; "
         f"foot skate ratio mean {p['meanFootSkateRatio']:.2f} (max {p['maxFootSkateRatio']:.2f})"]
 
