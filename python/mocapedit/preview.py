@@ -607,7 +607,7 @@ def write_png(scene: Scene, path: str, resolution=None, bounds: np.ndarray | Non
                             color=(0.6, 0.0, 0.35), zorder=8)
 
     for kind, marker, label in (("spin", "*", "spins (over 15 deg/frame)"),
-                                ("reverse", "v", "walks back (over 90 deg)")):
+                                ("reverse", "v", "walks back against its edit")):
         marks = [g for k, g, _ in scene.implausible if k == kind]
         if marks:
             pts = plan(np.array(marks), up)
