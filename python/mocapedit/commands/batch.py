@@ -48,7 +48,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args) -> int:
     from .. import batch
     from ..errors import MocapEditError
-    from ..writer import save_text
+    from ..outputs import save_text
 
     if args.workers is not None and args.workers < 1:
         raise MocapEditError(f"--workers must be at least 1, got {args.workers}")
@@ -56,6 +56,8 @@ def run(args) -> int:
     options = {"guides": args.guides, "collisions": args.collisions}
     if args.match_speed is not None:
         options["match_speed"] = args.match_speed
+    if args.foot_locking is not None:
+        options["foot_locking"] = args.foot_locking
     t = time.perf_counter()
     client, cluster = batch.connect(args.scheduler, args.workers)
 
