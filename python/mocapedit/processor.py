@@ -216,7 +216,9 @@ def measure_plausibility(ctx: SolveContext) -> None:
         entry["plausibility"] = {
             "maxFacingRate": p.max_facing_rate, "sourceMaxFacingRate": p.source_max_facing_rate,
             "maxExtraFacingRate": p.max_extra_facing_rate, "spinFrames": p.spin_frames,
-            "maxDirectionDeviation": p.max_direction_deviation, "lengthRatio": p.length_ratio,
+            "maxDirectionDeviation": p.max_direction_deviation,
+            "maxTurnedDirectionDeviation": p.max_turned_deviation, "maxEditTurn": p.max_edit_turn,
+            "reverses": p.reverses, "lengthRatio": p.length_ratio,
             "timeWarp": list(p.time_warp), "footSkateRatio": p.foot_skate_ratio,
             # Source frames where the largest extra turn and direction change happen (previews mark them).
             "worstTurnFrame": int(round(frames[max(p.worst_turn_frame, 0)])),

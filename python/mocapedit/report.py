@@ -107,7 +107,11 @@ def plausibility_lines(p: dict | None) -> list[str]:
         f"deg/frame at 60 fps ({p['maxExtraFacingRateAgent']}), {p['spinningAgents']} spinning (over 15)",
         f"  largest walking direction change {p['maxDirectionDeviation']:.1f} deg"
         + (f" ({p['maxDirectionDeviationAgent']})" if p.get("maxDirectionDeviationAgent") else "")
-        + f", {p['reversingAgents']} reversing (over 90)",
+        + (f", {p['maxTurnedDirectionDeviation']:.1f} deg against the edit's own turn"
+           + (f" ({p['maxTurnedDirectionDeviationAgent']})" if p.get("maxTurnedDirectionDeviationAgent") else "")
+           if "maxTurnedDirectionDeviation" in p else "")
+        + f", {p['reversingAgents']} reversing"
+        + (" (over 90 against the edit's turn, or turned over 135)" if "maxEditTurn" in p else " (over 90)"),
         f"  path length ratio mean {p['meanLengthRatio']:.3f} ({lo:.3f}..{hi:.3f}); time warp {wlo:.3f}..{whi:.3f}; "
         f"foot skate ratio mean {p['meanFootSkateRatio']:.2f} (max {p['maxFootSkateRatio']:.2f})"]
 
