@@ -389,3 +389,26 @@ def test_match_speed_from_the_settings_prim_and_the_command_line(tmp_path, monke
         entry = json.loads(report.read_text())["agents"][f"{CROWD}/walker"]
         matched[flag] = any("matchSpeed" in n for n in entry.get("notes", []))
     assert matched == {None: True, "--no-match-speed": False, "--match-speed": True}
+
+
+def test_the_report_measures_a_retimed_agent_as_forward_kinematics_does(tmp_path):
+    """Plausibility of a time-warped agent: the solve's figures (from the motions it writes)
+    agree with UsdSkel FK on the composed stage, and the time-warp range is the time map's."""
+    stage = _stage(tmp_path, [("dancer", (0, 0, 0), 0.0, 0.0)])
+    for i, (frame, t) in enumerate({20: 30.5, 50: 52.0, 80: 90.25}.items()):
+        examples.add_time_constraint(stage, f"/Edits/beat{i}", f"{CROWD}/dancer", frame, t)
+    result, out, src = _solve(tmp_path, stage)
+    agent = f"{CROWD}/dancer"
+    reported = result.report.agents[agent]["plausibility"]
+    measured = metrics.plausibility(src, out, agent)
+    # The edited body's own turning is the same; against the source, the solve pairs each shot
+    # frame with the source frame it plays, FK on the stage (which cannot know it) by fraction.
+    assert reported["maxFacingRate"] == pytest.approx(measured.max_facing_rate, rel=1e-3)
+    assert reported["maxExtraFacingRate"] < 60.0 and measured.max_extra_facing_rate < 60.0
+    assert reported["maxDirectionDeviation"] < 15.0 and measured.max_direction_deviation < 15.0
+    assert reported["lengthRatio"] == pytest.approx(1.0, abs=1e-3)
+    # The beats squeeze frames 20..50 into 21.5 time codes and stretch 50..80 over 38.25: the
+    # report's warp is the time map's (FK on the stage sees shot frames, not source frames).
+    lo, hi = reported["timeWarp"]
+    assert lo < 21.5 / 30 < 38.25 / 30 < hi and lo > 0
+    assert reported["spinFrames"] == 0 and not measured.spins

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import _solver, collisions
+from . import _solver, collisions, report
 
 STRATEGIES = ("relinearize", "accumulate")
 
@@ -405,14 +405,13 @@ class _Run:
         self.seconds["detect"] += time.perf_counter() - t
         record = _iteration(state, self.found, self.hits)
         self.iterations.append(record)
-        left = record.collisions + record.region_samples
-        last = left == 0 or it == state.s.max_iterations
+        last = record.collisions + record.region_samples == 0 or it == state.s.max_iterations
         if self.task is not None:
+            left = report.describe_left(record.collisions, record.region_samples)
             if last:
-                self.task.done(f"{left} collision{'s' if left != 1 else ''} left after {it} iteration"
-                               f"{'s' if it != 1 else ''}")
+                self.task.done(left, count=it)
             else:
-                self.task.update(it, f"{left} collision{'s' if left != 1 else ''} left")
+                self.task.update(it, left)
         return last
 
     def timing(self, total: float) -> dict:

@@ -28,6 +28,9 @@ class StageInfo:
         return value_in_metres / self.meters_per_unit
 
 
+CHANNELS = ("translations", "rotations", "scales")
+
+
 @dataclass
 class Clip:
     """One SkelAnimation's authored samples, read once however many agents play it."""
@@ -38,6 +41,9 @@ class Clip:
     translations: np.ndarray          # (F,Ja,3) float32, joint-local
     rotations: np.ndarray             # (F,Ja,4) float32 (x,y,z,w), joint-local
     scales: np.ndarray                # (F,Ja,3) float32
+    # The channels the clip authors; the others hold the identity (an agent's own clip
+    # authors all three, a layer clip may author only some).
+    channels: tuple[str, ...] = CHANNELS
     # (F,) the frames' times in the layer of :attr:`sample_spec` (before any layer offset of
     # the arcs that bring the clip in); None when there is no such single spec.
     spec_times: np.ndarray | None = None

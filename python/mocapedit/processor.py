@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 from pxr import Sdf, Usd, Vt
 
-from . import animation, guides, inspection, reader, trajectory, writer
+from . import animation, guides, inspection, limits, metrics, outputs, reader, trajectory, writer
 from .errors import MocapEditError
 from .model import StageData
 from .progress import Progress, Silent
@@ -101,6 +101,21 @@ def extract_trajectories(ctx: SolveContext) -> None:
     task.done()
 
 
+def retimed_spec(ctx: SolveContext, path: str) -> tuple[str, str] | None:
+    """(clip layer, prim path) when the agent's only change of pose is its timing and its clip
+    can be re-timed by a value clip (one spec's samples, in a layer on disk); None when it is
+    baked instead (layered, ``bake_timing``, a clip split over specs or only in memory)."""
+    if ctx.options.bake_timing or path not in ctx.time_maps or path in ctx.pose_edits:
+        return None
+    if any(path in layer.agents for layer in ctx.data.layers):
+        return None
+    clip = ctx.data.clip_of(ctx.data.agents[path])
+    spec = clip.sample_spec
+    if spec is None or clip.spec_times is None or Sdf.Layer.IsAnonymousLayerIdentifier(spec[0]):
+        return None
+    return spec
+
+
 def output_frames(ctx: SolveContext, path: str) -> tuple[np.ndarray, np.ndarray]:
     """(stage times to author, fractional source frame at each) for one agent."""
     agent = ctx.data.agents[path]
@@ -109,9 +124,12 @@ def output_frames(ctx: SolveContext, path: str) -> tuple[np.ndarray, np.ndarray]
     if time_map is None:
         times = ctx.out_times.get(path, agent.sample_times)
         return times, np.interp(times, agent.sample_times, frames)
+    if retimed_spec(ctx, path):
+        # A re-timed clip plays each source frame at its time on the map: those are its samples.
+        return np.asarray(time_map, dtype=np.float64), frames
     times = ctx.out_times.get(path)
     if times is None:
-        # A warped clip is authored on the shot's whole frames.
+        # A baked warped clip is authored on the shot's whole frames.
         times = np.arange(np.ceil(time_map[0] - 1e-9), np.floor(time_map[-1] + 1e-9) + 1.0)
     return times, np.interp(times, time_map, frames)
 
@@ -130,9 +148,8 @@ def compose_edits(ctx: SolveContext) -> None:
         times, frames = output_frames(ctx, path)
         edit = writer.AgentEdit()
         clip = ctx.data.clip_of(agent)
-        spec = clip.sample_spec if path not in ctx.pose_edits and not ctx.options.bake_timing else None
-        if (path in ctx.time_maps and spec and clip.spec_times is not None
-                and not Sdf.Layer.IsAnonymousLayerIdentifier(spec[0])):
+        spec = retimed_spec(ctx, path)
+        if spec:
             # Only the timing changed: the source clip plays on the time map, nothing is baked.
             edit.retimed = writer.RetimedClip(layer=spec[0], prim_path=spec[1], joints=list(clip.joints),
                                               stage_times=ctx.time_maps[path], clip_times=clip.spec_times)
@@ -166,6 +183,57 @@ def compose_edits(ctx: SolveContext) -> None:
             ctx.edits[path] = edit
 
 
+def measure_plausibility(ctx: SolveContext) -> None:
+    """Per edited agent, and for the shot (``stats["plausibility"]``), the figures of
+    :func:`metrics.plausibility_of`: the facing and walking direction of the edited body against
+    its source, path length, time warp and foot skate. They come from the same motions the edits
+    layer authors, by numpy forward kinematics of the hip and the feet (the composed stage plays
+    the same, so FK on it gives the same figures); layered poses are left out."""
+    info = ctx.data.info
+    up, chains, figures = info.up_axis, {}, []
+    for path in sorted(ctx.edits):
+        if path not in ctx.paths and path not in ctx.time_maps:
+            continue
+        agent, traj = ctx.data.agents[path], ctx.trajectories[path]
+        clip = ctx.data.clip_of(agent)
+        hip = metrics.default_facing_joint(agent.joints)
+        feet = metrics.default_foot_joints(agent.joints)
+        joints = [hip] + feet
+        key = (agent.clip_key, tuple(agent.joints))
+        if key not in chains:
+            chains[key] = np.stack([trajectory.joint_skel_space(agent, clip, j) for j in joints], axis=1)
+        source = chains[key] @ agent.skel_to_world[:, None]               # (F, 1 + feet, 4, 4)
+        times, frames = output_frames(ctx, path)
+        edited = animation.interp_frames(source, frames)
+        moved = ctx.paths.get(path)
+        if moved is not None:
+            edited = edited @ trajectory.ground_motion(
+                animation.interp_frames(traj.ground, frames), animation.interp_frames(traj.heading, frames),
+                animation.interp_frames(moved.ground, frames), animation.interp_frames(moved.heading, frames),
+                up)[:, None]
+        seconds = 1.0 / info.time_codes_per_second
+        skate = [float("nan"), float("nan")]
+        if feet:
+            units = (up, info.meters_per_unit, info.time_codes_per_second)
+            before = metrics.foot_skate_of_positions(source[:, 1:, 3, :3], agent.sample_times, *units)
+            mask = before.contact if len(times) == len(agent.sample_times) else None
+            skate = [before.mean, metrics.foot_skate_of_positions(edited[:, 1:, 3, :3], times, *units,
+                                                                  contact=mask).mean]
+        p = metrics.plausibility_of(path, agent.sample_times * seconds, source[:, 0], times * seconds, edited[:, 0],
+                                    up, info.meters_per_unit, *skate, edited_frames=frames)
+        figures.append(p)
+        ctx.report.agent(path)["plausibility"] = {
+            "maxFacingRate": p.max_facing_rate, "sourceMaxFacingRate": p.source_max_facing_rate,
+            "maxExtraFacingRate": p.max_extra_facing_rate, "spinFrames": p.spin_frames,
+            "maxDirectionDeviation": p.max_direction_deviation, "lengthRatio": p.length_ratio,
+            "timeWarp": list(p.time_warp), "footSkateRatio": p.foot_skate_ratio,
+            # Source frames where the largest extra turn and direction change happen (previews mark them).
+            "worstTurnFrame": int(round(frames[max(p.worst_turn_frame, 0)])),
+            "worstDirectionFrame": int(round(frames[p.worst_direction_frame])) if p.worst_direction_frame >= 0 else -1}
+    if figures:
+        ctx.report.stats["plausibility"] = metrics.worst_plausibility(figures)
+
+
 def _with_parent(agent, parent_to_world):
     import dataclasses
     return dataclasses.replace(agent, agent_parent_to_world=parent_to_world)
@@ -174,6 +242,7 @@ def _with_parent(agent, parent_to_world):
 def inspect(ctx: SolveContext) -> None:
     """After every pass: the report figures no pass measured, and the guides."""
     crowd = inspection.from_context(ctx)
+    inspection.foot_skate_figures(ctx)
     remaining = inspection.complete_report(ctx, crowd)
     guides.build(ctx, crowd, remaining)
 
@@ -225,13 +294,15 @@ class SolveResult:
 
 def solve(stage_or_path, output: str | None = None, composed: str | None = None,
           guides: bool = True, collisions: bool | None = None, progress: Progress | None = None,
-          bake_timing: bool = False, **overrides) -> SolveResult:
+          report_json: str | None = None, bake_timing: bool = False, **overrides) -> SolveResult:
     """Solves every edit authored on a stage and returns the edits layer and a report.
 
     Args:
       stage_or_path: a ``Usd.Stage`` or the path of a stage file. The input is read only.
       output: if given, the edits layer is saved there (``.usda`` or ``.usdc``), atomically.
       composed: if given (needs ``output``), a stage that sub-layers the edits over the input.
+      report_json: if given (needs ``output``), the report is saved there as JSON. The edits, the composed stage
+        and the report are renamed into place together, after all three are written.
       guides: author guide geometry under ``/MocapEdit/Guides``.
       collisions: force collision avoidance on or off; None follows MocapSolveSettings.
       progress: a :class:`~mocapedit.progress.Progress`; silent by default.
@@ -240,7 +311,8 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
       overrides: MocapSolveSettings values by their Python names (``max_iterations=...``).
 
     Raises:
-      MocapEditError: bad input, naming the prim and property. Nothing is written.
+      MocapEditError: bad input, naming the prim and property; an output path that names
+        the input, a layer it uses, another output or a folder. Nothing is written.
     """
     progress = progress or Silent()
     timings: dict[str, float] = {}
@@ -249,14 +321,24 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
         stage, input_name = stage_or_path, stage_or_path.GetRootLayer().identifier
     else:
         stage, input_name = reader.open_stage(str(stage_or_path)), str(stage_or_path)
-    if composed and not output:
-        raise MocapEditError("--composed needs an output path for the edits layer (-o)")
+    if (composed or report_json) and not output:
+        raise MocapEditError("a composed stage or a report needs an output path for the edits layer (-o)")
+    input_file = stage.GetRootLayer().realPath if isinstance(stage_or_path, Usd.Stage) else input_name
+    if composed and not input_file:
+        raise MocapEditError("a composed stage sub-layers the input file, but this stage is in memory; "
+                             "save it first or leave out the composed stage")
+    outputs.check_outputs([outputs.Output(output, "edits layer"),
+                           outputs.Output(composed, "composed stage"),
+                           outputs.Output(report_json, "report", kind="text")],
+                          outputs.input_files(stage))
 
     data = reader.read_stage(stage, progress)
     for key, value in overrides.items():
         if not hasattr(data.settings, key):
             raise MocapEditError(f"unknown solve setting '{key}'")
         setattr(data.settings, key, value)
+    limits.check_settings(data)
+    limits.check_constraint_times(data)
     timings["read"] = time.perf_counter() - t0
 
     report = Report(input=input_name, output=output)
@@ -277,6 +359,9 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
     t = time.perf_counter()
     inspect(ctx)
     timings["inspect"] = time.perf_counter() - t
+    t = time.perf_counter()
+    measure_plausibility(ctx)
+    timings["plausibility"] = time.perf_counter() - t
 
     constraint_count = sum(len(x) for x in (data.position_constraints, data.relative_constraints,
                                             data.time_constraints, data.sync_constraints))
@@ -299,11 +384,16 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
         provenance=provenance, stats=report.stats, report=report.to_layer_dict(),
         anchor=os.path.dirname(os.path.abspath(output)) if output else None))
     if output:
-        writer.save_layer(layer, output)
-        if composed:
-            default_prim = stage.GetRootLayer().defaultPrim or None
-            writer.save_composed(composed, output, input_name if not isinstance(stage_or_path, Usd.Stage)
-                                 else stage.GetRootLayer().realPath, data.info, default_prim)
+        timings["write"] = time.perf_counter() - t
+        timings["total"] = time.perf_counter() - t0
+        report.timings = dict(timings)
+        with outputs.Writes() as w:
+            w.add(output, writer.export_layer(layer))
+            if composed:
+                w.add(composed, writer.export_layer(writer.composed_layer(
+                    composed, output, input_file, data.info, stage.GetRootLayer().defaultPrim or None)))
+            if report_json:
+                w.add(report_json, outputs.write_text(report.to_json() + "\n"))
     timings["write"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     report.timings = timings

@@ -8,6 +8,8 @@ raises :class:`~mocapedit.errors.MocapEditError` naming the prim and property.
 """
 from __future__ import annotations
 
+import re
+
 import numpy as np
 from pxr import Sdf, Usd, UsdGeom, UsdSkel
 
@@ -36,6 +38,46 @@ def open_stage(path: str) -> Usd.Stage:
     return stage
 
 
+def check_composition(stage: Usd.Stage) -> None:
+    """Raises a MocapEditError when the stage did not compose as authored: a sublayer,
+    reference or payload whose file cannot be opened (USD only warns and goes on without
+    it), or a sublayer that says another ``upAxis``, ``metersPerUnit`` or
+    ``timeCodesPerSecond`` than the root layer, which the stage follows alone."""
+    errors = stage.GetCompositionErrors()
+    if errors:
+        # One missing clip file referenced by a thousand agents is one problem: group by
+        # what failed, and name a few of the prims where.
+        where: dict[str, list[str]] = {}
+        for error in errors:
+            text = str(error).strip().rstrip(".")
+            arc = re.fullmatch(r"(.* introduced by @[^@]*@)(<[^>]*>)", text)
+            where.setdefault(arc[1] if arc else text, []).extend([arc[2]] if arc else [])
+        parts = [what if not sites else what + sites[0] if len(sites) == 1 else
+                 f"{what} at {len(sites)} prims ({', '.join(sites[:3])}{', ...' if len(sites) > 3 else ''})"
+                 for what, sites in where.items()]
+        raise MocapEditError(f"{stage.GetRootLayer().identifier}: the stage does not compose: " + "; ".join(parts))
+    root = stage.GetRootLayer()
+    stage_says = {"upAxis": str(UsdGeom.GetStageUpAxis(stage)),
+                  "metersPerUnit": float(UsdGeom.GetStageMetersPerUnit(stage)),
+                  "timeCodesPerSecond": float(stage.GetTimeCodesPerSecond())}
+    for layer in stage.GetLayerStack(includeSessionLayers=False):
+        if layer == root:
+            continue
+        for key, value in stage_says.items():
+            if not layer.pseudoRoot.HasInfo(key):
+                continue
+            says = layer.pseudoRoot.GetInfo(key)
+            if (says != value) if key == "upAxis" else not np.isclose(float(says), value, rtol=1e-9, atol=0.0):
+                shown = lambda v: v if isinstance(v, str) else f"{float(v):g}"  # noqa: E731
+                root_says = (f"says {key} = {shown(value)}" if root.pseudoRoot.HasInfo(key) else
+                             f"does not author {key}, so the stage uses {shown(value)}")
+                raise MocapEditError(
+                    f"{layer.identifier}: sublayer says {key} = {shown(says)}, but the root layer "
+                    f"{root.identifier} {root_says}; a stage follows its root layer alone. Author {key} = "
+                    f"{shown(says)} on the "
+                    f"root layer (or make the sublayer agree with it)")
+
+
 def stage_info(stage: Usd.Stage) -> model.StageInfo:
     root = stage.GetRootLayer()
     return model.StageInfo(
@@ -56,12 +98,67 @@ def _targets(prim: Usd.Prim, name: str) -> list[str]:
     return [str(t) for t in rel.GetForwardedTargets()]
 
 
+def _authored_type(attr: Usd.Attribute) -> Sdf.ValueTypeName | None:
+    """The type the strongest spec authors (``attr.GetTypeName()`` gives the schema's)."""
+    for spec in attr.GetPropertyStack(Usd.TimeCode.EarliestTime()):
+        if spec.typeName:
+            return spec.typeName
+    return None
+
+
+_KINDS = {"int": "integer", "long": "integer", "unsigned int": "integer", "unsigned long": "integer",
+          "unsigned char": "integer", "double": "real", "float": "real", "pxr_half::half": "real",
+          "GfTimeCode": "real", "TfToken": "text", "string": "text"}
+
+
+def _kind(type_name: Sdf.ValueTypeName) -> tuple[str, bool]:
+    """What a value of this type means to the reader: text, integer, real, or a vector of
+    a size and component kind (float3, double3, point3d and half3 alike), and arrayness."""
+    name = type_name.scalarType.type.typeName
+    name = _KINDS.get(name, name)
+    if name.startswith("GfVec") and name[-1] in "dfh":
+        name = name[:-1] + "r"
+    return name, bool(type_name.isArray)
+
+
+def _compatible(authored: Sdf.ValueTypeName, expected: Sdf.ValueTypeName) -> bool:
+    a, e = _kind(authored), _kind(expected)
+    return a == e or (a == ("integer", e[1]) and e[0] == "real")
+
+
+def _check_finite(prim: Usd.Prim, name: str, value) -> None:
+    try:
+        numbers = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        return
+    if not np.all(np.isfinite(numbers)):
+        shown = f"got {value}" if numbers.size <= 4 else "some of its values are not"
+        raise prim_error(prim.GetPath(), f"must be a finite number, {shown}", name)
+
+
 def _get(prim: Usd.Prim, name: str, default=None):
+    """The value of a single-valued property, checked against the schema: an attribute
+    authored with another type than the schema's, only as time samples, or (for numbers)
+    not finite is an error naming the prim and property, never a silent misread."""
     attr = prim.GetAttribute(name)
     if not attr:
         return default
+    if attr.HasAuthoredValue():
+        source = attr.GetResolveInfo().GetSource()
+        if source in (Usd.ResolveInfoSourceTimeSamples, Usd.ResolveInfoSourceValueClips):
+            raise prim_error(prim.GetPath(), "is authored only as time samples; it takes one value: "
+                             "author it without a time", name)
+        expected = prim.GetPrimDefinition().GetAttributeDefinition(name)
+        authored = _authored_type(attr)
+        if expected and authored and not _compatible(authored, expected.GetTypeName()):
+            raise prim_error(prim.GetPath(), f"is authored as {authored} {attr.Get()!r}; the schema's type "
+                             f"is {expected.GetTypeName()}", name)
     value = attr.Get()
-    return default if value is None else value
+    if value is None:
+        return default
+    if not isinstance(value, (str, bool, int)) and _kind(attr.GetTypeName())[0] not in ("text", "bool"):
+        _check_finite(prim, name, value)
+    return value
 
 
 def _ancestors(prim: Usd.Prim):
@@ -129,6 +226,7 @@ class StageReader:
     """Reads one stage. Use :func:`read_stage` unless you need the pieces."""
 
     def __init__(self, stage: Usd.Stage, progress=None):
+        check_composition(stage)
         self.stage = stage
         self.info = stage_info(stage)
         self.progress = progress
@@ -140,15 +238,26 @@ class StageReader:
 
     # ---- agents ---------------------------------------------------------------------
 
+    def _target_prim(self, owner, rel: str, target: str, kind=None, what: str = "") -> Usd.Prim:
+        """The prim a relationship targets; an error naming ``owner.rel`` when it does not
+        exist, is inactive, or is not a ``kind`` (a schema class, described as ``what``)."""
+        found = self.stage.GetPrimAtPath(target)
+        why = None
+        if not found:
+            why = "does not exist"
+        elif not found.IsActive():
+            why = "is inactive (active = false)"
+        elif kind is not None and not found.IsA(kind):
+            why = f"is not a {what} (it is a {found.GetTypeName() or 'typeless prim'})"
+        if why:
+            raise prim_error(getattr(owner, "GetPath", lambda: owner)(), f"targets <{target}>, which {why}", rel)
+        return found
+
     def _find_skeleton(self, prim: Usd.Prim) -> Usd.Prim:
         if prim.IsA(UsdSkel.Skeleton):
             return prim
         for target in _targets(prim, "skel:skeleton"):
-            skel = self.stage.GetPrimAtPath(target)
-            if skel and skel.IsA(UsdSkel.Skeleton):
-                return skel
-            raise prim_error(prim.GetPath(), f"skel:skeleton targets <{target}>, which is not a Skeleton",
-                             "skel:skeleton")
+            return self._target_prim(prim, "skel:skeleton", target, UsdSkel.Skeleton, "Skeleton")
         for child in Usd.PrimRange(prim):
             if child.IsA(UsdSkel.Skeleton):
                 return child
@@ -158,20 +267,13 @@ class StageReader:
     def _find_animation(self, prim: Usd.Prim, skel: Usd.Prim) -> Usd.Prim:
         explicit = _targets(prim, "mocap:animationSource")
         if explicit:
-            anim = self.stage.GetPrimAtPath(explicit[0])
-            if not anim or not anim.IsA(UsdSkel.Animation):
-                raise prim_error(prim.GetPath(), f"targets <{explicit[0]}>, which is not a SkelAnimation",
-                                 "mocap:animationSource")
-            return anim
+            return self._target_prim(prim, "mocap:animationSource", explicit[0], UsdSkel.Animation,
+                                     "SkelAnimation")
         # UsdSkel binds the animation on the skeleton or inherits it from an ancestor.
         p = skel
         while p and not p.IsPseudoRoot():
             for target in _targets(p, "skel:animationSource"):
-                anim = self.stage.GetPrimAtPath(target)
-                if not anim or not anim.IsA(UsdSkel.Animation):
-                    raise prim_error(p.GetPath(), f"targets <{target}>, which is not a SkelAnimation",
-                                     "skel:animationSource")
-                return anim
+                return self._target_prim(p, "skel:animationSource", target, UsdSkel.Animation, "SkelAnimation")
             if p == prim:
                 break
             p = p.GetParent()
@@ -224,16 +326,19 @@ class StageReader:
         return np.unique(np.concatenate(
             [np.asarray(a.GetTimeSamples(), dtype=np.float64) for a in attrs if a] + [np.zeros(0)]))
 
-    def _clip(self, anim: Usd.Prim):
-        """(clip key, composed stage times of the clip's frames); reads the clip on first use."""
-        attrs = [anim.GetAttribute(n) for n in ("translations", "rotations", "scales")]
+    def _clip(self, anim: Usd.Prim, all_channels: bool = True):
+        """(clip key, composed stage times of the clip's frames); reads the clip on first use.
+
+        An agent's own clip must author translations, rotations and scales (UsdSkel poses an
+        animation only then); a layer clip (``all_channels=False``) may author only some."""
+        attrs = [anim.GetAttribute(n) for n in model.CHANNELS]
         specs = tuple(self._sampled_spec(a) if a else None for a in attrs)
         times = self._composed_times(attrs, specs)
         if times.size == 0:
             raise prim_error(anim.GetPath(), "clip has no samples: translations, rotations and scales "
                              "hold no time samples", "translations")
-        for name, attr in zip(("translations", "rotations", "scales"), attrs):
-            if not attr or not attr.HasValue():
+        for name, attr in zip(model.CHANNELS, attrs):
+            if all_channels and (not attr or not attr.HasValue()):
                 raise prim_error(anim.GetPath(), "has no value; UsdSkel poses an animation only when "
                                  "translations, rotations and scales are all authored", name)
         anim_joints = tuple(str(j) for j in (_get(anim, "joints") or []))
@@ -270,10 +375,13 @@ class StageReader:
         if not np.all(np.isfinite(translations)):
             raise prim_error(anim.GetPath(), "holds non-finite values", "translations")
         scales = read("scales", 3, 1.0)
+        if not np.all(np.isfinite(scales)):
+            raise prim_error(anim.GetPath(), "holds non-finite values", "scales")
         src = key[1][0] or key[1][1]
+        channels = tuple(n for n in model.CHANNELS if anim.GetAttribute(n).HasAuthoredValue())
         clip = model.Clip(key=key, source=f"{src[0]}@{src[1]}" if src else str(anim.GetPath()),
                           joints=list(joints), times=times, translations=translations,
-                          rotations=rotations, scales=scales)
+                          rotations=rotations, scales=scales, channels=channels)
         spec = clip.sample_spec
         layer = Sdf.Layer.Find(spec[0]) if spec else None
         # A clip that value clips already re-time is not one spec's samples.
@@ -296,6 +404,9 @@ class StageReader:
             if value is None:
                 raise prim_error(anim.GetPath(), "stationary tag has no frame range", prop)
             a, b = int(value[0]), int(value[1])
+            if a > b:
+                raise prim_error(anim.GetPath(), f"stationary range [{a}, {b}] is reversed: its first frame "
+                                 f"comes after its last; write ({b}, {a})", prop)
             if not (0 <= a <= b < frame_count):
                 raise prim_error(anim.GetPath(), f"stationary range [{a}, {b}] is outside the clip's "
                                  f"frames 0..{frame_count - 1}", prop)
@@ -369,10 +480,17 @@ class StageReader:
             raise prim_error(prim.GetPath(), f"has {len(targets)} targets; exactly one agent is expected", rel)
         target = targets[0]
         if target not in self.agents:
-            what = "does not exist" if not self.stage.GetPrimAtPath(target) else \
-                "is not an agent (no MocapAgentAPI), or is inactive"
-            raise prim_error(prim.GetPath(), f"targets <{target}>, which {what}", rel)
+            raise prim_error(prim.GetPath(), f"targets <{target}>, which {self._not_an_agent(target)}", rel)
         return target
+
+    def _not_an_agent(self, target: str) -> str:
+        """Why a target path is not one of the agents read, for messages."""
+        found = self.stage.GetPrimAtPath(target)
+        if not found:
+            return "does not exist"
+        if not found.IsActive() or not found.IsLoaded():
+            return "is inactive (active = false)" if not found.IsActive() else "is not loaded"
+        return "is not an agent (no MocapAgentAPI)"
 
     def _frame(self, prim: Usd.Prim, prop: str, agent: str) -> int:
         frame = int(_get(prim, prop, 0))
@@ -435,7 +553,7 @@ class StageReader:
         members = _targets(prim, "members")
         for m in members:
             if m not in self.agents:
-                raise prim_error(prim.GetPath(), f"member <{m}> is not an active agent", "members")
+                raise prim_error(prim.GetPath(), f"member <{m}> {self._not_an_agent(m)}", "members")
         stiffness = float(_get(prim, "stiffness", 1.0))
         if not stiffness > 0:
             raise prim_error(prim.GetPath(), f"stiffness must be positive, got {stiffness:g}", "stiffness")
@@ -448,14 +566,11 @@ class StageReader:
         agents = _targets(prim, "agents")
         for a in agents:
             if a not in self.agents:
-                raise prim_error(prim.GetPath(), f"targets <{a}>, which is not an active agent", "agents")
+                raise prim_error(prim.GetPath(), f"targets <{a}>, which {self._not_an_agent(a)}", "agents")
         geometry = _targets(prim, "geometry")
         bounds = None
         if geometry:
-            geo = self.stage.GetPrimAtPath(geometry[0])
-            if not geo or not geo.IsA(UsdGeom.Imageable):
-                raise prim_error(prim.GetPath(), f"targets <{geometry[0]}>, which is not a UsdGeom prim",
-                                 "geometry")
+            geo = self._target_prim(prim, "geometry", geometry[0], UsdGeom.Imageable, "UsdGeom prim")
             cache = UsdGeom.BBoxCache(Usd.TimeCode.Default(), [UsdGeom.Tokens.default_, UsdGeom.Tokens.render,
                                                                UsdGeom.Tokens.proxy, UsdGeom.Tokens.guide])
             box = cache.ComputeWorldBound(geo).ComputeAlignedRange()
@@ -473,15 +588,13 @@ class StageReader:
         agents = _targets(prim, "agents")
         for a in agents:
             if a not in self.agents:
-                raise prim_error(prim.GetPath(), f"targets <{a}>, which is not an active agent", "agents")
+                raise prim_error(prim.GetPath(), f"targets <{a}>, which {self._not_an_agent(a)}", "agents")
         anims = _targets(prim, "animation")
         if not anims:
             raise prim_error(prim.GetPath(), "has no animation", "animation")
-        anim = self.stage.GetPrimAtPath(anims[0])
-        if not anim or not anim.IsA(UsdSkel.Animation):
-            raise prim_error(prim.GetPath(), f"targets <{anims[0]}>, which is not a SkelAnimation", "animation")
+        anim = self._target_prim(prim, "animation", anims[0], UsdSkel.Animation, "SkelAnimation")
         try:
-            key, times = self._clip(anim)
+            key, times = self._clip(anim, all_channels=False)
         except MocapEditError as exc:
             raise prim_error(prim.GetPath(), f"animation <{anim.GetPath()}> cannot be layered: {exc}",
                              "animation") from None
@@ -521,12 +634,11 @@ class StageReader:
         return s
 
     def read_curve(self, agent_path: str, curve_path: str) -> dict:
-        prim = self.stage.GetPrimAtPath(curve_path)
-        type_name = prim.GetTypeName() if prim else ""
+        prim = self._target_prim(agent_path, "mocap:pathCurve", curve_path)
+        type_name = prim.GetTypeName()
         if type_name not in ("BasisCurves", "NurbsCurves"):
-            what = "does not exist" if not prim else f"is a {type_name or 'typeless prim'}, not a curve"
-            raise prim_error(agent_path, f"targets <{curve_path}>, which {what} (BasisCurves or NurbsCurves "
-                             "expected)", "mocap:pathCurve")
+            raise prim_error(agent_path, f"targets <{curve_path}>, which is a {type_name or 'typeless prim'}, "
+                             "not a curve (BasisCurves or NurbsCurves expected)", "mocap:pathCurve")
         points = np.array(_get(prim, "points") or [], dtype=np.float64).reshape(-1, 3)
         if len(points) < 2:
             raise prim_error(curve_path, "path curve needs at least two points", "points")
@@ -603,4 +715,4 @@ def read_stage(stage: Usd.Stage, progress=None) -> model.StageData:
     return StageReader(stage, progress).read()
 
 
-__all__ = ["open_stage", "read_stage", "stage_info", "resolve_joint", "StageReader"]
+__all__ = ["open_stage", "check_composition", "read_stage", "stage_info", "resolve_joint", "StageReader"]

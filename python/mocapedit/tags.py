@@ -141,6 +141,10 @@ def build_layer(clips: list[ClipTags], info, settings: stationary.DetectSettings
                 report[f"{clip.animation}.{name}"] = {
                     "frames": Gf.Vec2i(r.first, r.last), "seconds": round(r.duration, 4),
                     "maxSpeed": round(r.max_speed, 4), "maxTurn": round(r.max_turn, 3)}
+                if r.bridged:
+                    report[f"{clip.animation}.{name}"].update({
+                        "bridgedFrames": r.bridged, "bridgedMaxSpeed": round(r.bridged_max_speed, 4),
+                        "bridgedMaxTurn": round(r.bridged_max_turn, 3)})
     layer.customLayerData = {"mocapedit": {
         "version": __version__,
         "detectStationary": {"maxSpeed": settings.max_speed, "maxTurn": settings.max_turn,

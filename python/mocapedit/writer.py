@@ -30,13 +30,13 @@ import json
 import math
 import os
 import re
-import tempfile
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 from pxr import Sdf, UsdGeom, Vt
 
-from . import __version__
+from . import __version__, outputs
 from .model import Agent, StageInfo
 from .names import unique_identifier
 
@@ -354,34 +354,22 @@ def build_layer(content: LayerContent) -> Sdf.Layer:
     return layer
 
 
-def _temp_beside(path: str) -> str:
-    directory, base = os.path.split(os.path.abspath(path))
-    stem, ext = os.path.splitext(base)
-    fd, tmp = tempfile.mkstemp(prefix=f".{stem}.", suffix=ext, dir=directory)
-    os.close(fd)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; the result is an ordinary file
-    return tmp
+def export_layer(layer: Sdf.Layer) -> Callable[[str], None]:
+    """A writer for :class:`~mocapedit.outputs.Writes` that exports ``layer`` to a file."""
+    def write(tmp: str) -> None:
+        if not layer.Export(tmp):
+            raise OSError(f"USD could not write the layer to {tmp}")
+    return write
 
 
 def save_layer(layer: Sdf.Layer, path: str) -> None:
     """Writes the layer to ``path`` through a temporary file and a rename."""
-    directory = os.path.dirname(os.path.abspath(path))
-    os.makedirs(directory, exist_ok=True)
-    tmp = _temp_beside(path)
-    try:
-        if not layer.Export(tmp):
-            raise OSError(f"{path}: USD could not write the layer")
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    outputs.save_with(path, export_layer(layer))
 
 
-def save_composed(path: str, edits_path: str, input_path: str, info: StageInfo,
-                  default_prim: str | None = None) -> None:
-    """Writes a stage that sub-layers the edits over the input (relative paths)."""
+def composed_layer(path: str, edits_path: str, input_path: str, info: StageInfo,
+                   default_prim: str | None = None) -> Sdf.Layer:
+    """A stage layer, to be saved at ``path``, that sub-layers the edits over the input (relative paths)."""
     here = os.path.dirname(os.path.abspath(path))
     layer = Sdf.Layer.CreateAnonymous(os.path.splitext(path)[1] or ".usda")
     layer.subLayerPaths = [os.path.relpath(os.path.abspath(edits_path), here),
@@ -392,24 +380,10 @@ def save_composed(path: str, edits_path: str, input_path: str, info: StageInfo,
     layer.pseudoRoot.SetInfo("metersPerUnit", info.meters_per_unit)
     if default_prim:
         layer.defaultPrim = default_prim
-    save_layer(layer, path)
+    return layer
 
 
-def save_with(path: str, write) -> None:
-    """Writes a file through ``write(temporary path)`` beside it and a rename into place."""
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    tmp = _temp_beside(path)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-
-
-def save_text(path: str, text: str) -> None:
-    """Writes a text file (a report) through a temporary file and a rename."""
-    def write(tmp):
-        with open(tmp, "w", encoding="utf-8") as f:
-            f.write(text)
-    save_with(path, write)
+def save_composed(path: str, edits_path: str, input_path: str, info: StageInfo,
+                  default_prim: str | None = None) -> None:
+    """Writes a stage that sub-layers the edits over the input (relative paths)."""
+    save_layer(composed_layer(path, edits_path, input_path, info, default_prim), path)

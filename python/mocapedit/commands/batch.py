@@ -46,9 +46,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args) -> int:
-    from .. import batch
+    from .. import batch, outputs
     from ..errors import MocapEditError
-    from ..writer import save_text
 
     if args.workers is not None and args.workers < 1:
         raise MocapEditError(f"--workers must be at least 1, got {args.workers}")
@@ -74,7 +73,7 @@ def run(args) -> int:
             cluster.close()
     summary = batch.summary(results, options, time.perf_counter() - t)
     path = args.summary or os.path.join(args.outdir, batch.SUMMARY)
-    save_text(path, json.dumps(summary, indent=2, sort_keys=True) + "\n")
+    outputs.save_with(path, outputs.write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n"))
     if not args.quiet:
         print(f"batch: {summary['solved']} solved, {summary['skipped']} skipped, {summary['failed']} failed "
               f"in {summary['seconds']:.1f} s; summary {os.path.abspath(path)}", file=sys.stderr)

@@ -51,27 +51,32 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args) -> int:
-    from .. import reader, tags, writer
+    from .. import outputs, reader, tags, writer
     from ..progress import Progress
 
     progress = Progress(quiet=args.quiet)
     settings = DetectSettings(max_speed=args.max_speed, max_turn=args.max_turn, min_duration=args.min_duration,
                               window=args.window, max_gap=args.max_gap)
     stage = reader.open_stage(args.stage)
+    outputs.check_outputs([outputs.Output(args.output, "-o"), outputs.Output(args.composed, "--composed")],
+                          outputs.input_files(stage))
     clips, info = tags.detect(stage, settings, root_joint=args.root_joint, animation=args.animation,
                               prefix=args.prefix)
     layer = tags.build_layer(clips, info, settings)
-    writer.save_layer(layer, args.output)
-    if args.composed:
-        writer.save_composed(args.composed, args.output, args.stage, info,
-                             stage.GetRootLayer().defaultPrim or None)
+    with outputs.Writes() as w:
+        w.add(args.output, writer.export_layer(layer))
+        if args.composed:
+            w.add(args.composed, writer.export_layer(writer.composed_layer(
+                args.composed, args.output, args.stage, info, stage.GetRootLayer().defaultPrim or None)))
     fps = info.time_codes_per_second
     for clip in clips:
         progress.message(f"<{clip.animation}> ({clip.frames} frames, measured on {clip.joint.rsplit('/', 1)[-1]}): "
                          f"{len(clip.ranges)} stationary range{'s' if len(clip.ranges) != 1 else ''}")
         for name, r in zip(clip.names, clip.ranges):
+            bridged = (f"; bridges {r.bridged} frame{'s' if r.bridged != 1 else ''} of shorter gaps (--max-gap) "
+                       f"reaching {r.bridged_max_speed:.3f} m/s, {r.bridged_max_turn:.1f} deg/s") if r.bridged else ""
             progress.message(f"  {name}: frames {r.first}-{r.last} ({r.duration:.2f} s at {fps:g} fps), "
-                             f"speed <= {r.max_speed:.3f} m/s, turning <= {r.max_turn:.1f} deg/s")
+                             f"speed <= {r.max_speed:.3f} m/s, turning <= {r.max_turn:.1f} deg/s{bridged}")
     if not args.quiet:
         print(f"wrote {os.path.abspath(args.output)}", file=sys.stderr)
     return 0

@@ -37,16 +37,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args) -> int:
     from ..processor import solve
     from ..progress import Progress
-    from ..writer import save_text
 
     progress = Progress(quiet=args.quiet)
     overrides = {} if args.match_speed is None else {"match_speed": args.match_speed}
     result = solve(args.stage, output=args.output, composed=args.composed, guides=args.guides,
-                   collisions=args.collisions, progress=progress, **overrides)
-    if args.report:
-        save_text(args.report, result.report.to_json() + "\n")
+                   collisions=args.collisions, progress=progress, report_json=args.report, **overrides)
     if not args.quiet:
         print(result.report.summary(), file=sys.stderr)
-        print(f"wrote {os.path.abspath(args.output)}" +
-              (f" and {os.path.abspath(args.composed)}" if args.composed else ""), file=sys.stderr)
+        written = [args.output] + [p for p in (args.composed, args.report) if p]
+        print("wrote " + " and ".join(os.path.abspath(p) for p in written), file=sys.stderr)
     return 0

@@ -25,6 +25,7 @@ import numpy as np
 from .. import avoidance, collisions, ground, writer
 from ..errors import prim_error
 from ..processor import EditedPath, SolveContext, register_pass
+from ..report import describe_left
 
 ORDER = 300
 #: Clearance (metres) up to which each agent's nearest neighbour is measured for the report.
@@ -165,12 +166,14 @@ def _report(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Ou
     _region_entries(ctx, problem, outcome)
     its = stats["collisionsPerIteration"]
     if enabled:
-        how = (f"{its[0]} collision intervals, {len(left)} left after {stats['collisionIterations']} "
-               f"iteration{'s' if stats['collisionIterations'] != 1 else ''} ({problem.names and stats['collisionStrategy']})")
+        left_text = describe_left(len(left), len(outcome.region_left))
+        how = (f"{its[0]} collision interval{'s' if its[0] != 1 else ''} at first, {left_text} after "
+               f"{stats['collisionIterations']} iteration{'s' if stats['collisionIterations'] != 1 else ''} "
+               f"({problem.names and stats['collisionStrategy']})")
         report.note(f"collision avoidance: {how}")
         if len(left) and not blocked:
             report.note(f"collision avoidance stopped at maxIterations ({data.settings.max_iterations}) with "
-                        f"{len(left)} overlapping agent pairs left; see the collision entries")
+                        f"{left_text}; see the collision entries")
 
 
 def _region_entries(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Outcome) -> None:
