@@ -403,7 +403,9 @@ def test_the_report_measures_a_retimed_agent_as_forward_kinematics_does(tmp_path
     measured = metrics.plausibility(src, out, agent)
     # The edited body's own turning is the same; against the source, the solve pairs each shot
     # frame with the source frame it plays, FK on the stage (which cannot know it) by fraction.
-    assert reported["maxFacingRate"] == pytest.approx(measured.max_facing_rate, rel=1e-3)
+    # The solve interpolates the hip's world matrix between source frames; UsdSkel plays the
+    # re-timed clip by interpolating each joint's local rotation: the rates agree to 0.5%.
+    assert reported["maxFacingRate"] == pytest.approx(measured.max_facing_rate, rel=5e-3)
     assert reported["maxExtraFacingRate"] < 60.0 and measured.max_extra_facing_rate < 60.0
     assert reported["maxDirectionDeviation"] < 15.0 and measured.max_direction_deviation < 15.0
     assert reported["lengthRatio"] == pytest.approx(1.0, abs=1e-3)

@@ -53,18 +53,18 @@ def _stop(signum, frame):
             threading.Timer(0.05, os.kill, (os.getpid(), signum)).start()
             return
         f = f.f_back
-    from .outputs import Terminated
-    raise Terminated(signum)
+    from .outputs import request_stop
+    request_stop(signum)
 
 
 def _install_signal_handlers() -> None:
     """SIGTERM and SIGHUP (what farm schedulers and closed terminals send) stop the run
-    the way Ctrl-C does: temporaries are removed and nothing is written."""
+    the way Ctrl-C does: temporaries are removed and nothing is written half."""
     import signal
     import threading
     if threading.current_thread() is not threading.main_thread():
         return
-    for name in ("SIGTERM", "SIGHUP"):
+    for name in ("SIGTERM", "SIGHUP", "SIGINT"):
         if hasattr(signal, name):
             signal.signal(getattr(signal, name), _stop)
 

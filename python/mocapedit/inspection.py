@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import metrics, overlaps, trajectory
+from . import metrics, overlaps
 from .model import StageInfo
 
 #: Clearance (metres) within which the nearest neighbour is measured for the report's
@@ -208,70 +208,6 @@ def remaining_overlaps(crowd: Crowd, progress=None, reach: float = 0.0) -> tuple
     return (Remaining([names[i] for i in worst.a], [names[i] for i in worst.b], times[worst.sample],
                       worst.clearance, ground),
             overlaps.min_clearance(found, len(crowd.agents)))
-
-
-def foot_skate_figures(ctx) -> None:
-    """Adds ``footSkateSource`` and ``footSkateEdited`` to every agent the edits move: the
-    mean horizontal foot speed (stage units per second) while a foot is planted, as
-    :func:`mocapedit.metrics.foot_skate` measures it on the input stage and on the input
-    with the edits over it (the edited agent over the frames where its source feet were
-    planted; an agent whose timing changed, over its own). An agent without joints named
-    like feet gets no figure.
-
-    An agent the edits only carry along a new path is measured on its source frames by
-    forward kinematics here: the edit moves every world point ``p`` of frame ``i`` to
-    ``p @ M[i]`` (see :func:`mocapedit.trajectory.agent_xform_op`). One whose pose was
-    re-baked or re-timed (time warp, layers) is measured by UsdSkel on the two stages.
-    """
-    info = ctx.data.info
-    moved = sorted(p for p, e in ctx.edits.items() if e.xform_op is not None)
-    baked, chains = [], {}
-    for path in moved:
-        edit, agent = ctx.edits[path], ctx.data.agents[path]
-        feet = metrics.default_foot_joints(agent.joints)
-        if edit.animation is not None or edit.retimed is not None or not feet:
-            baked.extend([path] if feet else [])
-            continue
-        clip = ctx.data.clip_of(agent)
-        world = np.stack([trajectory.joint_world(agent, clip, f, chains) for f in feet], axis=1)  # (F,feet,4,4)
-        w = agent.agent_parent_to_world
-        motion = np.linalg.inv(w) @ edit.xform_op @ w
-        units = (agent.sample_times, info.up_axis, info.meters_per_unit, info.time_codes_per_second)
-        before = metrics.foot_skate_of_positions(world[..., 3, :3], *units)
-        after = metrics.foot_skate_of_positions((world @ motion[:, None])[..., 3, :3], *units,
-                                                contact=before.contact)
-        _put_foot_skate(ctx, path, before.mean, after.mean)
-    if baked:
-        _foot_skate_on_stages(ctx, baked)
-
-
-def _put_foot_skate(ctx, path: str, source: float, edited: float) -> None:
-    if np.isfinite(source) and np.isfinite(edited):
-        entry = ctx.report.agent(path)
-        entry.setdefault("footSkateSource", source)
-        entry.setdefault("footSkateEdited", edited)
-
-
-def _foot_skate_on_stages(ctx, paths: list[str]) -> None:
-    """Foot skate of agents by UsdSkel on the input and on the input with their edits over it."""
-    from pxr import Sdf, Usd
-
-    from . import writer
-    root = Sdf.Layer.Find(ctx.data.info.root_layer)
-    if root is None:
-        return
-    edits = writer.build_layer(writer.LayerContent(info=ctx.data.info, agents=ctx.data.agents,
-                                                   edits={p: ctx.edits[p] for p in paths}))
-    over = Sdf.Layer.CreateAnonymous(".usda")
-    over.subLayerPaths.append(edits.identifier)
-    source, edited = Usd.Stage.Open(root), Usd.Stage.Open(root, over)
-    for path in paths:
-        before = metrics.foot_skate(source, path)
-        if path in ctx.time_maps:
-            after = metrics.foot_skate(edited, path)
-        else:
-            after = metrics.foot_skate(edited, path, times=before.times, contact=before.contact)
-        _put_foot_skate(ctx, path, before.mean, after.mean)
 
 
 def complete_report(ctx, crowd: Crowd) -> Remaining | None:

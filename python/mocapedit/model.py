@@ -87,6 +87,11 @@ class Agent:
     collide: bool
     path_curve: str | None
     stationary: list[tuple[str, int, int]] = field(default_factory=list)  # (name, first, last)
+    legs: list = field(default_factory=list)           # contacts.Leg per leg found or authored
+    foot_locking: bool = True                          # mocap:footLocking
+    # Authored MocapFootContactAPI instances of the clip as (name, skeleton joint, first, last);
+    # None when the clip has none (contacts are then detected).
+    foot_contacts: list[tuple[str, int, int, int]] | None = None
 
     @property
     def frame_count(self) -> int:
@@ -184,6 +189,7 @@ class SolveSettings:
     match_speed: bool = False
     collision_strategy: str = "relinearize"
     min_time_interval: float = 0.1
+    foot_locking: bool = True
 
 
 @dataclass

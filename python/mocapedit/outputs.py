@@ -23,7 +23,6 @@ import os
 import secrets
 import signal
 import socket
-import threading
 import time
 from dataclasses import dataclass
 from typing import Callable, Iterable
@@ -181,18 +180,42 @@ def _host() -> str:
     return socket.gethostname().replace("~", "-") or "host"
 
 
+_hold_depth = 0
+_held_signal: int | None = None
+
+
+def request_stop(signum: int) -> None:
+    """What a signal handler calls to stop the run: raises :class:`Terminated` (or
+    KeyboardInterrupt for SIGINT) now, or, inside a few statements that must not be cut in
+    two, as soon as they are done."""
+    global _held_signal
+    if _hold_depth:
+        _held_signal = signum
+        return
+    _raise_stop(signum)
+
+
+def _raise_stop(signum: int) -> None:
+    if signum == signal.SIGINT:
+        raise KeyboardInterrupt
+    raise Terminated(signum)
+
+
 @contextlib.contextmanager
 def _signals_held():
-    """Holds SIGINT, SIGTERM and SIGHUP for a few statements that must not be cut in two
-    (creating a temporary and recording it; renaming a set of files into place)."""
-    held = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
-    main = threading.current_thread() is threading.main_thread()
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, held) if main else None
+    """Holds a stop request (see :func:`request_stop`) for a few statements that must not be
+    cut in two: creating a temporary and recording it, removing one, renaming a set of files
+    into place. (A signal mask would not do: the kernel hands a process's signal to any thread
+    that does not block it, and Python runs the handler in the main thread at once.)"""
+    global _hold_depth, _held_signal
+    _hold_depth += 1
     try:
         yield
     finally:
-        if old is not None:
-            signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        _hold_depth -= 1
+        if _hold_depth == 0 and _held_signal is not None:
+            signum, _held_signal = _held_signal, None
+            _raise_stop(signum)
 
 
 def temporary_beside(path: str) -> str:
@@ -220,11 +243,12 @@ def temporary_beside(path: str) -> str:
 
 
 def remove_temporary(tmp: str) -> None:
-    _live.discard(tmp)
-    try:
-        os.unlink(tmp)
-    except FileNotFoundError:
-        pass
+    with _signals_held():
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        _live.discard(tmp)
 
 
 def _remove_live() -> None:
@@ -348,3 +372,8 @@ def save_with(path: str, write: Callable[[str], object]) -> None:
     """Writes one file through ``write(temporary path)`` beside it and a rename into place."""
     with Writes() as w:
         w.add(path, write)
+
+
+def save_text(path: str, text: str) -> None:
+    """Writes a text file (a report, a summary) whole, through a temporary and a rename."""
+    save_with(path, write_text(text))

@@ -222,10 +222,17 @@ def measure_plausibility(ctx: SolveContext) -> None:
         p = metrics.plausibility_of(path, agent.sample_times * seconds, source[:, 0], times * seconds, edited[:, 0],
                                     up, info.meters_per_unit, *skate, edited_frames=frames)
         figures.append(p)
-        ctx.report.agent(path)["plausibility"] = {
+        entry = ctx.report.agent(path)
+        if np.isfinite(skate).all():
+            # Mean foot speed while in contact (stage units per second), over the source's contacts.
+            entry.setdefault("footSkateSource", skate[0])
+            entry.setdefault("footSkateEdited", skate[1])
+        entry["plausibility"] = {
             "maxFacingRate": p.max_facing_rate, "sourceMaxFacingRate": p.source_max_facing_rate,
             "maxExtraFacingRate": p.max_extra_facing_rate, "spinFrames": p.spin_frames,
-            "maxDirectionDeviation": p.max_direction_deviation, "lengthRatio": p.length_ratio,
+            "maxDirectionDeviation": p.max_direction_deviation,
+            "maxTurnedDirectionDeviation": p.max_turned_deviation, "maxEditTurn": p.max_edit_turn,
+            "reverses": p.reverses, "lengthRatio": p.length_ratio,
             "timeWarp": list(p.time_warp), "footSkateRatio": p.foot_skate_ratio,
             # Source frames where the largest extra turn and direction change happen (previews mark them).
             "worstTurnFrame": int(round(frames[max(p.worst_turn_frame, 0)])),
@@ -242,7 +249,6 @@ def _with_parent(agent, parent_to_world):
 def inspect(ctx: SolveContext) -> None:
     """After every pass: the report figures no pass measured, and the guides."""
     crowd = inspection.from_context(ctx)
-    inspection.foot_skate_figures(ctx)
     remaining = inspection.complete_report(ctx, crowd)
     guides.build(ctx, crowd, remaining)
 

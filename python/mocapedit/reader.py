@@ -13,11 +13,12 @@ import re
 import numpy as np
 from pxr import Sdf, Usd, UsdGeom, UsdSkel
 
-from . import model
+from . import contacts, model
 from .errors import MocapEditError, prim_error
 
 AGENT_API = "MocapAgentAPI"
 STATIONARY_API = "MocapStationaryAPI"
+FOOT_CONTACT_API = "MocapFootContactAPI"
 
 DEFAULT_COLLISION_RADIUS_M = 0.3
 DEFAULT_COLLISION_HEIGHT_M = 1.8
@@ -178,6 +179,21 @@ def resolve_joint(joints: list[str], name: str) -> int | None:
         return joints.index(name)
     matches = [i for i, j in enumerate(joints) if _leaf(j) == name]
     return matches[0] if len(matches) == 1 else None
+
+
+def _frame_range(anim: Usd.Prim, prop: str, frame_count: int, what: str) -> tuple[int, int]:
+    """An inclusive (first, last) int2 range of clip frames, checked against the clip."""
+    value = _get(anim, prop)
+    if value is None:
+        raise prim_error(anim.GetPath(), f"{what} tag has no frame range", prop)
+    a, b = int(value[0]), int(value[1])
+    if a > b:
+        raise prim_error(anim.GetPath(), f"{what} range [{a}, {b}] is reversed: its first frame "
+                         f"comes after its last; write ({b}, {a})", prop)
+    if not (0 <= a <= b < frame_count):
+        raise prim_error(anim.GetPath(), f"{what} range [{a}, {b}] is outside the clip's "
+                         f"frames 0..{frame_count - 1}", prop)
+    return a, b
 
 
 class _XformTimes:
@@ -399,19 +415,50 @@ class StageReader:
             if not schema.startswith(prefix):
                 continue
             name = schema[len(prefix):]
-            prop = f"stationary:{name}:frames"
-            value = _get(anim, prop)
-            if value is None:
-                raise prim_error(anim.GetPath(), "stationary tag has no frame range", prop)
-            a, b = int(value[0]), int(value[1])
-            if a > b:
-                raise prim_error(anim.GetPath(), f"stationary range [{a}, {b}] is reversed: its first frame "
-                                 f"comes after its last; write ({b}, {a})", prop)
-            if not (0 <= a <= b < frame_count):
-                raise prim_error(anim.GetPath(), f"stationary range [{a}, {b}] is outside the clip's "
-                                 f"frames 0..{frame_count - 1}", prop)
+            a, b = _frame_range(anim, f"stationary:{name}:frames", frame_count, "stationary")
             tags.append((name, a, b))
         return sorted(tags, key=lambda t: (t[1], t[2], t[0]))
+
+    def _legs(self, prim: Usd.Prim, joints: list[str], parents: np.ndarray) -> list:
+        found = {leg.side: leg for leg in contacts.find_legs(joints, parents)}
+        for side in contacts.SIDES:
+            prop = f"mocap:{side}LegJoints"
+            names = [str(n) for n in (_get(prim, prop) or [])]
+            if not names:
+                continue
+            indices = []
+            for name in names:
+                index = resolve_joint(joints, name)
+                if index is None:
+                    raise prim_error(prim.GetPath(), f"joint '{name}' is not in the skeleton (or its bare name "
+                                     "is not unique: give its joint path)", prop)
+                indices.append(int(index))
+            why = contacts.chain_problem(joints, parents, indices)
+            if why:
+                raise prim_error(prim.GetPath(), why, prop)
+            found[side] = contacts.Leg(side, *indices[:3], indices[3] if len(indices) > 3 else None)
+        return [found[s] for s in contacts.SIDES if s in found]
+
+    def _foot_contacts(self, anim: Usd.Prim, joints: list[str], frame_count: int, legs: list):
+        prefix = FOOT_CONTACT_API + ":"
+        names = [s[len(prefix):] for s in anim.GetAppliedSchemas() if s.startswith(prefix)]
+        if not names:
+            return None
+        feet = {j: leg for leg in legs for j in (leg.ankle, leg.toe) if j is not None}
+        out = []
+        for name in names:
+            prop = f"footContact:{name}:joint"
+            joint_name = str(_get(anim, prop, "") or "")
+            joint = resolve_joint(joints, joint_name) if joint_name else None
+            if joint is None:
+                raise prim_error(anim.GetPath(), f"foot joint '{joint_name}' is not in the skeleton" if joint_name
+                                 else "foot contact names no joint", prop)
+            if joint not in feet:
+                raise prim_error(anim.GetPath(), f"joint '{joint_name}' is not the ankle or toe of a leg "
+                                 "(set mocap:leftLegJoints / mocap:rightLegJoints on the agent)", prop)
+            a, b = _frame_range(anim, f"footContact:{name}:frames", frame_count, "foot contact")
+            out.append((name, int(feet[joint].ankle), a, b))
+        return sorted(out, key=lambda c: (c[2], c[3], c[0]))
 
     def read_agent(self, prim: Usd.Prim) -> model.Agent:
         path = str(prim.GetPath())
@@ -452,6 +499,7 @@ class StageReader:
         if not height > 0:
             raise prim_error(path, f"collision height must be positive, got {height:g}", "mocap:collisionHeight")
 
+        legs = self._legs(prim, joints, parents)
         curves = _targets(prim, "mocap:pathCurve")
         order = UsdGeom.Xformable(prim).GetXformOpOrderAttr().Get() if UsdGeom.Xformable(prim) else None
         return model.Agent(
@@ -466,6 +514,8 @@ class StageReader:
             collide=bool(_get(prim, "mocap:collide", True)),
             path_curve=curves[0] if curves else None,
             stationary=self._stationary(anim, times.size),
+            legs=legs, foot_locking=bool(_get(prim, "mocap:footLocking", True)),
+            foot_contacts=self._foot_contacts(anim, joints, times.size, legs),
         )
 
     # ---- the other prims ---------------------------------------------------------------
@@ -627,6 +677,7 @@ class StageReader:
         s.match_speed = bool(_get(prim, "matchSpeed", s.match_speed))
         s.collision_strategy = str(_get(prim, "collisionStrategy", s.collision_strategy))
         s.min_time_interval = float(_get(prim, "minTimeInterval", s.min_time_interval))
+        s.foot_locking = bool(_get(prim, "footLocking", s.foot_locking))
         if s.max_iterations < 0:
             raise prim_error(prim.GetPath(), "must not be negative", "maxIterations")
         if not s.sample_step > 0:

@@ -50,6 +50,7 @@ class Report:
                  f"clips: {s.get('clips', 0)}; constraints: {s.get('constraints', 0)}"]
         lines.extend(overview(s, self.constraints))
         lines.extend(plausibility_lines(s.get("plausibility")))
+        lines.extend(foot_locking_lines(s))
         lines.extend(f"note: {n}" for n in self.notes)
         return "\n".join(lines)
 
@@ -84,6 +85,17 @@ def overview(stats: dict, constraints: list[dict]) -> list[str]:
     return lines
 
 
+def foot_locking_lines(stats: dict) -> list[str]:
+    """The shot's foot locking figures, as ``solve`` prints them and the report shows them."""
+    if "footContactsLocked" not in stats:
+        return []
+    return [f"feet: {stats['footContactsLocked']} contacts locked on {stats.get('footLockedAgents', 0)} agents; "
+            f"skate {_num(stats.get('footSkateSource'))} source, {_num(stats.get('footSkateEdited'))} edited, "
+            f"{_num(stats.get('footSkateLocked'))} locked (stage units/s, mean over agents); "
+            f"largest pelvis drop {_num(stats.get('maxPelvisDrop'))}, "
+            f"largest foot correction {_num(stats.get('maxFootCorrection'))}"]
+
+
 def plausibility_lines(p: dict | None) -> list[str]:
     """The shot's worst plausibility figures (``stats["plausibility"]``), as ``solve`` prints them."""
     if not p or not p.get("agents"):
@@ -95,7 +107,11 @@ def plausibility_lines(p: dict | None) -> list[str]:
         f"deg/frame at 60 fps ({p['maxExtraFacingRateAgent']}), {p['spinningAgents']} spinning (over 15)",
         f"  largest walking direction change {p['maxDirectionDeviation']:.1f} deg"
         + (f" ({p['maxDirectionDeviationAgent']})" if p.get("maxDirectionDeviationAgent") else "")
-        + f", {p['reversingAgents']} reversing (over 90)",
+        + (f", {p['maxTurnedDirectionDeviation']:.1f} deg against the edit's own turn"
+           + (f" ({p['maxTurnedDirectionDeviationAgent']})" if p.get("maxTurnedDirectionDeviationAgent") else "")
+           if "maxTurnedDirectionDeviation" in p else "")
+        + f", {p['reversingAgents']} reversing"
+        + (" (over 90 against the edit's turn, or turned over 135)" if "maxEditTurn" in p else " (over 90)"),
         f"  path length ratio mean {p['meanLengthRatio']:.3f} ({lo:.3f}..{hi:.3f}); time warp {wlo:.3f}..{whi:.3f}; "
         f"foot skate ratio mean {p['meanFootSkateRatio']:.2f} (max {p['maxFootSkateRatio']:.2f})"]
 
@@ -198,7 +214,8 @@ def select(stored: StoredReport, patterns: list[str] | None = None) -> StoredRep
 _UNIT_NAMES = {1.0: "m", 0.01: "cm", 0.001: "mm", 0.1: "dm", 1000.0: "km"}
 _TIME_KINDS = ("time", "sync")
 _KNOWN_FIGURES = ("frames", "edited", "lengthRatio", "maxDisplacement", "meanDisplacement", "shapeChange",
-                  "footSkateSource", "footSkateEdited", "minSeparation", "minInterval", "solver", "notes",
+                  "footSkateSource", "footSkateEdited", "footSkateLocked", "footContactsLocked", "maxPelvisDrop",
+                  "maxFootCorrection", "minSeparation", "minInterval", "solver", "notes",
                   "plausibility", "trajectoryJoint")
 
 
@@ -236,8 +253,10 @@ def format_text(stored: StoredReport, show_all: bool = False) -> str:
     lines.extend(overview(s, r.constraints))
     others = {k: v for k, v in sorted(s.items()) if k not in (
         "agents", "editedAgents", "clips", "constraints", "groups", "avoidRegions", "animationLayers",
-        "remainingOverlaps", "plausibility")}
+        "remainingOverlaps", "plausibility", "footContactsLocked", "footLockedAgents", "footSkateSource",
+        "footSkateEdited", "footSkateLocked", "maxPelvisDrop", "maxFootCorrection")}
     lines.extend(plausibility_lines(s.get("plausibility")))
+    lines.extend(foot_locking_lines(s))
     if others:
         lines.append("stats: " + ", ".join(f"{k} {_num(v)}" for k, v in others.items()))
     lines.extend(f"note: {n}" for n in r.notes)
@@ -271,7 +290,11 @@ def format_text(stored: StoredReport, show_all: bool = False) -> str:
         if "footSkateSource" in fig or "footSkateEdited" in fig:
             a, b = fig.get("footSkateSource"), fig.get("footSkateEdited")
             change = f" ({'+' if b - a >= 0 else ''}{_num(b - a)})" if a is not None and b is not None else ""
-            parts.append(f"foot skate {_num(a)} -> {_num(b)}{change}")
+            locked = f" -> locked {_num(fig['footSkateLocked'])}" if "footSkateLocked" in fig else ""
+            parts.append(f"foot skate {_num(a)} -> {_num(b)}{change}{locked}")
+        if "footContactsLocked" in fig:
+            parts.append(f"contacts locked {fig['footContactsLocked']}, pelvis drop {_num(fig.get('maxPelvisDrop'))}, "
+                         f"foot correction {_num(fig.get('maxFootCorrection'))}")
         if "minSeparation" in fig:
             sep = fig["minSeparation"]
             parts.append(f"min separation {_num(sep)}" + ("  OVERLAP" if sep is not None and sep < 0 else ""))

@@ -17,3 +17,5 @@ def add_solve_options(p: argparse.ArgumentParser) -> None:
                         "(MocapSolveSettings.matchSpeed)")
     p.add_argument("--no-match-speed", dest="match_speed", action="store_false",
                    help="keep the source timing on edited paths even if MocapSolveSettings asks to match speed")
+    p.add_argument("--no-foot-locking", dest="foot_locking", action="store_false", default=None,
+                   help="leave the feet as the edits put them (MocapSolveSettings.footLocking off)")

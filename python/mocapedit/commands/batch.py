@@ -46,8 +46,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args) -> int:
-    from .. import batch, outputs
+    from .. import batch
     from ..errors import MocapEditError
+    from ..outputs import save_text
 
     if args.workers is not None and args.workers < 1:
         raise MocapEditError(f"--workers must be at least 1, got {args.workers}")
@@ -55,6 +56,8 @@ def run(args) -> int:
     options = {"guides": args.guides, "collisions": args.collisions}
     if args.match_speed is not None:
         options["match_speed"] = args.match_speed
+    if args.foot_locking is not None:
+        options["foot_locking"] = args.foot_locking
     t = time.perf_counter()
     client, cluster = batch.connect(args.scheduler, args.workers)
 
@@ -73,7 +76,7 @@ def run(args) -> int:
             cluster.close()
     summary = batch.summary(results, options, time.perf_counter() - t)
     path = args.summary or os.path.join(args.outdir, batch.SUMMARY)
-    outputs.save_with(path, outputs.write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n"))
+    save_text(path, json.dumps(summary, indent=2, sort_keys=True) + "\n")
     if not args.quiet:
         print(f"batch: {summary['solved']} solved, {summary['skipped']} skipped, {summary['failed']} failed "
               f"in {summary['seconds']:.1f} s; summary {os.path.abspath(path)}", file=sys.stderr)
