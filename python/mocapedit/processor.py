@@ -219,6 +219,9 @@ def measure_plausibility(ctx: SolveContext) -> None:
             mask = before.contact if len(times) == len(agent.sample_times) else None
             skate = [before.mean, metrics.foot_skate_of_positions(edited[:, 1:, 3, :3], times, *units,
                                                                   contact=mask).mean]
+        locked = ctx.report.agents.get(path, {})
+        if "footSkateUnlocked" in locked:  # foot locking measured the legs as the layer plays them
+            skate = [locked["footSkateSource"], locked["footSkateEdited"]]
         p = metrics.plausibility_of(path, agent.sample_times * seconds, source[:, 0], times * seconds, edited[:, 0],
                                     up, info.meters_per_unit, *skate, edited_frames=frames)
         figures.append(p)
