@@ -109,6 +109,7 @@ class Settings:
     sweeps: int = 20                    # Gauss-Seidel sweeps per solve step at least (warm-started)
     sweep_budget: float = 1e6           # rows x sweeps per step allowed beyond that (up to 10x sweeps)
     tolerance: float = 1e-3             # of the clearance: Gauss-Seidel stops when no row moves more
+    patience: int = 6                   # stop after this many iterations without progress
     meters_per_unit: float = 1.0
 
 
@@ -134,6 +135,9 @@ class Outcome:
     moved: np.ndarray                   # (A,) bool: the agent's path changed
     solves: int = 0
     seconds: float = 0.0
+    #: the iterations stopped before max_iterations because ``patience`` of them in a row
+    #: neither lowered the count of collisions and region frames nor the deepest overlap
+    stalled: bool = False
     #: wall seconds by phase: "factor" (the agents' energies), "detect" (sampling and
     #: detection), "gather", "blocks", "sweeps" and "responses" (inside the solves), "rows"
     #: (the rest: forming the rows)
@@ -378,7 +382,7 @@ def resolve(problem: Problem, settings: Settings | None = None, progress=None) -
                       for a in range(len(problem.names))], dtype=bool)
     return Outcome(paths=state.split(flat), rigid_angles=angles, iterations=run.iterations,
                    sampling=state.sampling, remaining=found, region_left=region_left,
-                   blocked=_blocked(state, found), moved=moved, solves=run.solves,
+                   blocked=_blocked(state, found), moved=moved, solves=run.solves, stalled=run.stalled,
                    seconds=time.perf_counter() - t0, timing=run.timing(time.perf_counter() - t0), work=dict(run.work))
 
 
@@ -394,6 +398,9 @@ class _Run:
         self.work = {"rows": 0, "updates": 0, "inverseColumns": 0}
         self.found = None
         self.hits = None
+        self.best = (np.inf, np.inf)    # fewest collisions and region frames, smallest deepest overlap
+        self.since_best = 0             # iterations since either improved
+        self.stalled = False
         self.task = progress.task("collision avoidance", state.s.max_iterations, "iterations") if progress else None
 
     def observe(self, flat: np.ndarray, it: int) -> bool:
@@ -406,7 +413,16 @@ class _Run:
         record = _iteration(state, self.found, self.hits)
         self.iterations.append(record)
         left = record.collisions + record.region_samples
-        last = left == 0 or it == state.s.max_iterations
+        # Constraints that cannot all hold (a wall closer than a capsule, a crowd packed
+        # tighter than its clearances) trade overlap for overlap forever: stop when the
+        # iterations no longer make progress, whatever max_iterations says.
+        if left < self.best[0] or record.deepest < self.best[1] * (1.0 - 1e-3):
+            self.since_best = 0
+        else:
+            self.since_best += 1
+        self.best = (min(self.best[0], left), min(self.best[1], record.deepest))
+        self.stalled = left > 0 and self.since_best >= state.s.patience and it < state.s.max_iterations
+        last = left == 0 or it == state.s.max_iterations or self.stalled
         if self.task is not None:
             if last:
                 self.task.done(f"{left} collision{'s' if left != 1 else ''} left after {it} iteration"

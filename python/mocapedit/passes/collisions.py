@@ -14,9 +14,15 @@ with ``mocap:collide = false`` are left alone. Time maps are not changed.
 
 Report: ``stats`` ``collisionStrategy``, ``collisionIterations``, ``collisionsPerIteration``
 (collision intervals found before each solve, then after the last), ``remainingOverlaps``,
-``regionFramesLeft``, ``minSeparation``; per agent ``minSeparation``; one ``collision``
+``regionFramesLeft``, ``minSeparation``, ``collisionStalled`` (when the iterations stopped
+making progress before ``maxIterations``); per agent ``minSeparation``; one ``collision``
 entry per overlap left (agent pair, shot time, where) and one ``avoid-region`` entry per
 agent a region had to push; notes naming agents hard constraints hold together.
+
+Bad input: a capsule radius above :data:`MAX_RADIUS_M` (no character is that wide; a
+typing slip in it would push the whole crowd kilometres) is an error naming the agent
+and ``mocap:collisionRadius``; so is a hard constraint that holds an agent inside an avoid
+region it must keep out of (the error names both prims).
 """
 from __future__ import annotations
 
@@ -32,6 +38,8 @@ SEPARATION_REACH_M = 2.0
 #: Sides of the outline drawn for a circular region.
 OUTLINE_SIDES = 64
 REGION_COLOR = (0.9, 0.35, 0.1)
+#: Largest capsule radius (metres) collision avoidance accepts.
+MAX_RADIUS_M = 10.0
 
 
 def _settings(ctx: SolveContext):
@@ -58,7 +66,9 @@ def collision_pass(ctx: SolveContext) -> None:
     names = [p for p in sorted(data.agents) if data.agents[p].collide]
     if len(names) < (2 if not footprints else 1):
         return
+    _check_radii(ctx, names)
     problem = _problem(ctx, names, footprints, enabled)
+    _check_pins_outside_regions(ctx, problem)
     outcome = avoidance.resolve(problem, avoidance.Settings(
         strategy=settings.collision_strategy, max_iterations=int(settings.max_iterations),
         meters_per_unit=info.meters_per_unit), ctx.progress)
@@ -66,6 +76,31 @@ def collision_pass(ctx: SolveContext) -> None:
     _report(ctx, problem, outcome, enabled)
     if ctx.options.guides and data.avoid_regions:
         _region_guides(ctx, footprints)
+
+
+def _check_radii(ctx: SolveContext, names: list[str]) -> None:
+    largest = ctx.data.info.metres(MAX_RADIUS_M)
+    for name in names:
+        radius = ctx.data.agents[name].collision_radius
+        if radius > largest:
+            raise prim_error(name, f"collision radius {radius:g} is more than {MAX_RADIUS_M:g} m "
+                             f"({largest:g} stage units): no character is that wide", "mocap:collisionRadius")
+
+
+def _check_pins_outside_regions(ctx: SolveContext, problem: avoidance.Problem) -> None:
+    """A hard constraint holding an agent inside a region it must avoid contradicts the region."""
+    for region in problem.regions:
+        for pin in problem.pins:
+            at = np.searchsorted(region.agents, pin.agent)
+            if pin.softness != 0 or at >= len(region.agents) or region.agents[at] != pin.agent:
+                continue
+            clearance = region.clearance[at]
+            depth = clearance - float(collisions.signed_distance(region.footprint, pin.position[None])[0])
+            if depth > 1e-6 * max(clearance, 1.0):
+                raise prim_error(pin.name, f"holds agent <{problem.names[pin.agent]}> at frame {pin.frame} "
+                                 f"{depth:g} stage units inside avoid region <{region.name}> (its footprint grown "
+                                 "by the agent's collision radius and the region's margin); move the constraint "
+                                 "or the region, or make one of them soft or inactive")
 
 
 def _problem(ctx: SolveContext, names: list[str], footprints, enabled: bool) -> avoidance.Problem:
@@ -169,8 +204,17 @@ def _report(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Ou
                f"iteration{'s' if stats['collisionIterations'] != 1 else ''} ({problem.names and stats['collisionStrategy']})")
         report.note(f"collision avoidance: {how}")
         if len(left) and not blocked:
-            report.note(f"collision avoidance stopped at maxIterations ({data.settings.max_iterations}) with "
-                        f"{len(left)} overlapping agent pairs left; see the collision entries")
+            why = (f"after {stats['collisionIterations']} iterations without progress "
+                   "(constraints that cannot all hold)" if outcome.stalled
+                   else f"at maxIterations ({data.settings.max_iterations})")
+            report.note(f"collision avoidance stopped {why} with {len(left)} overlapping agent pairs left; "
+                        "see the collision entries")
+    if outcome.stalled:
+        stats["collisionStalled"] = True
+        if outcome.region_left:
+            report.note(f"avoid regions: {len(outcome.region_left)} frames left inside after "
+                        f"{stats['collisionIterations']} iterations without progress (constraints that cannot "
+                        "all hold); see the avoid-region entries")
 
 
 def _region_entries(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Outcome) -> None:
