@@ -108,6 +108,7 @@ CONTRACT: dict[str, dict[str, object]] = {
         "matchSpeed": ("bool", UNIFORM, False, None),
         "collisionStrategy": ("token", UNIFORM, "relinearize", ["relinearize", "accumulate"]),
         "minTimeInterval": ("double", UNIFORM, 0.1, None),
+        "maxWait": ("double", UNIFORM, 3.0, None),
     },
 }
 
@@ -419,7 +420,7 @@ def test_docs_everywhere():
 # Every attribute doc names its unit or says it has none (modes with allowedTokens are
 # exempt: their values are the documentation).
 UNIT_WORDS = ("stage units", "time code", "dimensionless", "no units", "frame",
-              "joint path", "a count")
+              "joint path", "a count", "seconds")
 
 
 def test_attribute_docs_state_units():
@@ -471,7 +472,7 @@ SAMPLES = {
     "margin": 0.125, "joint": "Hips/Spine/Chest", "mode": "blend", "timeOffset": -12.5,
     "wrap": "clamp", "referencePose": "restPose", "collisionAvoidance": True,
     "maxIterations": 25, "sampleStep": 0.5, "matchSpeed": True,
-    "collisionStrategy": "accumulate", "minTimeInterval": 0.25,
+    "collisionStrategy": "accumulate", "minTimeInterval": 0.25, "maxWait": 1.5,
 }
 OFFSETS = {"MocapRelativeConstraint": Gf.Vec3d(0.75, 0, -1.25), "MocapSyncConstraint": 4.5}
 

@@ -1,4 +1,4 @@
-"""Collision avoidance by path editing (chapter 6 of the deliverable), and avoid regions.
+"""Collision avoidance by waiting and path editing (chapter 6 of the deliverable), and avoid regions.
 
 The agents' ground paths are re-solved with the two-step Laplacian energy of the path
 editor (:class:`mocapedit._solver.SeparationSolver`: each agent factored once, rows that
@@ -31,12 +31,24 @@ an avoid region, or ``max_iterations`` is reached. Two strategies:
   where it was already held apart is held at every sample of its intervals, a little
   further apart each time it resists, so the iterations do not stall on it.
 
+Before either, walkers wait (``Settings.max_wait_s``, ``MocapSolveSettings.maxWait``):
+of two walkers whose paths cross, the one that reaches the crossing later slows down
+before it, through its time map, until the other has passed (of two walking the same
+way, the one behind waits). A wait changes no path: no detour, no turn, no length added,
+and feet planted in the source stay planted (the pose plays slower, it does not slide).
+What waiting cannot part (head-on, overtaking without room, standing agents, agents whose
+timing constraints fix) the paths then resolve. Measured on the example scenes by FK
+(README), waiting first and then steering with a weak anchor (detours spread over about
+0.75 s each side at 24 fps) beat steering alone on foot skate, path length and walking
+direction.
+
 Artist constraints hold throughout: hard pins and links are hard rows of every solve,
 stationary ranges move rigidly. Pairs that hard constraints hold together are reported,
-not looped on.
+not looped on. The iterations stop when ``patience`` of them in a row make no progress.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -95,13 +107,15 @@ class Problem:
     links: list[Link] = field(default_factory=list)
     regions: list[Region] = field(default_factory=list)
     collide_agents: bool = True         # False: regions only
+    fixed_timing: np.ndarray | None = None  # (A,) bool: time constraints fix the agent's timing
+    span: tuple[float, float] | None = None  # shot times compared (default: all the frames play)
 
 
 @dataclass
 class Settings:
     strategy: str = "relinearize"
     max_iterations: int = 10
-    anchor_weight: float = 1e-4         # pull of every frame to its source (relative to shape terms)
+    anchor_weight: float = 1e-5         # pull of every frame to its source (relative to shape terms)
     overshoot: float = 0.03             # separations aim this fraction past the clearance
     buffer_m: float = 0.3               # near misses watched by relinearize, metres
     spread: int = 3                     # relinearize constrains every n-th sample of an interval
@@ -110,6 +124,10 @@ class Settings:
     sweep_budget: float = 1e6           # rows x sweeps per step allowed beyond that (up to 10x sweeps)
     tolerance: float = 1e-3             # of the clearance: Gauss-Seidel stops when no row moves more
     patience: int = 6                   # stop after this many iterations without progress
+    max_wait_s: float = 3.0             # most delay waiting may add to one agent, seconds (0: none)
+    wait_step_s: float = 0.25           # delays are tried in steps of this, seconds
+    wait_rounds: int = 8                # rounds of waiting at most
+    time_codes_per_second: float = 24.0
     meters_per_unit: float = 1.0
 
 
@@ -145,6 +163,11 @@ class Outcome:
     #: work done, summed over the solves: "rows" sent, Gauss-Seidel "updates" passed on,
     #: "inverseColumns" (back-substitutions for the agents' Schur blocks)
     work: dict = field(default_factory=dict)
+
+    #: (A,) the shot time of each source frame after waiting (the problem's when none waits)
+    frame_times: list[np.ndarray] = field(default_factory=list)
+    #: (A,) delay each agent took up by waiting, time codes
+    delays: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def converged(self) -> bool:
@@ -207,7 +230,7 @@ class _State:
         self.times = {i: t for i, t in enumerate(problem.frame_times)}
         idx = list(range(len(problem.names)))
         self.sampling = collisions.sample(idx, self.times, {i: g for i, g in enumerate(problem.paths)},
-                                          problem.sample_step)
+                                          problem.sample_step, problem.span)
         self.resample = collisions.Resampler(self.sampling, self.starts)
         pinned = np.zeros(len(self.rest), dtype=bool)
         for pin in problem.pins:
@@ -366,6 +389,10 @@ def resolve(problem: Problem, settings: Settings | None = None, progress=None) -
     if settings.strategy not in STRATEGIES:
         raise ValueError(f"unknown collision strategy '{settings.strategy}' (use {' or '.join(STRATEGIES)})")
     t0 = time.perf_counter()
+    fixed = np.zeros(len(problem.names), bool) if problem.fixed_timing is None else np.asarray(problem.fixed_timing)
+    waits = _waits(problem, settings, fixed)
+    if waits.delay.any():
+        problem = dataclasses.replace(problem, frame_times=waits.frame_times, span=waits.span)
     state = _State(problem, settings)
     watch = settings.buffer_m / settings.meters_per_unit if settings.strategy == "relinearize" else None
     run = _Run(state, progress, watch)
@@ -383,6 +410,7 @@ def resolve(problem: Problem, settings: Settings | None = None, progress=None) -
     return Outcome(paths=state.split(flat), rigid_angles=angles, iterations=run.iterations,
                    sampling=state.sampling, remaining=found, region_left=region_left,
                    blocked=_blocked(state, found), moved=moved, solves=run.solves, stalled=run.stalled,
+                   frame_times=waits.frame_times, delays=waits.delay,
                    seconds=time.perf_counter() - t0, timing=run.timing(time.perf_counter() - t0), work=dict(run.work))
 
 
@@ -793,4 +821,187 @@ def heading_change(before: np.ndarray, after: np.ndarray, ranges, still: float) 
     idx = np.flatnonzero(known)
     out = np.interp(np.arange(len(turn)), idx, turn[idx])
     out[known] = turn[known]
+    return out
+
+
+# ---- waiting: delays through the time maps ---------------------------------------------------
+
+#: Cosine of the angle between two walkers' directions beyond which they pass head-on or
+#: overtake: waiting cannot part them, only a step aside can.
+PASSING_COS = 0.7
+#: Slowest fraction of the source pace a walker slows to while it takes up a delay.
+SLOWEST_PACE = 0.5
+
+
+def smooth_delay(times: np.ndarray, start: float, end: float, delay: float) -> np.ndarray:
+    """(F,) the time map ``times`` with ``delay`` time codes taken up between shot times
+    ``start`` and ``end`` (a smoothstep: no interval shrinks, every one after ``end`` is
+    unchanged, the pace is continuous)."""
+    u = np.clip((np.asarray(times) - start) / max(end - start, 1e-12), 0.0, 1.0)
+    return np.asarray(times) + delay * u * u * (3.0 - 2.0 * u)
+
+
+@dataclass
+class _Boxes:
+    """Ground bounding boxes of every agent over blocks of ``size`` samples."""
+    low: np.ndarray               # (B,A,2)
+    high: np.ndarray              # (B,A,2)
+    size: int
+
+    @classmethod
+    def of(cls, positions: np.ndarray, size: int) -> "_Boxes":
+        k = len(positions)
+        blocks = -(-k // size)
+        padded = np.concatenate([positions, np.repeat(positions[-1:], blocks * size - k, axis=0)])
+        shaped = padded.reshape(blocks, size, *positions.shape[1:])
+        return cls(shaped.min(axis=1), shaped.max(axis=1), size)
+
+
+def _least_delay(problem: Problem, settings: Settings, paths, times: np.ndarray, w: int, o: int,
+                 pos: np.ndarray, st: np.ndarray, boxes: _Boxes, first: int, last: int, room: float,
+                 step: float):
+    """(time map, delay) of the least delay of agent w that parts it from agent o over
+    their encounter (samples first..last at the sampling ``pos``, ``st``) and meets no
+    agent it did not meet already, but for those walking its way; None when no delay up
+    to ``room`` does."""
+    fps = settings.time_codes_per_second
+    # The encounter: from a second before the overlap to a second past it, plus the room.
+    lo = max(first - int(np.ceil(fps / problem.sample_step)), 0)
+    hi = min(last + int(np.ceil((room + fps) / problem.sample_step)), len(st) - 1)
+    window = st[lo:hi + 1]
+    # Whatever the delay, w walks the part of its path it walked from `room` before the
+    # window to its end: only the agents whose blocks come near that part can meet it.
+    reach = pos[max(lo - int(np.ceil(room / problem.sample_step)), 0):hi + 1, w]
+    grow = problem.radius[w] + problem.radius + problem.margin * (1.0 + settings.overshoot)
+    b0, b1 = lo // boxes.size, hi // boxes.size + 1
+    low, high = boxes.low[b0:b1].min(axis=0), boxes.high[b0:b1].max(axis=0)     # (A,2)
+    r_lo, r_hi = reach.min(axis=0), reach.max(axis=0)
+    near = ((low[:, 0] - grow <= r_hi[0]) & (low[:, 1] - grow <= r_hi[1])
+            & (high[:, 0] + grow >= r_lo[0]) & (high[:, 1] + grow >= r_lo[1]))
+    near[w] = False
+    near[o] = True
+    cand = np.flatnonzero(near)
+    at_o = int(np.searchsorted(cand, o))
+    others = pos[lo:hi + 1][:, cand]                                 # (K,N,2)
+    need = grow[cand]
+
+    frames = np.arange(len(times), dtype=np.float64)
+
+    def overlapped(maps):
+        """(M,N) for each of M time maps of w, which candidates it overlaps in the window."""
+        pw = np.stack([collisions.positions_at(paths[w], np.interp(window, m, frames)) for m in maps])
+        return (np.linalg.norm(others[None] - pw[:, :, None], axis=3) - need).min(axis=1) < 0.0
+
+    before = overlapped([times])[0]
+    # Walkers going the same way may be caught up with: they wait in their turn (the next
+    # round), as a queue does. A new encounter with anyone else is not worth a wait.
+    motion = others[-1] - others[0]
+    mine = pos[hi, w] - pos[lo, w]
+    cos = motion @ mine / np.maximum(np.linalg.norm(motion, axis=1) * np.linalg.norm(mine), 1e-300)
+    queue = cos >= PASSING_COS
+    # A smoothstep's steepest slope is 1.5 times its mean: the pace stays at or above
+    # SLOWEST_PACE. It starts after the clip does: a walker never stands frozen in its
+    # first pose waiting for its clip to begin.
+    t_end = st[first] - 0.1 * fps
+    delays = np.arange(step, room + 1e-9, step)
+    t_start = t_end - np.maximum(1.5 * delays / (1.0 / SLOWEST_PACE - 1.0), fps)
+    delays, t_start = delays[t_start >= times[0]], t_start[t_start >= times[0]]
+    if len(delays) == 0:
+        return None
+    trials = [smooth_delay(times, a, t_end, d) for a, d in zip(t_start, delays)]
+    after = overlapped(trials)
+    good = np.flatnonzero(~after[:, at_o] & ~np.any(after & ~before & ~queue, axis=1))
+    if len(good) == 0:
+        return None
+    return trials[good[0]], delays[good[0]]
+
+
+@dataclass
+class _Waits:
+    """Per-agent delays found so far (time codes), and the collision intervals they left."""
+    frame_times: list[np.ndarray]
+    delay: np.ndarray
+    span: tuple[float, float] | None = None
+    rounds: int = 0
+
+
+def _velocities(positions: np.ndarray, k: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    k1 = np.minimum(k + 1, len(positions) - 1)
+    k0 = np.maximum(k - 1, 0)
+    return (positions[k1, cols] - positions[k0, cols]) / np.maximum(k1 - k0, 1)[:, None]
+
+
+def _waits(problem: Problem, settings: Settings, fixed: np.ndarray) -> _Waits:
+    """Delays the walker that arrives later at each crossing until the other has passed.
+
+    Rounds of: detect at the current time maps; for every collision interval of two
+    walkers whose directions cross take the one that reaches the crossing point of their
+    lines later (of two walking the same way, the one behind), unless its timing is
+    ``fixed``; find the least delay (in steps of ``wait_step_s``, at most what it may
+    still add within ``max_wait_s``) after which the pair keeps its clearance over the
+    encounter; take that delay up smoothly before the encounter, slowing to no less than
+    ``SLOWEST_PACE``. Each agent takes up at most one delay per round (its earliest), so
+    delays that create new encounters are seen by the next round. Collisions waiting
+    cannot part (head-on, standing agents, no room) are left to the lateral solve.
+    """
+    fps = settings.time_codes_per_second
+    names = list(range(len(problem.names)))
+    times = [np.asarray(t, dtype=np.float64).copy() for t in problem.frame_times]
+    delay = np.zeros(len(names))
+    budget = settings.max_wait_s * fps
+    out = _Waits(times, delay)
+    if budget <= 0 or not problem.collide_agents or not times:
+        return out
+    step = max(settings.wait_step_s * fps, problem.sample_step)
+    paths = {i: g for i, g in enumerate(problem.paths)}
+    # What plays after the last frame of the shot as it was (a delayed walker's last steps)
+    # is not compared: nobody else walks there then.
+    span = problem.span or (min(float(t[0]) for t in times), max(float(t[-1]) for t in times))
+    out.span = span
+    tried: dict[tuple[int, int], tuple[float, float]] = {}
+    for rnd in range(settings.wait_rounds):
+        sampling = collisions.sample(names, {i: t for i, t in enumerate(times)}, paths, problem.sample_step, span)
+        found = collisions.detect(sampling, problem.radius, problem.height, problem.margin,
+                                  report_distance=problem.margin)
+        out.rounds = rnd
+        if len(found) == 0:
+            break
+        pos, st = sampling.positions, sampling.times
+        a, b, k = (found.agent_a.astype(np.int64), found.agent_b.astype(np.int64), found.deepest.astype(np.int64))
+        va, vb = _velocities(pos, k, a), _velocities(pos, k, b)
+        sa, sb = np.linalg.norm(va, axis=1), np.linalg.norm(vb, axis=1)
+        walking = (sa > 1e-9) & (sb > 1e-9)
+        cos = np.sum(va * vb, axis=1) / np.maximum(sa * sb, 1e-300)
+        crossing = walking & (np.abs(cos) < PASSING_COS)
+        # Time (in samples) each needs to reach the crossing point of the two lines.
+        det = va[:, 0] * (-vb[:, 1]) - va[:, 1] * (-vb[:, 0])
+        rel = pos[k, b] - pos[k, a]
+        safe = np.where(np.abs(det) > 1e-300, det, 1.0)
+        ta = (rel[:, 0] * (-vb[:, 1]) - rel[:, 1] * (-vb[:, 0])) / safe
+        tb = (va[:, 0] * rel[:, 1] - va[:, 1] * rel[:, 0]) / safe
+        later_a = ta >= tb
+        # Walking the same way, the one behind waits for the one ahead (it would otherwise
+        # catch up with a walker that waited in front of it).
+        following = walking & (cos >= PASSING_COS)
+        behind_a = np.sum((pos[k, b] - pos[k, a]) * (va + vb), axis=1) > 0.0
+        later_a = np.where(following, behind_a, later_a)
+        who = np.where(later_a, a, b)
+        other = np.where(later_a, b, a)
+        ok = (crossing | following) & ~fixed[who]
+        taken = set()
+        boxes = _Boxes.of(pos, max(1, int(round(fps / problem.sample_step))))
+        order = np.argsort(found.first, kind="stable")
+        for m in order[ok[order]]:
+            w, o = int(who[m]), int(other[m])
+            # A pair tried before, neither of which has waited since, fails again.
+            if w in taken or budget - delay[w] < step or tried.get((w, o)) == (delay[w], delay[o]):
+                continue
+            tried[(w, o)] = (delay[w], delay[o])
+            found_delay = _least_delay(problem, settings, paths, times[w], w, o, pos, st, boxes,
+                                       int(found.first[m]), int(found.last[m]), budget - delay[w], step)
+            if found_delay is not None:
+                times[w], delay[w] = found_delay[0], delay[w] + found_delay[1]
+                taken.add(w)
+        if not taken:
+            break
     return out

@@ -493,6 +493,7 @@ class SolveSettings(_Typed):
     GetMatchSpeedAttr, CreateMatchSpeedAttr = _attribute("matchSpeed")
     GetCollisionStrategyAttr, CreateCollisionStrategyAttr = _attribute("collisionStrategy")
     GetMinTimeIntervalAttr, CreateMinTimeIntervalAttr = _attribute("minTimeInterval")
+    GetMaxWaitAttr, CreateMaxWaitAttr = _attribute("maxWait")
 
 
 #: Every schema class of the library, API schemas first.

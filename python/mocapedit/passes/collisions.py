@@ -10,13 +10,17 @@ are kept out of the footprint by capsule radius plus margin, through the same so
 
 What held before holds after: every hard position constraint keeps its frame where it is,
 every hard relative constraint keeps its offset, stationary ranges move rigidly. Agents
-with ``mocap:collide = false`` are left alone. Time maps are not changed.
+with ``mocap:collide = false`` are left alone. Walkers that wait (``maxWait``) get a time
+map that plays them slower before the crossing and later from there on; agents that a
+time, sync or relative constraint or a hard position constraint names keep their timing.
 
 Report: ``stats`` ``collisionStrategy``, ``collisionIterations``, ``collisionsPerIteration``
 (collision intervals found before each solve, then after the last), ``remainingOverlaps``,
-``regionFramesLeft``, ``minSeparation``, ``collisionStalled`` (when the iterations stopped
+``regionFramesLeft``, ``minSeparation``, ``delayedAgents`` and ``largestDelay``
+(seconds), ``collisionStalled`` (when the iterations stopped
 making progress before ``maxIterations``); per agent ``minSeparation``; one ``collision``
-entry per overlap left (agent pair, shot time, where) and one ``avoid-region`` entry per
+entry per overlap left (agent pair, shot time, where), per agent ``delay`` (seconds it
+waited), and one ``avoid-region`` entry per
 agent a region had to push; notes naming agents hard constraints hold together.
 
 Bad input: a capsule radius above :data:`MAX_RADIUS_M` (no character is that wide; a
@@ -28,7 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import avoidance, collisions, ground, writer
+from .. import avoidance, collisions, ground, retime, writer
 from ..errors import prim_error
 from ..processor import EditedPath, SolveContext, register_pass
 
@@ -71,7 +75,8 @@ def collision_pass(ctx: SolveContext) -> None:
     _check_pins_outside_regions(ctx, problem)
     outcome = avoidance.resolve(problem, avoidance.Settings(
         strategy=settings.collision_strategy, max_iterations=int(settings.max_iterations),
-        meters_per_unit=info.meters_per_unit), ctx.progress)
+        meters_per_unit=info.meters_per_unit, max_wait_s=float(settings.max_wait),
+        time_codes_per_second=float(info.time_codes_per_second)), ctx.progress)
     _apply(ctx, problem, outcome)
     _report(ctx, problem, outcome, enabled)
     if ctx.options.guides and data.avoid_regions:
@@ -112,10 +117,17 @@ def _problem(ctx: SolveContext, names: list[str], footprints, enabled: bool) -> 
         paths.append(np.array(edited.ground if edited is not None else ctx.trajectories[p].ground, dtype=np.float64))
         times.append(np.asarray(ctx.time_maps.get(p, data.agents[p].sample_times), dtype=np.float64))
     agents = [data.agents[p] for p in names]
+    # Constraints fix the timing of the agents they name: a time or sync constraint states
+    # it, a relative constraint meets another agent at a moment, a position constraint marks
+    # where the agent is at a moment of the shot.
+    timed = {c.agent for c in data.time_constraints} | {a for c in data.sync_constraints for a in (c.agent, c.target)}
+    timed |= {a for c in data.relative_constraints for a in (c.agent, c.target)}
+    timed |= {c.agent for c in data.position_constraints if c.hard}
     problem = avoidance.Problem(
         names=names, paths=paths, frame_times=times,
         radius=np.array([a.collision_radius for a in agents]), height=np.array([a.collision_height for a in agents]),
-        margin=float(data.settings.margin), sample_step=float(data.settings.sample_step), collide_agents=enabled)
+        margin=float(data.settings.margin), sample_step=float(data.settings.sample_step), collide_agents=enabled,
+        fixed_timing=np.array([p in timed for p in names], dtype=bool))
     for i, a in enumerate(agents):
         problem.rigid.extend((i, first, last) for _, first, last in a.stationary)
     # What the artist fixed stays where it is now.
@@ -147,6 +159,11 @@ def _problem(ctx: SolveContext, names: list[str], footprints, enabled: bool) -> 
 
 def _apply(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Outcome) -> None:
     still = 1e-5 / ctx.data.info.meters_per_unit
+    for i in np.flatnonzero(outcome.delays > 0):
+        name = problem.names[i]
+        ctx.time_maps[name] = outcome.frame_times[i]
+        if name in ctx.out_times:
+            ctx.out_times[name] = retime.shot_times(outcome.frame_times[i])
     for i, name in enumerate(problem.names):
         if not outcome.moved[i]:
             continue
@@ -183,6 +200,13 @@ def _report(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Ou
                 report.agent(name)["minSeparation"] = float(c)
         if np.isfinite(clearance).any():
             stats["minSeparation"] = float(np.min(clearance))
+    fps = data.info.time_codes_per_second
+    delayed = np.flatnonzero(outcome.delays > 0)
+    if enabled and data.settings.max_wait > 0:
+        stats["delayedAgents"] = int(len(delayed))
+        stats["largestDelay"] = float(outcome.delays.max(initial=0.0) / fps)
+    for i in delayed:
+        report.agent(names[i])["delay"] = float(outcome.delays[i] / fps)
     times = outcome.sampling.times
     blocked = {(a, b) for a, b, _ in outcome.blocked}
     left = outcome.remaining
