@@ -337,6 +337,47 @@ def test_agents_held_together_by_hard_constraints_are_named_not_looped(tmp_path)
     assert all(c["agent"] == "/World/Crowd/agent_0000" and c["target"] == "/World/Crowd/agent_0001" for c in held)
 
 
+def test_a_pair_a_link_holds_closer_than_their_clearance_is_left_there_and_named_once(tmp_path):
+    """A handshake: two walkers pass 0.56 m apart (capsules need 0.65) and a hard relative
+    constraint holds them so. Avoidance leaves them there, says so once naming the
+    constraint, and still clears a third walker who crosses one of them later."""
+    walk = _walk(frames=140)
+    specs = [("agent_0000", walk, (0.0, 0.0, -4.0), 0.0, 0.0), ("agent_0001", walk, (0.56, 0.0, 4.0), 180.0, 0.0),
+             ("agent_0002", walk, (-3.3, 0.0, 3.9), 90.0, 40.0)]
+    stage = _walker_stage(tmp_path / "s.usda", specs, frames=140)
+    meet = 68
+    a0 = metrics.agent_root_positions(stage, "/World/Crowd/agent_0000", [float(meet)])[0]
+    a1 = metrics.agent_root_positions(stage, "/World/Crowd/agent_0001", [float(meet)])[0]
+    examples.add_relative_constraint(stage, "/World/Handshake", "/World/Crowd/agent_0000", meet,
+                                     "/World/Crowd/agent_0001", meet, tuple(float(v) for v in a0 - a1))
+    stage.GetRootLayer().Save()
+    src = Usd.Stage.Open(str(tmp_path / "s.usda"))
+    agents = _agents(src)
+    result, out = _solve(tmp_path, tmp_path / "s.usda")
+    notes = [n for n in result.report.notes if "/World/Handshake" in n]
+    assert len(notes) == 1 and "agent_0000" in notes[0] and "agent_0001" in notes[0]
+    assert not any("cannot be separated" in n for n in result.report.notes)
+    left = [c for c in result.report.constraints if c["kind"] == "collision"]
+    assert left and all(c["heldByConstraints"] for c in left)
+    assert {(c["agent"], c["target"]) for c in left} == {("/World/Crowd/agent_0000", "/World/Crowd/agent_0001")}
+    # The third walker is cleared from both.
+    times = _shot_times(src)
+    roots = _ground_roots(out, agents, times)
+    sep = metrics.min_separation(roots[[0, 2]], 0.3, 1.8, "Y")
+    assert sep.clearance >= 0.05 - 1e-4
+    sep = metrics.min_separation(roots[[1, 2]], 0.3, 1.8, "Y")
+    assert sep.clearance >= 0.05 - 1e-4
+    # The held pair is not pushed around the hold: the handshake stays where it was and
+    # neither walker turns off its way.
+    g0 = metrics.to_ground(metrics.agent_root_positions(src, agents, times), "Y")
+    g1 = metrics.to_ground(metrics.agent_root_positions(out, agents, times), "Y")
+    assert _walking_deviation(g0[:2], g1[:2], FPS).max() < 45.0
+    k = int(np.searchsorted(times, meet))
+    assert np.abs(g1[:2, k - 12:k + 13] - g0[:2, k - 12:k + 13]).max() < 0.05
+    handshake = [c for c in result.report.constraints if c["prim"] == "/World/Handshake"]
+    assert handshake and handshake[0]["met"]
+
+
 def test_collide_false_agents_are_neither_moved_nor_obstacles(tmp_path):
     STAGES.head_on(tmp_path)
     stage = Usd.Stage.Open(str(tmp_path / "collisions_head_on.usda"))

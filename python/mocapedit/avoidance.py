@@ -168,6 +168,9 @@ class Outcome:
     frame_times: list[np.ndarray] = field(default_factory=list)
     #: (A,) delay each agent took up by waiting, time codes
     delays: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: (constraint, agent a, agent b, first and last shot time, distance): hard links that hold
+    #: two agents closer than their clearance; the pair is left as it is over that time
+    link_held: list[tuple[str, int, int, float, float, float]] = field(default_factory=list)
 
     @property
     def converged(self) -> bool:
@@ -237,6 +240,27 @@ class _State:
             if pin.softness == 0:
                 pinned[self.starts[pin.agent] + pin.frame] = True
         self.pinned = pinned
+        self.link_holds = self._link_holds()
+
+    def _link_holds(self) -> list[tuple[int, int, int, int, int]]:
+        """(link, a, b, first, last): samples around each hard link that holds its two agents
+        closer than their clearance, over which their input paths stay that close. The pair
+        is not pushed apart there (the artist put them there); elsewhere it is."""
+        p, pos = self.p, self.sampling.positions
+        out = []
+        for i, link in enumerate(p.links):
+            need = p.radius[link.a] + p.radius[link.b] + p.margin
+            if np.linalg.norm(link.offset) >= need or not len(self.sampling.times):
+                continue
+            at = int(np.argmin(np.abs(self.sampling.times - self.times[link.a][link.fa])))
+            close = np.linalg.norm(pos[:, link.a] - pos[:, link.b], axis=1) < need * (1.0 + self.s.overshoot)
+            first, last = at, at
+            while first > 0 and close[first - 1]:
+                first -= 1
+            while last + 1 < len(close) and close[last + 1]:
+                last += 1
+            out.append((i, min(link.a, link.b), max(link.a, link.b), first, last))
+        return out
 
     def split(self, flat: np.ndarray) -> list[np.ndarray]:
         return [flat[self.starts[a]:self.starts[a + 1]].copy() for a in range(len(self.starts) - 1)]
@@ -253,10 +277,16 @@ class _State:
         return np.stack([base + i0, base + i1], axis=1), np.stack([1.0 - w1, w1], axis=1)
 
     def held(self, a: np.ndarray, b: np.ndarray, k: np.ndarray) -> np.ndarray:
-        """(N,) True where hard pins hold both agents' points at the samples (no push can move them)."""
+        """(N,) True where hard constraints hold the pairs (a, b) at samples k: pins hold both
+        agents' points (no push can move them), or a link holds the two closer than their
+        clearance around that moment."""
         va, wa = self.sample_terms(a, k)
         vb, wb = self.sample_terms(b, k)
-        return np.all(self.pinned[va] | (wa == 0), axis=1) & np.all(self.pinned[vb] | (wb == 0), axis=1)
+        out = np.all(self.pinned[va] | (wa == 0), axis=1) & np.all(self.pinned[vb] | (wb == 0), axis=1)
+        lo, hi = np.minimum(a, b), np.maximum(a, b)
+        for _, la, lb, first, last in self.link_holds:
+            out |= (lo == la) & (hi == lb) & (k >= first) & (k <= last)
+        return out
 
     def fixed_rows(self, rows: _Rows, forces: np.ndarray | None = None, forces1: np.ndarray | None = None) -> None:
         """Artist pins and links, two rows each: every solve carries them (``forces``,
@@ -409,7 +439,7 @@ def resolve(problem: Problem, settings: Settings | None = None, progress=None) -
                       for a in range(len(problem.names))], dtype=bool)
     return Outcome(paths=state.split(flat), rigid_angles=angles, iterations=run.iterations,
                    sampling=state.sampling, remaining=found, region_left=region_left,
-                   blocked=_blocked(state, found), moved=moved, solves=run.solves, stalled=run.stalled,
+                   blocked=_blocked(state, found), link_held=_link_held(state), moved=moved, solves=run.solves, stalled=run.stalled,
                    frame_times=waits.frame_times, delays=waits.delay,
                    seconds=time.perf_counter() - t0, timing=run.timing(time.perf_counter() - t0), work=dict(run.work))
 
@@ -777,10 +807,17 @@ def _only_blocked(cands: _Candidates, found) -> bool:
 
 
 def _blocked(state: _State, found: collisions.Collisions) -> list[tuple[int, int, float]]:
-    """Overlaps left where hard pins hold both agents: (agent a, agent b, shot time)."""
+    """Overlaps left where hard constraints hold both agents: (agent a, agent b, shot time)."""
     a, b, k = (found.agent_a.astype(np.int64), found.agent_b.astype(np.int64), found.deepest.astype(np.int64))
     held = state.held(a, b, k)
     return [(int(x), int(y), float(state.sampling.times[z])) for x, y, z in zip(a[held], b[held], k[held])]
+
+
+def _link_held(state: _State) -> list[tuple[str, int, int, float, float, float]]:
+    """(link name, agent a, agent b, first and last shot time, distance the link holds)."""
+    t = state.sampling.times
+    return [(state.p.links[i].name, a, b, float(t[first]), float(t[last]), float(np.linalg.norm(state.p.links[i].offset)))
+            for i, a, b, first, last in state.link_holds]
 
 
 def _tangents(path: np.ndarray) -> np.ndarray:

@@ -218,7 +218,15 @@ def _report(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Ou
             "time": float(times[k]), "hard": False, "residual": float(depth), "met": False,
             "heldByConstraints": (int(a), int(b)) in blocked,
             "position": _world(ctx, 0.5 * (pa + pb)).tolist()})
+    by_link = {(a, b): (t0, t1) for _, a, b, t0, t1, _ in outcome.link_held}
+    for name, a, b, t0, t1, distance in outcome.link_held:
+        report.note(f"<{name}> holds agents <{names[a]}> and <{names[b]}> {distance:g} apart, closer than "
+                    f"their clearance ({problem.radius[a] + problem.radius[b] + problem.margin:g}): they are "
+                    f"not pushed apart from time {t0:g} to {t1:g}; the rest of their shot is")
     for a, b, t in outcome.blocked:
+        t0, t1 = by_link.get((min(a, b), max(a, b)), (np.inf, -np.inf))
+        if t0 <= t <= t1:
+            continue
         report.note(f"agents <{names[a]}> and <{names[b]}> cannot be separated at time {t:g}: hard "
                     "constraints hold both of them there")
     _region_entries(ctx, problem, outcome)
