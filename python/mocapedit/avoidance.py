@@ -896,11 +896,11 @@ class _Boxes:
 
 def _least_delay(problem: Problem, settings: Settings, paths, times: np.ndarray, w: int, o: int,
                  pos: np.ndarray, st: np.ndarray, boxes: _Boxes, first: int, last: int, room: float,
-                 step: float):
-    """(time map, delay) of the least delay of agent w that parts it from agent o over
-    their encounter (samples first..last at the sampling ``pos``, ``st``) and meets no
-    agent it did not meet already, but for those walking its way; None when no delay up
-    to ``room`` does."""
+                 step: float, guess: float):
+    """(time map, delay) of the least delay of agent w, near ``guess`` (time codes), that
+    parts it from agent o over their encounter (samples first..last at the sampling
+    ``pos``, ``st``) and meets no agent it did not meet already, but for those walking its
+    way; None when no delay up to ``room`` does."""
     fps = settings.time_codes_per_second
     # The encounter: from a second before the overlap to a second past it, plus the room.
     lo = max(first - int(np.ceil(fps / problem.sample_step)), 0)
@@ -920,14 +920,15 @@ def _least_delay(problem: Problem, settings: Settings, paths, times: np.ndarray,
     cand = np.flatnonzero(near)
     at_o = int(np.searchsorted(cand, o))
     others = pos[lo:hi + 1][:, cand]                                 # (K,N,2)
-    need = grow[cand]
-
+    need2 = grow[cand] ** 2
     frames = np.arange(len(times), dtype=np.float64)
 
     def overlapped(maps):
         """(M,N) for each of M time maps of w, which candidates it overlaps in the window."""
-        pw = np.stack([collisions.positions_at(paths[w], np.interp(window, m, frames)) for m in maps])
-        return (np.linalg.norm(others[None] - pw[:, :, None], axis=3) - need).min(axis=1) < 0.0
+        at = np.stack([np.interp(window, m, frames) for m in maps])   # (M,K) fractional frames
+        pw = collisions.positions_at(paths[w], at.ravel()).reshape(*at.shape, 2)
+        d = others[None] - pw[:, :, None]
+        return (d[..., 0] ** 2 + d[..., 1] ** 2 - need2).min(axis=1) < 0.0
 
     before = overlapped([times])[0]
     # Walkers going the same way may be caught up with: they wait in their turn (the next
@@ -940,7 +941,9 @@ def _least_delay(problem: Problem, settings: Settings, paths, times: np.ndarray,
     # SLOWEST_PACE. It starts after the clip does: a walker never stands frozen in its
     # first pose waiting for its clip to begin.
     t_end = st[first] - 0.1 * fps
-    delays = np.arange(step, room + 1e-9, step)
+    # Delays from a step below the first guess (rounded to steps) up to three steps above it.
+    lowest = max(step, step * (np.ceil(guess / step) - 1.0)) if np.isfinite(guess) else step
+    delays = np.arange(lowest, min(room, lowest + 4.0 * step) + 1e-9, step)
     t_start = t_end - np.maximum(1.5 * delays / (1.0 / SLOWEST_PACE - 1.0), fps)
     delays, t_start = delays[t_start >= times[0]], t_start[t_start >= times[0]]
     if len(delays) == 0:
@@ -974,9 +977,9 @@ def _waits(problem: Problem, settings: Settings, fixed: np.ndarray) -> _Waits:
     Rounds of: detect at the current time maps; for every collision interval of two
     walkers whose directions cross take the one that reaches the crossing point of their
     lines later (of two walking the same way, the one behind), unless its timing is
-    ``fixed``; find the least delay (in steps of ``wait_step_s``, at most what it may
-    still add within ``max_wait_s``) after which the pair keeps its clearance over the
-    encounter; take that delay up smoothly before the encounter, slowing to no less than
+    ``fixed``; find the least delay (in steps of ``wait_step_s`` from a step below the time
+    the other needs to clear the crossing, at most what it may still add within
+    ``max_wait_s``) after which the pair keeps its clearance over the encounter; take that delay up smoothly before the encounter, slowing to no less than
     ``SLOWEST_PACE``. Each agent takes up at most one delay per round (its earliest), so
     delays that create new encounters are seen by the next round. Collisions waiting
     cannot part (head-on, standing agents, no room) are left to the lateral solve.
@@ -996,8 +999,8 @@ def _waits(problem: Problem, settings: Settings, fixed: np.ndarray) -> _Waits:
     span = problem.span or (min(float(t[0]) for t in times), max(float(t[-1]) for t in times))
     out.span = span
     tried: dict[tuple[int, int], tuple[float, float]] = {}
+    sampling = collisions.sample(names, {i: t for i, t in enumerate(times)}, paths, problem.sample_step, span)
     for rnd in range(settings.wait_rounds):
-        sampling = collisions.sample(names, {i: t for i, t in enumerate(times)}, paths, problem.sample_step, span)
         found = collisions.detect(sampling, problem.radius, problem.height, problem.margin,
                                   report_distance=problem.margin)
         out.rounds = rnd
@@ -1025,6 +1028,15 @@ def _waits(problem: Problem, settings: Settings, fixed: np.ndarray) -> _Waits:
         who = np.where(later_a, a, b)
         other = np.where(later_a, b, a)
         ok = (crossing | following) & ~fixed[who]
+        # First guess of each delay (time codes): crossing, from when the other leaves the
+        # crossing point by the clearance to when the waiting one would come within it;
+        # following, the time to fall back by the clearance missing between them.
+        need = problem.radius[a] + problem.radius[b] + problem.margin
+        sw, so = np.where(later_a, sa, sb), np.where(later_a, sb, sa)
+        tw, to = np.where(later_a, ta, tb), np.where(later_a, tb, ta)
+        cross_guess = (to + need / np.maximum(so, 1e-300)) - (tw - need / np.maximum(sw, 1e-300))
+        gap = np.linalg.norm(pos[k, a] - pos[k, b], axis=1)
+        guess = np.where(following, (need - gap) / np.maximum(sw, 1e-300), cross_guess) * problem.sample_step
         taken = set()
         boxes = _Boxes.of(pos, max(1, int(round(fps / problem.sample_step))))
         order = np.argsort(found.first, kind="stable")
@@ -1035,10 +1047,14 @@ def _waits(problem: Problem, settings: Settings, fixed: np.ndarray) -> _Waits:
                 continue
             tried[(w, o)] = (delay[w], delay[o])
             found_delay = _least_delay(problem, settings, paths, times[w], w, o, pos, st, boxes,
-                                       int(found.first[m]), int(found.last[m]), budget - delay[w], step)
+                                       int(found.first[m]), int(found.last[m]), budget - delay[w], step,
+                                       float(guess[m]))
             if found_delay is not None:
                 times[w], delay[w] = found_delay[0], delay[w] + found_delay[1]
                 taken.add(w)
         if not taken:
             break
+        for w in taken:   # only the agents that waited move in the sampling
+            sampling.frames[:, w] = collisions.frames_at(times[w], st)
+            sampling.positions[:, w] = collisions.positions_at(paths[w], sampling.frames[:, w])
     return out
