@@ -370,6 +370,11 @@ def _assert_close(a, b, where):
     if isinstance(a, (str, bool, int, Sdf.Path)) or a is None:
         assert a == b, where
         return
+    if isinstance(a, dict):   # time samples, dictionaries: each value with the tolerance
+        assert isinstance(b, dict) and sorted(a) == sorted(b), where
+        for key in a:
+            _assert_close(a[key], b[key], f"{where} {key}")
+        return
     try:
         x, y = np.array(a, dtype=np.float64), np.array(b, dtype=np.float64)
     except (TypeError, ValueError):
