@@ -16,12 +16,13 @@ time, sync or relative constraint or a hard position constraint names keep their
 
 Report: ``stats`` ``collisionStrategy``, ``collisionIterations``, ``collisionsPerIteration``
 (collision intervals found before each solve, then after the last), ``remainingOverlaps``,
-``regionFramesLeft``, ``minSeparation``, ``delayedAgents`` and ``largestDelay``
-(seconds), ``collisionStalled`` (when the iterations stopped
-making progress before ``maxIterations``); per agent ``minSeparation``; one ``collision``
-entry per overlap left (agent pair, shot time, where), per agent ``delay`` (seconds it
-waited), and one ``avoid-region`` entry per
-agent a region had to push; notes naming agents hard constraints hold together.
+``regionFramesLeft``, ``minSeparation``, ``delayedAgents`` and ``largestDelay`` (seconds),
+``collisionStalled`` (when the iterations stopped making progress before
+``maxIterations``); per agent ``minSeparation`` and ``delay`` (seconds it waited); one
+``collision`` entry per overlap left (agent pair, shot time, where) and one
+``avoid-region`` entry per agent a region had to push; notes naming agents hard
+constraints hold together (once per hard relative constraint that holds two agents
+closer than their clearance, naming it).
 
 Bad input: a capsule radius above :data:`MAX_RADIUS_M` (no character is that wide; a
 typing slip in it would push the whole crowd kilometres) is an error naming the agent
