@@ -30,7 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from mocapedit import avoidance, collisions, metrics, overlaps
+from mocapedit import avoidance, collisions, examples, metrics, overlaps
 from mocapedit.processor import solve
 
 FRAMES = 240
@@ -42,17 +42,9 @@ HERE = Path(__file__).resolve().parent
 
 
 def crowd(agents: int, seed: int = 1) -> avoidance.Problem:
-    rng = np.random.default_rng(seed)
-    side = np.sqrt(agents / DENSITY)
-    start = rng.uniform(0.0, side, (agents, 2))
-    heading = rng.uniform(0.0, 2 * np.pi, agents)
-    speed = 1.4 * rng.uniform(0.8, 1.2, agents) / 24.0
+    paths = examples.dense_crowd_paths(agents, FRAMES, 24.0, DENSITY, seed)
     t = np.arange(FRAMES, dtype=np.float64)
-    d = np.stack([np.cos(heading), np.sin(heading)], 1)
-    side_dir = np.stack([-d[:, 1], d[:, 0]], 1)
-    sway = 0.03 * np.sin(2 * np.pi * t[None, :] / 24.0 + rng.uniform(0, 2 * np.pi, (agents, 1)))
-    paths = start[:, None] + t[None, :, None] * (speed[:, None] * d)[:, None] + sway[..., None] * side_dir[:, None]
-    return avoidance.Problem(names=[f"a{i}" for i in range(agents)], paths=list(paths),
+    return avoidance.Problem(names=[f"a{i}" for i in range(agents)], paths=paths,
                              frame_times=[t] * agents, radius=np.full(agents, RADIUS),
                              height=np.full(agents, HEIGHT), margin=MARGIN)
 
