@@ -124,6 +124,8 @@ class Settings:
     sweep_budget: float = 1e6           # rows x sweeps per step allowed beyond that (up to 10x sweeps)
     tolerance: float = 1e-3             # of the clearance: Gauss-Seidel stops when no row moves more
     patience: int = 6                   # stop after this many iterations without progress
+    stiffen_after: int = 5              # relinearize: from this iteration on, the anchor is
+    stiffen: float = 10.0               # this many times stiffer
     max_wait_s: float = 3.0             # most delay waiting may add to one agent, seconds (0: none)
     wait_step_s: float = 0.25           # delays are tried in steps of this, seconds
     wait_rounds: int = 8                # rounds of waiting at most
@@ -753,6 +755,12 @@ def _relinearize(state: _State, run: _Run):
             break
         if it > 0 and _only_blocked(cands, run.found) and run.iterations[-1].region_samples == 0:
             break
+        if it == s.stiffen_after:
+            # Overlaps that outlast the first iterations are knots of many pushes; gentle
+            # detours that reach far make them spread. Stiffer anchors keep the last pushes
+            # local, so they converge.
+            solver = run.factor(state.rest, state.starts, state.rigid, s.anchor_weight * s.stiffen,
+                                _still(s), 0)
         # Watch every near miss: each becomes a one-sided row that pushes only when needed.
         if p.collide_agents:
             # A pair still overlapping where it was already held apart resists: it is held at
