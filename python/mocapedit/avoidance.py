@@ -124,7 +124,7 @@ class Settings:
     sweep_budget: float = 1e6           # rows x sweeps per step allowed beyond that (up to 10x sweeps)
     tolerance: float = 1e-3             # of the clearance: Gauss-Seidel stops when no row moves more
     patience: int = 6                   # stop after this many iterations without progress
-    stiffen_after: int = 5              # relinearize: from this iteration on, the anchor is
+    stiffen_after: int = 3              # relinearize: from this iteration on, the anchor is
     stiffen: float = 10.0               # this many times stiffer
     max_wait_s: float = 3.0             # most delay waiting may add to one agent, seconds (0: none)
     wait_step_s: float = 0.25           # delays are tried in steps of this, seconds
