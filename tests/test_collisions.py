@@ -167,15 +167,20 @@ def _walking_deviation(src_ground, out_ground, fps, chord_s=0.25, moving_m_s=0.2
     n0, n1 = np.linalg.norm(c0, axis=2), np.linalg.norm(c1, axis=2)
     cos = np.sum(c0 * c1, axis=2) / np.maximum(n0 * n1, 1e-12)
     angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-    return np.where((n0 > moving_m_s * h / fps) & (n1 > 0), angle, 0.0).max(axis=1)
+    # An edited chord that barely moves (a walker standing, or waiting) has no direction.
+    return np.where((n0 > moving_m_s * h / fps) & (n1 > 0.05 * h / fps), angle, 0.0).max(axis=1)
 
 
-@pytest.mark.parametrize("scene", ["collisions_head_on", "collisions_crossing", "collisions_corridor",
-                                   "collisions_counterflow", "collisions_bottleneck", "collisions_groups"])
-def test_scene_ends_apart_without_loops_or_detours(tmp_path, scene):
+@pytest.mark.parametrize("scene,length_change", [
+    ("collisions_head_on", (0.02, 0.1)), ("collisions_crossing", (0.02, 0.1)), ("collisions_corridor", (0.02, 0.1)),
+    ("collisions_counterflow", (0.02, 0.1)), ("collisions_bottleneck", (0.02, 0.1)), ("collisions_groups", (0.02, 0.1)),
+    # Going round a fountain 2.4 m wide, a kiosk and ropes in the way adds length.
+    ("avoid_regions", (0.04, 0.3))])
+def test_scene_ends_apart_without_loops_or_detours(tmp_path, scene, length_change):
     """Measured on the composed stage by UsdSkel FK: no overlapping pair in the shot, no
     agent walking more than 90 degrees off its source direction, mean path length change
-    under 2 % (over the whole clip: a walker that waited finishes after the shot)."""
+    under 2 % between agents (over the whole clip: a walker that waited finishes after the
+    shot), under 4 % where regions stand in the way."""
     STAGES.STAGES[f"{scene}.usda"](tmp_path)
     stage_path = tmp_path / f"{scene}.usda"
     src = Usd.Stage.Open(str(stage_path))
@@ -194,7 +199,7 @@ def test_scene_ends_apart_without_loops_or_detours(tmp_path, scene):
     deviation = _walking_deviation(g0, g1, FPS)
     assert deviation.max() < 90.0, agents[int(np.argmax(deviation))]
     ratio = np.array([metrics.length_ratio(b, a) for a, b in zip(g0, g1)])
-    assert np.abs(ratio - 1.0).mean() < 0.02 and np.abs(ratio - 1.0).max() < 0.1
+    assert np.abs(ratio - 1.0).mean() < length_change[0] and np.abs(ratio - 1.0).max() < length_change[1]
 
 
 def test_a_dense_crowd_of_1000_crossing_at_random_ends_apart_without_loops():

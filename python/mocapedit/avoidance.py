@@ -461,6 +461,7 @@ class _Run:
         self.best = (np.inf, np.inf)    # fewest collisions and region frames, smallest deepest overlap
         self.since_best = 0             # iterations since either improved
         self.stalled = False
+        self.pending = False            # rows were added that the next solve must meet
         self.task = progress.task("collision avoidance", state.s.max_iterations, "iterations") if progress else None
 
     def observe(self, flat: np.ndarray, it: int) -> bool:
@@ -482,7 +483,7 @@ class _Run:
             self.since_best += 1
         self.best = (min(self.best[0], left), min(self.best[1], record.deepest))
         self.stalled = left > 0 and self.since_best >= state.s.patience and it < state.s.max_iterations
-        last = left == 0 or it == state.s.max_iterations or self.stalled
+        last = (left == 0 and not self.pending) or it == state.s.max_iterations or self.stalled
         if self.task is not None:
             if last:
                 self.task.done(f"{left} collision{'s' if left != 1 else ''} left after {it} iteration"
@@ -741,6 +742,58 @@ def _exit(footprint, points: np.ndarray, way: np.ndarray, clearance: np.ndarray)
     return points + hi[:, None] * way
 
 
+class _Forward:
+    """One-sided rows that keep walkers going their way: for a chord of ``chord_s`` seconds
+    of an agent's path where the source moves faster than ``moving_m_s``, the edited chord's
+    projection on the source chord's direction stays at least ``keep`` times the source
+    chord's length (a push never sends a walker back the way it came, nor across its way).
+    Only the chords an iterate broke are rows, kept from then on."""
+
+    def __init__(self, state: _State, keep: float = 0.5, chord_s: float = 0.25, moving_m_s: float = 0.2):
+        s, p = state.s, state.p
+        self.keep = keep
+        firsts, seconds, dirs, lengths = [], [], [], []
+        for a in range(len(p.names)):
+            lo, hi = int(state.starts[a]), int(state.starts[a + 1])
+            if hi - lo < 2:
+                continue
+            dt = float(np.median(np.diff(p.frame_times[a]))) / s.time_codes_per_second   # seconds per frame
+            h = max(1, int(round(chord_s / max(dt, 1e-9))))
+            if hi - lo <= h:
+                continue
+            v = np.arange(lo, hi - h)
+            c = state.rest[v + h] - state.rest[v]
+            n = np.linalg.norm(c, axis=1)
+            moving = n > moving_m_s / s.meters_per_unit * h * dt
+            firsts.append(v[moving])
+            seconds.append(v[moving] + h)
+            dirs.append(c[moving] / n[moving, None])
+            lengths.append(n[moving])
+        cat = lambda parts, shape: np.concatenate(parts) if parts else np.zeros(shape)  # noqa: E731
+        self.v, self.u = cat(firsts, 0).astype(np.int64), cat(seconds, 0).astype(np.int64)
+        self.d, self.length = cat(dirs, (0, 2)), cat(lengths, 0)
+        self.on = np.zeros(len(self.v), bool)
+        self.force = np.zeros(len(self.v))
+        self.force1 = np.zeros(len(self.v))
+
+    def watch(self, flat: np.ndarray) -> int:
+        """Turns on the rows of the chords ``flat`` breaks; returns how many were new."""
+        proj = np.sum((flat[self.u] - flat[self.v]) * self.d, axis=1)
+        fresh = ~self.on & (proj < self.keep * self.length)
+        self.on |= fresh
+        return int(fresh.sum())
+
+    def add(self, rows: "_Rows") -> np.ndarray:
+        on = np.flatnonzero(self.on)
+        return rows.add(self.d[on], self.keep * self.length[on], SEPARATION_SOFTNESS,
+                        np.stack([self.u[on], self.v[on]], axis=1), np.tile([1.0, -1.0], (len(on), 1)),
+                        at_least=True, force=self.force[on], force1=self.force1[on])
+
+    def solved(self, force: np.ndarray, force1: np.ndarray) -> None:
+        on = np.flatnonzero(self.on)
+        self.force[on], self.force1[on] = force, force1
+
+
 def _relinearize(state: _State, run: _Run):
     p, s = state.p, state.s
     solver = run.factor(state.rest, state.starts, state.rigid, s.anchor_weight, _still(s), 0)
@@ -750,10 +803,15 @@ def _relinearize(state: _State, run: _Run):
     watched = _RegionCandidates()
     buffer = s.buffer_m / s.meters_per_unit
     fixed_force, fixed_force1 = np.zeros(0), np.zeros(0)
+    forward = _Forward(state)
     for it in range(s.max_iterations + 1):
+        # A result that sends someone back the way it came is solved again, with the chords
+        # it broke held, even when nothing collides any more.
+        run.pending = forward.watch(flat) > 0
         if run.observe(flat, it):
             break
-        if it > 0 and _only_blocked(cands, run.found) and run.iterations[-1].region_samples == 0:
+        if it > 0 and _only_blocked(cands, run.found) and run.iterations[-1].region_samples == 0 \
+                and not run.pending:
             break
         if it == s.stiffen_after:
             # Overlaps that outlast the first iterations are knots of many pushes; gentle
@@ -791,6 +849,7 @@ def _relinearize(state: _State, run: _Run):
         reg = rows.add(rnormal, rrhs + watched.clearance * s.overshoot, SEPARATION_SOFTNESS,
                        watched.vertex[:, None], np.ones((len(watched.vertex), 1)), at_least=True,
                        force=watched.force, force1=watched.force1)
+        ahead = forward.add(rows)
         # Small problems afford a converged Gauss-Seidel; big ones carry it on from iteration
         # to iteration (warm start) within a budget of row updates.
         sweeps = int(np.clip(s.sweep_budget / max(rows.count, 1), s.sweeps, 10 * s.sweeps))
@@ -800,6 +859,7 @@ def _relinearize(state: _State, run: _Run):
         fixed_force, fixed_force1 = force[:fixed], force1[:fixed]
         cands.force[on], cands.force1[on] = force[sep], force1[sep]
         watched.force, watched.force1 = force[reg], force1[reg]
+        forward.solved(force[ahead], force1[ahead])
         flat = out["positions"]
         angles = out["rigid_angles"]
     return flat, angles
