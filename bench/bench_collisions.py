@@ -36,8 +36,8 @@ from mocapedit.processor import solve
 FRAMES = 240
 DENSITY = 0.25          # agents per square metre
 RADIUS, HEIGHT, MARGIN = 0.3, 1.8, 0.05
-#: Collision avoidance as it was before walkers waited: steering alone, stiffer anchor.
-STEER_ONLY_BEFORE = {"max_wait_s": 0.0, "anchor_weight": 1e-4}
+#: Collision avoidance as it was before walkers waited: steering alone, one anchor, no rows against walking back.
+STEER_ONLY_BEFORE = {"max_wait_s": 0.0, "anchor_weight": 1e-4, "stiffen": 1.0, "forward_keep": None}
 HERE = Path(__file__).resolve().parent
 
 

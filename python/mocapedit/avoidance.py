@@ -126,6 +126,8 @@ class Settings:
     patience: int = 6                   # stop after this many iterations without progress
     stiffen_after: int = 3              # relinearize: from this iteration on, the anchor is
     stiffen: float = 10.0               # this many times stiffer
+    forward_keep: float | None = 0.5    # relinearize: least projection of an edited 0.25 s chord on
+                                        # the source's direction, in source chord lengths (None: none)
     max_wait_s: float = 3.0             # most delay waiting may add to one agent, seconds (0: none)
     wait_step_s: float = 0.25           # delays are tried in steps of this, seconds
     wait_rounds: int = 8                # rounds of waiting at most
@@ -803,7 +805,7 @@ def _relinearize(state: _State, run: _Run):
     watched = _RegionCandidates()
     buffer = s.buffer_m / s.meters_per_unit
     fixed_force, fixed_force1 = np.zeros(0), np.zeros(0)
-    forward = _Forward(state)
+    forward = _Forward(state, s.forward_keep if s.forward_keep is not None else -np.inf)
     for it in range(s.max_iterations + 1):
         # A result that sends someone back the way it came is solved again, with the chords
         # it broke held, even when nothing collides any more.
