@@ -40,8 +40,9 @@ test: test-cpp test-py
 demo: build
 	@bash tools/demo.sh $(DEMO_OUT)
 
+# BENCH_ARGS=--large adds the largest sizes (30,000 agents); BENCH_ARGS="--only scale" runs one module.
 bench: build
-	$(PY) bench/run.py --out bench/results/bench.json
+	$(PY) bench/run.py --out bench/results/bench.json $(BENCH_ARGS)
 
 # Regenerate plugin/ from schema/schema.usda (commit both).
 schema: deps

@@ -96,6 +96,7 @@ def run(ctx):
         "constraints": report["stats"].get("constraints"),
         "remainingOverlaps": report["stats"].get("remainingOverlaps"),
         "collisionIterations": report["stats"].get("collisionIterations"),
+        "footLockedAgents": report["stats"].get("footLockedAgents"),
         "worstHardResidual": max(residuals, default=0.0),
         "phases": {k: round(v, 3) for k, v in report["timings"].items()},
         "peer": "the same stage with no edits authored (read, trajectories, inspection, write)",

@@ -25,9 +25,10 @@ HERE = Path(__file__).resolve().parent
 
 
 class Context:
-    def __init__(self, workdir: Path, quick: bool):
+    def __init__(self, workdir: Path, quick: bool, large: bool = False):
         self.workdir = workdir
         self.quick = quick
+        self.large = large
 
     @staticmethod
     def best_of(fn, repeat: int = 5, number: int = 1) -> float:
@@ -46,6 +47,8 @@ def main() -> int:
     ap.add_argument("--out", default=str(HERE / "results" / "bench.json"), help="JSON file to write")
     ap.add_argument("--only", nargs="*", help="run only these benchmark modules (e.g. reader path)")
     ap.add_argument("--quick", action="store_true", help="smaller sizes, for a smoke run")
+    ap.add_argument("--large", action="store_true",
+                    help="add the largest sizes (the scale benchmark's 30,000 agents: minutes)")
     ap.add_argument("--in-process", action="store_true",
                     help="run the selected modules in this process instead of one fresh process each")
     args = ap.parse_args()
@@ -60,11 +63,12 @@ def main() -> int:
             for name in names:
                 out = Path(tmp) / f"{name}.json"
                 cmd = [sys.executable, __file__, "--in-process", "--only", name, "--out", str(out)]
-                subprocess.run(cmd + (["--quick"] if args.quick else []), check=True)
+                cmd += (["--quick"] if args.quick else []) + (["--large"] if args.large else [])
+                subprocess.run(cmd, check=True)
                 results["benchmarks"].update(json.loads(out.read_text())["benchmarks"])
         return _write(results, args.out)
     with tempfile.TemporaryDirectory(prefix="mocapedit-bench-") as tmp:
-        ctx = Context(Path(tmp), args.quick)
+        ctx = Context(Path(tmp), args.quick, args.large)
         for path in modules:
             name = path.stem[len("bench_"):]
             if args.only and name not in args.only:

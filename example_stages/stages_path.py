@@ -20,6 +20,10 @@ curves, groups). All Y-up, metres, 24 fps; the walker walks along +Z before its 
   frame (the next one's first frame, side by side, one hard relative constraint each);
   the first start and the last end are pinned, the last moved 6 m to the side, and the
   middle runner's middle frame is dragged 3 m sideways: the whole chain bends.
+- ``path_long_stand.usda`` (Z-up, centimetres, 60 fps): a 10 s walk with a 4 s stand in
+  the middle that is not tagged stationary, its root jittering by a few millimetres as
+  captured roots do; three handles bend it: one in the stand moved 0.8 m sideways, the end
+  moved 1.5 m sideways. The body turns with the bend, smoothly through the stand.
 """
 from __future__ import annotations
 
@@ -162,6 +166,32 @@ def path_relay(out: Path) -> None:
     _save(stage)
 
 
+def long_stand_clip() -> tuple[walker.Clip, tuple[int, int]]:
+    """Walk 3.3 s, stand 4 s, walk on (60 fps, Z-up, cm); the root jitters by up to 3 mm
+    (uniform, seeded) through the stand."""
+    clip, (first, last) = walker.walk_idle_walk(frames=600, fps=60.0, stop_frame=200, idle_frames=240,
+                                                up="Z", meters_per_unit=0.01, name="path_long_stand")
+    rng = np.random.default_rng(16)
+    jitter = rng.uniform(-0.3, 0.3, size=(last - first + 1, 2))
+    clip.translations[first:last + 1, 0, :2] += np.round(jitter, 3)
+    return clip, (first, last)
+
+
+LONG_STAND_HANDLES = {"start": (0, (0.0, 0.0)), "stand": (320, (80.0, 0.0)), "end": (599, (150.0, -50.0))}
+
+
+def path_long_stand(out: Path) -> None:
+    clip, _ = long_stand_clip()
+    stage = examples.build_crowd_stage(out / "path_long_stand.usda", [examples.AgentSpec("stander", clip)],
+                                       up_axis="Z", meters_per_unit=0.01, fps=60.0, clips_dir=out / "clips")
+    for name, (frame, (dx, dy)) in LONG_STAND_HANDLES.items():
+        x, y, z = (float(v) for v in clip.translations[frame, 0])
+        examples.add_position_constraint(stage, f"/Edits/{name}", f"{CROWD}/stander", frame,
+                                         (round(x + dx, 6), round(y + dy, 6), 0.0))
+    _save(stage)
+
+
 STAGES = {"path_edit.usda": path_edit, "path_spline.usda": path_spline,
           "path_stationary.usda": path_stationary, "path_handshake.usda": path_handshake,
-          "path_formation.usda": path_formation, "path_relay.usda": path_relay}
+          "path_formation.usda": path_formation, "path_relay.usda": path_relay,
+          "path_long_stand.usda": path_long_stand}

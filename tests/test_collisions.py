@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from pxr import Gf, Sdf, Usd, UsdGeom
 
-from mocapedit import _solver, avoidance, collisions, examples, metrics, walker
+from mocapedit import _solver, avoidance, collisions, examples, metrics, report, walker
 from mocapedit.errors import MocapEditError
 from mocapedit.processor import solve
 from mocapedit.progress import Progress
@@ -447,11 +447,36 @@ def test_switches_and_progress(tmp_path):
     on = solve(str(stage), collisions=True, progress=Progress(stream=stream, interval=0.0))
     assert on.report.stats["remainingOverlaps"] == 0
     text = stream.getvalue()
-    assert "collision avoidance" in text and "collisions left" in text
+    assert "collision avoidance" in text and "collision intervals left" in text
     # The command line flag does the same.
     proc = run_cli("solve", stage, "-o", tmp_path / "cli.usda", "--collisions", "--report", tmp_path / "r.json")
     assert proc.returncode == 0, proc.stderr
-    assert "collisions left" in proc.stderr
+    assert "collision intervals left" in proc.stderr
+
+
+def test_progress_notes_summary_and_report_give_the_same_figures(tmp_path):
+    STAGES.crossing(tmp_path)
+    stream = io.StringIO()
+    edits = tmp_path / "e.usda"
+    result = solve(str(tmp_path / "collisions_crossing.usda"), output=str(edits), collisions=True,
+                   progress=Progress(stream=stream, interval=0.0), max_iterations=1)
+    stats = result.report.stats
+    assert stats["collisionIterations"] == 1 and stats["remainingOverlaps"] > 0
+    left = report.describe_left(stats["remainingOverlaps"], stats["regionFramesLeft"])
+    # Progress stops at the iteration it reached (not the maxIterations it was given).
+    assert "collision avoidance: 1 iterations in" in stream.getvalue()
+    assert f", {left}\n" in stream.getvalue()
+    assert any(left + " after 1 iteration" in n for n in result.report.notes)
+    summary = result.report.summary()
+    shared = report.overview(stats, result.report.constraints)
+    assert f"collision avoidance: {left} after 1 iteration" in shared
+    text = report.format_text(report.load(str(edits)))
+    for line in shared:
+        assert line in summary.splitlines() and line in text.splitlines()
+    # The worst residual printed is that of the hard constraints, never a soft collision row.
+    hard = [c["residual"] for c in result.report.constraints if c.get("hard") and c.get("kind") != "collision"]
+    assert f"worst hard residual {report._num(max(hard))}" in summary
+    assert "worst constraint residual" not in summary
 
 
 def test_detection_only_reports_overlaps_pairs_times_and_guides(tmp_path):

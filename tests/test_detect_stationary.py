@@ -62,6 +62,13 @@ def test_a_brief_fidget_inside_an_idle_is_bridged_by_max_gap():
     joined = stationary.detect(seconds, ground, heading, DetectSettings(max_gap=0.3, window=0.1))
     assert len(split) == 2 and len(joined) == 1
     assert joined[0].first == split[0].first and joined[0].last == split[1].last
+    # The figures of a range are those of its still frames, within the thresholds; the
+    # bridged fidget is counted apart with its own figures.
+    settings = DetectSettings(max_gap=0.3, window=0.1)
+    assert joined[0].max_speed <= settings.max_speed and joined[0].max_turn <= settings.max_turn
+    assert joined[0].bridged == joined[0].last - joined[0].first + 1 - (split[0].last - split[0].first + 1) \
+        - (split[1].last - split[1].first + 1)
+    assert joined[0].bridged > 0 and joined[0].bridged_max_speed > settings.max_speed
 
 
 def test_settings_are_checked():

@@ -13,6 +13,8 @@ from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel
 
 from mocapedit import examples, walker
 
+from layer_compare import assert_layers_close
+
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -344,46 +346,6 @@ def test_make_stages_is_deterministic_and_small(generated):
         assert tagged >= 1
 
 
-def _layer_values(layer: Sdf.Layer) -> dict:
-    """Every field of every spec in a layer: {(path, field): value}."""
-    values = {}
-
-    def visit(path):
-        spec = layer.GetObjectAtPath(path)
-        if spec is None:   # a relationship target or a connection
-            values[(str(path), "target")] = True
-            return
-        for key in spec.ListInfoKeys():
-            if key == "subLayerOffsets":  # no Python converter for the vector of offsets
-                values[(str(path), key)] = [(o.offset, o.scale) for o in layer.subLayerOffsets]
-            else:
-                values[(str(path), key)] = spec.GetInfo(key)
-        if path.IsPropertyPath() and layer.GetNumTimeSamplesForPath(path):
-            for t in layer.ListTimeSamplesForPath(path):
-                values[(str(path), f"sample {t}")] = layer.QueryTimeSample(path, t)
-
-    layer.Traverse(Sdf.Path.absoluteRootPath, visit)
-    return values
-
-
-def _assert_close(a, b, where):
-    if isinstance(a, (str, bool, int, Sdf.Path)) or a is None:
-        assert a == b, where
-        return
-    if isinstance(a, dict):   # time samples, dictionaries: each value with the tolerance
-        assert isinstance(b, dict) and sorted(a) == sorted(b), where
-        for key in a:
-            _assert_close(a[key], b[key], f"{where} {key}")
-        return
-    try:
-        x, y = np.array(a, dtype=np.float64), np.array(b, dtype=np.float64)
-    except (TypeError, ValueError):
-        assert a == b, where
-        return
-    assert x.shape == y.shape, where
-    np.testing.assert_allclose(x, y, atol=1e-5, rtol=1e-6, err_msg=where)
-
-
 def test_checked_in_example_stages_are_up_to_date(generated):
     # Compared with tolerances: the last digit of a sin() may differ between
     # machines, which is no reason to regenerate the files.
@@ -393,8 +355,5 @@ def test_checked_in_example_stages_are_up_to_date(generated):
     assert sorted(p.relative_to(checked_in) for p in checked_in.rglob("*.usda")) == fresh, (
         "example_stages/ is stale: run example_stages/make_stages.py")
     for rel in fresh:
-        new = _layer_values(Sdf.Layer.OpenAsAnonymous(str(tmp_path / rel)))
-        old = _layer_values(Sdf.Layer.OpenAsAnonymous(str(checked_in / rel)))
-        assert sorted(new) == sorted(old), f"example_stages/{rel} is stale"
-        for key, value in new.items():
-            _assert_close(value, old[key], f"example_stages/{rel} {key}")
+        assert_layers_close(Sdf.Layer.OpenAsAnonymous(str(tmp_path / rel)),
+                            Sdf.Layer.OpenAsAnonymous(str(checked_in / rel)), f"example_stages/{rel}")

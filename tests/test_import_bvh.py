@@ -3,6 +3,7 @@ every joint where an independent BVH implementation (bvhio) does, on every frame
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -255,3 +256,19 @@ def test_the_procedural_walker_through_bvh_comes_back_joint_for_joint(tmp_path, 
     got = world_joints(Usd.Stage.Open(str(tmp_path / "walker.usda")), result.skeleton, range(96))
     expect = walker.joint_world_positions(clip)
     assert np.abs(got - expect).max() < TOLERANCE
+
+
+LYING_REST_POSE = Path(__file__).with_name("lying_rest_pose.bvh")
+
+
+@pytest.mark.parametrize("up_axis", ["Y", "Z"])
+def test_the_height_is_measured_in_frame_0_not_in_the_rest_pose(tmp_path, up_axis):
+    # The rest pose lies along the ground (every OFFSET along Z); frame 0 turns the root
+    # upright, so the character stands 30 + 50 + 90 + 5 cm tall.
+    path = LYING_REST_POSE
+    result = bvh_usd.build_clip(path, ImportSettings(scale=0.01, meters_per_unit=1.0, up_axis=up_axis,
+                                                     end_sites=True))
+    assert result.height_m == pytest.approx(1.75, abs=1e-5)
+    proc = run_cli("import-bvh", path, "-o", tmp_path / "lying.usda", "--unit", "cm", "--end-sites")
+    assert proc.returncode == 0, proc.stderr
+    assert "1.75 m tall" in proc.stderr and "note" not in proc.stderr

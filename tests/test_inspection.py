@@ -252,3 +252,50 @@ def test_stored_report_is_deterministic_and_finite(tmp_path, monkeypatch):
     solve(str(stage), output=str(tmp_path / "b.usda"))
     assert (tmp_path / "a.usda").read_bytes() == (tmp_path / "b.usda").read_bytes()
     assert writer.report_text({"x": float("inf"), "y": [np.float32(1.5), float("nan")]}) == '{"x":null,"y":[1.5,null]}'
+
+
+@pytest.mark.parametrize("retimed", [False, True])
+def test_the_report_gives_the_foot_skate_of_moved_agents_source_and_edited(tmp_path, retimed):
+    from mocapedit import examples, metrics, walker
+    walk = walker.walk(frames=48, name="walk")
+    path = tmp_path / "shot.usda"
+    examples.build_crowd_stage(path, [examples.AgentSpec("a0", walk, (0.0, 0.0, 0.0), 0.0),
+                                      examples.AgentSpec("a1", walk, (3.0, 0.0, 0.0), 0.0)],
+                               clips_dir=tmp_path / "clips")
+    stage = Usd.Stage.Open(str(path))
+    start = metrics.agent_root_positions(stage, "/World/Crowd/a0", [0.0])[0]
+    examples.add_position_constraint(stage, "/Edits/start", "/World/Crowd/a0", 0, start)
+    # The end pulled a metre sideways: the path bends and the feet slide more than the source's.
+    end = metrics.agent_root_positions(stage, "/World/Crowd/a0", [47.0])[0] + (1.0, 0.0, 0.0)
+    examples.add_position_constraint(stage, "/Edits/end", "/World/Crowd/a0", 47, end)
+    if retimed:  # the pose is baked again on the shot's frames: measured by UsdSkel on both stages
+        examples.add_time_constraint(stage, "/Edits/late", "/World/Crowd/a0", 47, 55.0)
+    stage.GetRootLayer().Save()
+    edits, composed = tmp_path / "e.usda", tmp_path / "c.usda"
+    result = solve(str(path), output=str(edits), composed=str(composed))
+    moved, still = result.report.agents["/World/Crowd/a0"], result.report.agents["/World/Crowd/a1"]
+    assert "footSkateSource" not in still and "footSkateEdited" not in still
+    source = metrics.foot_skate(Usd.Stage.Open(str(path)), "/World/Crowd/a0")
+    edited = metrics.foot_skate(Usd.Stage.Open(str(composed)), "/World/Crowd/a0") if retimed else \
+        metrics.foot_skate(Usd.Stage.Open(str(composed)), "/World/Crowd/a0", times=source.times,
+                           contact=source.contact)
+    # The solve measures by forward kinematics in double precision, UsdSkel from float samples.
+    assert moved["footSkateSource"] == pytest.approx(source.mean, rel=1e-4)
+    assert moved["footSkateEdited"] == pytest.approx(edited.mean, rel=1e-4)
+    assert moved["footSkateEdited"] > moved["footSkateSource"]
+    text = report.format_text(report.load(str(edits)))
+    assert f"foot skate {report._num(moved['footSkateSource'])} -> {report._num(moved['footSkateEdited'])}" in text
+
+
+def test_progress_and_report_count_the_overlaps_left_alike(tmp_path, monkeypatch):
+    import io
+
+    from mocapedit.progress import Progress
+    stage = write_scene(tmp_path / "shot.usda")
+    install_pass(monkeypatch)
+    stream = io.StringIO()
+    result = solve(str(stage), output=str(tmp_path / "e.usda"), progress=Progress(stream=stream, interval=0.0))
+    left = result.report.stats["remainingOverlaps"]
+    assert left == 1
+    assert "overlaps: " in stream.getvalue() and ", 1 overlapping agent pair\n" in stream.getvalue()
+    assert "overlapping agent pairs left: 1" in result.report.summary().splitlines()

@@ -65,10 +65,10 @@ def add_layer(stage, path, agents, animation_path, joint="", mode="additive", we
     return layer
 
 
-def compose(tmp_path, stage):
+def compose(tmp_path, stage, **options):
     stage.GetRootLayer().Save()
     edits, composed = tmp_path / "edits.usda", tmp_path / "composed.usda"
-    result = solve(stage.GetRootLayer().realPath, output=str(edits), composed=str(composed))
+    result = solve(stage.GetRootLayer().realPath, output=str(edits), composed=str(composed), **options)
     return result, Usd.Stage.Open(str(composed))
 
 
@@ -472,10 +472,10 @@ def _bad_stage(tmp_path, case):
     ("weight-sampled", r"</Layers/L>\.weight: weight must be within \[0, 1\], got 1\.2 at time 10"),
     ("no-animation", r"</Layers/L>\.animation: has no animation"),
     ("not-an-animation", r"</Layers/L>\.animation: targets </World>, which is not a SkelAnimation"),
-    ("missing-prim", r"</Layers/L>\.animation: targets </Layers/Nowhere>, which is not a SkelAnimation"),
+    ("missing-prim", r"</Layers/L>\.animation: targets </Layers/Nowhere>, which does not exist"),
     ("animation-without-samples", r"</Layers/L>\.animation: animation </Layers/Empty> cannot be layered: "
                                   r".*clip has no samples"),
-    ("not-an-agent", r"</Layers/L>\.agents: targets </World>, which is not an active agent"),
+    ("not-an-agent", r"</Layers/L>\.agents: targets </World>, which is not an agent \(no MocapAgentAPI\)"),
     ("mode", r"</Layers/L>\.mode: must be one of blend, additive, got 'multiply'"),
 ])
 def test_bad_layers_fail_naming_the_layer_prim_and_write_nothing(tmp_path, case, needle):
@@ -564,7 +564,8 @@ def test_with_the_time_pass_layering_applies_to_the_warped_pose(tmp_path):
     examples.add_time_constraint(stage, "/Edits/Late", "/World/Crowd/a0", 20, 31.5)
     stage.GetRootLayer().Save()
     (tmp_path / "time").mkdir()
-    _, warped = compose(tmp_path / "time", stage)
+    # Baked, so its samples sit on the shot times the layered result is baked at.
+    _, warped = compose(tmp_path / "time", stage, bake_timing=True)
     phone = gestures.phone_call(frames=24)
     add_clip(stage, "/Layers/Phone", phone.joints, phone.translations, phone.rotations)
     weight = {4: 0.0, 16: 1.0}
@@ -591,3 +592,32 @@ def test_with_the_time_pass_layering_applies_to_the_warped_pose(tmp_path):
     got = np.array([np.array(got.Get(t)) for t in times])
     assert _rotation_difference(got, expect) < 1e-6
     assert _rotation_difference(got, pose[1]) > 0.1
+
+
+@pytest.mark.parametrize("mode,reference", [("blend", "firstFrame"), ("additive", "firstFrame"),
+                                            ("additive", "restPose")])
+def test_a_layer_clip_with_rotations_only_leaves_translations_and_scales_to_the_source(tmp_path, mode, reference):
+    path, walk = street(tmp_path, offsets=(0.0,))
+    stage = Usd.Stage.Open(str(path))
+    nod = UsdSkel.Animation.Define(stage, "/Layers/Nod")
+    nod.GetJointsAttr().Set([CHEST])
+    rotations = [quat(0.0, (1, 0, 0)), quat(30.0, (1, 0, 0)), quat(10.0, (0, 1, 1))]
+    for f, q in enumerate(rotations):
+        nod.GetRotationsAttr().Set(Vt.QuatfArray.FromNumpy(np.array([q], np.float32)), 12.0 * f)
+    add_layer(stage, "/Layers/L", ["/World/Crowd/a0"], "/Layers/Nod", "", mode, reference=reference)
+    result, out = compose(tmp_path, stage)
+    notes = result.report.agents["/World/Crowd/a0"]["notes"]
+    keeps = "stay as below" if mode == "blend" else "get nothing added"
+    assert f"layer </Layers/L>: {mode} on 1 joints from (whole skeleton); the clip authors rotations only: " \
+           f"translations and scales {keeps}" in notes
+    src = Usd.Stage.Open(str(path))
+    chest = joints_of(out, "/World/Crowd/a0").index(CHEST)
+    times = np.arange(FRAMES)
+    got_t, got_r, got_s = layering.trs_from_matrices(local_matrices(out, "/World/Crowd/a0", times)[:, chest])
+    src_t, src_r, src_s = layering.trs_from_matrices(local_matrices(src, "/World/Crowd/a0", times)[:, chest])
+    np.testing.assert_allclose(got_t, src_t, atol=1e-6)
+    np.testing.assert_allclose(got_s, src_s, atol=1e-6)
+    assert _rotation_difference(got_r, src_r) > 0.05, "the rotations are layered"
+    if mode == "blend":  # at weight 1 the chest turns as the clip says, at its samples
+        for f, q in enumerate(rotations):
+            assert _rotation_difference(got_r[12 * f], q) < 1e-5

@@ -579,3 +579,105 @@ def test_usd_errors_name_the_prim(tmp_path):
     _define_skeleton(stage, "/Static/Skel", sanim.GetPath())
     with pytest.raises(ValueError, match="no time samples"):
         M.foot_skate(stage, static.GetPath())
+
+
+# ---------------------------------------------------------------------------------------------
+# Plausibility: facing and walking direction against the source
+# ---------------------------------------------------------------------------------------------
+
+
+def test_facing_change_per_second_and_spin_threshold_scale_with_frame_rate():
+    for fps in (24.0, 60.0, 120.0):
+        seconds = np.arange(5) / fps
+        facing = np.radians([0.0, 1.0, 1.0, -20.0, 340.0 - 360.0])
+        rate = M.facing_change_per_second(facing, seconds)
+        np.testing.assert_allclose(rate, np.array([1.0, 0.0, 21.0, 0.0]) * fps, atol=1e-9)
+        # 15 degrees per frame at 60 fps is the same rate at every frame rate.
+        assert math.isclose(M.spin_threshold(), 15.0 * 60.0)
+        per_frame = np.degrees(np.abs(np.diff(facing))) * fps
+        source = np.zeros(4)
+        spun = M.spins(source, rate)
+        np.testing.assert_array_equal(spun, per_frame > 900.0)
+        assert not M.spins(rate, rate).any()        # the source turning as fast is no spin
+    with pytest.raises(ValueError):
+        M.facing_change_per_second([0.0, 1.0], [0.0, 0.0])
+
+
+def test_facing_change_unwraps_across_pi():
+    facing = np.radians([170.0, -170.0])            # 20 degrees counter-clockwise, not 340
+    np.testing.assert_allclose(M.facing_change_per_second(facing, [0.0, 1.0]), [20.0], atol=1e-9)
+
+
+def test_direction_deviation_by_hand():
+    t = np.arange(41) / 20.0                         # 2 s at 20 fps, chords of 5 frames
+    source = np.stack((t, np.zeros_like(t)), axis=1)  # 1 unit per second along +u
+    same = M.direction_deviation(source, source + 3.0, t, min_speed=0.5)
+    assert np.nanmax(same) < 1e-9 and np.isnan(same[-5:]).all() and np.isfinite(same[:-5]).all()
+    back = source.copy()
+    back[20:] = source[20] - (source[20:] - source[20])   # walks back after 1 s
+    dev = M.direction_deviation(source, back, t, min_speed=0.5)
+    assert math.isclose(np.nanmax(dev), 180.0, abs_tol=1e-9)
+    assert np.nanmax(dev[:15]) < 1e-9
+    side = np.stack((t, t), axis=1)                    # 45 degrees off
+    assert math.isclose(np.nanmax(M.direction_deviation(source, side, t, 0.5)), 45.0, abs_tol=1e-9)
+    # Where the source stands, nothing is measured however the edit moves.
+    stand = np.zeros_like(source)
+    assert np.isnan(M.direction_deviation(stand, back, t, min_speed=0.5)).all()
+
+
+def test_default_facing_joint():
+    assert M.default_facing_joint(["Root", "Root/Hips", "Root/Hips/LeftUpLeg"]) == 1
+    assert M.default_facing_joint(["pelvis", "pelvis/spine"]) == 0
+    assert M.default_facing_joint(["Root", "Root/LeftHip", "Root/mixamorig_Hips"]) == 2
+    assert M.default_facing_joint(["Root", "Root/Spine"]) == 0
+
+
+@pytest.fixture(scope="module")
+def walker_stage(tmp_path_factory):
+    from mocapedit import examples, walker
+    tmp = tmp_path_factory.mktemp("plausible")
+    clip = walker.walk(frames=96, fps=24.0, speed=1.3, name="straight")
+    stage = examples.build_crowd_stage(tmp / "shot.usda", [examples.AgentSpec("a", clip)], fps=24.0,
+                                       clips_dir=tmp / "clips")
+    stage.GetRootLayer().Save()
+    return stage.GetRootLayer().realPath
+
+
+def _turned(path, yaw_of_time):
+    """The stage at ``path`` with agent a turned about its origin by yaw_of_time(t) degrees."""
+    stage = Usd.Stage.Open(path)
+    stage.SetEditTarget(stage.GetSessionLayer())
+    op = UsdGeom.Xformable(stage.GetPrimAtPath("/World/Crowd/a")).AddRotateYOp(opSuffix="edit")
+    for t in range(96):
+        op.Set(float(yaw_of_time(t)), float(t))
+    return stage
+
+
+def test_plausibility_of_an_unedited_agent(walker_stage):
+    src = Usd.Stage.Open(walker_stage)
+    p = M.plausibility(src, _turned(walker_stage, lambda t: 0.0), "/World/Crowd/a")
+    assert abs(p.max_extra_facing_rate) < 1e-6 and p.spin_frames == 0 and not p.spins
+    assert p.max_direction_deviation < 1e-6 and not p.reverses
+    assert math.isclose(p.length_ratio, 1.0, rel_tol=1e-9)
+    assert p.time_warp == pytest.approx((1.0, 1.0))
+    assert math.isclose(p.foot_skate_ratio, 1.0, rel_tol=1e-6)
+    assert p.source_max_facing_rate < M.spin_threshold()
+
+
+def test_plausibility_catches_a_spin_and_a_reversal(walker_stage):
+    src = Usd.Stage.Open(walker_stage)
+    # One frame turns the body by 100 degrees (2,400 degrees per second at 24 fps): a spin, and the
+    # walk after it (turned about the start) goes off by 100 degrees.
+    p = M.plausibility(src, _turned(walker_stage, lambda t: 100.0 if t >= 50 else 0.0), "/World/Crowd/a")
+    assert p.spin_frames == 1 and p.spins
+    assert p.max_extra_facing_rate == pytest.approx(100.0 * 24.0, rel=0.05)
+    assert p.reverses and 95.0 < p.max_direction_deviation <= 180.0
+    # A constant turn of the whole agent is no spin, and its direction is off by that turn.
+    q = M.plausibility(src, _turned(walker_stage, lambda t: 30.0), "/World/Crowd/a")
+    assert q.spin_frames == 0 and abs(q.max_extra_facing_rate) < 1e-3
+    assert q.max_direction_deviation == pytest.approx(30.0, abs=1e-3)
+    assert q.length_ratio == pytest.approx(1.0, abs=1e-6)
+    worst = M.worst_plausibility([p, q])
+    assert worst["spinningAgents"] == 1 and worst["reversingAgents"] == 1
+    assert worst["maxExtraTurnPerFrameAt60fps"] == pytest.approx(p.max_extra_facing_rate / 60.0)
+    assert M.worst_plausibility([]) == {"agents": 0}

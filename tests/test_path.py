@@ -75,7 +75,8 @@ def test_hard_constraints_hold_on_the_composed_stage(tmp_path, walk_clip):
     targets = {0: (0.0, 0.0, 0.0), 70: (0.6, 0.0, 3.4), 140: (-0.4, 0.0, 7.5), 192: (0.3, 0.0, 10.2)}
     for f, p in targets.items():
         examples.add_position_constraint(stage, f"/Edits/c{f}", a, f, p)
-    result, src, out = _solve(tmp_path, stage)
+    # The path edit alone: foot locking, which then bends the legs, is tested in test_feet.py.
+    result, src, out = _solve(tmp_path, stage, foot_locking=False)
     frames = np.arange(193)
     before, after = world_joints(src, f"{a}/Skel", frames), world_joints(out, f"{a}/Skel", frames)
     for f, p in targets.items():

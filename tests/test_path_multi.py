@@ -301,3 +301,69 @@ def test_example_edits_keep_foot_skate_low(tmp_path, builder, stage):
         before = metrics.foot_skate(src, agent)
         after = metrics.foot_skate(out, agent, times=before.times, contact=before.contact)
         assert after.mean - before.mean < 0.04, f"{agent}: {before.mean:.3f} -> {after.mean:.3f} m/s"
+
+
+def test_a_long_stand_bent_by_handles_turns_the_body_smoothly(tmp_path):
+    """A 60 fps, Z-up centimetre walk with a 4 s untagged stand whose root jitters, bent by
+    three handles (one inside the stand): the body turns with the bend, never spins, and the
+    handles hold. With the heading taken from the edited path's tangent, the stand spins by
+    up to 177 degrees in one frame."""
+    stages = _load_stages()
+    stages.path_long_stand(tmp_path)
+    result, src, out = _solve(tmp_path, Usd.Stage.Open(str(tmp_path / "path_long_stand.usda")))
+    agent = f"{CROWD}/stander"
+    for c in result.report.constraints:
+        assert c["residual"] < 1e-6, c
+    p = metrics.plausibility(src, out, agent)
+    # The solve reports the same figures as UsdSkel FK on the composed stage gives.
+    reported = result.report.agents[agent]["plausibility"]
+    assert reported["maxExtraFacingRate"] == pytest.approx(p.max_extra_facing_rate, abs=0.5)
+    assert reported["maxDirectionDeviation"] == pytest.approx(p.max_direction_deviation, abs=0.01)
+    assert reported["lengthRatio"] == pytest.approx(p.length_ratio, rel=1e-4)
+    assert reported["footSkateRatio"] == pytest.approx(p.foot_skate_ratio, rel=1e-3)
+    assert reported["spinFrames"] == 0 and result.report.stats["plausibility"]["spinningAgents"] == 0
+    assert "largest extra turn" in result.report.summary()
+    assert p.spin_frames == 0
+    assert p.max_extra_facing_rate < 60.0                    # under 1 degree per frame at 60 fps
+    assert p.max_direction_deviation < 20.0 and not p.reverses
+    assert p.foot_skate_ratio < 1.5
+    # The stand turns with the handle inside it: by about the bend there, in one smooth sweep.
+    _, (first, last) = stages.long_stand_clip()
+    t, ms = metrics.joint_world_matrices(src, agent)
+    _, me = metrics.joint_world_matrices(out, agent)
+    turn = np.degrees(metrics.body_facing(me, "Z") - metrics.body_facing(ms, "Z"))
+    assert np.abs(np.diff(turn[first:last + 1])).max() < 0.2
+    # It turns with the bend (about 11 degrees), between the turns of the walks around it.
+    before, after = turn[first - 60:first].mean(), turn[last + 1:last + 61].mean()
+    assert turn[first:last + 1].mean() > 5.0
+    assert min(before, after) - 1.0 < turn[first:last + 1].min() <= turn[first:last + 1].max() < max(before, after) + 1.0
+
+
+def test_backward_walks_and_turns_on_the_spot_keep_their_facing(tmp_path):
+    """A walk played backwards (the body faces +Z while the root goes -Z) bent 1 m sideways keeps
+    facing +Z, turned only by the bend; a slow turn on the spot dragged 1 m keeps its own turn."""
+    import dataclasses
+    walk = walker.walk(frames=97, fps=24.0, speed=1.25, name="forward")
+    back = dataclasses.replace(walk, name="backward", translations=walk.translations[::-1].copy(),
+                               rotations=walk.rotations[::-1].copy(), foot_contacts=walk.foot_contacts[::-1].copy())
+    spot = walker.turn(frames=96, fps=24.0, speed=0.02, turn_rate=90.0, name="spot")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("back", back),
+                                                                examples.AgentSpec("spot", spot, (3.0, 0.0, 0.0))],
+                                       fps=24.0, clips_dir=tmp_path / "clips")
+    b, s = f"{CROWD}/back", f"{CROWD}/spot"
+    for f in (0, 48, 96):
+        x, _, z = (float(v) for v in back.translations[f, 0])
+        examples.add_position_constraint(stage, f"/Edits/back{f}", b, f, (x + (1.0 if f == 48 else 0.0), 0.0, z))
+    x, _, z = (float(v) for v in spot.translations[0, 0])
+    examples.add_position_constraint(stage, "/Edits/spot", s, 0, (x + 4.0, 0.0, z + 1.0))
+    result, src, out = _solve(tmp_path, stage)
+    for agent, most in ((b, 35.0), (s, 1e-6)):
+        p = metrics.plausibility(src, out, agent)
+        assert p.spin_frames == 0
+        _, ms = metrics.joint_world_matrices(src, agent)
+        _, me = metrics.joint_world_matrices(out, agent)
+        turn = np.degrees(metrics.body_facing(me, "Y") - metrics.body_facing(ms, "Y"))
+        assert np.abs(turn).max() < most, agent      # never turned round to face its path
+        if agent == b:                               # the bend turns the two halves both ways
+            assert abs(turn[48]) < 2.0 and turn[0] * turn[-1] < 0
+    assert p.source_max_facing_rate > 80.0             # the spot turn is there, and kept

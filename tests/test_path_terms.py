@@ -1,7 +1,7 @@
 """The fast paths that build a component's path problem, against straightforward numpy
 references on generated problems: the solver's batched terms (``_solver.component_chain_terms``,
 ``group_sample_frames``, ``frame_partners``, ``group_mesh_terms``, ``null_space_support``,
-``block_tangent_headings``) and ComponentProblem's vectorised key frames, interpolation and
+``block_deformation_turns``) and ComponentProblem's vectorised key frames, interpolation and
 freedom analysis. Each reference does the work one agent, one sampled time or one dense
 elimination at a time."""
 from __future__ import annotations
@@ -412,36 +412,49 @@ def test_null_space_support_of_known_matrices():
         _solver.null_space_support(one, one + 5, np.array([1 + 0j]), 1, 2)
 
 
-def test_block_tangent_headings_are_each_agents():
+def _edited(paths):
+    """Each path bent a little about its start: a different turn at every frame."""
+    out = []
+    for p in paths:
+        a = 0.3 * np.linspace(0.0, 1.0, len(p))[:, None]
+        d = p - p[0]
+        out.append(p[0] + np.concatenate([np.cos(a) * d[:, :1] - np.sin(a) * d[:, 1:],
+                                          np.sin(a) * d[:, :1] + np.cos(a) * d[:, 1:]], axis=1))
+    return out
+
+
+def test_block_deformation_turns_are_each_agents():
     paths = _paths(5)
-    g = np.concatenate(paths)
+    g, e = np.concatenate(paths), np.concatenate(_edited(paths))
     offsets = np.cumsum([0] + [len(p) for p in paths])
     blocks = np.array([(offsets[i], offsets[i + 1]) for i in (0, 2, 3)], np.int32)
     fixed = np.array([(1, 1, len(paths[2]) // 2), (2, 0, 0), (2, 1, 1)], np.int32)
-    fallback = np.array([0.5, -1.0, 2.0])
-    got = _solver.block_tangent_headings(g, blocks, fixed, fallback, 1e-5)
+    turn = np.array([0.5, -1.0, 2.0])
+    got = _solver.block_deformation_turns(g, e, blocks, fixed, turn, 2, 0.01)
     for b, (lo, hi) in enumerate(blocks):
         mine = fixed[:, 0] == b
-        ref = _solver.tangent_headings(g[lo:hi], [tuple(r) for r in fixed[mine, 1:].tolist()], fallback[mine], 1e-5)
+        ref = _solver.deformation_turns(g[lo:hi], e[lo:hi], [tuple(r) for r in fixed[mine, 1:].tolist()],
+                                        turn[mine], 2, 0.01)
         np.testing.assert_array_equal(got[lo:hi], ref)
     assert not got[offsets[1]:offsets[2]].any()
     with pytest.raises(ValueError, match="grouped by block"):
-        _solver.block_tangent_headings(g, blocks, fixed[::-1].copy(), fallback, 1e-5)
+        _solver.block_deformation_turns(g, e, blocks, fixed[::-1].copy(), turn, 2, 0.01)
 
 
-def test_many_headings_split_between_threads_are_each_agents():
+def test_many_turns_split_between_threads_are_each_agents():
     # Over 20,000 frames: computed on two threads, the same as one agent at a time.
     paths = [p for seed in range(100) for p in _paths(seed)]
-    g = np.concatenate(paths)
+    g, e = np.concatenate(paths), np.concatenate(_edited(paths))
     offsets = np.cumsum([0] + [len(p) for p in paths])
     assert offsets[-1] > 20000
     blocks = np.array([(offsets[i], offsets[i + 1]) for i in range(len(paths))], np.int32)
     fixed = np.array([(b, 0, 1) for b in range(0, len(paths), 3)], np.int32)
-    fallback = np.linspace(-1.0, 1.0, len(fixed))
-    got = _solver.block_tangent_headings(g, blocks, fixed, fallback, 1e-5)
+    turn = np.linspace(-1.0, 1.0, len(fixed))
+    got = _solver.block_deformation_turns(g, e, blocks, fixed, turn, 3, 0.01)
     for b, (lo, hi) in enumerate(blocks):
         mine = fixed[:, 0] == b
-        ref = _solver.tangent_headings(g[lo:hi], [tuple(r) for r in fixed[mine, 1:].tolist()], fallback[mine], 1e-5)
+        ref = _solver.deformation_turns(g[lo:hi], e[lo:hi], [tuple(r) for r in fixed[mine, 1:].tolist()],
+                                        turn[mine], 3, 0.01)
         np.testing.assert_array_equal(got[lo:hi], ref)
 
 
@@ -540,10 +553,9 @@ def test_component_problems_match_the_reference_build(name):
         elif result.solver == "rigid":
             assert np.ptp(r.heading - a.source_heading) < 1e-12
         else:
-            fixed = [tuple(map(int, s)) for s in a.stationary]
-            fallback = np.array([a.source_heading[f] + t for (f, _), t in zip(fixed, r.range_turn)])
-            np.testing.assert_array_equal(r.heading, _solver.tangent_headings(r.ground, fixed, fallback,
-                                                                              SETTINGS.still))
+            # The component's headings, computed for all agents at once, are each agent's own.
+            np.testing.assert_allclose(r.heading, path_edit.edited_heading(a, r.ground, r.range_turn, SETTINGS),
+                                       rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("start, end, expected", [

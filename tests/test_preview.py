@@ -215,3 +215,25 @@ def test_preview_reports_progress_through_the_given_progress(solved, tmp_path):
     for task in ("read agents", "source paths", "edited paths", "overlaps", "rasterize paths"):
         assert f"\n{task}: " in "\n" + text, task
     assert ground.up_index(scene.up_axis) in (1, 2)
+
+
+def test_preview_marks_agents_that_spin_or_walk_back(solved, tmp_path):
+    scene, *_ = solved
+    agent = next(a for a in scene.crowd.agents if a.edited_flag)
+    figures = scene.report.agents.setdefault(agent.path, {})
+    figures["plausibility"] = {"spinFrames": 3, "worstTurnFrame": 5, "maxDirectionDeviation": 120.0,
+                               "worstDirectionFrame": 9}
+    marks = preview.implausible_marks(scene.report, scene.crowd)
+    assert [(k, p) for k, _, p in marks] == [("spin", agent.path), ("reverse", agent.path)]
+    np.testing.assert_allclose(marks[0][1], preview._edited_at_frame(agent, 5))
+    np.testing.assert_allclose(marks[1][1], preview._edited_at_frame(agent, 9))
+    scene.implausible = marks
+    preview.write_png(scene, str(tmp_path / "marked.png"), resolution=400)
+    with Image.open(tmp_path / "marked.png") as img:
+        assert img.size[0] > 0
+    # Within the limits (or not measured): no mark.
+    figures["plausibility"] = {"spinFrames": 0, "maxDirectionDeviation": 45.0}
+    assert preview.implausible_marks(scene.report, scene.crowd) == []
+    figures["plausibility"] = {"spinFrames": 0, "maxDirectionDeviation": float("nan")}
+    assert preview.implausible_marks(scene.report, scene.crowd) == []
+    assert preview.implausible_marks(None, scene.crowd) == []

@@ -15,7 +15,7 @@ import pytest
 
 import mocapedit
 from mocapedit import schema as S
-from pxr import Gf, Sdf, Usd, UsdGeom
+from pxr import Gf, Sdf, Usd, UsdGeom, Vt
 
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMA_USDA = ROOT / "schema" / "schema.usda"
@@ -41,9 +41,16 @@ CONTRACT: dict[str, dict[str, object]] = {
         "mocap:collisionHeight": ("float", UNIFORM, NO_FALLBACK, None),
         "mocap:collide": ("bool", UNIFORM, True, None),
         "mocap:pathCurve": "rel",
+        "mocap:leftLegJoints": ("token[]", UNIFORM, NO_FALLBACK, None),
+        "mocap:rightLegJoints": ("token[]", UNIFORM, NO_FALLBACK, None),
+        "mocap:footLocking": ("bool", UNIFORM, True, None),
     },
     "MocapStationaryAPI": {
         "stationary:__INSTANCE_NAME__:frames": ("int2", UNIFORM, NO_FALLBACK, None),
+    },
+    "MocapFootContactAPI": {
+        "footContact:__INSTANCE_NAME__:joint": ("token", UNIFORM, NO_FALLBACK, None),
+        "footContact:__INSTANCE_NAME__:frames": ("int2", UNIFORM, NO_FALLBACK, None),
     },
     "MocapPositionConstraint": {
         "agent": "rel",
@@ -109,11 +116,13 @@ CONTRACT: dict[str, dict[str, object]] = {
         "collisionStrategy": ("token", UNIFORM, "relinearize", ["relinearize", "accumulate"]),
         "minTimeInterval": ("double", UNIFORM, 0.1, None),
         "maxWait": ("double", UNIFORM, 3.0, None),
+        "footLocking": ("bool", UNIFORM, True, None),
     },
 }
 
 API_KINDS = {"MocapAgentAPI": Usd.SchemaKind.SingleApplyAPI,
-             "MocapStationaryAPI": Usd.SchemaKind.MultipleApplyAPI}
+             "MocapStationaryAPI": Usd.SchemaKind.MultipleApplyAPI,
+             "MocapFootContactAPI": Usd.SchemaKind.MultipleApplyAPI}
 # Properties a schema gets from its base class rather than from schema.usda.
 INHERITED = {"MocapAvoidRegion": {"proxyPrim", "purpose", "visibility", "xformOpOrder"}}
 
@@ -410,9 +419,9 @@ def test_docs_everywhere():
         for prop in spec.properties:
             assert prop.documentation.strip(), f"{name}.{prop.name}"
             registered = prop.name
-            if name == "MocapStationaryAPI":
-                registered = Usd.SchemaRegistry.MakeMultipleApplyNameTemplate("stationary",
-                                                                              prop.name)
+            prefix = {"MocapStationaryAPI": "stationary", "MocapFootContactAPI": "footContact"}.get(name)
+            if prefix:
+                registered = Usd.SchemaRegistry.MakeMultipleApplyNameTemplate(prefix, prop.name)
             assert definition(name).GetPropertyDocumentation(registered).strip(), \
                 f"{name}.{prop.name}: registry doc"
 
@@ -473,6 +482,11 @@ SAMPLES = {
     "wrap": "clamp", "referencePose": "restPose", "collisionAvoidance": True,
     "maxIterations": 25, "sampleStep": 0.5, "matchSpeed": True,
     "collisionStrategy": "accumulate", "minTimeInterval": 0.25, "maxWait": 1.5,
+    "mocap:leftLegJoints": Vt.TokenArray(["Hips/LUpLeg", "Hips/LUpLeg/LLeg", "Hips/LUpLeg/LLeg/LFoot"]),
+    "mocap:rightLegJoints": Vt.TokenArray(["RUpLeg", "RLeg", "RFoot", "RToe"]),
+    "mocap:footLocking": False, "footLocking": False,
+    "footContact:__INSTANCE_NAME__:joint": "LeftToe",
+    "footContact:__INSTANCE_NAME__:frames": Gf.Vec2i(3, 9),
 }
 OFFSETS = {"MocapRelativeConstraint": Gf.Vec3d(0.75, 0, -1.25), "MocapSyncConstraint": 4.5}
 
@@ -496,7 +510,7 @@ def get_schema(cls, stage):
         return cls.Get(stage, f"/Edits/{cls.__name__}")
     if cls is S.AgentAPI:
         return cls.Get(stage, "/Crowd/agent0")
-    return cls.Get(stage, "/Clips/walk.stationary:pause")
+    return cls.Get(stage, f"/Clips/walk.{cls.NAMESPACE_PREFIX}:pause")
 
 
 @pytest.mark.parametrize("cls", S.ALL_SCHEMA_CLASSES, ids=lambda c: c.SCHEMA_NAME)

@@ -54,7 +54,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import _solver, collisions
+from . import _solver, collisions, report
 
 STRATEGIES = ("relinearize", "accumulate")
 
@@ -487,11 +487,11 @@ class _Run:
         self.stalled = left > 0 and self.since_best >= state.s.patience and it < state.s.max_iterations
         last = (left == 0 and not self.pending) or it == state.s.max_iterations or self.stalled
         if self.task is not None:
+            left = report.describe_left(record.collisions, record.region_samples)
             if last:
-                self.task.done(f"{left} collision{'s' if left != 1 else ''} left after {it} iteration"
-                               f"{'s' if it != 1 else ''}")
+                self.task.done(left, count=it)
             else:
-                self.task.update(it, f"{left} collision{'s' if left != 1 else ''} left")
+                self.task.update(it, left)
         return last
 
     def timing(self, total: float) -> dict:

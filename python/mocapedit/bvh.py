@@ -52,6 +52,10 @@ UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "inch": 0.0254, "ft": 
 _CHANNELS = {"xposition": ("p", 0), "yposition": ("p", 1), "zposition": ("p", 2),
              "xrotation": ("r", 0), "yrotation": ("r", 1), "zrotation": ("r", 2)}
 
+# The frame times (seconds) a capture can have: 10,000 down to 0.1 frames per second. Outside
+# them the file is broken, and taking it at its word makes a clip of absurd timing.
+FRAME_TIME_RANGE = (1e-4, 10.0)
+
 # Frame rates that a rounded Frame Time stands for (1/fps printed to a few digits).
 _COMMON_FPS = (24000 / 1001, 30000 / 1001, 60000 / 1001)
 
@@ -366,6 +370,10 @@ def _parse_motion_header(path: str, lines: _Lines, skeleton: BvhSkeleton) -> Non
         raise _error(path, number, f"frame time '{value[:20]}' is not a number") from None
     if not (math.isfinite(frame_time) and frame_time > 0):
         raise _error(path, number, f"frame time must be a positive number of seconds, got {value[:20]}")
+    low, high = FRAME_TIME_RANGE
+    if not low <= frame_time <= high:
+        raise _error(path, number, f"frame time {value[:20]} s ({1.0 / frame_time:.3g} frames per second) is not a "
+                     f"capture's: a frame lasts {low:g} to {high:g} s")
     skeleton.frame_time = frame_time
 
 
@@ -518,6 +526,13 @@ class SkeletonPose:
         """(J,4,4) joint-local rest matrices (row-vector convention)."""
         from .kinematics import compose_trs
         return compose_trs(self.rest_translations, self.rest_rotations)
+
+    def height(self, translations: np.ndarray, rotations: np.ndarray, up_axis: str) -> float:
+        """From the lowest to the highest joint along up, stage units, of one pose given as
+        (J,3) joint-local translations and (J,4) rotations (what the Converter gives)."""
+        from .kinematics import compose_trs, skel_space
+        skel = skel_space(compose_trs(translations, rotations), self.parents)
+        return float(np.ptp(skel[:, 3, 2 if up_axis == "Z" else 1]))
 
 
 class Converter:

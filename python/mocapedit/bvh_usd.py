@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from pxr import Sdf, Vt
 
-from . import __version__, bvh, examples, writer
+from . import __version__, bvh, examples, outputs, writer
 from .errors import MocapEditError
 from .progress import Progress, Silent
 
@@ -68,7 +68,7 @@ class ImportResult:
     frames: int
     fps: float
     joints: int
-    height_m: float                    # standing height of the rest pose, metres
+    height_m: float                    # height of the pose of frame 0 (lowest to highest joint), metres
     position_modes: dict[str, str] = field(default_factory=dict)  # joints with position channels
 
 
@@ -203,11 +203,12 @@ def build_clip(source: str, settings: ImportSettings | None = None, progress: Pr
             if with_positions:
                 provenance["positionChannels"] = with_positions
             builder = ClipLayerBuilder(name, pose, settings, fps, provenance, root_joint, hip_joint)
-        builder.add(*converter(values))
+        translations, rotations = converter(values)
+        if builder.frames == 0:  # the character as it stands in frame 0, not its rest pose
+            height = pose.height(translations[0], rotations[0], settings.up_axis) * settings.meters_per_unit
+        builder.add(translations, rotations)
         task.update(builder.frames)
     layer = builder.finish()
-    up = 2 if settings.up_axis == "Z" else 1
-    height = float(np.ptp(converter.pose.bind_transforms[:, 3, up])) * settings.meters_per_unit
     task.done(f"{converter.joint_count} joints, {fps:g} fps")
     return ImportResult(source=source, output=None, layer=layer, prim=str(builder.root),
                         skeleton=str(builder.skel_path), animation=str(builder.anim_path), frames=builder.frames,
@@ -217,6 +218,7 @@ def build_clip(source: str, settings: ImportSettings | None = None, progress: Pr
 def import_bvh(source: str, output: str, settings: ImportSettings | None = None,
                progress: Progress | None = None) -> ImportResult:
     """Imports one BVH file and saves the clip layer atomically (``.usda`` or ``.usdc``)."""
+    outputs.check_outputs([outputs.Output(str(output), "-o")], [source])
     result = build_clip(source, settings, progress)
     writer.save_layer(result.layer, str(output))
     result.output = str(output)
@@ -233,18 +235,20 @@ def import_many(sources: list[str], out_dir: str, settings: ImportSettings | Non
     file is written and the failures are returned as (source, message).
     """
     progress = progress or Silent()
-    os.makedirs(out_dir, exist_ok=True)
+    if os.path.exists(out_dir) and not os.path.isdir(out_dir):
+        raise MocapEditError(f"-o {out_dir}: several clips are written into a folder, but this is a file; "
+                             "give a folder, or one .usda/.usdc file for one .bvh")
     targets = [os.path.join(out_dir, os.path.splitext(os.path.basename(s))[0] + ext) for s in sources]
     seen: dict[str, str] = {}
     for s, t in zip(sources, targets):
         if t in seen:
             raise MocapEditError(f"{s}: would be written to {t} like {seen[t]}; rename one of them")
         seen[t] = s
+    outputs.check_outputs([outputs.Output(t, f"output for {s}") for s, t in zip(sources, targets)], sources)
     done: list[ImportResult] = []
     failed: list[tuple[str, str]] = []
-    staged: list[tuple[str, str]] = []
     files = progress.task("import files", len(sources), unit="files")
-    try:
+    with outputs.Writes() as staged:
         for i, (src, dst) in enumerate(zip(sources, targets)):
             try:
                 result = build_clip(src, settings, progress)
@@ -256,21 +260,11 @@ def import_many(sources: list[str], out_dir: str, settings: ImportSettings | Non
             if keep_going:
                 writer.save_layer(result.layer, dst)
             else:
-                tmp = writer._temp_beside(dst)
-                staged.append((tmp, dst))
-                if not result.layer.Export(tmp):
-                    raise OSError(f"{dst}: USD could not write the layer")
+                staged.add(dst, writer.export_layer(result.layer))
             result.output = dst
             result.layer = None  # the layers of a batch are not kept in memory
             done.append(result)
             files.update(i + 1)
-        for tmp, dst in staged:
-            os.replace(tmp, dst)
-        staged = []
-    finally:
-        for tmp, _ in staged:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
     files.done()
     return done, failed
 

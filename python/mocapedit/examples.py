@@ -435,3 +435,32 @@ def dense_crowd_paths(agents: int, frames: int = 240, fps: float = 24.0, density
     sway = 0.03 * np.sin(2 * np.pi * t[None, :] / fps + rng.uniform(0, 2 * np.pi, (agents, 1)))
     paths = start[:, None] + t[None, :, None] * (speed[:, None] * d)[:, None] + sway[..., None] * across[:, None]
     return list(paths)
+
+
+def leg_inputs(rng: np.random.Generator, agents: int, poses: int, reach: float, smooth: Sequence[int],
+               weights: np.ndarray):
+    """Inputs of the foot-locking job (:class:`mocapedit.footlock.LegInputs`) for #agents x
+    #poses walking-like pairs of legs, Y-up, in metres: hips 0.9 m up and 0.2 m apart, thigh
+    0.45 m, shin 0.42 m, knees bent 3 to 35 degrees forwards, random world rotations; each
+    target is its ankle moved by a normal offset of ``reach`` metres per axis. ``weights``
+    (#agents * #poses, 2) and ``smooth`` (#agents,) are passed through."""
+    from .footlock import LegInputs
+    n = agents * poses
+    hip = np.zeros((n, 2, 3))
+    hip[:, 0, 0], hip[:, 1, 0] = 0.1, -0.1
+    hip[:, :, 1] = 0.9 + 0.02 * rng.standard_normal((n, 1))
+    bend = rng.uniform(0.05, 0.6, (n, 2))
+    thigh, shin = 0.45, 0.42
+    knee = hip + np.stack([np.zeros_like(bend), -thigh * np.cos(bend), thigh * np.sin(bend)], -1)
+    ankle = knee + np.stack([np.zeros_like(bend), -shin * np.cos(bend), -shin * np.sin(bend)], -1)
+
+    def quats(scale):
+        q = np.concatenate([scale * rng.standard_normal((n, 2, 3)), np.ones((n, 2, 1))], -1)
+        return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+    return LegInputs(
+        offsets=np.arange(0, n + 1, poses, dtype=np.int64), smooth=np.asarray(smooth, dtype=np.int64),
+        up=np.array([0.0, 1.0, 0.0]), hip=hip, knee=knee, ankle=ankle, parent_rot=quats(0.2), hip_rot=quats(0.3),
+        knee_rot=quats(0.3), ankle_rot=quats(0.3), target=ankle + reach * rng.standard_normal((n, 2, 3)),
+        target_rot=quats(0.4), weight=np.asarray(weights, dtype=np.float64),
+        hinge=np.cross(knee - hip, ankle - hip))

@@ -32,4 +32,6 @@ def from_ground(uv: np.ndarray, height: np.ndarray | float, up_axis: str) -> np.
 
 
 def height(points: np.ndarray, up_axis: str) -> np.ndarray:
-    return np.asarray(points, dtype=np.float64)[..., up_index(up_axis)]
+    """(...,3) world points -> (...) heights, a copy: a view would keep every joint matrix
+    the points were sliced from alive (10,000 trajectories: 350 MB)."""
+    return np.asarray(points, dtype=np.float64)[..., up_index(up_axis)].copy()

@@ -88,7 +88,8 @@ class Crowd:
         radii = np.array([a.radius for a in self.agents])
         found = overlaps.proximity(pos, radii, reach, np.array([a.collide for a in self.agents], dtype=bool))
         if task:
-            task.done(f"{len(found.overlapping())} overlapping samples")
+            pairs = len(overlaps.worst_per_pair(found.overlapping()))
+            task.done(f"{pairs} overlapping agent pair{'s' if pairs != 1 else ''}")
         return times, found
 
     def contact_points(self, found: overlaps.Proximity, times: np.ndarray) -> np.ndarray:

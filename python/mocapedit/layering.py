@@ -30,7 +30,7 @@ import numpy as np
 from . import _solver, animation, reader
 from .animation import Pose
 from .errors import prim_error
-from .model import Agent, AnimationLayer, Clip
+from .model import CHANNELS, Agent, AnimationLayer, Clip
 
 #: A pose as the job takes it: (translations (T,J,3), rotations (T,J,4), scales (T,J,3)).
 PoseArrays = tuple[np.ndarray, np.ndarray, np.ndarray]
@@ -130,7 +130,8 @@ def additive_clip(clip: Clip, reference: PoseArrays) -> Clip:
     """The clip's deltas from a reference pose (J,...) in the clip's joint order."""
     t, r, s = _solver.build_additive_clip(reference, (clip.translations, clip.rotations, clip.scales))
     return Clip(key=("additive",) + tuple(clip.key), source=f"{clip.source} (additive)",
-                joints=list(clip.joints), times=clip.times, translations=t, rotations=r, scales=s)
+                joints=list(clip.joints), times=clip.times, translations=t, rotations=r, scales=s,
+                channels=clip.channels)
 
 
 def layer_frames(layer: AnimationLayer, clip: Clip, times: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -172,6 +173,21 @@ class PreparedLayer:
     pose_columns: np.ndarray    # (K,) its column in the (extended) source pose
     joint_name: str             # the subtree's top joint, for reports
     _samples: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def missing(self) -> tuple[str, ...]:
+        """The channels the layer clip does not author: they stay as the pose below has them
+        (blend), and add nothing (additive)."""
+        return tuple(c for c in CHANNELS if c not in self.clip.channels)
+
+    def describe(self) -> str:
+        """What the layer does, for the report."""
+        text = f"{self.layer.mode} on {len(self.pose_columns)} joints from {self.joint_name}"
+        if self.missing:
+            keeps = "stay as below" if self.layer.mode == "blend" else "get nothing added"
+            text += (f"; the clip authors {' and '.join(c for c in CHANNELS if c not in self.missing)} only: "
+                     f"{' and '.join(self.missing)} {keeps}")
+        return text
 
     def sample(self, times: np.ndarray, width: int) -> tuple[PoseArrays, np.ndarray, np.ndarray]:
         """(layer transforms (T,width,...), weights (T,), joint weights (width,)) for the job;
@@ -229,9 +245,25 @@ class AgentLayers:
                 (hit[0].translations, hit[0].rotations, hit[0].scales),
                 (pose.translations, pose.rotations, pose.scales)))):
             return hit[1]
-        source = self.extend(pose)
-        job = [(p.layer.mode,) + p.sample(times, len(self.joints)) for p in self.layers]
-        t, r, s = _solver.apply_layers(source, job)
+        arrays = self.extend(pose)
+        # Layers run in one job, except that a layer missing some channels runs alone and
+        # its joints get those channels back from the pose below it.
+        batch: list = []
+        for p in self.layers + [None]:
+            if batch and (p is None or p.missing):
+                arrays = _solver.apply_layers(arrays, [(q.layer.mode,) + q.sample(times, len(self.joints))
+                                                       for q in batch])
+                batch = []
+            if p is not None and p.missing:
+                below = arrays
+                arrays = tuple(np.array(a) for a in _solver.apply_layers(
+                    arrays, [(p.layer.mode,) + p.sample(times, len(self.joints))]))
+                for channel in p.missing:
+                    k = CHANNELS.index(channel)
+                    arrays[k][:, p.pose_columns] = below[k][:, p.pose_columns]
+            elif p is not None:
+                batch.append(p)
+        t, r, s = arrays
         out = Pose(joints=list(self.joints), translations=t, rotations=r, scales=s)
         self._memo[key] = (pose, out)
         return out
@@ -265,6 +297,32 @@ def _reference_pose(layer: AnimationLayer, clip: Clip, agent: Agent, skel_of: np
     return (clip.key, "restPose", tuple(agent.joints), agent.rest_transforms.tobytes()), reference
 
 
+def resolve_layer(agent: Agent, layer: AnimationLayer, clip: Clip) -> tuple[int, np.ndarray]:
+    """(skeleton index of the layer's top joint or -1 for the whole skeleton, skeleton index
+    of each layer clip joint or -1) for one agent.
+
+    Raises:
+      MocapEditError naming the layer prim: a ``joint`` not in the skeleton (or a bare name
+      that is not unique), a layer clip that shares no joint with the skeleton.
+    """
+    root = -1
+    if layer.joint:
+        found = reader.resolve_joint(agent.joints, layer.joint)
+        if found is None:
+            same = [j for j in agent.joints if _leaf(j) == layer.joint]
+            why = (f"the bare name '{layer.joint}' is not unique ({', '.join(same)}): give its joint path"
+                   if len(same) > 1 else f"joint '{layer.joint}' is not in the skeleton")
+            raise prim_error(layer.path, f"{why} <{agent.skeleton_path}> of agent <{agent.path}>", "joint")
+        root = int(found)
+    skel_of = match_joints(clip.joints, agent.joints)
+    if not np.any(skel_of >= 0):
+        raise prim_error(layer.path, f"layer clip <{layer.animation}> shares no joint with the skeleton "
+                         f"<{agent.skeleton_path}> of agent <{agent.path}> (it animates "
+                         f"{', '.join(clip.joints[:3])}{', ...' if len(clip.joints) > 3 else ''})",
+                         "animation")
+    return root, skel_of
+
+
 def plan_agent(agent: Agent, source: Clip, layers: list[tuple[AnimationLayer, Clip]],
                delta_cache: dict) -> AgentLayers:
     """The layers of one agent, in stacking order, made ready for poses of its source clip.
@@ -283,21 +341,7 @@ def plan_agent(agent: Agent, source: Clip, layers: list[tuple[AnimationLayer, Cl
     parents = [int(p) for p in agent.parents]
     resolved = []
     for layer, clip in layers:
-        root = -1
-        if layer.joint:
-            found = reader.resolve_joint(agent.joints, layer.joint)
-            if found is None:
-                same = [j for j in agent.joints if _leaf(j) == layer.joint]
-                why = (f"the bare name '{layer.joint}' is not unique ({', '.join(same)}): give its joint path"
-                       if len(same) > 1 else f"joint '{layer.joint}' is not in the skeleton")
-                raise prim_error(layer.path, f"{why} <{agent.skeleton_path}> of agent <{agent.path}>", "joint")
-            root = int(found)
-        skel_of = match_joints(clip.joints, agent.joints)
-        if not np.any(skel_of >= 0):
-            raise prim_error(layer.path, f"layer clip <{layer.animation}> shares no joint with the skeleton "
-                             f"<{agent.skeleton_path}> of agent <{agent.path}> (it animates "
-                             f"{', '.join(clip.joints[:3])}{', ...' if len(clip.joints) > 3 else ''})",
-                             "animation")
+        root, skel_of = resolve_layer(agent, layer, clip)
         subtree = _solver.subtree_joint_weights(parents, root)
         used = np.flatnonzero((skel_of >= 0) & (subtree[np.maximum(skel_of, 0)] > 0))
         resolved.append((layer, clip, root, skel_of, used))

@@ -21,6 +21,7 @@ import numpy as np
 from pxr import Sdf, Usd, UsdGeom, UsdSkel
 
 from . import ground as _ground
+from . import stationary as _stationary
 
 __all__ = [
     "ground_axes", "to_ground", "from_ground",
@@ -30,6 +31,9 @@ __all__ = [
     "time_intervals_positive",
     "joint_world_positions", "agent_root_positions", "default_foot_joints",
     "FootSkate", "foot_skate",
+    "SPIN_DEGREES_AT_60FPS", "CHORD_SECONDS", "default_facing_joint", "joint_world_matrices",
+    "body_facing", "facing_change_per_second", "spin_threshold", "spins", "direction_deviation",
+    "Plausibility", "plausibility_of", "plausibility", "shot_plausibility", "foot_skate_of_positions", "worst_plausibility",
 ]
 
 PathLike = Union[str, Sdf.Path]
@@ -481,8 +485,10 @@ class _Skel:
         return self.sample_times
 
     def world_translations(self, xform_cache: UsdGeom.XformCache) -> np.ndarray:
-        xf = np.asarray(self.query.ComputeJointWorldTransforms(xform_cache))
-        return xf[:, 3, :3]  # USD matrices are row-vector: translation is the last row
+        return self.world_matrices(xform_cache)[:, 3, :3]  # row-vector: translation is the last row
+
+    def world_matrices(self, xform_cache: UsdGeom.XformCache) -> np.ndarray:
+        return np.asarray(self.query.ComputeJointWorldTransforms(xform_cache))
 
 
 def _find_skeleton(prim: Usd.Prim) -> UsdSkel.Skeleton:
@@ -624,22 +630,33 @@ def foot_skate(stage: Usd.Stage, agent_path: PathLike, times: Iterable | None = 
                              "ankle; pass foot_joints")
     else:
         feet = [skel.joint_index(j) for j in foot_joints]
-    up = UsdGeom.GetStageUpAxis(stage)
-    if contact_height is None:
-        contact_height = 0.02 / UsdGeom.GetStageMetersPerUnit(stage)
-    seconds_per_code = 1.0 / stage.GetTimeCodesPerSecond()
-
     pos = np.empty((len(t), len(feet), 3))
     xfc = UsdGeom.XformCache()
     for k, tc in enumerate(t):
         xfc.SetTime(Usd.TimeCode(tc))
         pos[k] = skel.world_translations(xfc)[feet]
-
     if len(skel.sample_times):
         first, last = skel.sample_times[0], skel.sample_times[-1]
         in_clip = (t >= first - 1e-9) & (t <= last + 1e-9)
     else:
         in_clip = np.ones(len(t), dtype=bool)
+    return foot_skate_of_positions(pos, t, UsdGeom.GetStageUpAxis(stage), UsdGeom.GetStageMetersPerUnit(stage),
+                                   stage.GetTimeCodesPerSecond(), tuple(skel.joints[f] for f in feet),
+                                   in_clip, contact_height, contact)
+
+
+def foot_skate_of_positions(pos: np.ndarray, t: np.ndarray, up, meters_per_unit: float,
+                            time_codes_per_second: float, joints: tuple[str, ...] = (),
+                            in_clip: np.ndarray | None = None, contact_height: float | None = None,
+                            contact: np.ndarray | None = None) -> FootSkate:
+    """:func:`foot_skate` of feet whose world positions are known: ``pos`` (T, F, 3) stage
+    units at increasing time codes ``t`` (T,); ``in_clip`` (T,) marks the samples inside
+    the clip (default: all). The other arguments are :func:`foot_skate`'s."""
+    t = np.asarray(t, dtype=np.float64)
+    if contact_height is None:
+        contact_height = 0.02 / meters_per_unit
+    seconds_per_code = 1.0 / time_codes_per_second
+    in_clip = np.ones(len(t), dtype=bool) if in_clip is None else np.asarray(in_clip, dtype=bool)
     height = pos[..., ground_axes(up)[0]]
     if contact is not None:
         contact = np.asarray(contact, dtype=bool)
@@ -662,4 +679,296 @@ def foot_skate(stage: Usd.Stage, agent_path: PathLike, times: Iterable | None = 
     speeds = np.where(duration > 0, slide / np.where(duration > 0, duration, 1.0), np.nan)
     total = float(duration.sum())
     mean = float(slide.sum() / total) if total > 0 else float("nan")
-    return FootSkate(tuple(skel.joints[f] for f in feet), speeds, duration, contact, t, mean)
+    return FootSkate(tuple(joints), speeds, duration, contact, t, mean)
+
+
+# ---------------------------------------------------------------------------------------------
+# Plausibility: does the edited body turn and walk like its source?
+# ---------------------------------------------------------------------------------------------
+
+#: A body turning more than this in one frame at 60 fps spins (scaled with the frame rate:
+#: 30 degrees per frame at 30 fps, 7.5 at 120 fps; that is 900 degrees per second).
+SPIN_DEGREES_AT_60FPS = 15.0
+#: Walking direction is measured on chords of this many seconds.
+CHORD_SECONDS = 0.25
+#: Ground speed (metres per second) below which the source is said not to walk.
+WALKING_SPEED_M = 0.2
+
+_FACING_NAMES = ("hips", "hip", "pelvis")
+
+
+def default_facing_joint(joints: Sequence[str]) -> int:
+    """Index of the joint whose frame stands for the body's facing: the one named hips, hip or
+    pelvis (leaf name, any case), else the first joint whose leaf name contains one of those
+    words without naming a leg, else the skeleton's root (0)."""
+    leaves = [str(j).rsplit("/", 1)[-1].lower() for j in joints]
+    for k, leaf in enumerate(leaves):
+        if leaf in _FACING_NAMES:
+            return k
+    for k, leaf in enumerate(leaves):
+        if any(w in leaf for w in ("hip", "pelvis")) and not any(w in leaf for w in ("leg", "thigh", "up", "left", "right")):
+            return k
+    return 0
+
+
+def joint_world_matrices(stage: Usd.Stage, agent_path: PathLike, times: Iterable | None = None,
+                         joint: Union[int, str, None] = None) -> tuple[np.ndarray, np.ndarray]:
+    """World matrices of one joint by UsdSkel FK: ``(times (T,), matrices (T, 4, 4))``.
+
+    ``joint``: index, full path or unique name (default :func:`default_facing_joint`). ``times``:
+    time codes (default: the animation's authored samples as composed). Matrices are USD's
+    row-vector convention: row k is the joint's local axis k in world space, row 3 its position.
+    """
+    skel = _Skel(stage, agent_path)
+    t = skel.default_times() if times is None else _times(times)
+    j = default_facing_joint(skel.joints) if joint is None else skel.joint_index(joint)
+    out = np.empty((len(t), 4, 4))
+    xfc = UsdGeom.XformCache()
+    for k, tc in enumerate(t):
+        xfc.SetTime(Usd.TimeCode(tc))
+        out[k] = skel.world_matrices(xfc)[j]
+    return t, out
+
+
+def body_facing(matrices, up_axis) -> np.ndarray:
+    """(T,) facing of a body from its hip (or root) joint's world matrices ``(T, 4, 4)``:
+    the horizontal projection of the joint's local axis that stays the most horizontal over the
+    clip (any joint convention works), radians counter-clockwise about up, unwrapped. Taken from
+    the skeleton, never from the path: a side step or a turn on the spot faces where the body
+    faces. Two clips of the same joint that differ by a yaw pick the same axis."""
+    return np.unwrap(_stationary.facing(np.asarray(matrices, dtype=np.float64), _up_token(up_axis)))
+
+
+def facing_change_per_second(facing, seconds) -> np.ndarray:
+    """(T-1,) unsigned turning rate of a facing between consecutive samples, degrees per second.
+    ``facing`` (T,) radians; ``seconds`` (T,) increasing sample times in seconds."""
+    f = np.unwrap(np.asarray(facing, dtype=np.float64))
+    s = np.asarray(seconds, dtype=np.float64)
+    if f.shape != s.shape or f.ndim != 1:
+        raise ValueError(f"facing {f.shape} and seconds {s.shape} must both be (T,)")
+    dt = np.diff(s)
+    if np.any(dt <= 0):
+        raise ValueError("sample times must increase")
+    return np.degrees(np.abs(np.diff(f))) / dt
+
+
+def spin_threshold() -> float:
+    """Turning rate (degrees per second) above which a body spins: 15 degrees per frame at
+    60 fps, scaled with the frame rate."""
+    return SPIN_DEGREES_AT_60FPS * 60.0
+
+
+def spins(source_rate, edited_rate) -> np.ndarray:
+    """(T-1,) bool: the edited body turns faster than :func:`spin_threshold` over an interval
+    where its source does not (rates from :func:`facing_change_per_second`, paired by frame)."""
+    s, e = np.asarray(source_rate, dtype=np.float64), np.asarray(edited_rate, dtype=np.float64)
+    if s.shape != e.shape:
+        raise ValueError(f"source rates {s.shape} and edited rates {e.shape} must pair by frame")
+    limit = spin_threshold()
+    return (e > limit) & (s <= limit)
+
+
+def direction_deviation(source_ground, edited_ground, seconds, min_speed: float,
+                        chord: float = CHORD_SECONDS) -> np.ndarray:
+    """(T,) angle (degrees, 0..180) between the edited and the source walking direction.
+
+    The walking direction at frame i is the chord from i to the first frame at least ``chord``
+    seconds later (``seconds``: (T,) source sample times). Frames where the source chord is
+    slower than ``min_speed`` (stage units per second), and frames without a full chord, are NaN:
+    the source does not walk there. Paths are ``(T, 2)`` ground points paired by frame."""
+    s = _points(source_ground, "source_ground", dims=(2,))
+    e = _points(edited_ground, "edited_ground", dims=(2,))
+    t = np.asarray(seconds, dtype=np.float64)
+    if s.shape != e.shape or t.shape != (len(s),):
+        raise ValueError(f"source {s.shape}, edited {e.shape} and seconds {t.shape} must pair by frame")
+    out = np.full(len(s), np.nan)
+    if len(s) < 2:
+        return out
+    end = np.searchsorted(t, t + chord - 1e-9, side="left")
+    ok = end < len(s)
+    i = np.flatnonzero(ok)
+    j = end[ok]
+    ds, de = s[j] - s[i], e[j] - e[i]
+    speed = np.linalg.norm(ds, axis=1) / (t[j] - t[i])
+    walk = speed >= min_speed
+    cross = ds[:, 0] * de[:, 1] - ds[:, 1] * de[:, 0]
+    dot = np.einsum("ij,ij->i", ds, de)
+    angle = np.degrees(np.abs(np.arctan2(cross, dot)))
+    out[i[walk]] = angle[walk]
+    return out
+
+
+@dataclass(frozen=True)
+class Plausibility:
+    """Plausibility figures of one agent, edited against its source (:func:`plausibility`).
+
+    Turning rates are degrees per second of the body's facing (:func:`body_facing`):
+    ``max_facing_rate`` of the edited body, ``source_max_facing_rate`` of the source,
+    ``max_extra_facing_rate`` the largest excess of the edited rate over the source's at the same
+    frame (divide by 60 for degrees per frame at 60 fps); ``spin_frames`` how many frames spin
+    (:func:`spins`). ``max_direction_deviation``: degrees (:func:`direction_deviation`; NaN when
+    the source never walks). ``length_ratio``: edited over source ground path of the facing joint.
+    ``time_warp``: smallest and largest shot time per source time (from the time map when the
+    caller gives ``edited_frames``, else the ratio of edited to source sample intervals). ``foot_skate_source``
+    and ``foot_skate_edited``: mean foot speed in contact (stage units per second, over the
+    source's contact frames), ``foot_skate_ratio`` their ratio (1 when both are 0).
+    ``worst_turn_frame`` and ``worst_direction_frame``: the edited samples where those happen."""
+
+    agent: str
+    max_facing_rate: float
+    source_max_facing_rate: float
+    max_extra_facing_rate: float
+    spin_frames: int
+    max_direction_deviation: float
+    length_ratio: float
+    time_warp: tuple[float, float]
+    foot_skate_source: float
+    foot_skate_edited: float
+    foot_skate_ratio: float
+    worst_turn_frame: int = -1        # edited sample where the extra turn is largest (interval start)
+    worst_direction_frame: int = -1   # edited sample where the direction deviates most (-1: none)
+
+    @property
+    def spins(self) -> bool:
+        return self.spin_frames > 0
+
+    @property
+    def reverses(self) -> bool:
+        """Walks more than 90 degrees away from its source direction somewhere."""
+        return bool(self.max_direction_deviation > 90.0)
+
+
+def _resample(values: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Per-sample ``values`` ``(N, ...)`` linearly interpolated at fractional sample indices."""
+    values = np.asarray(values, dtype=np.float64)
+    x = np.arange(len(values), dtype=np.float64)
+    flat = values.reshape(len(values), -1)
+    out = np.stack([np.interp(at, x, flat[:, c]) for c in range(flat.shape[1])], axis=1)
+    return out.reshape((len(at),) + values.shape[1:])
+
+
+def _pair(source: np.ndarray, count: int) -> np.ndarray:
+    """Source samples paired with ``count`` edited samples: the same ones when the counts agree,
+    else resampled over the clip by frame fraction (an edit that re-sampled the time)."""
+    if len(source) == count:
+        return source
+    return _resample(source, np.linspace(0.0, len(source) - 1.0, count))
+
+
+def _ratio(edited: float, source: float) -> float:
+    if not (np.isfinite(edited) and np.isfinite(source)):
+        return float("nan")
+    if source > 0:
+        return edited / source
+    return 1.0 if edited == 0 else float("inf")
+
+
+def plausibility_of(agent: str, source_seconds, source_hip, edited_seconds, edited_hip, up_axis,
+                    meters_per_unit: float, foot_skate_source: float = float("nan"),
+                    foot_skate_edited: float = float("nan"), edited_frames=None) -> Plausibility:
+    """:class:`Plausibility` from the facing joint's world matrices of the source ``(T, 4, 4)``
+    at ``source_seconds`` ``(T,)`` and of the edited agent ``(T', 4, 4)`` at ``edited_seconds``,
+    and the two foot skate means (stage units per second). ``edited_frames`` ``(T',)``: the
+    (fractional) source frame each edited sample plays, as a time warp knows it; the source is
+    then compared at those frames and the time warp is shot time per source time. Without it,
+    edited samples pair with source samples by frame (resampled by frame fraction when T'
+    differs) and the time warp is the ratio of their intervals. :func:`plausibility` measures
+    these on stages by FK."""
+    ss, se = np.asarray(source_seconds, np.float64), np.asarray(edited_seconds, np.float64)
+    ms, me = np.asarray(source_hip, np.float64), np.asarray(edited_hip, np.float64)
+    fs, fe = body_facing(ms, up_axis), body_facing(me, up_axis)
+    gs, ge = to_ground(ms[:, 3, :3], up_axis), to_ground(me[:, 3, :3], up_axis)
+    if len(se) >= 2 and len(ss) >= 2:
+        rate_e = facing_change_per_second(fe, se)
+        if edited_frames is None:
+            rate_s = _pair(facing_change_per_second(fs, ss), len(rate_e))
+            warp = np.diff(se) / _pair(np.diff(ss), len(se) - 1)
+            gs_at, ss_at = _pair(gs, len(ge)), _pair(ss, len(se))
+        else:
+            f = np.asarray(edited_frames, dtype=np.float64)
+            if f.shape != se.shape:
+                raise ValueError(f"edited_frames {f.shape} must pair with edited_seconds {se.shape}")
+            # The source's turn over each edited interval, per second of the source.
+            d_frames = np.diff(f)
+            moving = d_frames > 1e-9
+            src_turn = np.abs(np.diff(_resample(fs, f)))
+            src_dt = np.diff(_resample(ss, f))
+            rate_s = np.where(moving, np.degrees(src_turn) / np.where(moving, src_dt, 1.0), 0.0)
+            warp = (np.diff(se) / np.where(moving, src_dt, 1.0))[moving] if moving.any() else np.ones(1)
+            gs_at, ss_at = _resample(gs, f), _resample(ss, f)
+        turn_frame = int(np.argmax(rate_e - rate_s))
+        extra = float(rate_e[turn_frame] - rate_s[turn_frame])
+        spin = int(np.count_nonzero(spins(rate_s, rate_e)))
+        if np.all(np.diff(ss_at) > 0):
+            dev = direction_deviation(gs_at, ge, ss_at, WALKING_SPEED_M / meters_per_unit)
+        else:   # held ends of a warped clip: measure on the frames that advance
+            keep = np.r_[True, np.diff(ss_at) > 0]
+            dev = np.full(len(ge), np.nan)
+            dev[keep] = direction_deviation(gs_at[keep], ge[keep], ss_at[keep], WALKING_SPEED_M / meters_per_unit)
+        dev_frame = int(np.nanargmax(dev)) if np.isfinite(dev).any() else -1
+        max_dev = float(dev[dev_frame]) if dev_frame >= 0 else float("nan")
+        rates = (float(rate_e.max()), float(rate_s.max()))
+        warp_range = (float(warp.min()), float(warp.max()))
+    else:
+        rates, extra, spin, max_dev, warp_range = (0.0, 0.0), 0.0, 0, float("nan"), (1.0, 1.0)
+        turn_frame, dev_frame = -1, -1
+    return Plausibility(agent=str(agent), max_facing_rate=rates[0], source_max_facing_rate=rates[1],
+                        max_extra_facing_rate=extra, spin_frames=spin, max_direction_deviation=max_dev,
+                        length_ratio=length_ratio(ge, gs),
+                        time_warp=warp_range, foot_skate_source=float(foot_skate_source),
+                        foot_skate_edited=float(foot_skate_edited),
+                        foot_skate_ratio=_ratio(float(foot_skate_edited), float(foot_skate_source)),
+                        worst_turn_frame=turn_frame, worst_direction_frame=dev_frame)
+
+
+def plausibility(source_stage: Usd.Stage, edited_stage: Usd.Stage, agent_path: PathLike,
+                 joint: Union[int, str, None] = None, foot_joints=None) -> Plausibility:
+    """Plausibility of one agent: its edited motion on ``edited_stage`` (the input with the edits
+    layer on top) against its source on ``source_stage``, both by UsdSkel FK at their own composed
+    samples, paired by frame. ``joint``: the facing joint (default :func:`default_facing_joint`)."""
+    ts, ms = joint_world_matrices(source_stage, agent_path, None, joint)
+    te, me = joint_world_matrices(edited_stage, agent_path, None, joint)
+    skate_s = foot_skate(source_stage, agent_path, foot_joints=foot_joints)
+    contact = skate_s.contact if len(skate_s.times) == len(te) else None
+    skate_e = foot_skate(edited_stage, agent_path, times=te if contact is not None else None,
+                         foot_joints=foot_joints, contact=contact)
+    return plausibility_of(str(agent_path), ts / source_stage.GetTimeCodesPerSecond(), ms,
+                           te / edited_stage.GetTimeCodesPerSecond(), me, UsdGeom.GetStageUpAxis(source_stage),
+                           UsdGeom.GetStageMetersPerUnit(source_stage), skate_s.mean, skate_e.mean)
+
+
+def shot_plausibility(source_stage: Usd.Stage, edited_stage: Usd.Stage,
+                      agent_paths: Iterable[PathLike], joint=None, foot_joints=None) -> list[Plausibility]:
+    """:func:`plausibility` of each agent, in the order given."""
+    return [plausibility(source_stage, edited_stage, p, joint, foot_joints) for p in agent_paths]
+
+
+def worst_plausibility(figures: Sequence[Plausibility]) -> dict:
+    """The shot's worst figures over agents' :class:`Plausibility`: the largest extra facing rate
+    (degrees per second, and per frame at 60 fps) and its agent, how many agents spin, the largest
+    direction deviation and its agent, how many agents reverse (over 90 degrees), the mean and
+    extreme path length ratios, the time-warp range, and the mean and largest foot skate ratio."""
+    figs = list(figures)
+    if not figs:
+        return {"agents": 0}
+    extra = max(figs, key=lambda f: f.max_extra_facing_rate)
+    devs = [f for f in figs if np.isfinite(f.max_direction_deviation)]
+    dev = max(devs, key=lambda f: f.max_direction_deviation) if devs else None
+    lengths = np.array([f.length_ratio for f in figs])
+    skates = np.array([f.foot_skate_ratio for f in figs])
+    skates = skates[np.isfinite(skates)]
+    return {
+        "agents": len(figs),
+        "maxExtraFacingRate": extra.max_extra_facing_rate,
+        "maxExtraTurnPerFrameAt60fps": extra.max_extra_facing_rate / 60.0,
+        "maxExtraFacingRateAgent": extra.agent,
+        "spinningAgents": sum(f.spins for f in figs),
+        "maxDirectionDeviation": dev.max_direction_deviation if dev else float("nan"),
+        "maxDirectionDeviationAgent": dev.agent if dev else None,
+        "reversingAgents": sum(f.reverses for f in figs),
+        "meanLengthRatio": float(lengths.mean()),
+        "lengthRatioRange": (float(lengths.min()), float(lengths.max())),
+        "timeWarpRange": (min(f.time_warp[0] for f in figs), max(f.time_warp[1] for f in figs)),
+        "meanFootSkateRatio": float(skates.mean()) if len(skates) else float("nan"),
+        "maxFootSkateRatio": float(skates.max()) if len(skates) else float("nan"),
+    }

@@ -28,6 +28,9 @@ class StageInfo:
         return value_in_metres / self.meters_per_unit
 
 
+CHANNELS = ("translations", "rotations", "scales")
+
+
 @dataclass
 class Clip:
     """One SkelAnimation's authored samples, read once however many agents play it."""
@@ -38,10 +41,28 @@ class Clip:
     translations: np.ndarray          # (F,Ja,3) float32, joint-local
     rotations: np.ndarray             # (F,Ja,4) float32 (x,y,z,w), joint-local
     scales: np.ndarray                # (F,Ja,3) float32
+    # The channels the clip authors; the others hold the identity (an agent's own clip
+    # authors all three, a layer clip may author only some).
+    channels: tuple[str, ...] = CHANNELS
+    # (F,) the frames' times in the layer of :attr:`sample_spec` (before any layer offset of
+    # the arcs that bring the clip in); None when there is no such single spec.
+    spec_times: np.ndarray | None = None
 
     @property
     def frame_count(self) -> int:
         return int(self.times.shape[0])
+
+    @property
+    def sample_spec(self) -> tuple[str, str] | None:
+        """(layer identifier, prim path) of the one spec whose time samples make the whole
+        clip, or None when translations, rotations and scales are sampled on different specs
+        (or inside a variant), which cannot be re-timed as one value clip."""
+        specs = {(s[0], s[1].rsplit(".", 1)[0]) for s in self.key[1] if s is not None} \
+            if len(self.key) > 1 else set()
+        if len(specs) != 1:
+            return None
+        layer, prim_path = next(iter(specs))
+        return None if "{" in prim_path else (layer, prim_path)
 
 
 @dataclass
@@ -66,6 +87,11 @@ class Agent:
     collide: bool
     path_curve: str | None
     stationary: list[tuple[str, int, int]] = field(default_factory=list)  # (name, first, last)
+    legs: list = field(default_factory=list)           # contacts.Leg per leg found or authored
+    foot_locking: bool = True                          # mocap:footLocking
+    # Authored MocapFootContactAPI instances of the clip as (name, skeleton joint, first, last);
+    # None when the clip has none (contacts are then detected).
+    foot_contacts: list[tuple[str, int, int, int]] | None = None
 
     @property
     def frame_count(self) -> int:
@@ -164,6 +190,7 @@ class SolveSettings:
     collision_strategy: str = "relinearize"
     min_time_interval: float = 0.1
     max_wait: float = 3.0             # seconds collision avoidance may delay one agent
+    foot_locking: bool = True
 
 
 @dataclass

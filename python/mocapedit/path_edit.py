@@ -33,6 +33,10 @@ than it must:
   linked end to end) keeps the direction and distance between the two farthest frames it
   is held at, by a weak soft term.
 
+Headings: an edited agent's body turns, at each frame, by the rotation the edit applies to
+its path around that frame, on top of its source heading (``trajectory.deformation_turns``),
+never by the tangent of the edited path; a stationary range turns by its own rigid rotation.
+
 Relative constraints in the target's space turn with the target: the target's heading at
 targetFrame is that of its edited path, found by re-solving (no refactoring) until it
 stops changing.
@@ -44,7 +48,7 @@ from itertools import chain
 
 import numpy as np
 
-from . import _solver, metrics
+from . import _solver, metrics, trajectory
 
 HARD = np.inf
 #: Weight of the soft terms that keep free agents' turn and scale (see ComponentProblem).
@@ -123,8 +127,17 @@ class Settings:
     min_baseline: float                   # stage units: shortest local frame of a triangle
     rigid_min_extent: float               # stage units: smaller stationary ranges turn with their ends
     still: float                          # stage units: tangent steps below this stand still
+    turn_window: int = 2                  # frames: half-width of the windows of the edit's turn
+    turn_min_travel: float = 0.0          # stage units: less source travel in a window is slow
     group_step: float = 12.0              # time codes between the sampled times of a group mesh
     group_neighbours: int = 3
+
+
+def turn_settings(fps: float, meters_per_unit: float) -> dict:
+    """``turn_window`` and ``turn_min_travel`` of :class:`Settings` for a clip at ``fps``: the
+    source is slow where it walks slower than ``trajectory.TURN_MIN_SPEED_M`` over the window."""
+    h = trajectory.turn_window(fps)
+    return {"turn_window": h, "turn_min_travel": trajectory.TURN_MIN_SPEED_M / meters_per_unit * 2 * h / fps}
 
 
 @dataclass
@@ -176,6 +189,7 @@ class ComponentProblem:
         self._resolve_freedom()
         self._needs_headings = any(k.space == "target" for k in self.links)
         self._rest_headings: dict[int, np.ndarray] = {}
+        self._source_full: np.ndarray | None = None   # every agent's source path, concatenated
         self.data = _solver.path_edit_precompute(
             self.rest, self.triangles, self.triangle_weights, self.edges, self.edge_weights, self.rigid,
             self.handle_vertex, self.handle_weight, self.link_vertex, self.link_weight,
@@ -601,33 +615,37 @@ class ComponentProblem:
     def _headings(self, ground: np.ndarray, result, turns: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
         """(F,) headings of the agents ``turns`` names (index -> turn of each stationary range)
         on their edited paths (``ground``: every agent's, concatenated), as ``edited_heading``
-        gives them, the tangent ones from one solver call."""
+        gives them, the turns of the deformation from one call."""
         rigid = result.rigid_angle if result.rigid_motion else None
         fo = self._full_offset
-        out, tangent, fixed, fallback = {}, [], [], []
+        out, turned, fixed, fixed_turn = {}, [], [], []
         for i, turn in turns.items():
             a = self._inputs[i]
             if i in self.translate_only:
                 # Moved by one translation: the heading is the rest path's.
                 if i not in self._rest_headings:
-                    self._rest_headings[i] = rest_heading(a)
+                    self._rest_headings[i] = rest_heading(a, self.settings)
                 out[i] = self._rest_headings[i].copy()
             elif rigid is not None and a.rest_turn is None:
-                out[i] = edited_heading(a, None, turn, None, rigid)
+                out[i] = np.asarray(a.source_heading, dtype=np.float64) + rigid
             else:
-                for (first, last), t in zip(a.stationary, turn):
-                    fixed.append((len(tangent), first, last))
-                    fallback.append(a.source_heading[first] + t)
-                tangent.append(i)
-        if tangent:
-            blocks = np.array([(fo[i], fo[i + 1]) for i in tangent], dtype=np.int32)
-            if fixed:
-                fixed, fallback = np.array(fixed, dtype=np.int32), np.array(fallback, dtype=np.float64)
+                fixed.extend((len(turned), first, last) for first, last in a.stationary)
+                fixed_turn.extend(turn)
+                turned.append(i)
+        if turned:
+            blocks = [(fo[i], fo[i + 1]) for i in turned]
+            if len(turned) == len(self._inputs):
+                if self._source_full is None:
+                    self._source_full = np.concatenate([a.source for a in self._inputs], dtype=np.float64)
+                source, edited = self._source_full, ground
             else:
-                fixed, fallback = np.zeros((0, 3), np.int32), np.zeros(0)
-            h = _solver.block_tangent_headings(ground, blocks, fixed, fallback, self.settings.still)
-            for i, (begin, end) in zip(tangent, blocks.tolist()):
-                out[i] = h[begin:end]
+                source = np.concatenate([self._inputs[i].source for i in turned])
+                edited = np.concatenate([ground[b:e] for b, e in blocks])
+            offsets = np.cumsum([0] + [e - b for b, e in blocks])
+            h = trajectory.deformation_turns(source, edited, offsets, fixed, fixed_turn,
+                                             self.settings.turn_window, self.settings.turn_min_travel)
+            for k, i in enumerate(turned):
+                out[i] = np.asarray(self._inputs[i].source_heading, dtype=np.float64) + h[offsets[k]:offsets[k + 1]]
         return out
 
     def _agents(self, result) -> dict[str, AgentResult]:
@@ -640,23 +658,21 @@ class ComponentProblem:
                 for i, a in enumerate(self._inputs)}
 
 
-def rest_heading(a: AgentInput) -> np.ndarray:
+def rest_heading(a: AgentInput, settings: Settings) -> np.ndarray:
     """Headings of an agent on its rest path (the source's, turned with any remap)."""
     if a.rest_turn is None:
         return np.asarray(a.source_heading, dtype=np.float64).copy()
-    return edited_heading(a, a.rest, a.rest_turn, None, None)
+    return edited_heading(a, a.rest, a.rest_turn, settings)
 
 
-def edited_heading(a: AgentInput, g: np.ndarray, turn: np.ndarray, still: float | None,
-                   rigid_angle: float | None) -> np.ndarray:
-    """Headings on an edited path: its tangent, and through each stationary range the source
-    heading turned by that range's rotation, so the range stays rigid."""
-    if rigid_angle is not None and a.rest_turn is None:
-        return np.asarray(a.source_heading, dtype=np.float64) + rigid_angle
-    fixed = [(int(f), int(l)) for f, l in a.stationary]
-    fallback = np.array([a.source_heading[f] + t for (f, _), t in zip(fixed, turn)], dtype=np.float64)
-    step = still if still is not None else 0.0
-    return _solver.tangent_headings(np.ascontiguousarray(g, dtype=np.float64), fixed, fallback, step)
+def edited_heading(a: AgentInput, g: np.ndarray, turn: np.ndarray, settings: Settings) -> np.ndarray:
+    """Headings on an edited path ``g``: the source heading turned by the rotation the edit
+    applies to the path around each frame (``trajectory.deformation_turns``), and through each
+    stationary range by that range's rotation ``turn``, so the range stays rigid."""
+    fixed = [(0, int(f), int(l)) for f, l in a.stationary]
+    h = trajectory.deformation_turns(a.source, g, [0, a.frames], fixed, turn, settings.turn_window,
+                                     settings.turn_min_travel)
+    return np.asarray(a.source_heading, dtype=np.float64) + h
 
 
 def shape_figures(a: AgentInput, g: np.ndarray, min_base: float) -> dict:

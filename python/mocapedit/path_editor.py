@@ -6,7 +6,7 @@
 
     editor = PathEditor.for_agent("shot.usda", "/World/Crowd/agent_0007", frames=[0, 60, 119])
     ground = editor.move(1, (2.0, -3.5))      # handle 1 (frame 60) to ground (u, v); (F, 2)
-    heading = editor.heading                  # (F,) radians, the new path's tangent
+    heading = editor.heading                  # (F,) radians, the rest heading turned by the edit
 
 The editor builds the same two-step problem as ``mocapedit solve`` (shape terms, edge
 terms, stationary ranges, hard or soft handles; see :mod:`mocapedit.path_edit`) and
@@ -39,10 +39,12 @@ class PathEditor:
       stationary: inclusive (first, last) frame ranges that move rigidly.
       heading: (F,) headings of the rest path (default: its tangent headings).
       meters_per_unit: for the default tolerances.
+      fps: frames per second of the path, for the windows that turn the heading.
     """
 
     def __init__(self, rest, frames: Sequence[int], positions=None, weights=None,
-                 stationary: Sequence[tuple[int, int]] = (), heading=None, meters_per_unit: float = 1.0):
+                 stationary: Sequence[tuple[int, int]] = (), heading=None, meters_per_unit: float = 1.0,
+                 fps: float = 24.0):
         rest = np.ascontiguousarray(rest, dtype=np.float64)
         frames = [int(f) for f in frames]
         if rest.ndim != 2 or rest.shape[1] != 2 or len(rest) < 2:
@@ -52,7 +54,8 @@ class PathEditor:
                 raise ValueError(f"frame {f} is outside 0..{len(rest) - 1}")
         unit = 1.0 / meters_per_unit
         self.settings = path_edit.Settings(min_baseline=MIN_BASELINE_M * unit,
-                                           rigid_min_extent=RIGID_MIN_EXTENT_M * unit, still=STILL_M * unit)
+                                           rigid_min_extent=RIGID_MIN_EXTENT_M * unit, still=STILL_M * unit,
+                                           **path_edit.turn_settings(fps, meters_per_unit))
         ranges = sorted((int(a), int(b)) for a, b in stationary)
         if heading is None:
             heading = trajectory.headings(rest, ranges, meters_per_unit)
@@ -87,7 +90,8 @@ class PathEditor:
         a = data.agents[agent]
         traj = trajectory.extract(a, data.clip_of(a), data.info.up_axis, data.info.meters_per_unit)
         editor = cls(traj.ground, frames, positions, weights, [(f, l) for _, f, l in a.stationary],
-                     heading=traj.heading, meters_per_unit=data.info.meters_per_unit)
+                     heading=traj.heading, meters_per_unit=data.info.meters_per_unit,
+                     fps=data.info.time_codes_per_second)
         editor.up_axis, editor.source_height = data.info.up_axis, traj.height
         return editor
 

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import ground, inspection, overlaps, reader, trajectory, writer
+from . import ground, inspection, outputs, overlaps, reader, trajectory, writer
 from .errors import MocapEditError
 from .inspection import Crowd, Remaining
 from .progress import Progress, Silent
@@ -48,6 +48,8 @@ class Scene:
     links: list[tuple[str, np.ndarray, dict | None]] = field(default_factory=list)  # (kind, 2x2 ground, entry)
     regions: list[tuple[str, np.ndarray, float]] = field(default_factory=list)   # (prim, Kx2 footprint, margin)
     remaining: Remaining | None = None
+    # Agents whose edit spins or reverses them (from the report): (kind "spin" | "reverse", ground (2,), agent).
+    implausible: list[tuple[str, np.ndarray, str]] = field(default_factory=list)
     overlap_rows: overlaps.Proximity | None = None    # every overlapping (pair, sample)
     overlap_times: np.ndarray | None = None
     report: Report | None = None
@@ -142,6 +144,7 @@ def load(stage_path: str, edits_path: str | None = None, progress: Progress | No
             scene.links.append((kind, ends, status.get(c.path)))
     scene.regions = [(r.path, region_footprint(r, up), float(r.margin)) for r in source.avoid_regions]
 
+    scene.implausible = implausible_marks(report, crowd)
     times, found = crowd.proximity(0.0, progress)
     scene.overlap_rows, scene.overlap_times = found, times
     worst = overlaps.worst_per_pair(found)
@@ -149,6 +152,26 @@ def load(stage_path: str, edits_path: str | None = None, progress: Progress | No
     scene.remaining = Remaining([names[i] for i in worst.a], [names[i] for i in worst.b], times[worst.sample],
                                 worst.clearance, crowd.contact_points(worst, times) if len(worst) else np.zeros((0, 2)))
     return scene
+
+
+def implausible_marks(report: Report | None, crowd: Crowd) -> list[tuple[str, np.ndarray, str]]:
+    """Where the report's plausibility figures say an edited agent spins (turns more than 15
+    degrees per frame at 60 fps where its source does not) or walks back (over 90 degrees from
+    its source direction): ``(kind, ground point on the edited path, agent)``, sorted by agent."""
+    if report is None:
+        return []
+    index, out = crowd.index(), []
+    for path in sorted(report.agents):
+        p = report.agents[path].get("plausibility")
+        if not p or path not in index:
+            continue
+        agent = crowd.agents[index[path]]
+        if p.get("spinFrames", 0) > 0:
+            out.append(("spin", _edited_at_frame(agent, p.get("worstTurnFrame", 0)), path))
+        deviation = p.get("maxDirectionDeviation")
+        if deviation is not None and np.isfinite(deviation) and deviation > 90.0:
+            out.append(("reverse", _edited_at_frame(agent, p.get("worstDirectionFrame", 0)), path))
+    return out
 
 
 def _edited_at_frame(agent: inspection.AgentTracks, frame: int) -> np.ndarray:
@@ -229,18 +252,22 @@ def bounds_from_plan(values: list[float], up_axis: str) -> np.ndarray:
     return np.array([corners.min(axis=0), corners.max(axis=0)])
 
 
+#: The longest side a preview may have: at 8192 x 8192 the four float channels of an EXR take 1 GiB.
+MAX_RESOLUTION = 8192
+
+
 def parse_resolution(text: str | int | None) -> tuple[int | None, int | None, int]:
     """'N' (the longer side) or 'WxH' -> (width or None, height or None, longer side)."""
     if text is None:
         return None, None, DEFAULT_RESOLUTION
     text = str(text).lower()
     try:
-        if "x" in text:
-            w, h = (int(v) for v in text.split("x", 1))
-            if w > 0 and h > 0:
-                return w, h, max(w, h)
-        elif int(text) > 0:
-            return None, None, int(text)
+        w, h = (int(v) for v in text.split("x", 1)) if "x" in text else (None, None)
+        longest = max(w, h) if w is not None else int(text)
+        if (w is None or min(w, h) > 0) and 0 < longest <= MAX_RESOLUTION:
+            return w, h, longest
+        if longest > MAX_RESOLUTION:
+            raise MocapEditError(f"--resolution: at most {MAX_RESOLUTION} pixels a side, got '{text}'")
     except ValueError:
         pass
     raise MocapEditError(f"--resolution: expected N or WxH (pixels), got '{text}'")
@@ -394,7 +421,7 @@ def write_exr(scene: Scene, path: str, resolution=None, bounds: np.ndarray | Non
                      f"{grid.pixel:g} stage units square. Channels: path densities (agents per pixel), "
                      "displacement (stage units), overlap count (agent pairs x time samples)."),
     }
-    writer.save_with(path, lambda tmp: OpenEXR.File(header, channels).write(tmp))
+    outputs.save_with(path, lambda tmp: OpenEXR.File(header, channels).write(tmp))
     return grid
 
 
@@ -579,6 +606,16 @@ def write_png(scene: Scene, path: str, resolution=None, bounds: np.ndarray | Non
                 ax.annotate(f"t={t:g}", p, xytext=(7, -10), textcoords="offset points", fontsize=7.5 * scale,
                             color=(0.6, 0.0, 0.35), zorder=8)
 
+    for kind, marker, label in (("spin", "*", "spins (over 15 deg/frame)"),
+                                ("reverse", "v", "walks back (over 90 deg)")):
+        marks = [g for k, g, _ in scene.implausible if k == kind]
+        if marks:
+            pts = plan(np.array(marks), up)
+            ax.scatter(pts[:, 0], pts[:, 1], s=150 * scale ** 2, marker=marker, color=colors.NOT_MET,
+                       edgecolors="black", linewidths=0.6 * scale, zorder=7)
+            legend.append(Line2D([], [], marker=marker, linestyle="", markerfacecolor=colors.NOT_MET,
+                                 markeredgecolor="black", markersize=10 * scale, label=f"{label} ({len(marks)})"))
+
     view_m = float(span[0]) * info.meters_per_unit
     bar_m = _nice_length(view_m)
     bar = AnchoredSizeBar(ax.transData, bar_m / info.meters_per_unit, _metres_label(bar_m), loc="lower left",
@@ -604,7 +641,7 @@ def write_png(scene: Scene, path: str, resolution=None, bounds: np.ndarray | Non
     to_pixel = (flip @ affine).T                           # row-vector convention, row 0 at the top
     meta = {"mocapedit:worldToPixel": json.dumps(to_pixel.tolist()),
             "mocapedit:planAxes": "x z" if up == "Y" else "x y", "Software": "mocapedit"}
-    writer.save_with(path, lambda tmp: fig.savefig(tmp, format="png", dpi=dpi, metadata=meta))
+    outputs.save_with(path, lambda tmp: fig.savefig(tmp, format="png", dpi=dpi, metadata=meta))
     task.done()
     return to_pixel
 

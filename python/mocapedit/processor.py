@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 from pxr import Sdf, Usd, Vt
 
-from . import animation, guides, inspection, reader, trajectory, writer
+from . import animation, guides, inspection, limits, metrics, outputs, reader, trajectory, writer
 from .errors import MocapEditError
 from .model import StageData
 from .progress import Progress, Silent
@@ -39,6 +39,9 @@ class SolveOptions:
     guides: bool = True
     collisions: bool | None = None     # None: follow MocapSolveSettings.collisionAvoidance
     overrides: dict = field(default_factory=dict)  # settings overrides by python field name
+    # Bake time-only edits into SkelAnimation samples instead of re-timing the source clip
+    # with value clips (the two play the same motion; the baked form is the reference).
+    bake_timing: bool = False
 
 
 @dataclass
@@ -126,8 +129,15 @@ def compose_edits(ctx: SolveContext) -> None:
         agent, traj = ctx.data.agents[path], ctx.trajectories[path]
         times, frames = output_frames(ctx, path)
         edit = writer.AgentEdit()
-        if path in ctx.time_maps or path in ctx.pose_edits:
-            pose = animation.sample_pose(ctx.data.clip_of(agent), frames)
+        clip = ctx.data.clip_of(agent)
+        spec = clip.sample_spec if path not in ctx.pose_edits and not ctx.options.bake_timing else None
+        if (path in ctx.time_maps and spec and clip.spec_times is not None
+                and not Sdf.Layer.IsAnonymousLayerIdentifier(spec[0])):
+            # Only the timing changed: the source clip plays on the time map, nothing is baked.
+            edit.retimed = writer.RetimedClip(layer=spec[0], prim_path=spec[1], joints=list(clip.joints),
+                                              stage_times=ctx.time_maps[path], clip_times=clip.spec_times)
+        elif path in ctx.time_maps or path in ctx.pose_edits:
+            pose = animation.sample_pose(clip, frames)
             for fn in ctx.pose_edits.get(path, []):
                 pose = fn(pose, times, frames)
             edit.animation = writer.BakedAnimation(
@@ -135,10 +145,11 @@ def compose_edits(ctx: SolveContext) -> None:
                 rotations=pose.rotations, scales=pose.scales)
         edited = ctx.paths.get(path)
         if edited is not None:
-            motion = trajectory.ground_motion(
-                animation.interp_frames(traj.ground, frames), animation.interp_frames(traj.heading, frames),
-                animation.interp_frames(edited.ground, frames), animation.interp_frames(edited.heading, frames),
-                up)
+            # Untimed agents are written at their own frames: nothing to interpolate.
+            whole = len(frames) == len(traj.ground) and np.array_equal(frames, np.arange(len(frames)))
+            at = (lambda values: values) if whole else (lambda values: animation.interp_frames(values, frames))
+            motion = trajectory.ground_motion(at(traj.ground), at(traj.heading), at(edited.ground),
+                                              at(edited.heading), up)
             # A path moved by less than a nanometre (numerical noise of a solve that had nothing
             # to do) is not an edit: the agent is not written.
             still = 1e-9 / ctx.data.info.meters_per_unit
@@ -151,8 +162,64 @@ def compose_edits(ctx: SolveContext) -> None:
                 else:
                     agent_view = agent
                 edit.xform_op = trajectory.agent_xform_op(agent_view, motion)
-        if edit.animation is not None or edit.xform_op is not None:
+        if edit.animation is not None or edit.retimed is not None or edit.xform_op is not None:
             ctx.edits[path] = edit
+
+
+def measure_plausibility(ctx: SolveContext) -> None:
+    """Per edited agent, and for the shot (``stats["plausibility"]``), the figures of
+    :func:`metrics.plausibility_of`: the facing and walking direction of the edited body against
+    its source, path length, time warp and foot skate. They come from the same motions the edits
+    layer authors, by numpy forward kinematics of the hip and the feet (the composed stage plays
+    the same, so FK on it gives the same figures); layered poses are left out."""
+    info = ctx.data.info
+    up, chains, figures = info.up_axis, {}, []
+    for path in sorted(ctx.edits):
+        if path not in ctx.paths and path not in ctx.time_maps:
+            continue
+        agent, traj = ctx.data.agents[path], ctx.trajectories[path]
+        clip = ctx.data.clip_of(agent)
+        hip = metrics.default_facing_joint(agent.joints)
+        feet = metrics.default_foot_joints(agent.joints)
+        joints = [hip] + feet
+        key = (agent.clip_key, tuple(agent.joints))
+        if key not in chains:
+            chains[key] = np.stack([trajectory.joint_skel_space(agent, clip, j) for j in joints], axis=1)
+        source = chains[key] @ agent.skel_to_world[:, None]               # (F, 1 + feet, 4, 4)
+        times, frames = output_frames(ctx, path)
+        edited = animation.interp_frames(source, frames)
+        moved = ctx.paths.get(path)
+        if moved is not None:
+            edited = edited @ trajectory.ground_motion(
+                animation.interp_frames(traj.ground, frames), animation.interp_frames(traj.heading, frames),
+                animation.interp_frames(moved.ground, frames), animation.interp_frames(moved.heading, frames),
+                up)[:, None]
+        seconds = 1.0 / info.time_codes_per_second
+        skate = [float("nan"), float("nan")]
+        if feet:
+            units = (up, info.meters_per_unit, info.time_codes_per_second)
+            before = metrics.foot_skate_of_positions(source[:, 1:, 3, :3], agent.sample_times, *units)
+            mask = before.contact if len(times) == len(agent.sample_times) else None
+            skate = [before.mean, metrics.foot_skate_of_positions(edited[:, 1:, 3, :3], times, *units,
+                                                                  contact=mask).mean]
+        p = metrics.plausibility_of(path, agent.sample_times * seconds, source[:, 0], times * seconds, edited[:, 0],
+                                    up, info.meters_per_unit, *skate, edited_frames=frames)
+        figures.append(p)
+        entry = ctx.report.agent(path)
+        if np.isfinite(skate).all():
+            # Mean foot speed while in contact (stage units per second), over the source's contacts.
+            entry.setdefault("footSkateSource", skate[0])
+            entry.setdefault("footSkateEdited", skate[1])
+        entry["plausibility"] = {
+            "maxFacingRate": p.max_facing_rate, "sourceMaxFacingRate": p.source_max_facing_rate,
+            "maxExtraFacingRate": p.max_extra_facing_rate, "spinFrames": p.spin_frames,
+            "maxDirectionDeviation": p.max_direction_deviation, "lengthRatio": p.length_ratio,
+            "timeWarp": list(p.time_warp), "footSkateRatio": p.foot_skate_ratio,
+            # Source frames where the largest extra turn and direction change happen (previews mark them).
+            "worstTurnFrame": int(round(frames[max(p.worst_turn_frame, 0)])),
+            "worstDirectionFrame": int(round(frames[p.worst_direction_frame])) if p.worst_direction_frame >= 0 else -1}
+    if figures:
+        ctx.report.stats["plausibility"] = metrics.worst_plausibility(figures)
 
 
 def _with_parent(agent, parent_to_world):
@@ -195,6 +262,16 @@ def input_layers(stage: Usd.Stage) -> list[str]:
     return [root] + others
 
 
+def options_text(guides: bool = True, collisions: bool | None = None, bake_timing: bool = False,
+                 **overrides) -> str:
+    """The solve options as the edits layer records them (``customLayerData`` mocapedit
+    ``options``): compact JSON with sorted keys, so a re-run can tell whether an existing
+    output was made with the same options."""
+    import json
+    options = dict(overrides, guides=guides, collisions=collisions, bake_timing=bake_timing)
+    return json.dumps(options, sort_keys=True, separators=(",", ":"))
+
+
 @dataclass
 class SolveResult:
     layer: Sdf.Layer
@@ -204,20 +281,25 @@ class SolveResult:
 
 def solve(stage_or_path, output: str | None = None, composed: str | None = None,
           guides: bool = True, collisions: bool | None = None, progress: Progress | None = None,
-          **overrides) -> SolveResult:
+          report_json: str | None = None, bake_timing: bool = False, **overrides) -> SolveResult:
     """Solves every edit authored on a stage and returns the edits layer and a report.
 
     Args:
       stage_or_path: a ``Usd.Stage`` or the path of a stage file. The input is read only.
       output: if given, the edits layer is saved there (``.usda`` or ``.usdc``), atomically.
       composed: if given (needs ``output``), a stage that sub-layers the edits over the input.
+      report_json: if given (needs ``output``), the report is saved there as JSON. The edits, the composed stage
+        and the report are renamed into place together, after all three are written.
       guides: author guide geometry under ``/MocapEdit/Guides``.
       collisions: force collision avoidance on or off; None follows MocapSolveSettings.
       progress: a :class:`~mocapedit.progress.Progress`; silent by default.
+      bake_timing: bake agents whose only edit is timing into SkelAnimation samples instead
+        of re-timing their source clips with value clips (the same motion, a larger layer).
       overrides: MocapSolveSettings values by their Python names (``max_iterations=...``).
 
     Raises:
-      MocapEditError: bad input, naming the prim and property. Nothing is written.
+      MocapEditError: bad input, naming the prim and property; an output path that names
+        the input, a layer it uses, another output or a folder. Nothing is written.
     """
     progress = progress or Silent()
     timings: dict[str, float] = {}
@@ -226,19 +308,29 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
         stage, input_name = stage_or_path, stage_or_path.GetRootLayer().identifier
     else:
         stage, input_name = reader.open_stage(str(stage_or_path)), str(stage_or_path)
-    if composed and not output:
-        raise MocapEditError("--composed needs an output path for the edits layer (-o)")
+    if (composed or report_json) and not output:
+        raise MocapEditError("a composed stage or a report needs an output path for the edits layer (-o)")
+    input_file = stage.GetRootLayer().realPath if isinstance(stage_or_path, Usd.Stage) else input_name
+    if composed and not input_file:
+        raise MocapEditError("a composed stage sub-layers the input file, but this stage is in memory; "
+                             "save it first or leave out the composed stage")
+    outputs.check_outputs([outputs.Output(output, "edits layer"),
+                           outputs.Output(composed, "composed stage"),
+                           outputs.Output(report_json, "report", kind="text")],
+                          outputs.input_files(stage))
 
     data = reader.read_stage(stage, progress)
     for key, value in overrides.items():
         if not hasattr(data.settings, key):
             raise MocapEditError(f"unknown solve setting '{key}'")
         setattr(data.settings, key, value)
+    limits.check_settings(data)
+    limits.check_constraint_times(data)
     timings["read"] = time.perf_counter() - t0
 
     report = Report(input=input_name, output=output)
     ctx = SolveContext(data=data, options=SolveOptions(guides=guides, collisions=collisions,
-                                                       overrides=overrides),
+                                                       overrides=overrides, bake_timing=bake_timing),
                        report=report, progress=progress)
     t = time.perf_counter()
     extract_trajectories(ctx)
@@ -248,10 +340,15 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
         t = time.perf_counter()
         fn(ctx)
         timings[name] = time.perf_counter() - t
+    t = time.perf_counter()
     compose_edits(ctx)
+    timings["compose"] = time.perf_counter() - t
     t = time.perf_counter()
     inspect(ctx)
     timings["inspect"] = time.perf_counter() - t
+    t = time.perf_counter()
+    measure_plausibility(ctx)
+    timings["plausibility"] = time.perf_counter() - t
 
     constraint_count = sum(len(x) for x in (data.position_constraints, data.relative_constraints,
                                             data.time_constraints, data.sync_constraints))
@@ -267,16 +364,23 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
             entry.setdefault("trajectoryJoint", data.agents[path].joints[traj.joint])
 
     t = time.perf_counter()
-    provenance = {"inputs": Vt.StringArray(input_layers(stage)), "contentHash": content_hash(stage)}
+    provenance = {"inputs": Vt.StringArray(input_layers(stage)), "contentHash": content_hash(stage),
+                  "options": options_text(guides, collisions, bake_timing, **overrides)}
     layer = writer.build_layer(writer.LayerContent(
         info=data.info, agents=data.agents, edits=ctx.edits, guides=ctx.guides,
-        provenance=provenance, stats=report.stats, report=report.to_layer_dict()))
+        provenance=provenance, stats=report.stats, report=report.to_layer_dict(),
+        anchor=os.path.dirname(os.path.abspath(output)) if output else None))
     if output:
-        writer.save_layer(layer, output)
-        if composed:
-            default_prim = stage.GetRootLayer().defaultPrim or None
-            writer.save_composed(composed, output, input_name if not isinstance(stage_or_path, Usd.Stage)
-                                 else stage.GetRootLayer().realPath, data.info, default_prim)
+        timings["write"] = time.perf_counter() - t
+        timings["total"] = time.perf_counter() - t0
+        report.timings = dict(timings)
+        with outputs.Writes() as w:
+            w.add(output, writer.export_layer(layer))
+            if composed:
+                w.add(composed, writer.export_layer(writer.composed_layer(
+                    composed, output, input_file, data.info, stage.GetRootLayer().defaultPrim or None)))
+            if report_json:
+                w.add(report_json, outputs.write_text(report.to_json() + "\n"))
     timings["write"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     report.timings = timings

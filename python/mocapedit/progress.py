@@ -129,8 +129,9 @@ class Task:
             print(f"{self.name}: " + ", ".join(parts), file=p.stream, flush=True)
         self.drawn = True
 
-    def done(self, extra: str = "") -> None:
-        """Prints the task's summary line: count, time taken and rate."""
+    def done(self, extra: str = "", count: int | None = None) -> None:
+        """Prints the task's summary line: count, time taken and rate. ``count``: the steps
+        done when a task stops before its total (which was then only an upper bound)."""
         p = self.p
         if self.finished:
             return
@@ -138,9 +139,9 @@ class Task:
         if p.quiet:
             return
         now = p.clock()
-        self.count = max(self.count, self.total)
+        self.count = max(self.count, self.total) if count is None else int(count)
         f = self.figures(now)
-        line = f"{self.name}: {self.total}{' ' + self.unit if self.unit else ''} in {format_duration(f['elapsed'])}"
+        line = f"{self.name}: {self.count}{' ' + self.unit if self.unit else ''} in {format_duration(f['elapsed'])}"
         if f["rate"] and f["elapsed"] >= 0.01:
             line += f" ({format_rate(f['rate'], self.unit)})"
         if extra:

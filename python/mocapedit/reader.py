@@ -8,14 +8,17 @@ raises :class:`~mocapedit.errors.MocapEditError` naming the prim and property.
 """
 from __future__ import annotations
 
-import numpy as np
-from pxr import Usd, UsdGeom, UsdSkel
+import re
 
-from . import model
+import numpy as np
+from pxr import Sdf, Usd, UsdGeom, UsdSkel
+
+from . import contacts, model
 from .errors import MocapEditError, prim_error
 
 AGENT_API = "MocapAgentAPI"
 STATIONARY_API = "MocapStationaryAPI"
+FOOT_CONTACT_API = "MocapFootContactAPI"
 
 DEFAULT_COLLISION_RADIUS_M = 0.3
 DEFAULT_COLLISION_HEIGHT_M = 1.8
@@ -34,6 +37,46 @@ def open_stage(path: str) -> Usd.Stage:
     if stage is None:
         raise MocapEditError(f"{path}: cannot be read as a USD stage")
     return stage
+
+
+def check_composition(stage: Usd.Stage) -> None:
+    """Raises a MocapEditError when the stage did not compose as authored: a sublayer,
+    reference or payload whose file cannot be opened (USD only warns and goes on without
+    it), or a sublayer that says another ``upAxis``, ``metersPerUnit`` or
+    ``timeCodesPerSecond`` than the root layer, which the stage follows alone."""
+    errors = stage.GetCompositionErrors()
+    if errors:
+        # One missing clip file referenced by a thousand agents is one problem: group by
+        # what failed, and name a few of the prims where.
+        where: dict[str, list[str]] = {}
+        for error in errors:
+            text = str(error).strip().rstrip(".")
+            arc = re.fullmatch(r"(.* introduced by @[^@]*@)(<[^>]*>)", text)
+            where.setdefault(arc[1] if arc else text, []).extend([arc[2]] if arc else [])
+        parts = [what if not sites else what + sites[0] if len(sites) == 1 else
+                 f"{what} at {len(sites)} prims ({', '.join(sites[:3])}{', ...' if len(sites) > 3 else ''})"
+                 for what, sites in where.items()]
+        raise MocapEditError(f"{stage.GetRootLayer().identifier}: the stage does not compose: " + "; ".join(parts))
+    root = stage.GetRootLayer()
+    stage_says = {"upAxis": str(UsdGeom.GetStageUpAxis(stage)),
+                  "metersPerUnit": float(UsdGeom.GetStageMetersPerUnit(stage)),
+                  "timeCodesPerSecond": float(stage.GetTimeCodesPerSecond())}
+    for layer in stage.GetLayerStack(includeSessionLayers=False):
+        if layer == root:
+            continue
+        for key, value in stage_says.items():
+            if not layer.pseudoRoot.HasInfo(key):
+                continue
+            says = layer.pseudoRoot.GetInfo(key)
+            if (says != value) if key == "upAxis" else not np.isclose(float(says), value, rtol=1e-9, atol=0.0):
+                shown = lambda v: v if isinstance(v, str) else f"{float(v):g}"  # noqa: E731
+                root_says = (f"says {key} = {shown(value)}" if root.pseudoRoot.HasInfo(key) else
+                             f"does not author {key}, so the stage uses {shown(value)}")
+                raise MocapEditError(
+                    f"{layer.identifier}: sublayer says {key} = {shown(says)}, but the root layer "
+                    f"{root.identifier} {root_says}; a stage follows its root layer alone. Author {key} = "
+                    f"{shown(says)} on the "
+                    f"root layer (or make the sublayer agree with it)")
 
 
 def stage_info(stage: Usd.Stage) -> model.StageInfo:
@@ -56,12 +99,74 @@ def _targets(prim: Usd.Prim, name: str) -> list[str]:
     return [str(t) for t in rel.GetForwardedTargets()]
 
 
+def _authored_type(attr: Usd.Attribute) -> Sdf.ValueTypeName | None:
+    """The type the strongest spec authors (``attr.GetTypeName()`` gives the schema's)."""
+    for spec in attr.GetPropertyStack(Usd.TimeCode.EarliestTime()):
+        if spec.typeName:
+            return spec.typeName
+    return None
+
+
+_KINDS = {"int": "integer", "long": "integer", "unsigned int": "integer", "unsigned long": "integer",
+          "unsigned char": "integer", "double": "real", "float": "real", "pxr_half::half": "real",
+          "GfTimeCode": "real", "TfToken": "text", "string": "text"}
+
+
+def _kind(type_name: Sdf.ValueTypeName) -> tuple[str, bool]:
+    """What a value of this type means to the reader: text, integer, real, or a vector of
+    a size and component kind (float3, double3, point3d and half3 alike), and arrayness."""
+    name = type_name.scalarType.type.typeName
+    name = _KINDS.get(name, name)
+    if name.startswith("GfVec") and name[-1] in "dfh":
+        name = name[:-1] + "r"
+    return name, bool(type_name.isArray)
+
+
+def _compatible(authored: Sdf.ValueTypeName, expected: Sdf.ValueTypeName) -> bool:
+    a, e = _kind(authored), _kind(expected)
+    return a == e or (a == ("integer", e[1]) and e[0] == "real")
+
+
+def _check_finite(prim: Usd.Prim, name: str, value) -> None:
+    try:
+        numbers = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        return
+    if not np.all(np.isfinite(numbers)):
+        shown = f"got {value}" if numbers.size <= 4 else "some of its values are not"
+        raise prim_error(prim.GetPath(), f"must be a finite number, {shown}", name)
+
+
 def _get(prim: Usd.Prim, name: str, default=None):
+    """The value of a single-valued property, checked against the schema: an attribute
+    authored with another type than the schema's, only as time samples, or (for numbers)
+    not finite is an error naming the prim and property, never a silent misread."""
     attr = prim.GetAttribute(name)
     if not attr:
         return default
+    if attr.HasAuthoredValue():
+        source = attr.GetResolveInfo().GetSource()
+        if source in (Usd.ResolveInfoSourceTimeSamples, Usd.ResolveInfoSourceValueClips):
+            raise prim_error(prim.GetPath(), "is authored only as time samples; it takes one value: "
+                             "author it without a time", name)
+        expected = prim.GetPrimDefinition().GetAttributeDefinition(name)
+        authored = _authored_type(attr)
+        if expected and authored and not _compatible(authored, expected.GetTypeName()):
+            raise prim_error(prim.GetPath(), f"is authored as {authored} {attr.Get()!r}; the schema's type "
+                             f"is {expected.GetTypeName()}", name)
     value = attr.Get()
-    return default if value is None else value
+    if value is None:
+        return default
+    if not isinstance(value, (str, bool, int)) and _kind(attr.GetTypeName())[0] not in ("text", "bool"):
+        _check_finite(prim, name, value)
+    return value
+
+
+def _ancestors(prim: Usd.Prim):
+    """The prim and its ancestors up to (not including) the pseudo-root."""
+    while prim and not prim.IsPseudoRoot():
+        yield prim
+        prim = prim.GetParent()
 
 
 def _leaf(joint_path: str) -> str:
@@ -74,6 +179,21 @@ def resolve_joint(joints: list[str], name: str) -> int | None:
         return joints.index(name)
     matches = [i for i, j in enumerate(joints) if _leaf(j) == name]
     return matches[0] if len(matches) == 1 else None
+
+
+def _frame_range(anim: Usd.Prim, prop: str, frame_count: int, what: str) -> tuple[int, int]:
+    """An inclusive (first, last) int2 range of clip frames, checked against the clip."""
+    value = _get(anim, prop)
+    if value is None:
+        raise prim_error(anim.GetPath(), f"{what} tag has no frame range", prop)
+    a, b = int(value[0]), int(value[1])
+    if a > b:
+        raise prim_error(anim.GetPath(), f"{what} range [{a}, {b}] is reversed: its first frame "
+                         f"comes after its last; write ({b}, {a})", prop)
+    if not (0 <= a <= b < frame_count):
+        raise prim_error(anim.GetPath(), f"{what} range [{a}, {b}] is outside the clip's "
+                         f"frames 0..{frame_count - 1}", prop)
+    return a, b
 
 
 class _XformTimes:
@@ -122,6 +242,7 @@ class StageReader:
     """Reads one stage. Use :func:`read_stage` unless you need the pieces."""
 
     def __init__(self, stage: Usd.Stage, progress=None):
+        check_composition(stage)
         self.stage = stage
         self.info = stage_info(stage)
         self.progress = progress
@@ -129,18 +250,30 @@ class StageReader:
         self.clips: dict[tuple, model.Clip] = {}
         self.agents: dict[str, model.Agent] = {}
         self._skeletons: dict[str, tuple] = {}
+        self._same_times: dict[tuple, bool] = {}
 
     # ---- agents ---------------------------------------------------------------------
+
+    def _target_prim(self, owner, rel: str, target: str, kind=None, what: str = "") -> Usd.Prim:
+        """The prim a relationship targets; an error naming ``owner.rel`` when it does not
+        exist, is inactive, or is not a ``kind`` (a schema class, described as ``what``)."""
+        found = self.stage.GetPrimAtPath(target)
+        why = None
+        if not found:
+            why = "does not exist"
+        elif not found.IsActive():
+            why = "is inactive (active = false)"
+        elif kind is not None and not found.IsA(kind):
+            why = f"is not a {what} (it is a {found.GetTypeName() or 'typeless prim'})"
+        if why:
+            raise prim_error(getattr(owner, "GetPath", lambda: owner)(), f"targets <{target}>, which {why}", rel)
+        return found
 
     def _find_skeleton(self, prim: Usd.Prim) -> Usd.Prim:
         if prim.IsA(UsdSkel.Skeleton):
             return prim
         for target in _targets(prim, "skel:skeleton"):
-            skel = self.stage.GetPrimAtPath(target)
-            if skel and skel.IsA(UsdSkel.Skeleton):
-                return skel
-            raise prim_error(prim.GetPath(), f"skel:skeleton targets <{target}>, which is not a Skeleton",
-                             "skel:skeleton")
+            return self._target_prim(prim, "skel:skeleton", target, UsdSkel.Skeleton, "Skeleton")
         for child in Usd.PrimRange(prim):
             if child.IsA(UsdSkel.Skeleton):
                 return child
@@ -150,20 +283,13 @@ class StageReader:
     def _find_animation(self, prim: Usd.Prim, skel: Usd.Prim) -> Usd.Prim:
         explicit = _targets(prim, "mocap:animationSource")
         if explicit:
-            anim = self.stage.GetPrimAtPath(explicit[0])
-            if not anim or not anim.IsA(UsdSkel.Animation):
-                raise prim_error(prim.GetPath(), f"targets <{explicit[0]}>, which is not a SkelAnimation",
-                                 "mocap:animationSource")
-            return anim
+            return self._target_prim(prim, "mocap:animationSource", explicit[0], UsdSkel.Animation,
+                                     "SkelAnimation")
         # UsdSkel binds the animation on the skeleton or inherits it from an ancestor.
         p = skel
         while p and not p.IsPseudoRoot():
             for target in _targets(p, "skel:animationSource"):
-                anim = self.stage.GetPrimAtPath(target)
-                if not anim or not anim.IsA(UsdSkel.Animation):
-                    raise prim_error(p.GetPath(), f"targets <{target}>, which is not a SkelAnimation",
-                                     "skel:animationSource")
-                return anim
+                return self._target_prim(p, "skel:animationSource", target, UsdSkel.Animation, "SkelAnimation")
             if p == prim:
                 break
             p = p.GetParent()
@@ -200,22 +326,41 @@ class StageReader:
                 return (spec.layer.identifier, str(spec.path))
         return None
 
-    def _clip(self, anim: Usd.Prim):
-        """(clip key, composed stage times of the clip's frames); reads the clip on first use."""
-        attrs = [anim.GetAttribute(n) for n in ("translations", "rotations", "scales")]
-        times = np.unique(np.concatenate(
+    def _composed_times(self, attrs: list, specs: tuple) -> np.ndarray:
+        """The union of the attributes' composed sample times. Attributes sampled at the same
+        times on one layer compose to the same times, so one of them is asked (a crowd's
+        agents share a few clips: the check is cached per spec)."""
+        sampled = [(a, s) for a, s in zip(attrs, specs) if s is not None]
+        same = self._same_times.get(specs) if sampled else False
+        if same is None:
+            layer = Sdf.Layer.Find(sampled[0][1][0])
+            same = bool(layer) and all(s[0] == sampled[0][1][0] for _, s in sampled) and len(
+                {tuple(layer.ListTimeSamplesForPath(s[1])) for _, s in sampled}) == 1
+            self._same_times[specs] = same
+        if same:
+            return np.asarray(sampled[0][0].GetTimeSamples(), dtype=np.float64)
+        return np.unique(np.concatenate(
             [np.asarray(a.GetTimeSamples(), dtype=np.float64) for a in attrs if a] + [np.zeros(0)]))
+
+    def _clip(self, anim: Usd.Prim, all_channels: bool = True):
+        """(clip key, composed stage times of the clip's frames); reads the clip on first use.
+
+        An agent's own clip must author translations, rotations and scales (UsdSkel poses an
+        animation only then); a layer clip (``all_channels=False``) may author only some."""
+        attrs = [anim.GetAttribute(n) for n in model.CHANNELS]
+        specs = tuple(self._sampled_spec(a) if a else None for a in attrs)
+        times = self._composed_times(attrs, specs)
         if times.size == 0:
             raise prim_error(anim.GetPath(), "clip has no samples: translations, rotations and scales "
                              "hold no time samples", "translations")
-        for name, attr in zip(("translations", "rotations", "scales"), attrs):
-            if not attr or not attr.HasValue():
+        for name, attr in zip(model.CHANNELS, attrs):
+            if all_channels and (not attr or not attr.HasValue()):
                 raise prim_error(anim.GetPath(), "has no value; UsdSkel poses an animation only when "
                                  "translations, rotations and scales are all authored", name)
         anim_joints = tuple(str(j) for j in (_get(anim, "joints") or []))
         if not anim_joints:
             raise prim_error(anim.GetPath(), "SkelAnimation has no joints", "joints")
-        key = (anim_joints, tuple(self._sampled_spec(a) if a else None for a in attrs), times.size)
+        key = (anim_joints, specs, times.size)
         if key not in self.clips:
             self.clips[key] = self._read_clip(anim, key, anim_joints, times)
         return key, times
@@ -246,10 +391,22 @@ class StageReader:
         if not np.all(np.isfinite(translations)):
             raise prim_error(anim.GetPath(), "holds non-finite values", "translations")
         scales = read("scales", 3, 1.0)
+        if not np.all(np.isfinite(scales)):
+            raise prim_error(anim.GetPath(), "holds non-finite values", "scales")
         src = key[1][0] or key[1][1]
-        return model.Clip(key=key, source=f"{src[0]}@{src[1]}" if src else str(anim.GetPath()),
+        channels = tuple(n for n in model.CHANNELS if anim.GetAttribute(n).HasAuthoredValue())
+        clip = model.Clip(key=key, source=f"{src[0]}@{src[1]}" if src else str(anim.GetPath()),
                           joints=list(joints), times=times, translations=translations,
-                          rotations=rotations, scales=scales)
+                          rotations=rotations, scales=scales, channels=channels)
+        spec = clip.sample_spec
+        layer = Sdf.Layer.Find(spec[0]) if spec else None
+        # A clip that value clips already re-time is not one spec's samples.
+        if layer and not any(p.HasAuthoredMetadata("clips") for p in _ancestors(anim)):
+            # The frames' own times in that layer, for value clips that re-time it.
+            own = np.unique(np.concatenate([np.asarray(layer.ListTimeSamplesForPath(s[1]), dtype=np.float64)
+                                            for s in key[1] if s is not None]))
+            clip.spec_times = own if own.size == n else None
+        return clip
 
     def _stationary(self, anim: Usd.Prim, frame_count: int):
         tags = []
@@ -258,16 +415,50 @@ class StageReader:
             if not schema.startswith(prefix):
                 continue
             name = schema[len(prefix):]
-            prop = f"stationary:{name}:frames"
-            value = _get(anim, prop)
-            if value is None:
-                raise prim_error(anim.GetPath(), "stationary tag has no frame range", prop)
-            a, b = int(value[0]), int(value[1])
-            if not (0 <= a <= b < frame_count):
-                raise prim_error(anim.GetPath(), f"stationary range [{a}, {b}] is outside the clip's "
-                                 f"frames 0..{frame_count - 1}", prop)
+            a, b = _frame_range(anim, f"stationary:{name}:frames", frame_count, "stationary")
             tags.append((name, a, b))
         return sorted(tags, key=lambda t: (t[1], t[2], t[0]))
+
+    def _legs(self, prim: Usd.Prim, joints: list[str], parents: np.ndarray) -> list:
+        found = {leg.side: leg for leg in contacts.find_legs(joints, parents)}
+        for side in contacts.SIDES:
+            prop = f"mocap:{side}LegJoints"
+            names = [str(n) for n in (_get(prim, prop) or [])]
+            if not names:
+                continue
+            indices = []
+            for name in names:
+                index = resolve_joint(joints, name)
+                if index is None:
+                    raise prim_error(prim.GetPath(), f"joint '{name}' is not in the skeleton (or its bare name "
+                                     "is not unique: give its joint path)", prop)
+                indices.append(int(index))
+            why = contacts.chain_problem(joints, parents, indices)
+            if why:
+                raise prim_error(prim.GetPath(), why, prop)
+            found[side] = contacts.Leg(side, *indices[:3], indices[3] if len(indices) > 3 else None)
+        return [found[s] for s in contacts.SIDES if s in found]
+
+    def _foot_contacts(self, anim: Usd.Prim, joints: list[str], frame_count: int, legs: list):
+        prefix = FOOT_CONTACT_API + ":"
+        names = [s[len(prefix):] for s in anim.GetAppliedSchemas() if s.startswith(prefix)]
+        if not names:
+            return None
+        feet = {j: leg for leg in legs for j in (leg.ankle, leg.toe) if j is not None}
+        out = []
+        for name in names:
+            prop = f"footContact:{name}:joint"
+            joint_name = str(_get(anim, prop, "") or "")
+            joint = resolve_joint(joints, joint_name) if joint_name else None
+            if joint is None:
+                raise prim_error(anim.GetPath(), f"foot joint '{joint_name}' is not in the skeleton" if joint_name
+                                 else "foot contact names no joint", prop)
+            if joint not in feet:
+                raise prim_error(anim.GetPath(), f"joint '{joint_name}' is not the ankle or toe of a leg "
+                                 "(set mocap:leftLegJoints / mocap:rightLegJoints on the agent)", prop)
+            a, b = _frame_range(anim, f"footContact:{name}:frames", frame_count, "foot contact")
+            out.append((name, int(feet[joint].ankle), a, b))
+        return sorted(out, key=lambda c: (c[2], c[3], c[0]))
 
     def read_agent(self, prim: Usd.Prim) -> model.Agent:
         path = str(prim.GetPath())
@@ -308,6 +499,7 @@ class StageReader:
         if not height > 0:
             raise prim_error(path, f"collision height must be positive, got {height:g}", "mocap:collisionHeight")
 
+        legs = self._legs(prim, joints, parents)
         curves = _targets(prim, "mocap:pathCurve")
         order = UsdGeom.Xformable(prim).GetXformOpOrderAttr().Get() if UsdGeom.Xformable(prim) else None
         return model.Agent(
@@ -322,6 +514,8 @@ class StageReader:
             collide=bool(_get(prim, "mocap:collide", True)),
             path_curve=curves[0] if curves else None,
             stationary=self._stationary(anim, times.size),
+            legs=legs, foot_locking=bool(_get(prim, "mocap:footLocking", True)),
+            foot_contacts=self._foot_contacts(anim, joints, times.size, legs),
         )
 
     # ---- the other prims ---------------------------------------------------------------
@@ -336,10 +530,17 @@ class StageReader:
             raise prim_error(prim.GetPath(), f"has {len(targets)} targets; exactly one agent is expected", rel)
         target = targets[0]
         if target not in self.agents:
-            what = "does not exist" if not self.stage.GetPrimAtPath(target) else \
-                "is not an agent (no MocapAgentAPI), or is inactive"
-            raise prim_error(prim.GetPath(), f"targets <{target}>, which {what}", rel)
+            raise prim_error(prim.GetPath(), f"targets <{target}>, which {self._not_an_agent(target)}", rel)
         return target
+
+    def _not_an_agent(self, target: str) -> str:
+        """Why a target path is not one of the agents read, for messages."""
+        found = self.stage.GetPrimAtPath(target)
+        if not found:
+            return "does not exist"
+        if not found.IsActive() or not found.IsLoaded():
+            return "is inactive (active = false)" if not found.IsActive() else "is not loaded"
+        return "is not an agent (no MocapAgentAPI)"
 
     def _frame(self, prim: Usd.Prim, prop: str, agent: str) -> int:
         frame = int(_get(prim, prop, 0))
@@ -402,7 +603,7 @@ class StageReader:
         members = _targets(prim, "members")
         for m in members:
             if m not in self.agents:
-                raise prim_error(prim.GetPath(), f"member <{m}> is not an active agent", "members")
+                raise prim_error(prim.GetPath(), f"member <{m}> {self._not_an_agent(m)}", "members")
         stiffness = float(_get(prim, "stiffness", 1.0))
         if not stiffness > 0:
             raise prim_error(prim.GetPath(), f"stiffness must be positive, got {stiffness:g}", "stiffness")
@@ -415,14 +616,11 @@ class StageReader:
         agents = _targets(prim, "agents")
         for a in agents:
             if a not in self.agents:
-                raise prim_error(prim.GetPath(), f"targets <{a}>, which is not an active agent", "agents")
+                raise prim_error(prim.GetPath(), f"targets <{a}>, which {self._not_an_agent(a)}", "agents")
         geometry = _targets(prim, "geometry")
         bounds = None
         if geometry:
-            geo = self.stage.GetPrimAtPath(geometry[0])
-            if not geo or not geo.IsA(UsdGeom.Imageable):
-                raise prim_error(prim.GetPath(), f"targets <{geometry[0]}>, which is not a UsdGeom prim",
-                                 "geometry")
+            geo = self._target_prim(prim, "geometry", geometry[0], UsdGeom.Imageable, "UsdGeom prim")
             cache = UsdGeom.BBoxCache(Usd.TimeCode.Default(), [UsdGeom.Tokens.default_, UsdGeom.Tokens.render,
                                                                UsdGeom.Tokens.proxy, UsdGeom.Tokens.guide])
             box = cache.ComputeWorldBound(geo).ComputeAlignedRange()
@@ -440,15 +638,13 @@ class StageReader:
         agents = _targets(prim, "agents")
         for a in agents:
             if a not in self.agents:
-                raise prim_error(prim.GetPath(), f"targets <{a}>, which is not an active agent", "agents")
+                raise prim_error(prim.GetPath(), f"targets <{a}>, which {self._not_an_agent(a)}", "agents")
         anims = _targets(prim, "animation")
         if not anims:
             raise prim_error(prim.GetPath(), "has no animation", "animation")
-        anim = self.stage.GetPrimAtPath(anims[0])
-        if not anim or not anim.IsA(UsdSkel.Animation):
-            raise prim_error(prim.GetPath(), f"targets <{anims[0]}>, which is not a SkelAnimation", "animation")
+        anim = self._target_prim(prim, "animation", anims[0], UsdSkel.Animation, "SkelAnimation")
         try:
-            key, times = self._clip(anim)
+            key, times = self._clip(anim, all_channels=False)
         except MocapEditError as exc:
             raise prim_error(prim.GetPath(), f"animation <{anim.GetPath()}> cannot be layered: {exc}",
                              "animation") from None
@@ -485,6 +681,7 @@ class StageReader:
         if not (np.isfinite(s.max_wait) and s.max_wait >= 0):
             raise prim_error(prim.GetPath(), f"must be a finite number of seconds, 0 or more, got {s.max_wait:g}",
                              "maxWait")
+        s.foot_locking = bool(_get(prim, "footLocking", s.foot_locking))
         if s.max_iterations < 0:
             raise prim_error(prim.GetPath(), "must not be negative", "maxIterations")
         if not s.sample_step > 0:
@@ -492,12 +689,11 @@ class StageReader:
         return s
 
     def read_curve(self, agent_path: str, curve_path: str) -> dict:
-        prim = self.stage.GetPrimAtPath(curve_path)
-        type_name = prim.GetTypeName() if prim else ""
+        prim = self._target_prim(agent_path, "mocap:pathCurve", curve_path)
+        type_name = prim.GetTypeName()
         if type_name not in ("BasisCurves", "NurbsCurves"):
-            what = "does not exist" if not prim else f"is a {type_name or 'typeless prim'}, not a curve"
-            raise prim_error(agent_path, f"targets <{curve_path}>, which {what} (BasisCurves or NurbsCurves "
-                             "expected)", "mocap:pathCurve")
+            raise prim_error(agent_path, f"targets <{curve_path}>, which is a {type_name or 'typeless prim'}, "
+                             "not a curve (BasisCurves or NurbsCurves expected)", "mocap:pathCurve")
         points = np.array(_get(prim, "points") or [], dtype=np.float64).reshape(-1, 3)
         if len(points) < 2:
             raise prim_error(curve_path, "path curve needs at least two points", "points")
@@ -574,4 +770,4 @@ def read_stage(stage: Usd.Stage, progress=None) -> model.StageData:
     return StageReader(stage, progress).read()
 
 
-__all__ = ["open_stage", "read_stage", "stage_info", "resolve_joint", "StageReader"]
+__all__ = ["open_stage", "check_composition", "read_stage", "stage_info", "resolve_joint", "StageReader"]

@@ -43,14 +43,73 @@ class Report:
         return json.dumps(self.to_dict(), indent=indent, sort_keys=True, default=_plain)
 
     def summary(self) -> str:
+        """What ``mocapedit solve`` prints: the same figures, in the same words, as the
+        summary of ``mocapedit report``."""
         s = self.stats
         lines = [f"agents: {s.get('agents', 0)} read, {s.get('editedAgents', 0)} edited; "
                  f"clips: {s.get('clips', 0)}; constraints: {s.get('constraints', 0)}"]
-        if self.constraints:
-            worst = max((c.get("residual", 0.0) for c in self.constraints), default=0.0)
-            lines.append(f"worst constraint residual: {worst:.3g}")
+        lines.extend(overview(s, self.constraints))
+        lines.extend(plausibility_lines(s.get("plausibility")))
+        lines.extend(foot_locking_lines(s))
         lines.extend(f"note: {n}" for n in self.notes)
         return "\n".join(lines)
+
+
+def describe_left(intervals: int, region_frames: int) -> str:
+    """What collision avoidance left, in the words progress, notes and reports share."""
+    text = f"{intervals} collision interval{'s' if intervals != 1 else ''}"
+    if region_frames:
+        text += f" and {region_frames} frame{'s' if region_frames != 1 else ''} inside avoid regions"
+    return text + " left"
+
+
+def overview(stats: dict, constraints: list[dict]) -> list[str]:
+    """The lines on constraints and overlaps that the solve summary and the report share.
+
+    Constraint figures leave out the soft collision rows; residuals of time and sync
+    constraints are in time codes, the others in stage units."""
+    lines = []
+    checked = [c for c in constraints if c.get("kind") != "collision"]
+    if checked:
+        unmet = [c for c in checked if not c.get("met", True)]
+        hard = [c.get("residual") or 0.0 for c in checked if c.get("hard")]
+        lines.append(f"constraints reported: {len(checked)}, met: {len(checked) - len(unmet)}, "
+                     f"not met: {len(unmet)}" + (f"; worst hard residual {_num(max(hard))}" if hard else ""))
+    if "collisionsPerIteration" in stats:
+        iterations = stats.get("collisionIterations", 0)
+        lines.append("collision avoidance: " + describe_left(stats.get("remainingOverlaps", 0),
+                                                             stats.get("regionFramesLeft", 0)) +
+                     f" after {iterations} iteration{'s' if iterations != 1 else ''}")
+    elif "remainingOverlaps" in stats:
+        lines.append(f"overlapping agent pairs left: {stats['remainingOverlaps']}")
+    return lines
+
+
+def foot_locking_lines(stats: dict) -> list[str]:
+    """The shot's foot locking figures, as ``solve`` prints them and the report shows them."""
+    if "footContactsLocked" not in stats:
+        return []
+    return [f"feet: {stats['footContactsLocked']} contacts locked on {stats.get('footLockedAgents', 0)} agents; "
+            f"skate {_num(stats.get('footSkateSource'))} source, {_num(stats.get('footSkateEdited'))} edited, "
+            f"{_num(stats.get('footSkateLocked'))} locked (stage units/s, mean over agents); "
+            f"largest pelvis drop {_num(stats.get('maxPelvisDrop'))}, "
+            f"largest foot correction {_num(stats.get('maxFootCorrection'))}"]
+
+
+def plausibility_lines(p: dict | None) -> list[str]:
+    """The shot's worst plausibility figures (``stats["plausibility"]``), as ``solve`` prints them."""
+    if not p or not p.get("agents"):
+        return []
+    lo, hi = p["lengthRatioRange"]
+    wlo, whi = p["timeWarpRange"]
+    return [
+        f"plausibility of {p['agents']} moved agents: largest extra turn {p['maxExtraTurnPerFrameAt60fps']:.1f} "
+        f"deg/frame at 60 fps ({p['maxExtraFacingRateAgent']}), {p['spinningAgents']} spinning (over 15)",
+        f"  largest walking direction change {p['maxDirectionDeviation']:.1f} deg"
+        + (f" ({p['maxDirectionDeviationAgent']})" if p.get("maxDirectionDeviationAgent") else "")
+        + f", {p['reversingAgents']} reversing (over 90)",
+        f"  path length ratio mean {p['meanLengthRatio']:.3f} ({lo:.3f}..{hi:.3f}); time warp {wlo:.3f}..{whi:.3f}; "
+        f"foot skate ratio mean {p['meanFootSkateRatio']:.2f} (max {p['maxFootSkateRatio']:.2f})"]
 
 
 def _plain(value):
@@ -151,8 +210,9 @@ def select(stored: StoredReport, patterns: list[str] | None = None) -> StoredRep
 _UNIT_NAMES = {1.0: "m", 0.01: "cm", 0.001: "mm", 0.1: "dm", 1000.0: "km"}
 _TIME_KINDS = ("time", "sync")
 _KNOWN_FIGURES = ("frames", "edited", "lengthRatio", "maxDisplacement", "meanDisplacement", "shapeChange",
-                  "footSkateSource", "footSkateEdited", "minSeparation", "minInterval", "solver", "notes",
-                  "trajectoryJoint")
+                  "footSkateSource", "footSkateEdited", "footSkateLocked", "footContactsLocked", "maxPelvisDrop",
+                  "maxFootCorrection", "minSeparation", "minInterval", "solver", "notes",
+                  "plausibility", "trajectoryJoint")
 
 
 def _num(value, digits: int = 4) -> str:
@@ -186,17 +246,13 @@ def format_text(stored: StoredReport, show_all: bool = False) -> str:
     lines.append(f"agents: {s.get('agents', len(r.agents))} read, {s.get('editedAgents', 0)} edited; "
                  f"constraints: {s.get('constraints', 0)}; groups: {s.get('groups', 0)}; "
                  f"avoid regions: {s.get('avoidRegions', 0)}; animation layers: {s.get('animationLayers', 0)}")
-    checked = [c for c in r.constraints if c.get("kind") != "collision"]
-    if checked:
-        unmet = [c for c in checked if not c.get("met", True)]
-        hard = [c.get("residual") or 0.0 for c in checked if c.get("hard")]
-        lines.append(f"constraints reported: {len(checked)}, met: {len(checked) - len(unmet)}, "
-                     f"not met: {len(unmet)}" + (f"; worst hard residual {_num(max(hard))}" if hard else ""))
-    if "remainingOverlaps" in s:
-        lines.append(f"overlapping agent pairs left: {s['remainingOverlaps']}")
+    lines.extend(overview(s, r.constraints))
     others = {k: v for k, v in sorted(s.items()) if k not in (
         "agents", "editedAgents", "clips", "constraints", "groups", "avoidRegions", "animationLayers",
-        "remainingOverlaps")}
+        "remainingOverlaps", "plausibility", "footContactsLocked", "footLockedAgents", "footSkateSource",
+        "footSkateEdited", "footSkateLocked", "maxPelvisDrop", "maxFootCorrection")}
+    lines.extend(plausibility_lines(s.get("plausibility")))
+    lines.extend(foot_locking_lines(s))
     if others:
         lines.append("stats: " + ", ".join(f"{k} {_num(v)}" for k, v in others.items()))
     lines.extend(f"note: {n}" for n in r.notes)
@@ -222,10 +278,19 @@ def format_text(stored: StoredReport, show_all: bool = False) -> str:
             parts.append(f"displacement max {_num(fig.get('maxDisplacement'))}, mean {_num(fig.get('meanDisplacement'))}")
         if "shapeChange" in fig:
             parts.append(f"shape change {_num(fig['shapeChange'])}")
+        if "plausibility" in fig:
+            p = fig["plausibility"]
+            parts.append(f"extra turn {_num(p['maxExtraFacingRate'] / 60.0)} deg/frame at 60 fps"
+                         f" ({p['spinFrames']} spinning frames), walking direction change "
+                         f"{_num(p['maxDirectionDeviation'])} deg, foot skate ratio {_num(p['footSkateRatio'])}")
         if "footSkateSource" in fig or "footSkateEdited" in fig:
             a, b = fig.get("footSkateSource"), fig.get("footSkateEdited")
             change = f" ({'+' if b - a >= 0 else ''}{_num(b - a)})" if a is not None and b is not None else ""
-            parts.append(f"foot skate {_num(a)} -> {_num(b)}{change}")
+            locked = f" -> locked {_num(fig['footSkateLocked'])}" if "footSkateLocked" in fig else ""
+            parts.append(f"foot skate {_num(a)} -> {_num(b)}{change}{locked}")
+        if "footContactsLocked" in fig:
+            parts.append(f"contacts locked {fig['footContactsLocked']}, pelvis drop {_num(fig.get('maxPelvisDrop'))}, "
+                         f"foot correction {_num(fig.get('maxFootCorrection'))}")
         if "minSeparation" in fig:
             sep = fig["minSeparation"]
             parts.append(f"min separation {_num(sep)}" + ("  OVERLAP" if sep is not None and sep < 0 else ""))

@@ -34,6 +34,7 @@ __all__ = [
     "SchemaNotRegisteredError",
     "AgentAPI",
     "StationaryAPI",
+    "FootContactAPI",
     "PositionConstraint",
     "RelativeConstraint",
     "TimeConstraint",
@@ -369,6 +370,9 @@ class AgentAPI(_SingleApplyAPI):
     GetCollisionHeightAttr, CreateCollisionHeightAttr = _attribute("mocap:collisionHeight")
     GetCollideAttr, CreateCollideAttr = _attribute("mocap:collide")
     GetPathCurveRel, CreatePathCurveRel = _relationship("mocap:pathCurve")
+    GetLeftLegJointsAttr, CreateLeftLegJointsAttr = _attribute("mocap:leftLegJoints")
+    GetRightLegJointsAttr, CreateRightLegJointsAttr = _attribute("mocap:rightLegJoints")
+    GetFootLockingAttr, CreateFootLockingAttr = _attribute("mocap:footLocking")
 
 
 class StationaryAPI(_MultipleApplyAPI):
@@ -383,6 +387,16 @@ class StationaryAPI(_MultipleApplyAPI):
     def IsStationaryAPIPath(cls, path: Sdf.Path | str) -> bool:
         """Whether ``path`` names an instance, like </Anim.stationary:pause>."""
         return cls.IsSchemaPath(path)
+
+
+class FootContactAPI(_MultipleApplyAPI):
+    """``MocapFootContactAPI``: a named foot contact (joint and frame range) on a SkelAnimation clip."""
+
+    SCHEMA_NAME = "MocapFootContactAPI"
+    NAMESPACE_PREFIX = "footContact"
+
+    GetJointAttr, CreateJointAttr = _attribute("joint")
+    GetFramesAttr, CreateFramesAttr = _attribute("frames")
 
 
 # -- typed schemas --------------------------------------------------------------------
@@ -494,12 +508,14 @@ class SolveSettings(_Typed):
     GetCollisionStrategyAttr, CreateCollisionStrategyAttr = _attribute("collisionStrategy")
     GetMinTimeIntervalAttr, CreateMinTimeIntervalAttr = _attribute("minTimeInterval")
     GetMaxWaitAttr, CreateMaxWaitAttr = _attribute("maxWait")
+    GetFootLockingAttr, CreateFootLockingAttr = _attribute("footLocking")
 
 
 #: Every schema class of the library, API schemas first.
 ALL_SCHEMA_CLASSES: tuple[type[_Schema], ...] = (
     AgentAPI,
     StationaryAPI,
+    FootContactAPI,
     PositionConstraint,
     RelativeConstraint,
     TimeConstraint,

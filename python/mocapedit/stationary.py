@@ -42,8 +42,13 @@ class StationaryRange:
     first: int                     # first frame (0-based, inclusive)
     last: int                      # last frame (inclusive)
     duration: float                # seconds
-    max_speed: float               # metres per second, the largest windowed ground speed inside
-    max_turn: float                # degrees per second, the largest windowed turning rate inside
+    max_speed: float               # metres per second, the largest windowed ground speed of its still frames
+    max_turn: float                # degrees per second, the largest windowed turning rate of its still frames
+    # Frames of gaps shorter than max_gap that join two still runs into this range: they
+    # exceed a threshold (that is what makes them a gap), by as much as these maxima.
+    bridged: int = 0
+    bridged_max_speed: float = 0.0
+    bridged_max_turn: float = 0.0
 
 
 def facing(rotations: np.ndarray, up_axis: str) -> np.ndarray:
@@ -130,9 +135,13 @@ def detect(seconds: np.ndarray, ground_m: np.ndarray, heading: np.ndarray,
         duration = float(seconds[last] - seconds[first] + step)
         if duration + 1e-9 < settings.min_duration:
             continue
+        inside = still[first:last + 1]
+        s, t = speed[first:last + 1], turn[first:last + 1]
         out.append(StationaryRange(first=first, last=last, duration=duration,
-                                   max_speed=float(speed[first:last + 1].max()),
-                                   max_turn=float(turn[first:last + 1].max())))
+                                   max_speed=float(s[inside].max()), max_turn=float(t[inside].max()),
+                                   bridged=int((~inside).sum()),
+                                   bridged_max_speed=float(s[~inside].max(initial=0.0)),
+                                   bridged_max_turn=float(t[~inside].max(initial=0.0))))
     return out
 
 

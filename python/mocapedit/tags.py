@@ -82,18 +82,11 @@ def detect(stage: Usd.Stage, settings: stationary.DetectSettings | None = None,
         raise MocapEditError(str(exc)) from None
     if not Sdf.Path.IsValidIdentifier(prefix + "1"):
         raise MocapEditError(f"tag name prefix '{prefix}' is not a valid identifier")
-    _view_skeletons_as_agents(stage, root_joint)
-    data = reader.read_stage(stage)
+    data, measured = clips_to_measure(stage, root_joint, animation)
     info = data.info
-    if animation is not None and not any(a.animation_path == animation for a in data.agents.values()):
-        raise MocapEditError(f"<{animation}> is not a SkelAnimation played by an agent or bound to a "
-                             "skeleton on this stage")
     out: dict[str, ClipTags] = {}
     chains: dict = {}   # skeleton-space chains of clips that several agents play, composed once
-    for path in sorted(data.agents):
-        agent = data.agents[path]
-        if agent.animation_path in out or (animation is not None and agent.animation_path != animation):
-            continue
+    for path, agent in measured:
         if root_joint:
             index = reader.resolve_joint(agent.joints, root_joint)
             if index is None:
@@ -116,20 +109,47 @@ def detect(stage: Usd.Stage, settings: stationary.DetectSettings | None = None,
         out[agent.animation_path] = ClipTags(
             animation=agent.animation_path, agent=path, joint=agent.joints[traj.joint],
             frames=agent.frame_count, existing=list(agent.stationary), ranges=ranges, names=names)
-    if not out:
-        raise MocapEditError(f"{info.root_layer}: no clip to measure: no agent (MocapAgentAPI) and no Skeleton "
-                             "bound to a SkelAnimation")
     return [out[k] for k in sorted(out)], info
 
 
-def build_layer(clips: list[ClipTags], info, settings: stationary.DetectSettings) -> Sdf.Layer:
-    """A layer of ``over``s tagging each proposed range with MocapStationaryAPI."""
+def clips_to_measure(stage: Usd.Stage, root_joint: str | None = None, animation: str | None = None):
+    """(the stage's data, [(agent path, agent)] one agent per clip to measure, in path order).
+
+    Skeletons that no agent plays are read as agents (see the module doc); ``animation``
+    keeps only that clip. Raises a MocapEditError when there is nothing to measure.
+    """
+    _view_skeletons_as_agents(stage, root_joint)
+    data = reader.read_stage(stage)
+    if animation is not None and not any(a.animation_path == animation for a in data.agents.values()):
+        raise MocapEditError(f"<{animation}> is not a SkelAnimation played by an agent or bound to a "
+                             "skeleton on this stage")
+    measured, seen = [], set()
+    for path in sorted(data.agents):
+        agent = data.agents[path]
+        if agent.animation_path in seen or (animation is not None and agent.animation_path != animation):
+            continue
+        seen.add(agent.animation_path)
+        measured.append((path, agent))
+    if not measured:
+        raise MocapEditError(f"{data.info.root_layer}: no clip to measure: no agent (MocapAgentAPI) and no "
+                             "Skeleton bound to a SkelAnimation")
+    return data, measured
+
+
+def review_layer(info, documentation: str) -> Sdf.Layer:
+    """A new anonymous layer with the input's time, up axis and units, to review tags in."""
     layer = Sdf.Layer.CreateAnonymous(".usda")
     writer._set_time_metadata(layer, info)
     layer.pseudoRoot.SetInfo("upAxis", info.up_axis)
     layer.pseudoRoot.SetInfo("metersPerUnit", info.meters_per_unit)
-    layer.documentation = ("Stationary ranges proposed by mocapedit detect-stationary, for review: "
-                           "place over the clip (sublayer above it).")
+    layer.documentation = documentation
+    return layer
+
+
+def build_layer(clips: list[ClipTags], info, settings: stationary.DetectSettings) -> Sdf.Layer:
+    """A layer of ``over``s tagging each proposed range with MocapStationaryAPI."""
+    layer = review_layer(info, "Stationary ranges proposed by mocapedit detect-stationary, for review: "
+                               "place over the clip (sublayer above it).")
     report = {}
     with Sdf.ChangeBlock():
         for clip in clips:
@@ -141,6 +161,10 @@ def build_layer(clips: list[ClipTags], info, settings: stationary.DetectSettings
                 report[f"{clip.animation}.{name}"] = {
                     "frames": Gf.Vec2i(r.first, r.last), "seconds": round(r.duration, 4),
                     "maxSpeed": round(r.max_speed, 4), "maxTurn": round(r.max_turn, 3)}
+                if r.bridged:
+                    report[f"{clip.animation}.{name}"].update({
+                        "bridgedFrames": r.bridged, "bridgedMaxSpeed": round(r.bridged_max_speed, 4),
+                        "bridgedMaxTurn": round(r.bridged_max_turn, 3)})
     layer.customLayerData = {"mocapedit": {
         "version": __version__,
         "detectStationary": {"maxSpeed": settings.max_speed, "maxTurn": settings.max_turn,

@@ -2,8 +2,10 @@
 
 The trajectory of an agent is its root joint's world position on the ground plane at
 each source frame (section 5.4.1 of the deliverable): the root joint when it carries the
-motion, otherwise the hip joint projected to the ground. Its heading follows the path
-tangent, held constant through stationary ranges.
+motion, otherwise the hip joint projected to the ground. Its source heading follows the path
+tangent, held constant through stationary ranges; an edit turns it by the rotation the edit
+applies to the path around each frame (:func:`deformation_turns`), never by the edited path's
+own tangent.
 
 An edit moves an agent's ground pose ``(position, heading)`` at each frame to a new one.
 Because only the ground-plane motion and the yaw change, the whole body follows by one
@@ -61,26 +63,28 @@ def joint_skel_space(agent: Agent, clip: Clip, joint: int) -> np.ndarray:
     return m
 
 
-def joint_world(agent: Agent, clip: Clip, joint: int) -> np.ndarray:
-    """(F,4,4) world matrices of one joint at every source frame."""
-    return joint_skel_space(agent, clip, joint) @ agent.skel_to_world
+def joint_world(agent: Agent, clip: Clip, joint: int, cache: dict | None = None) -> np.ndarray:
+    """(F,4,4) world matrices of one joint at every source frame.
+
+    ``cache`` (optional, shared across agents) keeps the skeleton-space chains of clips
+    that many agents play, so a crowd of re-used clips is composed once per clip."""
+    key = (agent.clip_key, tuple(agent.joints), joint)
+    skel = cache.get(key) if cache is not None else None
+    if skel is None:
+        skel = joint_skel_space(agent, clip, joint)
+        if cache is not None:
+            cache[key] = skel
+    return skel @ agent.skel_to_world
 
 
 def extract(agent: Agent, clip: Clip, up_axis: str, meters_per_unit: float,
             cache: dict | None = None) -> Trajectory:
     """The agent's ground trajectory, its heading and height at each source frame.
 
-    ``cache`` (optional, shared across agents) keeps the skeleton-space chains of clips
-    that many agents play, so a crowd of re-used clips is composed once per clip.
+    ``cache``: see :func:`joint_world`.
     """
     def world(joint):
-        key = (agent.clip_key, tuple(agent.joints), joint)
-        skel = cache.get(key) if cache is not None else None
-        if skel is None:
-            skel = joint_skel_space(agent, clip, joint)
-            if cache is not None:
-                cache[key] = skel
-        return skel @ agent.skel_to_world
+        return joint_world(agent, clip, joint, cache)
 
     root = world(agent.root_joint)
     pos = root[:, 3, :3]
@@ -106,6 +110,44 @@ def headings(uv: np.ndarray, fixed: list[tuple[int, int]], meters_per_unit: floa
         return free
     fallback = np.array([free[a] for a, _ in fixed])
     return _solver.tangent_headings(np.ascontiguousarray(uv, dtype=np.float64), fixed, fallback, still)
+
+
+#: Half-width (seconds) of each of the two box windows that average the edit's rotation.
+TURN_WINDOW_S = 0.2
+#: Source ground speed (metres per second) below which a frame's turn comes from the frames
+#: around it instead of its own steps.
+TURN_MIN_SPEED_M = 0.1
+
+
+def turn_window(fps: float) -> int:
+    """Half-width in frames of the windows of :func:`deformation_turns` at ``fps``."""
+    return max(1, int(round(TURN_WINDOW_S * float(fps))))
+
+
+def deformation_turns(source: np.ndarray, edited: np.ndarray, offsets, fixed=(), fixed_turn=(),
+                      window: int = 2, min_travel: float = 0.0) -> np.ndarray:
+    """(F,) turn of each frame's heading (radians, counter-clockwise) when paths go from source
+    to edited: the local rotation the edit applies to the path around the frame (the least-squares
+    rotation of the source steps onto the edited ones within two nested windows of ``window``
+    frames each side; where the source moves less than ``min_travel`` stage units across the
+    window, interpolated from the moving frames around it; each fixed range by its own turn). See
+    ``DeformationTurns`` in ``solver/include/mocapedit/trajectory.h``. An unedited path turns by
+    exactly 0, a rigidly turned one by its angle.
+
+      source, edited  (F,2) ground paths of one or more agents, concatenated
+      offsets         (B+1,) first frame of each agent's block, then F
+      fixed           (R,3) (block, first, last) inclusive frame ranges within the blocks, by block
+      fixed_turn      (R,) turn of each fixed range
+    """
+    s = np.ascontiguousarray(source, dtype=np.float64)
+    e = np.ascontiguousarray(edited, dtype=np.float64)
+    off = np.asarray(offsets, dtype=np.int32)
+    if s.shape != e.shape or s.ndim != 2 or s.shape[1] != 2 or len(off) < 1 or off[-1] != len(s):
+        raise ValueError(f"source {s.shape} and edited {e.shape} must be (F,2) with offsets ending at F")
+    blocks = np.ascontiguousarray(np.stack((off[:-1], off[1:]), axis=1))
+    ranges = np.ascontiguousarray(np.asarray(fixed, dtype=np.int32).reshape(-1, 3))
+    turns = np.asarray(fixed_turn, dtype=np.float64).reshape(-1)
+    return _solver.block_deformation_turns(s, e, blocks, ranges, turns, int(window), float(min_travel))
 
 
 def ground_motion(src_uv: np.ndarray, src_heading: np.ndarray, new_uv: np.ndarray,

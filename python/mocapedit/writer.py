@@ -6,9 +6,14 @@ UsdSkel and UsdGeom. Layout:
 
 - an edited agent gets ``xformOp:transform:mocapEdit`` (time-sampled) prepended to its
   ``xformOpOrder``: the rigid ground motion of its path edit;
-- an agent whose joints changed (time warp, layering) gets a baked SkelAnimation under
-  ``/MocapEdit/Animations`` bound to its skeleton with ``skel:animationSource``; agents
-  whose baked animations are identical share one;
+- an agent whose joints changed only in timing (time warp, time and sync constraints,
+  speed matching) gets a SkelAnimation under ``/MocapEdit/Animations`` that references its
+  source clip and re-times it with USD value clips (``clips:times`` maps shot time to the
+  clip's own time, ``clips:active`` plays the one clip): nothing is baked, the layer grows
+  by one time pair per source frame;
+- an agent whose poses changed (layering) gets a baked SkelAnimation there instead;
+  either is bound to its skeleton with ``skel:animationSource``, and agents whose
+  animations are identical share one;
 - guide geometry goes under ``/MocapEdit/Guides`` with purpose ``guide``;
 - ``customLayerData["mocapedit"]`` records the version, the input layers, a content hash,
   the solve statistics and the whole solve report (``report``: compact JSON text, sorted
@@ -25,13 +30,13 @@ import json
 import math
 import os
 import re
-import tempfile
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
-from pxr import Gf, Sdf, UsdGeom, Vt
+from pxr import Sdf, UsdGeom, Vt
 
-from . import __version__
+from . import __version__, outputs
 from .model import Agent, StageInfo
 from .names import unique_identifier
 
@@ -51,11 +56,22 @@ class BakedAnimation:
 
 
 @dataclass
+class RetimedClip:
+    """A source clip played on a new timing by USD value clips: nothing is baked."""
+    layer: str                   # identifier of the layer whose spec holds the clip's samples
+    prim_path: str               # that SkelAnimation spec's path in the layer
+    joints: list[str]
+    stage_times: np.ndarray      # (F,) shot time at which each clip sample plays, increasing
+    clip_times: np.ndarray       # (F,) the samples' own times in the clip layer
+
+
+@dataclass
 class AgentEdit:
-    """What the writer authors for one agent; both parts optional."""
+    """What the writer authors for one agent; every part optional (at most one animation)."""
     times: np.ndarray | None = None          # (T,) stage times of the xform op samples
     xform_op: np.ndarray | None = None       # (T,4,4) prepended op values
     animation: BakedAnimation | None = None
+    retimed: RetimedClip | None = None
 
 
 @dataclass
@@ -86,6 +102,9 @@ class LayerContent:
     provenance: dict = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
     report: dict | None = None   # JSON-ready solve report, stored as compact JSON text
+    # Folder the layer will be saved in: asset paths (value clips) are written relative to
+    # it; None writes them absolute.
+    anchor: str | None = None
 
 
 def _safe_name(path: str, taken: set[str]) -> str:
@@ -123,8 +142,10 @@ def _author_xform_op(layer: Sdf.Layer, agent: Agent, edit: AgentEdit) -> None:
     order.insert(at, EDIT_OP)
     _attr(spec, "xformOpOrder", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(order), uniform=True)
     attr = _attr(spec, EDIT_OP, Sdf.ValueTypeNames.Matrix4d)
-    for t, m in zip(edit.times, edit.xform_op):
-        layer.SetTimeSample(attr.path, float(t), Gf.Matrix4d(m.tolist()))
+    # One conversion of the whole (T,4,4) array: per-sample Gf.Matrix4d(list) took half the time.
+    values = Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(edit.xform_op, dtype=np.float64))
+    for t, m in zip(np.asarray(edit.times, dtype=np.float64).tolist(), values):
+        layer.SetTimeSample(attr.path, t, m)
 
 
 def _animation_key(anim: BakedAnimation, digests: dict[int, bytes]) -> tuple:
@@ -163,6 +184,42 @@ def _author_animation(layer: Sdf.Layer, anim: BakedAnimation, name: str) -> Sdf.
         data = np.ascontiguousarray(data, dtype=np.float32)
         for t, frame in zip(anim.times, data):
             layer.SetTimeSample(attr.path, float(t), array_type.FromNumpy(frame))
+    return path
+
+
+def asset_path(identifier: str, anchor: str | None) -> str:
+    """The asset path to write for a layer: relative to ``anchor`` ("./" or "../" first, so
+    it resolves beside the layer that holds it), absolute without an anchor."""
+    layer = Sdf.Layer.Find(identifier)
+    real = os.path.abspath(layer.realPath if layer and layer.realPath else identifier)
+    if anchor is None:
+        return real.replace(os.sep, "/")
+    rel = os.path.relpath(real, os.path.abspath(anchor)).replace(os.sep, "/")
+    return rel if rel.startswith("../") else "./" + rel
+
+
+def _retimed_key(clip: RetimedClip) -> tuple:
+    return ("retimed", clip.layer, clip.prim_path, tuple(clip.joints),
+            np.asarray(clip.stage_times, dtype=np.float64).tobytes(),
+            np.asarray(clip.clip_times, dtype=np.float64).tobytes())
+
+
+def _author_retimed(layer: Sdf.Layer, clip: RetimedClip, name: str, anchor: str | None) -> Sdf.Path:
+    """A SkelAnimation that references the source clip (its joints, defaults and any other
+    property) and plays its samples on the new timing through one value clip."""
+    path = ANIMATIONS.AppendChild(name)
+    spec = _def(layer, path, "SkelAnimation")
+    asset = asset_path(clip.layer, anchor)
+    spec.referenceList.Prepend(Sdf.Reference(asset, Sdf.Path(clip.prim_path)))
+    _attr(spec, "joints", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(clip.joints), uniform=True)
+    pairs = np.stack([np.asarray(clip.stage_times, dtype=np.float64),
+                      np.asarray(clip.clip_times, dtype=np.float64)], axis=1)
+    spec.SetInfo("clips", {"default": {
+        "assetPaths": Sdf.AssetPathArray([Sdf.AssetPath(asset)]),
+        "primPath": clip.prim_path,
+        "active": Vt.Vec2dArray([(float(pairs[0, 0]), 0.0)]),
+        "times": Vt.Vec2dArray.FromNumpy(np.ascontiguousarray(pairs)),
+    }})
     return path
 
 
@@ -275,7 +332,7 @@ def build_layer(content: LayerContent) -> Sdf.Layer:
         root = Sdf.PrimSpec(layer.pseudoRoot, ROOT.name, Sdf.SpecifierDef, "Scope")
         Sdf.PrimSpec(root, GUIDES.name, Sdf.SpecifierDef, "Scope")
         taken: set[str] = set()
-        if any(e.animation is not None for e in content.edits.values()):
+        if any(e.animation is not None or e.retimed is not None for e in content.edits.values()):
             Sdf.PrimSpec(root, ANIMATIONS.name, Sdf.SpecifierDef, "Scope")
         # Agents whose baked animations are identical share one prim, named after the first.
         authored: dict[tuple, Sdf.Path] = {}
@@ -284,45 +341,35 @@ def build_layer(content: LayerContent) -> Sdf.Layer:
             edit, agent = content.edits[agent_path], content.agents[agent_path]
             if edit.xform_op is not None:
                 _author_xform_op(layer, agent, edit)
-            if edit.animation is not None:
-                key = _animation_key(edit.animation, digests)
+            if edit.animation is not None or edit.retimed is not None:
+                retimed = edit.retimed
+                key = _retimed_key(retimed) if retimed else _animation_key(edit.animation, digests)
                 path = authored.get(key)
                 if path is None:
-                    path = authored[key] = _author_animation(layer, edit.animation,
-                                                             _safe_name(agent_path, taken))
+                    name = _safe_name(agent_path, taken)
+                    path = authored[key] = (_author_retimed(layer, retimed, name, content.anchor) if retimed
+                                            else _author_animation(layer, edit.animation, name))
                 _bind_animation(layer, agent, path)
         _author_guides(layer, content.guides)
     return layer
 
 
-def _temp_beside(path: str) -> str:
-    directory, base = os.path.split(os.path.abspath(path))
-    stem, ext = os.path.splitext(base)
-    fd, tmp = tempfile.mkstemp(prefix=f".{stem}.", suffix=ext, dir=directory)
-    os.close(fd)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; the result is an ordinary file
-    return tmp
+def export_layer(layer: Sdf.Layer) -> Callable[[str], None]:
+    """A writer for :class:`~mocapedit.outputs.Writes` that exports ``layer`` to a file."""
+    def write(tmp: str) -> None:
+        if not layer.Export(tmp):
+            raise OSError(f"USD could not write the layer to {tmp}")
+    return write
 
 
 def save_layer(layer: Sdf.Layer, path: str) -> None:
     """Writes the layer to ``path`` through a temporary file and a rename."""
-    directory = os.path.dirname(os.path.abspath(path))
-    os.makedirs(directory, exist_ok=True)
-    tmp = _temp_beside(path)
-    try:
-        if not layer.Export(tmp):
-            raise OSError(f"{path}: USD could not write the layer")
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    outputs.save_with(path, export_layer(layer))
 
 
-def save_composed(path: str, edits_path: str, input_path: str, info: StageInfo,
-                  default_prim: str | None = None) -> None:
-    """Writes a stage that sub-layers the edits over the input (relative paths)."""
+def composed_layer(path: str, edits_path: str, input_path: str, info: StageInfo,
+                   default_prim: str | None = None) -> Sdf.Layer:
+    """A stage layer, to be saved at ``path``, that sub-layers the edits over the input (relative paths)."""
     here = os.path.dirname(os.path.abspath(path))
     layer = Sdf.Layer.CreateAnonymous(os.path.splitext(path)[1] or ".usda")
     layer.subLayerPaths = [os.path.relpath(os.path.abspath(edits_path), here),
@@ -333,24 +380,10 @@ def save_composed(path: str, edits_path: str, input_path: str, info: StageInfo,
     layer.pseudoRoot.SetInfo("metersPerUnit", info.meters_per_unit)
     if default_prim:
         layer.defaultPrim = default_prim
-    save_layer(layer, path)
+    return layer
 
 
-def save_with(path: str, write) -> None:
-    """Writes a file through ``write(temporary path)`` beside it and a rename into place."""
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    tmp = _temp_beside(path)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-
-
-def save_text(path: str, text: str) -> None:
-    """Writes a text file (a report) through a temporary file and a rename."""
-    def write(tmp):
-        with open(tmp, "w", encoding="utf-8") as f:
-            f.write(text)
-    save_with(path, write)
+def save_composed(path: str, edits_path: str, input_path: str, info: StageInfo,
+                  default_prim: str | None = None) -> None:
+    """Writes a stage that sub-layers the edits over the input (relative paths)."""
+    save_layer(composed_layer(path, edits_path, input_path, info, default_prim), path)

@@ -84,17 +84,19 @@ MOCAPEDIT_BINDINGS(BindPathTerms) {
       "(triangles (t,3), edges (e,2)) of a group mesh: members (M,T) int32 vertex of each member at\n"
       "each sampled time, each joined to its `neighbours` nearest there; partner (V,) int32.");
   m.def(
-      "block_tangent_headings",
-      [](const Eigen::Ref<const Trajectory2>& points, const Eigen::Ref<const mocapedit::IndexPairs>& blocks,
-         const Eigen::Ref<const mocapedit::IndexTriples>& fixed, const Eigen::Ref<const Eigen::VectorXd>& fallback,
-         double min_step) {
+      "block_deformation_turns",
+      [](const Eigen::Ref<const Trajectory2>& source, const Eigen::Ref<const Trajectory2>& edited,
+         const Eigen::Ref<const mocapedit::IndexPairs>& blocks, const Eigen::Ref<const mocapedit::IndexTriples>& fixed,
+         const Eigen::Ref<const Eigen::VectorXd>& fixed_turn, int window, double min_travel) {
         Eigen::VectorXd out;
-        mocapedit::BlockTangentHeadings(points, blocks, fixed, fallback, min_step, out);
+        mocapedit::BlockDeformationTurns(source, edited, blocks, fixed, fixed_turn, window, min_travel, out);
         return out;
       },
-      kReleaseGil, py::arg("points"), py::arg("blocks"), py::arg("fixed"), py::arg("fallback"), py::arg("min_step"),
-      "(V,) tangent_headings of each block of rows: points (V,2), blocks (B,2) int32 [begin, end),\n"
-      "fixed (R,3) int32 (block, first, last) grouped by block, fallback (R,); other rows 0.");
+      kReleaseGil, py::arg("source"), py::arg("edited"), py::arg("blocks"), py::arg("fixed"), py::arg("fixed_turn"),
+      py::arg("window"), py::arg("min_travel"),
+      "(V,) turn of each frame's heading from source to edited paths (V,2), block by block: blocks (B,2)\n"
+      "int32 [begin, end), fixed (R,3) int32 (block, first, last) grouped by block, fixed_turn (R,),\n"
+      "window (frames), min_travel (stage units); see DeformationTurns in trajectory.h.");
   m.def(
       "null_space_support",
       [](const Eigen::Ref<const Eigen::VectorXi>& rows, const Eigen::Ref<const Eigen::VectorXi>& cols,

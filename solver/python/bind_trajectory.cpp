@@ -24,4 +24,18 @@ MOCAPEDIT_BINDINGS(BindTrajectory) {
       "(N,) unwrapped headings (radians, CCW about up) from the path tangent.\n\n"
       "Frames inside a `fixed` inclusive range take that range's `fallback` heading;\n"
       "frames standing still (tangent shorter than `min_step`) keep the nearest moving heading.");
+  m.def(
+      "deformation_turns",
+      [](const Eigen::Ref<const Trajectory2>& source, const Eigen::Ref<const Trajectory2>& edited,
+         const std::vector<mocapedit::FrameRange>& fixed, const Eigen::VectorXd& fixed_turn, int window,
+         double min_travel) {
+        py::gil_scoped_release release;
+        return mocapedit::DeformationTurns(source, edited, fixed, fixed_turn, window, min_travel);
+      },
+      py::arg("source"), py::arg("edited"), py::arg("fixed") = std::vector<mocapedit::FrameRange>{},
+      py::arg("fixed_turn") = Eigen::VectorXd(), py::arg("window") = 2, py::arg("min_travel") = 0.0,
+      "(N,) turn (radians, CCW) of each frame's heading when the path goes from source to edited (N,2):\n"
+      "the least-squares rotation of the source steps onto the edited ones within two nested windows of\n"
+      "`window` frames each side; frames whose source moves less than `min_travel` across the window take\n"
+      "it from the moving frames around them; `fixed` inclusive ranges turn by their `fixed_turn`.");
 }

@@ -419,11 +419,13 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
     triangles.row(static_cast<Eigen::Index>(k)) << tri[k][0], tri[k][1], tri[k][2];
 }
 
-void BlockTangentHeadings(const Eigen::Ref<const Trajectory2>& points, const Eigen::Ref<const IndexPairs>& blocks,
-                          const Eigen::Ref<const IndexTriples>& fixed, const Eigen::Ref<const Eigen::VectorXd>& fallback,
-                          double min_step, Eigen::VectorXd& headings) {
-  Check(fixed.rows() == fallback.size(), "BlockTangentHeadings: one fallback heading is needed per fixed range");
-  headings.setZero(points.rows());
+void BlockDeformationTurns(const Eigen::Ref<const Trajectory2>& source, const Eigen::Ref<const Trajectory2>& edited,
+                           const Eigen::Ref<const IndexPairs>& blocks, const Eigen::Ref<const IndexTriples>& fixed,
+                           const Eigen::Ref<const Eigen::VectorXd>& fixed_turn, int window, double min_travel,
+                           Eigen::VectorXd& turns) {
+  Check(fixed.rows() == fixed_turn.size(), "BlockDeformationTurns: one turn is needed per fixed range");
+  Check(source.rows() == edited.rows(), "BlockDeformationTurns: source and edited differ in rows");
+  turns.setZero(source.rows());
   // Each block's first fixed range; the blocks are independent.
   const Eigen::Index count = blocks.rows();
   std::vector<Eigen::Index> first_range(static_cast<size_t>(count) + 1);
@@ -431,33 +433,34 @@ void BlockTangentHeadings(const Eigen::Ref<const Trajectory2>& points, const Eig
   bool disjoint = true;  // in order, each after the last: the threads below write apart
   for (Eigen::Index b = 0; b < count; ++b) {
     const int begin = blocks(b, 0), end = blocks(b, 1);
-    Check(0 <= begin && begin <= end && end <= points.rows(), "BlockTangentHeadings: block out of range");
+    Check(0 <= begin && begin <= end && end <= source.rows(), "BlockDeformationTurns: block out of range");
     if (b > 0 && begin < blocks(b - 1, 1)) disjoint = false;
     first_range[b] = r;
     while (r < fixed.rows() && fixed(r, 0) == b) ++r;
     frames += end - begin;
   }
   first_range[count] = r;
-  Check(r == fixed.rows(), "BlockTangentHeadings: fixed ranges must be grouped by block, in block order");
-  const auto head = [&](Eigen::Index b0, Eigen::Index b1) {
+  Check(r == fixed.rows(), "BlockDeformationTurns: fixed ranges must be grouped by block, in block order");
+  const auto turn = [&](Eigen::Index b0, Eigen::Index b1) {
     std::vector<FrameRange> ranges;
     for (Eigen::Index b = b0; b < b1; ++b) {
       const int begin = blocks(b, 0), end = blocks(b, 1);
       const Eigen::Index lo = first_range[b], hi = first_range[b + 1];
       ranges.clear();
       for (Eigen::Index k = lo; k < hi; ++k) ranges.emplace_back(fixed(k, 1), fixed(k, 2));
-      headings.segment(begin, end - begin) =
-          TangentHeadings(points.middleRows(begin, end - begin), ranges, fallback.segment(lo, hi - lo), min_step);
+      turns.segment(begin, end - begin) =
+          DeformationTurns(source.middleRows(begin, end - begin), edited.middleRows(begin, end - begin), ranges,
+                           fixed_turn.segment(lo, hi - lo), window, min_travel);
     }
   };
   if (count < 2 || frames < kParallelHeadingFrames || !disjoint) {
-    head(0, count);
+    turn(0, count);
     return;
   }
   // Large sets on two threads, split at half of the frames.
   Eigen::Index split = 0;
   for (Eigen::Index seen = 0; split < count && 2 * seen < frames; ++split) seen += blocks(split, 1) - blocks(split, 0);
-  OnTwoThreads([&] { head(0, split); }, [&] { head(split, count); });
+  OnTwoThreads([&] { turn(0, split); }, [&] { turn(split, count); });
 }
 
 namespace {

@@ -1,5 +1,6 @@
 #include "mocapedit/trajectory.h"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -74,6 +75,85 @@ Eigen::VectorXd TangentHeadings(const Eigen::Ref<const Trajectory2>& points,
   for (size_t k = 0; k < fixed.size(); ++k)
     for (int i = fixed[k].first; i <= fixed[k].second; ++i) heading[i] = fallback[static_cast<Eigen::Index>(k)];
   return heading;
+}
+
+Eigen::VectorXd DeformationTurns(const Eigen::Ref<const Trajectory2>& source,
+                                 const Eigen::Ref<const Trajectory2>& edited,
+                                 const std::vector<FrameRange>& fixed,
+                                 const Eigen::Ref<const Eigen::VectorXd>& fixed_turn, int window,
+                                 double min_travel) {
+  const Eigen::Index n = source.rows();
+  if (edited.rows() != n) throw std::invalid_argument("DeformationTurns: source and edited differ in frames");
+  if (static_cast<Eigen::Index>(fixed.size()) != fixed_turn.size())
+    throw std::invalid_argument("DeformationTurns: one turn is needed per fixed range");
+  for (const auto& r : fixed)
+    if (r.first < 0 || r.second >= n || r.first > r.second)
+      throw std::invalid_argument("DeformationTurns: frame range [" + std::to_string(r.first) + ", " +
+                                  std::to_string(r.second) + "] is outside 0.." + std::to_string(n - 1));
+  Eigen::VectorXd turn = Eigen::VectorXd::Zero(n);
+  if (n == 0) return turn;
+  const Eigen::Index h = std::max(1, window);
+  // Prefix sums of conj(s_k) e_k = (s.e, s x e) over the steps k -> k+1.
+  Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor> steps = Eigen::MatrixX2d::Zero(n, 2);
+  for (Eigen::Index k = 0; k + 1 < n; ++k) {
+    const Eigen::RowVector2d s = source.row(k + 1) - source.row(k);
+    const Eigen::RowVector2d e = edited.row(k + 1) - edited.row(k);
+    steps(k + 1, 0) = steps(k, 0) + (s[0] * e[0] + s[1] * e[1]);
+    steps(k + 1, 1) = steps(k, 1) + (s[0] * e[1] - s[1] * e[0]);
+  }
+  // The first window sums the steps from i - h to i + h - 1; the second sums those over the
+  // frames from i - h to i + h.
+  Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor> once(n + 1, 2);
+  once.row(0).setZero();
+  std::vector<char> known(static_cast<size_t>(n), 0), in_range(static_cast<size_t>(n), 0);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Eigen::Index lo = std::max<Eigen::Index>(i - h, 0), hi = std::min<Eigen::Index>(i + h, n - 1);
+    once.row(i + 1) = once.row(i) + (steps.row(hi) - steps.row(lo));
+    known[static_cast<size_t>(i)] = (source.row(hi) - source.row(lo)).norm() >= min_travel;
+  }
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Eigen::Index lo = std::max<Eigen::Index>(i - h, 0), hi = std::min<Eigen::Index>(i + h, n - 1);
+    const Eigen::RowVector2d z = once.row(hi + 1) - once.row(lo);
+    turn[i] = std::atan2(z[1], z[0]);
+    if (z[0] == 0.0 && z[1] == 0.0) known[static_cast<size_t>(i)] = 0;
+  }
+  for (size_t r = 0; r < fixed.size(); ++r) {
+    const Eigen::Index a = fixed[r].first, b = fixed[r].second;
+    // The frames next to a rigid range blend from its turn into the moving frames'.
+    for (Eigen::Index i = std::max<Eigen::Index>(a - h, 0); i <= std::min<Eigen::Index>(b + h, n - 1); ++i)
+      known[static_cast<size_t>(i)] = 0;
+  }
+  for (size_t r = 0; r < fixed.size(); ++r)
+    for (Eigen::Index i = fixed[r].first; i <= fixed[r].second; ++i) {
+      in_range[static_cast<size_t>(i)] = 1;
+      turn[i] = fixed_turn[static_cast<Eigen::Index>(r)];
+    }
+  std::vector<Eigen::Index> keys;
+  for (Eigen::Index i = 0; i < n; ++i)
+    if (known[static_cast<size_t>(i)] || in_range[static_cast<size_t>(i)]) keys.push_back(i);
+  if (keys.empty()) return Eigen::VectorXd::Zero(n);  // nothing moves: no turn
+  Eigen::VectorXd v(static_cast<Eigen::Index>(keys.size()));
+  for (size_t k = 0; k < keys.size(); ++k) v[static_cast<Eigen::Index>(k)] = turn[keys[k]];
+  UnwrapAngles(v);
+  for (size_t k = 0; k < keys.size(); ++k)
+    if (in_range[static_cast<size_t>(keys[k])]) {  // ranges keep their own angle exactly
+      v.array() += turn[keys[k]] - v[static_cast<Eigen::Index>(k)];
+      break;
+    }
+  // By frame between the keys, held beyond the first and the last.
+  size_t k = 0;
+  for (Eigen::Index i = 0; i < n; ++i) {
+    while (k + 1 < keys.size() && keys[k + 1] <= i) ++k;
+    const Eigen::Index x0 = keys[k];
+    if (i <= x0 || k + 1 == keys.size()) {
+      turn[i] = v[static_cast<Eigen::Index>(k)];
+    } else {
+      const Eigen::Index x1 = keys[k + 1];
+      const double t = static_cast<double>(i - x0) / static_cast<double>(x1 - x0);
+      turn[i] = v[static_cast<Eigen::Index>(k)] + t * (v[static_cast<Eigen::Index>(k + 1)] - v[static_cast<Eigen::Index>(k)]);
+    }
+  }
+  return turn;
 }
 
 }  // namespace mocapedit

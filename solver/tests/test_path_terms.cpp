@@ -66,8 +66,9 @@ TEST(PathTerms, ValidityRejectsBadInput) {
   {
     IndexPairs blocks(1, 2);
     blocks << 0, 31;
-    Eigen::VectorXd headings;
-    EXPECT_THROW(mocapedit::BlockTangentHeadings(rest, blocks, IndexTriples(0, 3), Eigen::VectorXd(), 1e-9, headings),
+    Eigen::VectorXd turns;
+    EXPECT_THROW(mocapedit::BlockDeformationTurns(rest, rest, blocks, IndexTriples(0, 3), Eigen::VectorXd(), 2, 0.0,
+                                                  turns),
                  std::invalid_argument);
   }
 }
@@ -164,21 +165,26 @@ TEST(PathTerms, NullSpaceSupportOfSmallSystems) {
             std::vector<char>({1, 1}));
 }
 
-TEST(PathTerms, BlockHeadingsAreEachBlocksTangentHeadings) {
+TEST(PathTerms, BlockTurnsAreEachBlocksDeformationTurns) {
   const Trajectory2 rest = Walkers(3, 20);
+  Trajectory2 edited = rest;
+  for (Eigen::Index i = 0; i < edited.rows(); ++i) edited.row(i) << -rest(i, 1), rest(i, 0) + 0.01 * i;
   IndexPairs blocks(2, 2);
   blocks << 20, 40, 0, 20;
   IndexTriples fixed(1, 3);
   fixed << 1, 5, 9;
-  Eigen::VectorXd fallback(1);
-  fallback << 0.25;
-  Eigen::VectorXd h;
-  mocapedit::BlockTangentHeadings(rest, blocks, fixed, fallback, 1e-9, h);
-  const Eigen::VectorXd first = mocapedit::TangentHeadings(rest.middleRows(20, 20), {}, Eigen::VectorXd(), 1e-9);
-  const Eigen::VectorXd second = mocapedit::TangentHeadings(rest.middleRows(0, 20), {{5, 9}}, fallback, 1e-9);
-  EXPECT_EQ(h.segment(20, 20), first);
-  EXPECT_EQ(h.segment(0, 20), second);
-  EXPECT_TRUE((h.segment(40, 20).array() == 0).all());
+  Eigen::VectorXd fixed_turn(1);
+  fixed_turn << 0.25;
+  Eigen::VectorXd t;
+  mocapedit::BlockDeformationTurns(rest, edited, blocks, fixed, fixed_turn, 2, 0.01, t);
+  const Eigen::VectorXd first = mocapedit::DeformationTurns(rest.middleRows(20, 20), edited.middleRows(20, 20), {},
+                                                            Eigen::VectorXd(), 2, 0.01);
+  const Eigen::VectorXd second = mocapedit::DeformationTurns(rest.middleRows(0, 20), edited.middleRows(0, 20),
+                                                             {{5, 9}}, fixed_turn, 2, 0.01);
+  EXPECT_EQ(t.segment(20, 20), first);
+  EXPECT_EQ(t.segment(0, 20), second);
+  EXPECT_TRUE((t.segment(40, 20).array() == 0).all());
+  EXPECT_TRUE((t.segment(5, 5).array() == 0.25).all());
 }
 
 TEST(PathTerms, KeyFramesKeepShortStretchesAndUnkeyedAgents) {

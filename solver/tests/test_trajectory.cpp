@@ -20,6 +20,15 @@ TEST(Trajectory, ValidityRejectsBadRanges) {
   {
     EXPECT_THROW(mocapedit::TangentHeadings(p, {}, one, 1e-9), std::invalid_argument);
   }
+  {
+    EXPECT_THROW(mocapedit::DeformationTurns(p, p.topRows(3), {}, Eigen::VectorXd(), 2, 0.0), std::invalid_argument);
+  }
+  {
+    EXPECT_THROW(mocapedit::DeformationTurns(p, p, {{2, 9}}, one, 2, 0.0), std::invalid_argument);
+  }
+  {
+    EXPECT_THROW(mocapedit::DeformationTurns(p, p, {}, one, 2, 0.0), std::invalid_argument);
+  }
 }
 
 TEST(Trajectory, LengthOfAStraightLineAndASquare) {
@@ -60,4 +69,54 @@ TEST(Trajectory, StandingStillAndFixedRangesKeepAHeading) {
   EXPECT_NEAR(h[3], M_PI / 2, 1e-12);  // still: keeps the last moving heading
   EXPECT_NEAR(h[4], 0.25, 1e-12);
   EXPECT_NEAR(h[5], 0.25, 1e-12);
+}
+
+namespace {
+
+// A walk along the first axis with a sideways sway, standing still over frames [40, 80).
+Trajectory2 WalkStandWalk() {
+  Trajectory2 p(120, 2);
+  double u = 0.0;
+  for (int i = 0; i < 120; ++i) {
+    p.row(i) << u, 0.02 * std::sin(u * 2.0 * M_PI / 1.2);
+    if (i < 39 || i >= 79) u += 0.05;
+  }
+  return p;
+}
+
+Trajectory2 Turned(const Trajectory2& p, double angle, double du, double dv) {
+  Trajectory2 out(p.rows(), 2);
+  const double c = std::cos(angle), s = std::sin(angle);
+  for (Eigen::Index i = 0; i < p.rows(); ++i)
+    out.row(i) << c * p(i, 0) - s * p(i, 1) + du, s * p(i, 0) + c * p(i, 1) + dv;
+  return out;
+}
+
+}  // namespace
+
+TEST(Trajectory, AnUneditedPathTurnsByExactlyZeroAndATurnedOneByItsAngle) {
+  const Trajectory2 p = WalkStandWalk();
+  EXPECT_TRUE((mocapedit::DeformationTurns(p, p, {}, Eigen::VectorXd(), 2, 0.01).array() == 0.0).all());
+  for (double angle : {0.3, -2.5, 3.0}) {
+    const Eigen::VectorXd t = mocapedit::DeformationTurns(p, Turned(p, angle, 4.0, 5.0), {}, Eigen::VectorXd(), 3, 0.01);
+    EXPECT_LT((t.array() - angle).abs().maxCoeff(), 1e-9) << angle;
+  }
+}
+
+TEST(Trajectory, AStandTurnsFromTheWalkBeforeItToTheWalkAfterIt) {
+  const Trajectory2 p = WalkStandWalk();
+  Trajectory2 e = p;
+  // The walk after the stand (from its last frame, 79) turned by 0.8 about where it starts.
+  e.bottomRows(41) = Turned(p.bottomRows(41).rowwise() - p.row(79), 0.8, p(79, 0), p(79, 1));
+  const Eigen::VectorXd t = mocapedit::DeformationTurns(p, e, {}, Eigen::VectorXd(), 2, 0.01);
+  EXPECT_LT(t.head(36).cwiseAbs().maxCoeff(), 1e-9);
+  EXPECT_LT((t.tail(36).array() - 0.8).abs().maxCoeff(), 1e-9);
+  const Eigen::VectorXd step = t.tail(119) - t.head(119);
+  EXPECT_LT(step.cwiseAbs().maxCoeff(), 0.8 / 30);       // spread over the stand: no jump
+  EXPECT_GE(step.minCoeff(), -1e-12);
+  // A fixed range turns by its own angle, exactly.
+  Eigen::VectorXd turn(1);
+  turn << 0.4;
+  const Eigen::VectorXd f = mocapedit::DeformationTurns(p, e, {{45, 70}}, turn, 2, 0.01);
+  EXPECT_TRUE((f.segment(45, 26).array() == 0.4).all());
 }

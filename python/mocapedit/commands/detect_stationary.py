@@ -27,10 +27,7 @@ window inside the idle section."""
 
 def register(sub: argparse._SubParsersAction) -> None:
     d = DetectSettings()
-    p = sub.add_parser("detect-stationary", help=HELP, description=DESCRIPTION,
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("stage", metavar="STAGE", help="a clip layer or a shot stage (.usd, .usda, .usdc)")
-    p.add_argument("-o", "--output", required=True, metavar="TAGS", help="tags layer to write")
+    p = review_parser(sub, "detect-stationary", HELP, DESCRIPTION, "TAGS", "tags layer to write")
     p.add_argument("--max-speed", type=float, default=d.max_speed, metavar="M_PER_S",
                    help=f"largest ground speed of the root, metres per second (default {d.max_speed})")
     p.add_argument("--max-turn", type=float, default=d.max_turn, metavar="DEG_PER_S",
@@ -43,35 +40,65 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help=f"bridge interruptions shorter than this between two ranges, seconds (default {d.max_gap})")
     p.add_argument("--root-joint", metavar="JOINT",
                    help="measure this joint (name or joint path) instead of each agent's root joint")
-    p.add_argument("--animation", metavar="PRIM", help="only the clip at this SkelAnimation path")
-    p.add_argument("--prefix", default="auto", help="tag names are <prefix>1, <prefix>2, ... (default auto)")
-    p.add_argument("--composed", metavar="OUT", help="also write a stage that sub-layers TAGS over STAGE")
-    p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
+    add_review_options(p, "auto", "tag names are <prefix>1, <prefix>2, ... (default auto)", "TAGS")
     p.set_defaults(run=run)
 
 
+def review_parser(sub: argparse._SubParsersAction, name: str, help: str, description: str, layer_name: str,
+                  layer_help: str) -> argparse.ArgumentParser:
+    """A command that reads STAGE and writes proposed tags to a new layer for review."""
+    p = sub.add_parser(name, help=help, description=description, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("stage", metavar="STAGE", help="a clip layer or a shot stage (.usd, .usda, .usdc)")
+    p.add_argument("-o", "--output", required=True, metavar=layer_name, help=layer_help)
+    return p
+
+
+def add_review_options(p: argparse.ArgumentParser, prefix: str, prefix_help: str, layer_name: str) -> None:
+    """The options every command that proposes tags for review shares."""
+    p.add_argument("--animation", metavar="PRIM", help="only the clip at this SkelAnimation path")
+    p.add_argument("--prefix", default=prefix, help=prefix_help)
+    p.add_argument("--composed", metavar="OUT", help=f"also write a stage that sub-layers {layer_name} over STAGE")
+    p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
+
+
+def check_review_outputs(args, stage) -> None:
+    """Refuses, before any work, outputs that name the input or a layer it uses (see outputs)."""
+    from .. import outputs
+    outputs.check_outputs([outputs.Output(args.output, "-o"), outputs.Output(args.composed, "--composed")],
+                          outputs.input_files(stage))
+
+
+def save_review(args, stage, layer, info) -> None:
+    """Writes the proposed tags (and with --composed, a stage to review them on), together."""
+    from .. import outputs, writer
+    with outputs.Writes() as w:
+        w.add(args.output, writer.export_layer(layer))
+        if args.composed:
+            w.add(args.composed, writer.export_layer(writer.composed_layer(
+                args.composed, args.output, args.stage, info, stage.GetRootLayer().defaultPrim or None)))
+
+
 def run(args) -> int:
-    from .. import reader, tags, writer
+    from .. import reader, tags
     from ..progress import Progress
 
     progress = Progress(quiet=args.quiet)
     settings = DetectSettings(max_speed=args.max_speed, max_turn=args.max_turn, min_duration=args.min_duration,
                               window=args.window, max_gap=args.max_gap)
     stage = reader.open_stage(args.stage)
+    check_review_outputs(args, stage)
     clips, info = tags.detect(stage, settings, root_joint=args.root_joint, animation=args.animation,
                               prefix=args.prefix)
-    layer = tags.build_layer(clips, info, settings)
-    writer.save_layer(layer, args.output)
-    if args.composed:
-        writer.save_composed(args.composed, args.output, args.stage, info,
-                             stage.GetRootLayer().defaultPrim or None)
+    save_review(args, stage, tags.build_layer(clips, info, settings), info)
     fps = info.time_codes_per_second
     for clip in clips:
         progress.message(f"<{clip.animation}> ({clip.frames} frames, measured on {clip.joint.rsplit('/', 1)[-1]}): "
                          f"{len(clip.ranges)} stationary range{'s' if len(clip.ranges) != 1 else ''}")
         for name, r in zip(clip.names, clip.ranges):
+            bridged = (f"; bridges {r.bridged} frame{'s' if r.bridged != 1 else ''} of shorter gaps (--max-gap) "
+                       f"reaching {r.bridged_max_speed:.3f} m/s, {r.bridged_max_turn:.1f} deg/s") if r.bridged else ""
             progress.message(f"  {name}: frames {r.first}-{r.last} ({r.duration:.2f} s at {fps:g} fps), "
-                             f"speed <= {r.max_speed:.3f} m/s, turning <= {r.max_turn:.1f} deg/s")
+                             f"speed <= {r.max_speed:.3f} m/s, turning <= {r.max_turn:.1f} deg/s{bridged}")
     if not args.quiet:
         print(f"wrote {os.path.abspath(args.output)}", file=sys.stderr)
     return 0

@@ -112,18 +112,20 @@ def _inputs(args) -> tuple[list[str], bool]:
 
 def _check_height(result, progress) -> None:
     if not 0.3 <= result.height_m <= 3.0:
-        progress.message(f"  note: {os.path.basename(result.source)} stands {result.height_m:.2f} m tall in its "
-                         "rest pose; check --unit/--scale and --meters-per-unit")
+        progress.message(f"  note: {os.path.basename(result.source)} stands {result.height_m:.2f} m tall in "
+                         "frame 0; check --unit/--scale and --meters-per-unit")
 
 
 def run(args) -> int:
+    from ..bvh import FRAME_TIME_RANGE
     from ..bvh_usd import ImportSettings, import_bvh, import_many
     from ..errors import MocapEditError
     from ..progress import Progress
 
     progress = Progress(quiet=args.quiet)
-    if args.fps is not None and not args.fps > 0:
-        raise MocapEditError(f"--fps must be positive, got {args.fps}")
+    low, high = (1.0 / t for t in reversed(FRAME_TIME_RANGE))
+    if args.fps is not None and not low <= args.fps <= high:
+        raise MocapEditError(f"--fps must be between {low:g} and {high:g}, got {args.fps:g}")
     settings = ImportSettings(scale=_scale(args), meters_per_unit=args.meters_per_unit, up_axis=args.up,
                               fps=args.fps, position_mode=args.positions, end_sites=args.end_sites,
                               agent=args.agent, root_joint=args.root_joint, hip_joint=args.hip_joint,

@@ -46,14 +46,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args) -> int:
-    from .. import preview
+    from .. import outputs, preview
     from ..errors import MocapEditError
     from ..progress import Progress
 
     if args.step is not None and not args.step > 0:
         raise MocapEditError(f"--step must be positive, got {args.step:g}")
-    if os.path.splitext(args.output)[1].lower() not in (".png", ".exr"):
-        raise MocapEditError(f"{args.output}: the preview is written as .png or .exr")
+    outputs.check_outputs([outputs.Output(args.output, "-o", kind="image", extensions=(".png", ".exr"))],
+                          [p for p in (args.stage, args.edits) if p])
     preview.parse_resolution(args.resolution)
     progress = Progress(quiet=args.quiet)
     scene = preview.load(args.stage, args.edits, progress, args.step)

@@ -5,6 +5,8 @@ import argparse
 import os
 import sys
 
+from . import add_solve_options
+
 HELP = "solve the edits authored on a stage and write them as a new layer"
 DESCRIPTION = """\
 Reads STAGE (never modifying it), solves every active mocapEdit prim on it (position,
@@ -26,17 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="edits layer to write (.usda for text, .usdc for large crowds)")
     p.add_argument("--composed", metavar="OUT",
                    help="also write a stage that sub-layers EDITS over STAGE, for viewing")
-    p.add_argument("--no-guides", dest="guides", action="store_false",
-                   help="do not author guide curves and points under /MocapEdit/Guides")
-    p.add_argument("--collisions", dest="collisions", action="store_true", default=None,
-                   help="run collision avoidance even if MocapSolveSettings does not ask for it")
-    p.add_argument("--no-collisions", dest="collisions", action="store_false",
-                   help="skip collision avoidance even if MocapSolveSettings asks for it")
-    p.add_argument("--match-speed", dest="match_speed", action="store_true", default=None,
-                   help="re-time edited paths so each agent keeps its source speed along its new path "
-                        "(MocapSolveSettings.matchSpeed)")
-    p.add_argument("--no-match-speed", dest="match_speed", action="store_false",
-                   help="keep the source timing on edited paths even if MocapSolveSettings asks to match speed")
+    add_solve_options(p)
     p.add_argument("--report", metavar="JSON", help="also write the solve report as JSON")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(run=run)
@@ -45,16 +37,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args) -> int:
     from ..processor import solve
     from ..progress import Progress
-    from ..writer import save_text
 
     progress = Progress(quiet=args.quiet)
     overrides = {} if args.match_speed is None else {"match_speed": args.match_speed}
+    if args.foot_locking is not None:
+        overrides["foot_locking"] = args.foot_locking
     result = solve(args.stage, output=args.output, composed=args.composed, guides=args.guides,
-                   collisions=args.collisions, progress=progress, **overrides)
-    if args.report:
-        save_text(args.report, result.report.to_json() + "\n")
+                   collisions=args.collisions, progress=progress, report_json=args.report, **overrides)
     if not args.quiet:
         print(result.report.summary(), file=sys.stderr)
-        print(f"wrote {os.path.abspath(args.output)}" +
-              (f" and {os.path.abspath(args.composed)}" if args.composed else ""), file=sys.stderr)
+        written = [args.output] + [p for p in (args.composed, args.report) if p]
+        print("wrote " + " and ".join(os.path.abspath(p) for p in written), file=sys.stderr)
     return 0

@@ -36,6 +36,7 @@ import numpy as np
 from .. import avoidance, collisions, ground, retime, writer
 from ..errors import prim_error
 from ..processor import EditedPath, SolveContext, register_pass
+from ..report import describe_left
 
 ORDER = 300
 #: Clearance (metres) up to which each agent's nearest neighbour is measured for the report.
@@ -233,15 +234,16 @@ def _report(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Ou
     _region_entries(ctx, problem, outcome)
     its = stats["collisionsPerIteration"]
     if enabled:
-        how = (f"{its[0]} collision intervals, {len(left)} left after {stats['collisionIterations']} "
-               f"iteration{'s' if stats['collisionIterations'] != 1 else ''} ({problem.names and stats['collisionStrategy']})")
+        left_text = describe_left(len(left), len(outcome.region_left))
+        how = (f"{its[0]} collision interval{'s' if its[0] != 1 else ''} at first, {left_text} after "
+               f"{stats['collisionIterations']} iteration{'s' if stats['collisionIterations'] != 1 else ''} "
+               f"({problem.names and stats['collisionStrategy']})")
         report.note(f"collision avoidance: {how}")
         if len(left) and not blocked:
             why = (f"after {stats['collisionIterations']} iterations without progress "
                    "(constraints that cannot all hold)" if outcome.stalled
                    else f"at maxIterations ({data.settings.max_iterations})")
-            report.note(f"collision avoidance stopped {why} with {len(left)} overlapping agent pairs left; "
-                        "see the collision entries")
+            report.note(f"collision avoidance stopped {why} with {left_text}; see the collision entries")
     if outcome.stalled:
         stats["collisionStalled"] = True
         if outcome.region_left:

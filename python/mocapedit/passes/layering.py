@@ -17,13 +17,27 @@ import numpy as np
 from .. import animation, layering, processor
 
 
+def check_layers(ctx: processor.SolveContext) -> None:
+    """Before any other pass: every layer's weights, and its joint and clip against the
+    skeleton of each of its agents, so a bad layer stops the solve before the work."""
+    data = ctx.data
+    checked = set()
+    for layer in data.layers:
+        layering.check_weights(layer)
+        for agent_path in layer.agents:
+            agent = data.agents[agent_path]
+            key = (layer.path, agent.skeleton_path)
+            if key not in checked:
+                checked.add(key)
+                layering.resolve_layer(agent, layer, data.clips[layer.clip_key])
+
+
 def layering_pass(ctx: processor.SolveContext) -> None:
     data = ctx.data
     if not data.layers:
         return
     stacks: dict[str, list] = {}
     for layer in data.layers:
-        layering.check_weights(layer)
         if not layer.agents:
             ctx.report.note(f"layer <{layer.path}> has no agents: it changes nothing")
         for agent_path in layer.agents:
@@ -47,8 +61,7 @@ def layering_pass(ctx: processor.SolveContext) -> None:
         entry = ctx.report.agent(agent_path)
         notes = entry.setdefault("notes", [])
         for p in plan.layers:
-            notes.append(f"layer <{p.layer.path}>: {p.layer.mode} on {len(p.pose_columns)} joints "
-                         f"from {p.joint_name}")
+            notes.append(f"layer <{p.layer.path}>: {p.describe()}")
         pose_key = (agent.clip_key, frames.tobytes())
         pose = poses.get(pose_key)
         if pose is None:  # unwarped agents of one clip all play frames 0, 1, ...: one pose
@@ -66,4 +79,5 @@ def layering_pass(ctx: processor.SolveContext) -> None:
     ctx.report.stats["layeredJointSamples"] = samples
 
 
+processor.register_pass(0, "layering-check", check_layers)
 processor.register_pass(400, "layering", layering_pass)

@@ -153,14 +153,15 @@ class _Component:
                 self.handles.extend(path_edit.Handle(a.path, f, a.rest[f], CURVE_ANCHOR_WEIGHT, curve) for f in frames)
         self.settings = path_edit.Settings(
             min_baseline=info.metres(MIN_BASELINE_M), rigid_min_extent=info.metres(RIGID_MIN_EXTENT_M),
-            still=info.metres(STILL_M), group_step=max(1.0, round(GROUP_SAMPLE_S * fps)))
+            still=info.metres(STILL_M), group_step=max(1.0, round(GROUP_SAMPLE_S * fps)),
+            **path_edit.turn_settings(fps, info.meters_per_unit))
         self.result: path_edit.ComponentResult | None = None
         self.problem: path_edit.ComponentProblem | None = None
 
     def run(self) -> None:
         if self.curve_only:   # path curves alone: the remapped paths
             self.result = path_edit.ComponentResult(
-                agents={a.path: path_edit.AgentResult(ground=a.rest, heading=path_edit.rest_heading(a),
+                agents={a.path: path_edit.AgentResult(ground=a.rest, heading=path_edit.rest_heading(a, self.settings),
                                                       range_turn=a.rest_turn if a.rest_turn is not None
                                                       else np.zeros(len(a.stationary)))
                         for a in self.inputs},

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import _solver, ground, retime
+from .. import _solver, ground, limits, retime
 from ..errors import prim_error
 from ..processor import SolveContext, register_pass
 
@@ -66,7 +66,6 @@ def _conflict_error(exc, agents: list[str], ctx: SolveContext):
         else:
             message = (f"hard time and sync constraints {named} fix the same frame's time twice and "
                        f"disagree by {info['mismatch']:g} time codes")
-        prop = "time" if times else "offset"
     else:
         if info["agent"] >= 0:
             agent = agents[info["agent"]]
@@ -80,7 +79,9 @@ def _conflict_error(exc, agents: list[str], ctx: SolveContext):
             message = (f"hard constraints {named} would make time run backwards (or faster than "
                        f"minTimeInterval {ctx.data.settings.min_time_interval:g} allows) for one of "
                        f"the agents they tie together")
-        prop = "time" if times else "offset"
+    # The prim named first is given its own property: a time constraint's time, a sync
+    # constraint's offset.
+    prop = "time" if prims[0] in {c.path for c in times} else "offset"
     return prim_error(prims[0], message, prop)
 
 
@@ -139,6 +140,8 @@ def time_pass(ctx: SolveContext) -> None:
         time_map = result["time_maps"][i]
         if np.array_equal(time_map, agent.sample_times):
             continue
+        limits.check_time_map(path, agent.sample_times, time_map,
+                              [c for c in tc if c.agent == path] + [c for c in sc if path in (c.agent, c.target)])
         ctx.time_maps[path] = time_map
         times = retime.shot_times(time_map, keys[path])
         if path in ctx.out_times:

@@ -132,21 +132,22 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
                     int neighbours, const Eigen::Ref<const Eigen::VectorXi>& partner, IndexTriples& triangles,
                     IndexPairs& edges);
 
-// Headings of several agents' edited paths at once: TangentHeadings of each block of rows.
+// Turns of several agents' headings at once: DeformationTurns of each block of rows.
 //
 // Inputs:
-//   points    #V by 2 paths of every agent, concatenated (stage units)
-//   blocks    #B by 2 [begin, end) rows of each path to head
-//   fixed     #R by 3 (block, first, last): inclusive frame ranges (frames of that block's
-//             path) that keep a constant heading, grouped by block in block order
-//   fallback  #R heading of each fixed range
-//   min_step  as in TangentHeadings
+//   source, edited  #V by 2 source and edited paths of every agent, concatenated (stage units)
+//   blocks          #B by 2 [begin, end) rows of each agent
+//   fixed           #R by 3 (block, first, last): inclusive frame ranges (frames of that block)
+//                   that turn rigidly, grouped by block in block order
+//   fixed_turn      #R turn of each fixed range
+//   window, min_travel  as in DeformationTurns
 // Outputs:
-//   headings  #V: each block's rows filled as TangentHeadings fills them, other rows 0
+//   turns           #V: each block's rows filled as DeformationTurns fills them, other rows 0
 // Throws std::invalid_argument on blocks or ranges out of range.
-void BlockTangentHeadings(const Eigen::Ref<const Trajectory2>& points, const Eigen::Ref<const IndexPairs>& blocks,
-                          const Eigen::Ref<const IndexTriples>& fixed, const Eigen::Ref<const Eigen::VectorXd>& fallback,
-                          double min_step, Eigen::VectorXd& headings);
+void BlockDeformationTurns(const Eigen::Ref<const Trajectory2>& source, const Eigen::Ref<const Trajectory2>& edited,
+                           const Eigen::Ref<const IndexPairs>& blocks, const Eigen::Ref<const IndexTriples>& fixed,
+                           const Eigen::Ref<const Eigen::VectorXd>& fixed_turn, int window, double min_travel,
+                           Eigen::VectorXd& turns);
 
 // Columns of a sparse complex #R by #C matrix A that its null space reaches: c such that
 // some x with A x = 0 has x_c != 0. Each column is first scaled to unit largest magnitude;

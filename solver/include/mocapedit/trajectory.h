@@ -36,6 +36,34 @@ Eigen::VectorXd TangentHeadings(const Eigen::Ref<const Trajectory2>& points,
                                 const Eigen::Ref<const Eigen::VectorXd>& fallback,
                                 double min_step);
 
+// Turn of each frame's heading (radians, counter-clockwise) when a path goes from `source`
+// to `edited`: the local rotation the edit applies to the path around the frame, so that an
+// edited body faces its source heading plus this turn (never the edited path's tangent).
+//
+// The rotation of frame i is the least-squares rotation taking the source steps near it onto
+// the edited ones: the angle of the sum of conj(s_k) e_k (steps as complex numbers) over the
+// steps within two nested box windows of `window` frames each side, so each step counts by the
+// product of its lengths and a step that barely moves cannot flip it. Where the source moves
+// less than `min_travel` from `window` frames before to `window` frames after (a stand, a turn on
+// the spot, the top of a jump: a displacement, so the jitter of a standing root is no travel)
+// the turn is interpolated, by frame, from the moving frames around it (held beyond the first
+// and last). Each fixed range turns by its own angle, as one rigid body, and the `window` frames
+// either side of it blend from that angle into the moving frames'. An unedited path turns by
+// exactly 0, a rigidly turned one by its angle; with nothing that moves and no fixed range, 0.
+//
+// Inputs:
+//   source, edited  #N by 2 trajectories (stage units), paired by frame
+//   fixed           inclusive frame ranges that turn rigidly (stationary sections)
+//   fixed_turn      #R turn of each fixed range
+//   window          half-width of each box window, frames (at least 1)
+//   min_travel      stage units
+// Returns #N turns, unwrapped. Throws std::invalid_argument on bad shapes or ranges.
+Eigen::VectorXd DeformationTurns(const Eigen::Ref<const Trajectory2>& source,
+                                 const Eigen::Ref<const Trajectory2>& edited,
+                                 const std::vector<FrameRange>& fixed,
+                                 const Eigen::Ref<const Eigen::VectorXd>& fixed_turn, int window,
+                                 double min_travel);
+
 // Adds multiples of 2*pi so consecutive angles differ by at most pi.
 void UnwrapAngles(Eigen::Ref<Eigen::VectorXd> angles);
 
