@@ -1019,8 +1019,12 @@ def _least_delay(problem: Problem, settings: Settings, paths, times: np.ndarray,
     if len(delays) == 0:
         return None
     trials = [smooth_delay(times, a, t_end, d) for a, d in zip(t_start, delays)]
+    # Delays taken up over overlapping spans add their slowing: the pace stays at or above
+    # SLOWEST_PACE of the source's all the same.
+    source = np.diff(problem.frame_times[w])
+    paced = np.array([np.all(np.diff(m) * SLOWEST_PACE <= source * (1.0 + 1e-9)) for m in trials])
     after = overlapped(trials)
-    good = np.flatnonzero(~after[:, at_o] & ~np.any(after & ~before & ~queue, axis=1))
+    good = np.flatnonzero(paced & ~after[:, at_o] & ~np.any(after & ~before & ~queue, axis=1))
     if len(good) == 0:
         return None
     return trials[good[0]], delays[good[0]]
