@@ -192,7 +192,9 @@ def _stage_quality(ctx) -> dict:
     for label, path, strategy in runs:
         edits, composed = ctx.workdir / f"{label}.usda", ctx.workdir / f"{label}.edited.usda"
         t = time.perf_counter()
-        result = solve(str(path), output=str(edits), composed=str(composed), collision_strategy=strategy)
+        # The edit itself: foot locking would plant again the feet it made slide.
+        result = solve(str(path), output=str(edits), composed=str(composed), collision_strategy=strategy,
+                       foot_locking=False)
         seconds = time.perf_counter() - t
         edited = Usd.Stage.Open(str(composed))
         roots = metrics.agent_root_positions(edited, agents, times)
