@@ -116,15 +116,18 @@ def retimed_spec(ctx: SolveContext, path: str) -> tuple[str, str] | None:
     return spec
 
 
-def output_frames(ctx: SolveContext, path: str) -> tuple[np.ndarray, np.ndarray]:
-    """(stage times to author, fractional source frame at each) for one agent."""
+def output_frames(ctx: SolveContext, path: str, baked: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(stage times to author, fractional source frame at each) for one agent.
+
+    ``baked``: the times its animation has when baked, even if it is re-timed by a value clip
+    now (a pass that is about to give it a pose edit, which bakes it, asks for these)."""
     agent = ctx.data.agents[path]
     frames = np.arange(agent.frame_count, dtype=np.float64)
     time_map = ctx.time_maps.get(path)
     if time_map is None:
         times = ctx.out_times.get(path, agent.sample_times)
         return times, np.interp(times, agent.sample_times, frames)
-    if retimed_spec(ctx, path):
+    if not baked and retimed_spec(ctx, path):
         # A re-timed clip plays each source frame at its time on the map: those are its samples.
         return np.asarray(time_map, dtype=np.float64), frames
     times = ctx.out_times.get(path)

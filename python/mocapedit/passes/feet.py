@@ -148,7 +148,8 @@ class _AgentLock:
         self.path = path
         agent = self.agent = data.agents[path]
         self.legs = agent.legs
-        self.times, self.frames = processor.output_frames(ctx, path)
+        # Locked legs are a pose edit, and a pose edit bakes the animation: lock on its frames.
+        self.times, self.frames = processor.output_frames(ctx, path, baked=True)
         self.root = _top(agent, self.legs[0].hip)
         pose, skel_pos, skel_rot = _posed_legs(ctx, path, self.frames, self.times, shared)
         self.pose = pose
