@@ -625,6 +625,59 @@ def test_direction_deviation_by_hand():
     assert np.isnan(M.direction_deviation(stand, back, t, min_speed=0.5)).all()
 
 
+def _walk_along(points, speed=1.0, fps=24.0):
+    """Ground samples walking the polyline ``points`` at ``speed`` units per second, and their
+    times (s)."""
+    pts = np.asarray(points, dtype=np.float64)
+    arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))]
+    t = np.arange(0.0, arc[-1] / speed + 1e-9, 1.0 / fps)
+    d = t * speed
+    return np.stack((np.interp(d, arc, pts[:, 0]), np.interp(d, arc, pts[:, 1])), axis=1), t
+
+
+def _straight(n, fps=24.0, speed=1.0):
+    t = np.arange(n) / fps
+    return np.stack((t * speed, np.zeros(n)), axis=1), t
+
+
+def test_a_turn_the_edit_asks_for_is_no_reversal():
+    # A 5 m walk turned 90 degrees left after 5 m by a rounded corner that overshoots to about
+    # 120 degrees before it settles: against the unturned source it deviates more than 90
+    # degrees, against the turn the edit makes it stays well within.
+    a = np.radians(np.linspace(0.0, 120.0, 30))
+    bend = np.stack((5.0 + 0.8 * np.sin(a), 0.8 * (1.0 - np.cos(a))), axis=1)
+    edited, t = _walk_along(np.vstack(([0.0, 0.0], bend, bend[-1] + [-0.5, 4.0])))
+    source, _ = _straight(len(t))
+    speed = M.WALKING_SPEED_M
+    assert np.nanmax(M.direction_deviation(source, edited, t, speed)) > 100.0
+    turn = M.edit_turn(source, edited, t, speed)
+    assert abs(turn[0]) < 1e-9 and np.degrees(turn[-1]) == pytest.approx(97.1, abs=1.0)
+    assert np.nanmax(M.direction_deviation(source, edited, t, speed, turn=turn)) < 60.0
+    # An unedited path turns by exactly 0; a whole path turned by 30 degrees by exactly that.
+    np.testing.assert_allclose(M.edit_turn(source, source + 2.0, t, speed), 0.0, atol=1e-12)
+    c, s = np.cos(np.radians(30.0)), np.sin(np.radians(30.0))
+    np.testing.assert_allclose(M.edit_turn(source, source @ np.array([[c, s], [-s, c]]), t, speed),
+                               np.radians(30.0), atol=1e-12)
+    with pytest.raises(ValueError):
+        M.direction_deviation(source, edited, t, speed, turn=turn[:-1])
+
+
+def test_a_walk_back_or_a_loop_is_still_a_reversal():
+    source, t = _straight(97)
+    speed = M.WALKING_SPEED_M
+    # Walks 2 s, back 1 s along itself, on again: the short chords go against the edit's turn.
+    d = np.interp(t, [0.0, 2.0, 3.0, 4.0], [0.0, 2.0, 1.0, 2.0])
+    back = np.stack((d, np.zeros_like(d)), axis=1)
+    turn = M.edit_turn(source, back, t, speed)
+    assert np.nanmax(M.direction_deviation(source, back, t, speed, turn=turn)) > 170.0
+    # A full loop of 1 m radius in the middle of a straight walk: the edit turns it round past 180.
+    a = np.linspace(0.0, 2.0 * np.pi, 60)
+    loop = np.stack((1.5 + np.sin(a), 1.0 - np.cos(a)), axis=1)
+    edited, t = _walk_along(np.vstack(([0.0, 0.0], loop, [4.0, 0.0])))
+    source, _ = _straight(len(t))
+    assert np.degrees(np.abs(M.edit_turn(source, edited, t, speed)).max()) > 180.0
+
+
 def test_default_facing_joint():
     assert M.default_facing_joint(["Root", "Root/Hips", "Root/Hips/LeftUpLeg"]) == 1
     assert M.default_facing_joint(["pelvis", "pelvis/spine"]) == 0

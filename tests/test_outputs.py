@@ -152,13 +152,19 @@ def test_temporaries_of_dead_processes_are_swept_and_live_ones_kept(tmp_path):
 
 @pytest.fixture
 def slow_shot(tmp_path):
-    """A shot whose edits layer takes a while to write: every agent is retimed and baked."""
+    """A shot whose edits layer takes a while to write: every agent's end is pulled aside, so
+    foot locking bakes its legs."""
+    from mocapedit import metrics
     clip = walker.walk(frames=240, name="walk")
-    specs = [examples.AgentSpec(f"a{i:03d}", clip, (2.0 * (i % 20), 0.0, 2.0 * (i // 20)), 0.0)
+    specs = [examples.AgentSpec(f"a{i:03d}", clip, (4.0 * (i % 20), 0.0, 40.0 * (i // 20)), 0.0)
              for i in range(120)]
     stage = examples.build_crowd_stage(tmp_path / "big.usda", specs)
     for i in range(120):
-        examples.add_time_constraint(stage, f"/Edits/t{i:03d}", f"/World/Crowd/a{i:03d}", 120, 131.5)
+        agent = f"/World/Crowd/a{i:03d}"
+        start, end = metrics.agent_root_positions(stage, agent, [0.0, 239.0])
+        examples.add_position_constraint(stage, f"/Edits/start{i:03d}", agent, 0, tuple(map(float, start)))
+        examples.add_position_constraint(stage, f"/Edits/end{i:03d}", agent, 239,
+                                         tuple(map(float, end + (1.0, 0.0, 0.0))))
     stage.GetRootLayer().Save()
     return tmp_path
 
@@ -188,7 +194,7 @@ def test_sigterm_removes_temporaries_and_writes_nothing(slow_shot, when):
     before = _digests(slow_shot)
     proc = _start_solve(slow_shot)
     if when == "reading":
-        time.sleep(1.5)
+        time.sleep(1.0)
     else:
         assert _wait_for_temporary(slow_shot, proc, exporting=when == "writing"), "the solve ended before it wrote"
     proc.send_signal(signal.SIGTERM)

@@ -166,6 +166,35 @@ def test_a_formation_turned_by_one_edit_keeps_its_neighbours(tmp_path):
     # at each key: 0.094 m/s).
     skate = [metrics.foot_skate(out, n).mean - metrics.foot_skate(src, n).mean for n in names]
     assert np.mean(skate) < 0.085
+    # The turn is the artist's: no member walks back against it. Handles at the corner and at
+    # the end level with it make the leader's rounded corner overshoot (its walk deviates by
+    # more than 90 degrees from the unturned source), but against the turn the edit makes every
+    # member's walk stays within 45 degrees, and none turns round (a loop).
+    figures = metrics.shot_plausibility(src, out, names)
+    assert figures[lead].max_direction_deviation > 90.0
+    assert max(f.max_turned_deviation for f in figures) < 45.0
+    assert max(f.max_edit_turn for f in figures) < metrics.REVERSE_TURN_DEGREES
+    assert not any(f.reverses for f in figures)
+    assert result.report.stats["plausibility"]["reversingAgents"] == 0
+
+
+def test_an_edit_that_sends_a_walker_back_is_a_reversal(tmp_path, walk_clip):
+    # Held at its start and its middle, the end pinned 1 m behind the middle: the second half
+    # has to walk back the way the first came, whatever the edit's own turn. The measure of
+    # reversals against the edit's turn still calls that a reversal.
+    stage = _stage(tmp_path, [examples.AgentSpec("a", walk_clip)])
+    z = walk_clip.translations[:, 0, 2].astype(float)
+    agent = f"{CROWD}/a"
+    examples.add_position_constraint(stage, "/Edits/start", agent, 0, (0.0, 0.0, 0.0))
+    examples.add_position_constraint(stage, "/Edits/middle", agent, 60, (0.0, 0.0, z[60]))
+    examples.add_position_constraint(stage, "/Edits/back", agent, 120, (0.5, 0.0, z[60] - 1.0))
+    result, src, out = _solve(tmp_path, stage)
+    assert max(c["residual"] for c in result.report.constraints) < 1e-6
+    p = metrics.plausibility(src, out, agent)
+    assert p.reverses and p.max_direction_deviation > 150.0
+    assert p.max_edit_turn > metrics.REVERSE_TURN_DEGREES   # sent back: turned by about 180 degrees
+    assert result.report.stats["plausibility"]["reversingAgents"] == 1
+    assert result.report.agents[agent]["plausibility"]["reverses"] is True
 
 
 def test_a_large_formation_is_solved_end_to_end_in_a_dissection_order(tmp_path, monkeypatch):

@@ -115,6 +115,7 @@ CONTRACT: dict[str, dict[str, object]] = {
         "matchSpeed": ("bool", UNIFORM, False, None),
         "collisionStrategy": ("token", UNIFORM, "relinearize", ["relinearize", "accumulate"]),
         "minTimeInterval": ("double", UNIFORM, 0.1, None),
+        "maxWait": ("double", UNIFORM, 3.0, None),
         "footLocking": ("bool", UNIFORM, True, None),
     },
 }
@@ -428,7 +429,7 @@ def test_docs_everywhere():
 # Every attribute doc names its unit or says it has none (modes with allowedTokens are
 # exempt: their values are the documentation).
 UNIT_WORDS = ("stage units", "time code", "dimensionless", "no units", "frame",
-              "joint path", "a count")
+              "joint path", "a count", "seconds")
 
 
 def test_attribute_docs_state_units():
@@ -480,7 +481,7 @@ SAMPLES = {
     "margin": 0.125, "joint": "Hips/Spine/Chest", "mode": "blend", "timeOffset": -12.5,
     "wrap": "clamp", "referencePose": "restPose", "collisionAvoidance": True,
     "maxIterations": 25, "sampleStep": 0.5, "matchSpeed": True,
-    "collisionStrategy": "accumulate", "minTimeInterval": 0.25,
+    "collisionStrategy": "accumulate", "minTimeInterval": 0.25, "maxWait": 1.5,
     "mocap:leftLegJoints": Vt.TokenArray(["Hips/LUpLeg", "Hips/LUpLeg/LLeg", "Hips/LUpLeg/LLeg/LFoot"]),
     "mocap:rightLegJoints": Vt.TokenArray(["RUpLeg", "RLeg", "RFoot", "RToe"]),
     "mocap:footLocking": False, "footLocking": False,

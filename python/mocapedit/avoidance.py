@@ -1,4 +1,4 @@
-"""Collision avoidance by path editing (chapter 6 of the deliverable), and avoid regions.
+"""Collision avoidance by waiting and path editing (chapter 6 of the deliverable), and avoid regions.
 
 The agents' ground paths are re-solved with the two-step Laplacian energy of the path
 editor (:class:`mocapedit._solver.SeparationSolver`: each agent factored once, rows that
@@ -31,12 +31,24 @@ an avoid region, or ``max_iterations`` is reached. Two strategies:
   where it was already held apart is held at every sample of its intervals, a little
   further apart each time it resists, so the iterations do not stall on it.
 
+Before either, walkers wait (``Settings.max_wait_s``, ``MocapSolveSettings.maxWait``):
+of two walkers whose paths cross, the one that reaches the crossing later slows down
+before it, through its time map, until the other has passed (of two walking the same
+way, the one behind waits). A wait changes no path: no detour, no turn, no length added,
+and feet planted in the source stay planted (the pose plays slower, it does not slide).
+What waiting cannot part (head-on, overtaking without room, standing agents, agents whose
+timing constraints fix) the paths then resolve. Measured on the example scenes by FK
+(README), waiting first and then steering with a weak anchor (detours spread over about
+0.75 s each side at 24 fps) beat steering alone on foot skate, path length and walking
+direction.
+
 Artist constraints hold throughout: hard pins and links are hard rows of every solve,
 stationary ranges move rigidly. Pairs that hard constraints hold together are reported,
-not looped on.
+not looped on. The iterations stop when ``patience`` of them in a row make no progress.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -95,13 +107,15 @@ class Problem:
     links: list[Link] = field(default_factory=list)
     regions: list[Region] = field(default_factory=list)
     collide_agents: bool = True         # False: regions only
+    fixed_timing: np.ndarray | None = None  # (A,) bool: time constraints fix the agent's timing
+    span: tuple[float, float] | None = None  # shot times compared (default: all the frames play)
 
 
 @dataclass
 class Settings:
     strategy: str = "relinearize"
     max_iterations: int = 10
-    anchor_weight: float = 1e-4         # pull of every frame to its source (relative to shape terms)
+    anchor_weight: float = 1e-5         # pull of every frame to its source (relative to shape terms)
     overshoot: float = 0.03             # separations aim this fraction past the clearance
     buffer_m: float = 0.3               # near misses watched by relinearize, metres
     spread: int = 3                     # relinearize constrains every n-th sample of an interval
@@ -109,6 +123,15 @@ class Settings:
     sweeps: int = 20                    # Gauss-Seidel sweeps per solve step at least (warm-started)
     sweep_budget: float = 1e6           # rows x sweeps per step allowed beyond that (up to 10x sweeps)
     tolerance: float = 1e-3             # of the clearance: Gauss-Seidel stops when no row moves more
+    patience: int = 6                   # stop after this many iterations without progress
+    stiffen_after: int = 3              # relinearize: from this iteration on, the anchor is
+    stiffen: float = 10.0               # this many times stiffer
+    forward_keep: float | None = 0.5    # relinearize: least projection of an edited 0.25 s chord on
+                                        # the source's direction, in source chord lengths (None: none)
+    max_wait_s: float = 3.0             # most delay waiting may add to one agent, seconds (0: none)
+    wait_step_s: float = 0.25           # delays are tried in steps of this, seconds
+    wait_rounds: int = 8                # rounds of waiting at most
+    time_codes_per_second: float = 24.0
     meters_per_unit: float = 1.0
 
 
@@ -134,6 +157,9 @@ class Outcome:
     moved: np.ndarray                   # (A,) bool: the agent's path changed
     solves: int = 0
     seconds: float = 0.0
+    #: the iterations stopped before max_iterations because ``patience`` of them in a row
+    #: neither lowered the count of collisions and region frames nor the deepest overlap
+    stalled: bool = False
     #: wall seconds by phase: "factor" (the agents' energies), "detect" (sampling and
     #: detection), "gather", "blocks", "sweeps" and "responses" (inside the solves), "rows"
     #: (the rest: forming the rows)
@@ -141,6 +167,14 @@ class Outcome:
     #: work done, summed over the solves: "rows" sent, Gauss-Seidel "updates" passed on,
     #: "inverseColumns" (back-substitutions for the agents' Schur blocks)
     work: dict = field(default_factory=dict)
+
+    #: (A,) the shot time of each source frame after waiting (the problem's when none waits)
+    frame_times: list[np.ndarray] = field(default_factory=list)
+    #: (A,) delay each agent took up by waiting, time codes
+    delays: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: (constraint, agent a, agent b, first and last shot time, distance): hard links that hold
+    #: two agents closer than their clearance; the pair is left as it is over that time
+    link_held: list[tuple[str, int, int, float, float, float]] = field(default_factory=list)
 
     @property
     def converged(self) -> bool:
@@ -203,13 +237,34 @@ class _State:
         self.times = {i: t for i, t in enumerate(problem.frame_times)}
         idx = list(range(len(problem.names)))
         self.sampling = collisions.sample(idx, self.times, {i: g for i, g in enumerate(problem.paths)},
-                                          problem.sample_step)
+                                          problem.sample_step, problem.span)
         self.resample = collisions.Resampler(self.sampling, self.starts)
         pinned = np.zeros(len(self.rest), dtype=bool)
         for pin in problem.pins:
             if pin.softness == 0:
                 pinned[self.starts[pin.agent] + pin.frame] = True
         self.pinned = pinned
+        self.link_holds = self._link_holds()
+
+    def _link_holds(self) -> list[tuple[int, int, int, int, int]]:
+        """(link, a, b, first, last): samples around each hard link that holds its two agents
+        closer than their clearance, over which their input paths stay that close. The pair
+        is not pushed apart there (the artist put them there); elsewhere it is."""
+        p, pos = self.p, self.sampling.positions
+        out = []
+        for i, link in enumerate(p.links):
+            need = p.radius[link.a] + p.radius[link.b] + p.margin
+            if np.linalg.norm(link.offset) >= need or not len(self.sampling.times):
+                continue
+            at = int(np.argmin(np.abs(self.sampling.times - self.times[link.a][link.fa])))
+            close = np.linalg.norm(pos[:, link.a] - pos[:, link.b], axis=1) < need * (1.0 + self.s.overshoot)
+            first, last = at, at
+            while first > 0 and close[first - 1]:
+                first -= 1
+            while last + 1 < len(close) and close[last + 1]:
+                last += 1
+            out.append((i, min(link.a, link.b), max(link.a, link.b), first, last))
+        return out
 
     def split(self, flat: np.ndarray) -> list[np.ndarray]:
         return [flat[self.starts[a]:self.starts[a + 1]].copy() for a in range(len(self.starts) - 1)]
@@ -226,10 +281,16 @@ class _State:
         return np.stack([base + i0, base + i1], axis=1), np.stack([1.0 - w1, w1], axis=1)
 
     def held(self, a: np.ndarray, b: np.ndarray, k: np.ndarray) -> np.ndarray:
-        """(N,) True where hard pins hold both agents' points at the samples (no push can move them)."""
+        """(N,) True where hard constraints hold the pairs (a, b) at samples k: pins hold both
+        agents' points (no push can move them), or a link holds the two closer than their
+        clearance around that moment."""
         va, wa = self.sample_terms(a, k)
         vb, wb = self.sample_terms(b, k)
-        return np.all(self.pinned[va] | (wa == 0), axis=1) & np.all(self.pinned[vb] | (wb == 0), axis=1)
+        out = np.all(self.pinned[va] | (wa == 0), axis=1) & np.all(self.pinned[vb] | (wb == 0), axis=1)
+        lo, hi = np.minimum(a, b), np.maximum(a, b)
+        for _, la, lb, first, last in self.link_holds:
+            out |= (lo == la) & (hi == lb) & (k >= first) & (k <= last)
+        return out
 
     def fixed_rows(self, rows: _Rows, forces: np.ndarray | None = None, forces1: np.ndarray | None = None) -> None:
         """Artist pins and links, two rows each: every solve carries them (``forces``,
@@ -362,6 +423,10 @@ def resolve(problem: Problem, settings: Settings | None = None, progress=None) -
     if settings.strategy not in STRATEGIES:
         raise ValueError(f"unknown collision strategy '{settings.strategy}' (use {' or '.join(STRATEGIES)})")
     t0 = time.perf_counter()
+    fixed = np.zeros(len(problem.names), bool) if problem.fixed_timing is None else np.asarray(problem.fixed_timing)
+    waits = _waits(problem, settings, fixed)
+    if waits.delay.any():
+        problem = dataclasses.replace(problem, frame_times=waits.frame_times, span=waits.span)
     state = _State(problem, settings)
     watch = settings.buffer_m / settings.meters_per_unit if settings.strategy == "relinearize" else None
     run = _Run(state, progress, watch)
@@ -378,7 +443,8 @@ def resolve(problem: Problem, settings: Settings | None = None, progress=None) -
                       for a in range(len(problem.names))], dtype=bool)
     return Outcome(paths=state.split(flat), rigid_angles=angles, iterations=run.iterations,
                    sampling=state.sampling, remaining=found, region_left=region_left,
-                   blocked=_blocked(state, found), moved=moved, solves=run.solves,
+                   blocked=_blocked(state, found), link_held=_link_held(state), moved=moved, solves=run.solves, stalled=run.stalled,
+                   frame_times=waits.frame_times, delays=waits.delay,
                    seconds=time.perf_counter() - t0, timing=run.timing(time.perf_counter() - t0), work=dict(run.work))
 
 
@@ -394,6 +460,10 @@ class _Run:
         self.work = {"rows": 0, "updates": 0, "inverseColumns": 0}
         self.found = None
         self.hits = None
+        self.best = (np.inf, np.inf)    # fewest collisions and region frames, smallest deepest overlap
+        self.since_best = 0             # iterations since either improved
+        self.stalled = False
+        self.pending = False            # rows were added that the next solve must meet
         self.task = progress.task("collision avoidance", state.s.max_iterations, "iterations") if progress else None
 
     def observe(self, flat: np.ndarray, it: int) -> bool:
@@ -405,7 +475,17 @@ class _Run:
         self.seconds["detect"] += time.perf_counter() - t
         record = _iteration(state, self.found, self.hits)
         self.iterations.append(record)
-        last = record.collisions + record.region_samples == 0 or it == state.s.max_iterations
+        left = record.collisions + record.region_samples
+        # Constraints that cannot all hold (a wall closer than a capsule, a crowd packed
+        # tighter than its clearances) trade overlap for overlap forever: stop when the
+        # iterations no longer make progress, whatever max_iterations says.
+        if left < self.best[0] or record.deepest < self.best[1] * (1.0 - 1e-3):
+            self.since_best = 0
+        else:
+            self.since_best += 1
+        self.best = (min(self.best[0], left), min(self.best[1], record.deepest))
+        self.stalled = left > 0 and self.since_best >= state.s.patience and it < state.s.max_iterations
+        last = (left == 0 and not self.pending) or it == state.s.max_iterations or self.stalled
         if self.task is not None:
             left = report.describe_left(record.collisions, record.region_samples)
             if last:
@@ -664,6 +744,58 @@ def _exit(footprint, points: np.ndarray, way: np.ndarray, clearance: np.ndarray)
     return points + hi[:, None] * way
 
 
+class _Forward:
+    """One-sided rows that keep walkers going their way: for a chord of ``chord_s`` seconds
+    of an agent's path where the source moves faster than ``moving_m_s``, the edited chord's
+    projection on the source chord's direction stays at least ``keep`` times the source
+    chord's length (a push never sends a walker back the way it came, nor across its way).
+    Only the chords an iterate broke are rows, kept from then on."""
+
+    def __init__(self, state: _State, keep: float = 0.5, chord_s: float = 0.25, moving_m_s: float = 0.2):
+        s, p = state.s, state.p
+        self.keep = keep
+        firsts, seconds, dirs, lengths = [], [], [], []
+        for a in range(len(p.names)):
+            lo, hi = int(state.starts[a]), int(state.starts[a + 1])
+            if hi - lo < 2:
+                continue
+            dt = float(np.median(np.diff(p.frame_times[a]))) / s.time_codes_per_second   # seconds per frame
+            h = max(1, int(round(chord_s / max(dt, 1e-9))))
+            if hi - lo <= h:
+                continue
+            v = np.arange(lo, hi - h)
+            c = state.rest[v + h] - state.rest[v]
+            n = np.linalg.norm(c, axis=1)
+            moving = n > moving_m_s / s.meters_per_unit * h * dt
+            firsts.append(v[moving])
+            seconds.append(v[moving] + h)
+            dirs.append(c[moving] / n[moving, None])
+            lengths.append(n[moving])
+        cat = lambda parts, shape: np.concatenate(parts) if parts else np.zeros(shape)  # noqa: E731
+        self.v, self.u = cat(firsts, 0).astype(np.int64), cat(seconds, 0).astype(np.int64)
+        self.d, self.length = cat(dirs, (0, 2)), cat(lengths, 0)
+        self.on = np.zeros(len(self.v), bool)
+        self.force = np.zeros(len(self.v))
+        self.force1 = np.zeros(len(self.v))
+
+    def watch(self, flat: np.ndarray) -> int:
+        """Turns on the rows of the chords ``flat`` breaks; returns how many were new."""
+        proj = np.sum((flat[self.u] - flat[self.v]) * self.d, axis=1)
+        fresh = ~self.on & (proj < self.keep * self.length)
+        self.on |= fresh
+        return int(fresh.sum())
+
+    def add(self, rows: "_Rows") -> np.ndarray:
+        on = np.flatnonzero(self.on)
+        return rows.add(self.d[on], self.keep * self.length[on], SEPARATION_SOFTNESS,
+                        np.stack([self.u[on], self.v[on]], axis=1), np.tile([1.0, -1.0], (len(on), 1)),
+                        at_least=True, force=self.force[on], force1=self.force1[on])
+
+    def solved(self, force: np.ndarray, force1: np.ndarray) -> None:
+        on = np.flatnonzero(self.on)
+        self.force[on], self.force1[on] = force, force1
+
+
 def _relinearize(state: _State, run: _Run):
     p, s = state.p, state.s
     solver = run.factor(state.rest, state.starts, state.rigid, s.anchor_weight, _still(s), 0)
@@ -673,11 +805,22 @@ def _relinearize(state: _State, run: _Run):
     watched = _RegionCandidates()
     buffer = s.buffer_m / s.meters_per_unit
     fixed_force, fixed_force1 = np.zeros(0), np.zeros(0)
+    forward = _Forward(state, s.forward_keep if s.forward_keep is not None else -np.inf)
     for it in range(s.max_iterations + 1):
+        # A result that sends someone back the way it came is solved again, with the chords
+        # it broke held, even when nothing collides any more.
+        run.pending = forward.watch(flat) > 0
         if run.observe(flat, it):
             break
-        if it > 0 and _only_blocked(cands, run.found) and run.iterations[-1].region_samples == 0:
+        if it > 0 and _only_blocked(cands, run.found) and run.iterations[-1].region_samples == 0 \
+                and not run.pending:
             break
+        if it == s.stiffen_after:
+            # Overlaps that outlast the first iterations are knots of many pushes; gentle
+            # detours that reach far make them spread. Stiffer anchors keep the last pushes
+            # local, so they converge.
+            solver = run.factor(state.rest, state.starts, state.rigid, s.anchor_weight * s.stiffen,
+                                _still(s), 0)
         # Watch every near miss: each becomes a one-sided row that pushes only when needed.
         if p.collide_agents:
             # A pair still overlapping where it was already held apart resists: it is held at
@@ -708,6 +851,7 @@ def _relinearize(state: _State, run: _Run):
         reg = rows.add(rnormal, rrhs + watched.clearance * s.overshoot, SEPARATION_SOFTNESS,
                        watched.vertex[:, None], np.ones((len(watched.vertex), 1)), at_least=True,
                        force=watched.force, force1=watched.force1)
+        ahead = forward.add(rows)
         # Small problems afford a converged Gauss-Seidel; big ones carry it on from iteration
         # to iteration (warm start) within a budget of row updates.
         sweeps = int(np.clip(s.sweep_budget / max(rows.count, 1), s.sweeps, 10 * s.sweeps))
@@ -717,6 +861,7 @@ def _relinearize(state: _State, run: _Run):
         fixed_force, fixed_force1 = force[:fixed], force1[:fixed]
         cands.force[on], cands.force1[on] = force[sep], force1[sep]
         watched.force, watched.force1 = force[reg], force1[reg]
+        forward.solved(force[ahead], force1[ahead])
         flat = out["positions"]
         angles = out["rigid_angles"]
     return flat, angles
@@ -732,10 +877,17 @@ def _only_blocked(cands: _Candidates, found) -> bool:
 
 
 def _blocked(state: _State, found: collisions.Collisions) -> list[tuple[int, int, float]]:
-    """Overlaps left where hard pins hold both agents: (agent a, agent b, shot time)."""
+    """Overlaps left where hard constraints hold both agents: (agent a, agent b, shot time)."""
     a, b, k = (found.agent_a.astype(np.int64), found.agent_b.astype(np.int64), found.deepest.astype(np.int64))
     held = state.held(a, b, k)
     return [(int(x), int(y), float(state.sampling.times[z])) for x, y, z in zip(a[held], b[held], k[held])]
+
+
+def _link_held(state: _State) -> list[tuple[str, int, int, float, float, float]]:
+    """(link name, agent a, agent b, first and last shot time, distance the link holds)."""
+    t = state.sampling.times
+    return [(state.p.links[i].name, a, b, float(t[first]), float(t[last]), float(np.linalg.norm(state.p.links[i].offset)))
+            for i, a, b, first, last in state.link_holds]
 
 
 def _tangents(path: np.ndarray) -> np.ndarray:
@@ -776,4 +928,207 @@ def heading_change(before: np.ndarray, after: np.ndarray, ranges, still: float) 
     idx = np.flatnonzero(known)
     out = np.interp(np.arange(len(turn)), idx, turn[idx])
     out[known] = turn[known]
+    return out
+
+
+# ---- waiting: delays through the time maps ---------------------------------------------------
+
+#: Cosine of the angle between two walkers' directions beyond which they pass head-on or
+#: overtake: waiting cannot part them, only a step aside can.
+PASSING_COS = 0.7
+#: Slowest fraction of the source pace a walker slows to while it takes up a delay.
+SLOWEST_PACE = 0.5
+
+
+def smooth_delay(times: np.ndarray, start: float, end: float, delay: float) -> np.ndarray:
+    """(F,) the time map ``times`` with ``delay`` time codes taken up between shot times
+    ``start`` and ``end`` (a smoothstep: no interval shrinks, every one after ``end`` is
+    unchanged, the pace is continuous)."""
+    u = np.clip((np.asarray(times) - start) / max(end - start, 1e-12), 0.0, 1.0)
+    return np.asarray(times) + delay * u * u * (3.0 - 2.0 * u)
+
+
+@dataclass
+class _Boxes:
+    """Ground bounding boxes of every agent over blocks of ``size`` samples."""
+    low: np.ndarray               # (B,A,2)
+    high: np.ndarray              # (B,A,2)
+    size: int
+
+    @classmethod
+    def of(cls, positions: np.ndarray, size: int) -> "_Boxes":
+        k = len(positions)
+        blocks = -(-k // size)
+        padded = np.concatenate([positions, np.repeat(positions[-1:], blocks * size - k, axis=0)])
+        shaped = padded.reshape(blocks, size, *positions.shape[1:])
+        return cls(shaped.min(axis=1), shaped.max(axis=1), size)
+
+
+def _least_delay(problem: Problem, settings: Settings, paths, times: np.ndarray, w: int, o: int,
+                 pos: np.ndarray, st: np.ndarray, boxes: _Boxes, first: int, last: int, room: float,
+                 step: float, guess: float):
+    """(time map, delay) of the least delay of agent w, near ``guess`` (time codes), that
+    parts it from agent o over their encounter (samples first..last at the sampling
+    ``pos``, ``st``) and meets no agent it did not meet already, but for those walking its
+    way; None when no delay up to ``room`` does."""
+    fps = settings.time_codes_per_second
+    # The encounter: from a second before the overlap to a second past it, plus the room.
+    lo = max(first - int(np.ceil(fps / problem.sample_step)), 0)
+    hi = min(last + int(np.ceil((room + fps) / problem.sample_step)), len(st) - 1)
+    window = st[lo:hi + 1]
+    # Whatever the delay, w walks the part of its path it walked from `room` before the
+    # window to its end: only the agents whose blocks come near that part can meet it.
+    reach = pos[max(lo - int(np.ceil(room / problem.sample_step)), 0):hi + 1, w]
+    grow = problem.radius[w] + problem.radius + problem.margin * (1.0 + settings.overshoot)
+    b0, b1 = lo // boxes.size, hi // boxes.size + 1
+    low, high = boxes.low[b0:b1].min(axis=0), boxes.high[b0:b1].max(axis=0)     # (A,2)
+    r_lo, r_hi = reach.min(axis=0), reach.max(axis=0)
+    near = ((low[:, 0] - grow <= r_hi[0]) & (low[:, 1] - grow <= r_hi[1])
+            & (high[:, 0] + grow >= r_lo[0]) & (high[:, 1] + grow >= r_lo[1]))
+    near[w] = False
+    near[o] = True
+    cand = np.flatnonzero(near)
+    at_o = int(np.searchsorted(cand, o))
+    others = pos[lo:hi + 1][:, cand]                                 # (K,N,2)
+    need2 = grow[cand] ** 2
+    frames = np.arange(len(times), dtype=np.float64)
+
+    def overlapped(maps):
+        """(M,N) for each of M time maps of w, which candidates it overlaps in the window."""
+        at = np.stack([np.interp(window, m, frames) for m in maps])   # (M,K) fractional frames
+        pw = collisions.positions_at(paths[w], at.ravel()).reshape(*at.shape, 2)
+        d = others[None] - pw[:, :, None]
+        return (d[..., 0] ** 2 + d[..., 1] ** 2 - need2).min(axis=1) < 0.0
+
+    before = overlapped([times])[0]
+    # Walkers going the same way may be caught up with: they wait in their turn (the next
+    # round), as a queue does. A new encounter with anyone else is not worth a wait.
+    motion = others[-1] - others[0]
+    mine = pos[hi, w] - pos[lo, w]
+    cos = motion @ mine / np.maximum(np.linalg.norm(motion, axis=1) * np.linalg.norm(mine), 1e-300)
+    queue = cos >= PASSING_COS
+    # A smoothstep's steepest slope is 1.5 times its mean: the pace stays at or above
+    # SLOWEST_PACE. It starts after the clip does: a walker never stands frozen in its
+    # first pose waiting for its clip to begin.
+    t_end = st[first] - 0.1 * fps
+    # Delays from a step below the first guess (rounded to steps) up to three steps above it.
+    lowest = max(step, step * (np.ceil(guess / step) - 1.0)) if np.isfinite(guess) else step
+    delays = np.arange(lowest, min(room, lowest + 4.0 * step) + 1e-9, step)
+    t_start = t_end - np.maximum(1.5 * delays / (1.0 / SLOWEST_PACE - 1.0), fps)
+    delays, t_start = delays[t_start >= times[0]], t_start[t_start >= times[0]]
+    if len(delays) == 0:
+        return None
+    trials = [smooth_delay(times, a, t_end, d) for a, d in zip(t_start, delays)]
+    # Delays taken up over overlapping spans add their slowing: the pace stays at or above
+    # SLOWEST_PACE of the source's all the same.
+    source = np.diff(problem.frame_times[w])
+    paced = np.array([np.all(np.diff(m) * SLOWEST_PACE <= source * (1.0 + 1e-9)) for m in trials])
+    after = overlapped(trials)
+    good = np.flatnonzero(paced & ~after[:, at_o] & ~np.any(after & ~before & ~queue, axis=1))
+    if len(good) == 0:
+        return None
+    return trials[good[0]], delays[good[0]]
+
+
+@dataclass
+class _Waits:
+    """Per-agent delays found so far (time codes), and the collision intervals they left."""
+    frame_times: list[np.ndarray]
+    delay: np.ndarray
+    span: tuple[float, float] | None = None
+    rounds: int = 0
+
+
+def _velocities(positions: np.ndarray, k: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    k1 = np.minimum(k + 1, len(positions) - 1)
+    k0 = np.maximum(k - 1, 0)
+    return (positions[k1, cols] - positions[k0, cols]) / np.maximum(k1 - k0, 1)[:, None]
+
+
+def _waits(problem: Problem, settings: Settings, fixed: np.ndarray) -> _Waits:
+    """Delays the walker that arrives later at each crossing until the other has passed.
+
+    Rounds of: detect at the current time maps; for every collision interval of two
+    walkers whose directions cross take the one that reaches the crossing point of their
+    lines later (of two walking the same way, the one behind), unless its timing is
+    ``fixed``; find the least delay (in steps of ``wait_step_s`` from a step below the time
+    the other needs to clear the crossing, at most what it may still add within
+    ``max_wait_s``) after which the pair keeps its clearance over the encounter; take that delay up smoothly before the encounter, slowing to no less than
+    ``SLOWEST_PACE``. Each agent takes up at most one delay per round (its earliest), so
+    delays that create new encounters are seen by the next round. Collisions waiting
+    cannot part (head-on, standing agents, no room) are left to the lateral solve.
+    """
+    fps = settings.time_codes_per_second
+    names = list(range(len(problem.names)))
+    times = [np.asarray(t, dtype=np.float64).copy() for t in problem.frame_times]
+    delay = np.zeros(len(names))
+    budget = settings.max_wait_s * fps
+    out = _Waits(times, delay)
+    if budget <= 0 or not problem.collide_agents or not times:
+        return out
+    step = max(settings.wait_step_s * fps, problem.sample_step)
+    paths = {i: g for i, g in enumerate(problem.paths)}
+    # What plays after the last frame of the shot as it was (a delayed walker's last steps)
+    # is not compared: nobody else walks there then.
+    span = problem.span or (min(float(t[0]) for t in times), max(float(t[-1]) for t in times))
+    out.span = span
+    tried: dict[tuple[int, int], tuple[float, float]] = {}
+    sampling = collisions.sample(names, {i: t for i, t in enumerate(times)}, paths, problem.sample_step, span)
+    for rnd in range(settings.wait_rounds):
+        found = collisions.detect(sampling, problem.radius, problem.height, problem.margin,
+                                  report_distance=problem.margin)
+        out.rounds = rnd
+        if len(found) == 0:
+            break
+        pos, st = sampling.positions, sampling.times
+        a, b, k = (found.agent_a.astype(np.int64), found.agent_b.astype(np.int64), found.deepest.astype(np.int64))
+        va, vb = _velocities(pos, k, a), _velocities(pos, k, b)
+        sa, sb = np.linalg.norm(va, axis=1), np.linalg.norm(vb, axis=1)
+        walking = (sa > 1e-9) & (sb > 1e-9)
+        cos = np.sum(va * vb, axis=1) / np.maximum(sa * sb, 1e-300)
+        crossing = walking & (np.abs(cos) < PASSING_COS)
+        # Time (in samples) each needs to reach the crossing point of the two lines.
+        det = va[:, 0] * (-vb[:, 1]) - va[:, 1] * (-vb[:, 0])
+        rel = pos[k, b] - pos[k, a]
+        safe = np.where(np.abs(det) > 1e-300, det, 1.0)
+        ta = (rel[:, 0] * (-vb[:, 1]) - rel[:, 1] * (-vb[:, 0])) / safe
+        tb = (va[:, 0] * rel[:, 1] - va[:, 1] * rel[:, 0]) / safe
+        later_a = ta >= tb
+        # Walking the same way, the one behind waits for the one ahead (it would otherwise
+        # catch up with a walker that waited in front of it).
+        following = walking & (cos >= PASSING_COS)
+        behind_a = np.sum((pos[k, b] - pos[k, a]) * (va + vb), axis=1) > 0.0
+        later_a = np.where(following, behind_a, later_a)
+        who = np.where(later_a, a, b)
+        other = np.where(later_a, b, a)
+        ok = (crossing | following) & ~fixed[who]
+        # First guess of each delay (time codes): crossing, from when the other leaves the
+        # crossing point by the clearance to when the waiting one would come within it;
+        # following, the time to fall back by the clearance missing between them.
+        need = problem.radius[a] + problem.radius[b] + problem.margin
+        sw, so = np.where(later_a, sa, sb), np.where(later_a, sb, sa)
+        tw, to = np.where(later_a, ta, tb), np.where(later_a, tb, ta)
+        cross_guess = (to + need / np.maximum(so, 1e-300)) - (tw - need / np.maximum(sw, 1e-300))
+        gap = np.linalg.norm(pos[k, a] - pos[k, b], axis=1)
+        guess = np.where(following, (need - gap) / np.maximum(sw, 1e-300), cross_guess) * problem.sample_step
+        taken = set()
+        boxes = _Boxes.of(pos, max(1, int(round(fps / problem.sample_step))))
+        order = np.argsort(found.first, kind="stable")
+        for m in order[ok[order]]:
+            w, o = int(who[m]), int(other[m])
+            # A pair tried before, neither of which has waited since, fails again.
+            if w in taken or budget - delay[w] < step or tried.get((w, o)) == (delay[w], delay[o]):
+                continue
+            tried[(w, o)] = (delay[w], delay[o])
+            found_delay = _least_delay(problem, settings, paths, times[w], w, o, pos, st, boxes,
+                                       int(found.first[m]), int(found.last[m]), budget - delay[w], step,
+                                       float(guess[m]))
+            if found_delay is not None:
+                times[w], delay[w] = found_delay[0], delay[w] + found_delay[1]
+                taken.add(w)
+        if not taken:
+            break
+        for w in taken:   # only the agents that waited move in the sampling
+            sampling.frames[:, w] = collisions.frames_at(times[w], st)
+            sampling.positions[:, w] = collisions.positions_at(paths[w], sampling.frames[:, w])
     return out

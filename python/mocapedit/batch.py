@@ -19,6 +19,7 @@ import os
 import time
 from dataclasses import asdict, dataclass, field
 
+from . import outputs
 from .errors import MocapEditError
 
 #: Seconds to wait for a scheduler given by address before giving up.
@@ -73,6 +74,8 @@ def plan(shots: list[str], outdir: str, suffix: str = ".edits.usdc") -> list[Job
     for job in jobs:
         if job.output in inputs:
             raise MocapEditError(f"{job.output}: the output would overwrite an input shot")
+    # Extensions and folders; each solve checks its output against every layer its shot uses.
+    outputs.check_outputs([outputs.Output(j.output, "-o/--suffix") for j in jobs])
     return jobs
 
 

@@ -72,7 +72,7 @@ def positions_at(ground_path: np.ndarray, frames: np.ndarray) -> np.ndarray:
 
 
 def sample(agents: list[str], frame_times: dict[str, np.ndarray], paths: dict[str, np.ndarray],
-           step: float) -> Sampling:
+           step: float, span: tuple[float, float] | None = None) -> Sampling:
     """Samples agents at common shot times.
 
     Args:
@@ -80,8 +80,11 @@ def sample(agents: list[str], frame_times: dict[str, np.ndarray], paths: dict[st
       frame_times: per agent, (F,) shot time at which each source frame plays.
       paths: per agent, (F,2) ground position at each source frame.
       step: time codes between samples (> 0).
+      span: (first, last) shot times to sample; default: from the earliest first frame to
+        the latest last frame.
     """
-    times = sample_times([(float(frame_times[a][0]), float(frame_times[a][-1])) for a in agents], step)
+    ranges = [(float(frame_times[a][0]), float(frame_times[a][-1])) for a in agents]
+    times = sample_times(ranges if span is None else [span], step)
     frames = np.empty((len(times), len(agents)))
     positions = np.empty((len(times), len(agents), 2))
     for i, a in enumerate(agents):

@@ -693,6 +693,13 @@ SPIN_DEGREES_AT_60FPS = 15.0
 CHORD_SECONDS = 0.25
 #: Ground speed (metres per second) below which the source is said not to walk.
 WALKING_SPEED_M = 0.2
+#: The turn an edit gives a walk is measured on chords of this many seconds, centred on each
+#: frame: long enough to span a gait cycle and a rounded corner's overshoot, short enough to
+#: follow a deliberate turn.
+EDIT_TURN_SECONDS = 2.0
+#: An edit that turns a walk by more than this (degrees) sends it back the way it came: half
+#: way between a right-angle turn and a full reversal.
+REVERSE_TURN_DEGREES = 135.0
 
 _FACING_NAMES = ("hips", "hip", "pelvis")
 
@@ -769,13 +776,15 @@ def spins(source_rate, edited_rate) -> np.ndarray:
 
 
 def direction_deviation(source_ground, edited_ground, seconds, min_speed: float,
-                        chord: float = CHORD_SECONDS) -> np.ndarray:
+                        chord: float = CHORD_SECONDS, turn=None) -> np.ndarray:
     """(T,) angle (degrees, 0..180) between the edited and the source walking direction.
 
     The walking direction at frame i is the chord from i to the first frame at least ``chord``
     seconds later (``seconds``: (T,) source sample times). Frames where the source chord is
     slower than ``min_speed`` (stage units per second), and frames without a full chord, are NaN:
-    the source does not walk there. Paths are ``(T, 2)`` ground points paired by frame."""
+    the source does not walk there. Paths are ``(T, 2)`` ground points paired by frame.
+    ``turn`` (T,) radians, counter-clockwise: the source direction at each chord's first frame
+    is turned by it before comparing (:func:`edit_turn` gives the turn an edit means to make)."""
     s = _points(source_ground, "source_ground", dims=(2,))
     e = _points(edited_ground, "edited_ground", dims=(2,))
     t = np.asarray(seconds, dtype=np.float64)
@@ -791,11 +800,45 @@ def direction_deviation(source_ground, edited_ground, seconds, min_speed: float,
     ds, de = s[j] - s[i], e[j] - e[i]
     speed = np.linalg.norm(ds, axis=1) / (t[j] - t[i])
     walk = speed >= min_speed
+    if turn is not None:
+        a = np.asarray(turn, dtype=np.float64)
+        if a.shape != t.shape:
+            raise ValueError(f"turn {a.shape} must pair with seconds {t.shape}")
+        c, n = np.cos(a[i]), np.sin(a[i])
+        ds = np.stack((c * ds[:, 0] - n * ds[:, 1], n * ds[:, 0] + c * ds[:, 1]), axis=1)
     cross = ds[:, 0] * de[:, 1] - ds[:, 1] * de[:, 0]
     dot = np.einsum("ij,ij->i", ds, de)
     angle = np.degrees(np.abs(np.arctan2(cross, dot)))
     out[i[walk]] = angle[walk]
     return out
+
+
+def edit_turn(source_ground, edited_ground, seconds, min_speed: float,
+              span: float = EDIT_TURN_SECONDS) -> np.ndarray:
+    """(T,) the turn (radians, counter-clockwise, unwrapped) an edit gives a walk at each frame:
+    the angle from the source's chord to the edited chord over ``span`` seconds centred on the
+    frame (cut at the clip's ends). This is the turn the artist asks for (a group turned round a
+    corner turns by 90 degrees); a walk that goes back against it over a short chord
+    (:func:`direction_deviation` with ``turn``) hooks, zig-zags or loops. Where the source does
+    not walk over the span (slower than ``min_speed``) the turn is interpolated from the frames
+    around it where it does (held at the ends); 0 everywhere when it never does. Paths ``(T, 2)``, paired by frame."""
+    s = _points(source_ground, "source_ground", dims=(2,))
+    e = _points(edited_ground, "edited_ground", dims=(2,))
+    t = np.asarray(seconds, dtype=np.float64)
+    if s.shape != e.shape or t.shape != (len(s),):
+        raise ValueError(f"source {s.shape}, edited {e.shape} and seconds {t.shape} must pair by frame")
+    if len(s) < 2:
+        return np.zeros(len(s))
+    a = np.searchsorted(t, t - 0.5 * span, side="left")
+    b = np.minimum(np.searchsorted(t, t + 0.5 * span, side="right") - 1, len(s) - 1)
+    ds, de = s[b] - s[a], e[b] - e[a]
+    dt = np.maximum(t[b] - t[a], 1e-12)
+    walk = (b > a) & (np.linalg.norm(ds, axis=1) / dt >= min_speed) & (np.linalg.norm(de, axis=1) > 0)
+    if not walk.any():
+        return np.zeros(len(s))
+    angle = np.unwrap(np.arctan2(ds[walk, 0] * de[walk, 1] - ds[walk, 1] * de[walk, 0],
+                                 np.einsum("ij,ij->i", ds[walk], de[walk])))
+    return np.interp(np.arange(len(s)), np.flatnonzero(walk), angle)
 
 
 @dataclass(frozen=True)
@@ -807,7 +850,12 @@ class Plausibility:
     ``max_extra_facing_rate`` the largest excess of the edited rate over the source's at the same
     frame (divide by 60 for degrees per frame at 60 fps); ``spin_frames`` how many frames spin
     (:func:`spins`). ``max_direction_deviation``: degrees (:func:`direction_deviation`; NaN when
-    the source never walks). ``length_ratio``: edited over source ground path of the facing joint.
+    the source never walks): against the source's direction as it is, so a group turned 90 degrees
+    on purpose measures 90. ``max_turned_deviation``: degrees, against the source's direction
+    turned by the edit's own turn (:func:`edit_turn`): a hook, zig-zag or small loop that walks
+    back against where the edit sends the agent. ``max_edit_turn``: degrees, the largest turn the
+    edit gives the walk (:func:`edit_turn`; a walk sent back turns by 180, a loop past it).
+    ``length_ratio``: edited over source ground path of the facing joint.
     ``time_warp``: smallest and largest shot time per source time (from the time map when the
     caller gives ``edited_frames``, else the ratio of edited to source sample intervals). ``foot_skate_source``
     and ``foot_skate_edited``: mean foot speed in contact (stage units per second, over the
@@ -827,6 +875,8 @@ class Plausibility:
     foot_skate_ratio: float
     worst_turn_frame: int = -1        # edited sample where the extra turn is largest (interval start)
     worst_direction_frame: int = -1   # edited sample where the direction deviates most (-1: none)
+    max_turned_deviation: float = float("nan")
+    max_edit_turn: float = 0.0
 
     @property
     def spins(self) -> bool:
@@ -834,8 +884,12 @@ class Plausibility:
 
     @property
     def reverses(self) -> bool:
-        """Walks more than 90 degrees away from its source direction somewhere."""
-        return bool(self.max_direction_deviation > 90.0)
+        """Walks back: more than 90 degrees away from its source direction as the edit turns it
+        (``max_turned_deviation``: a hook, a zig-zag), or turned by the edit nearer to the way
+        it came than to a right angle (``max_edit_turn`` over ``REVERSE_TURN_DEGREES``: sent
+        back, or a loop). A deliberate turn of 90 degrees, the overshoot of its rounded corner
+        included, is not a reversal."""
+        return bool(self.max_turned_deviation > 90.0 or self.max_edit_turn > REVERSE_TURN_DEGREES)
 
 
 def _resample(values: np.ndarray, at: np.ndarray) -> np.ndarray:
@@ -899,18 +953,22 @@ def plausibility_of(agent: str, source_seconds, source_hip, edited_seconds, edit
         turn_frame = int(np.argmax(rate_e - rate_s))
         extra = float(rate_e[turn_frame] - rate_s[turn_frame])
         spin = int(np.count_nonzero(spins(rate_s, rate_e)))
-        if np.all(np.diff(ss_at) > 0):
-            dev = direction_deviation(gs_at, ge, ss_at, WALKING_SPEED_M / meters_per_unit)
-        else:   # held ends of a warped clip: measure on the frames that advance
-            keep = np.r_[True, np.diff(ss_at) > 0]
-            dev = np.full(len(ge), np.nan)
-            dev[keep] = direction_deviation(gs_at[keep], ge[keep], ss_at[keep], WALKING_SPEED_M / meters_per_unit)
+        # Held ends of a warped clip: measure on the frames that advance.
+        keep = np.r_[True, np.diff(ss_at) > 0]
+        walking = WALKING_SPEED_M / meters_per_unit
+        dev, turned = np.full(len(ge), np.nan), np.full(len(ge), np.nan)
+        turn = edit_turn(gs_at[keep], ge[keep], ss_at[keep], walking)
+        dev[keep] = direction_deviation(gs_at[keep], ge[keep], ss_at[keep], walking)
+        turned[keep] = direction_deviation(gs_at[keep], ge[keep], ss_at[keep], walking, turn=turn)
         dev_frame = int(np.nanargmax(dev)) if np.isfinite(dev).any() else -1
         max_dev = float(dev[dev_frame]) if dev_frame >= 0 else float("nan")
+        max_turned = float(np.nanmax(turned)) if np.isfinite(turned).any() else float("nan")
+        max_turn = float(np.degrees(np.abs(turn).max(initial=0.0)))
         rates = (float(rate_e.max()), float(rate_s.max()))
         warp_range = (float(warp.min()), float(warp.max()))
     else:
         rates, extra, spin, max_dev, warp_range = (0.0, 0.0), 0.0, 0, float("nan"), (1.0, 1.0)
+        max_turned, max_turn = float("nan"), 0.0
         turn_frame, dev_frame = -1, -1
     return Plausibility(agent=str(agent), max_facing_rate=rates[0], source_max_facing_rate=rates[1],
                         max_extra_facing_rate=extra, spin_frames=spin, max_direction_deviation=max_dev,
@@ -918,7 +976,8 @@ def plausibility_of(agent: str, source_seconds, source_hip, edited_seconds, edit
                         time_warp=warp_range, foot_skate_source=float(foot_skate_source),
                         foot_skate_edited=float(foot_skate_edited),
                         foot_skate_ratio=_ratio(float(foot_skate_edited), float(foot_skate_source)),
-                        worst_turn_frame=turn_frame, worst_direction_frame=dev_frame)
+                        worst_turn_frame=turn_frame, worst_direction_frame=dev_frame,
+                        max_turned_deviation=max_turned, max_edit_turn=max_turn)
 
 
 def plausibility(source_stage: Usd.Stage, edited_stage: Usd.Stage, agent_path: PathLike,
@@ -946,7 +1005,10 @@ def shot_plausibility(source_stage: Usd.Stage, edited_stage: Usd.Stage,
 def worst_plausibility(figures: Sequence[Plausibility]) -> dict:
     """The shot's worst figures over agents' :class:`Plausibility`: the largest extra facing rate
     (degrees per second, and per frame at 60 fps) and its agent, how many agents spin, the largest
-    direction deviation and its agent, how many agents reverse (over 90 degrees), the mean and
+    direction deviation and its agent, the largest deviation from the direction the edit turns the
+    walk to (``maxTurnedDirectionDeviation``) and its agent, the largest turn an edit gives a walk
+    (``maxEditTurn``), how many agents reverse
+    (:attr:`Plausibility.reverses`), the mean and
     extreme path length ratios, the time-warp range, and the mean and largest foot skate ratio."""
     figs = list(figures)
     if not figs:
@@ -954,6 +1016,8 @@ def worst_plausibility(figures: Sequence[Plausibility]) -> dict:
     extra = max(figs, key=lambda f: f.max_extra_facing_rate)
     devs = [f for f in figs if np.isfinite(f.max_direction_deviation)]
     dev = max(devs, key=lambda f: f.max_direction_deviation) if devs else None
+    turned = [f for f in figs if np.isfinite(f.max_turned_deviation)]
+    back = max(turned, key=lambda f: f.max_turned_deviation) if turned else None
     lengths = np.array([f.length_ratio for f in figs])
     skates = np.array([f.foot_skate_ratio for f in figs])
     skates = skates[np.isfinite(skates)]
@@ -965,6 +1029,9 @@ def worst_plausibility(figures: Sequence[Plausibility]) -> dict:
         "spinningAgents": sum(f.spins for f in figs),
         "maxDirectionDeviation": dev.max_direction_deviation if dev else float("nan"),
         "maxDirectionDeviationAgent": dev.agent if dev else None,
+        "maxTurnedDirectionDeviation": back.max_turned_deviation if back else float("nan"),
+        "maxTurnedDirectionDeviationAgent": back.agent if back else None,
+        "maxEditTurn": max(f.max_edit_turn for f in figs),
         "reversingAgents": sum(f.reverses for f in figs),
         "meanLengthRatio": float(lengths.mean()),
         "lengthRatioRange": (float(lengths.min()), float(lengths.max())),

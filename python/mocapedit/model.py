@@ -189,6 +189,7 @@ class SolveSettings:
     match_speed: bool = False
     collision_strategy: str = "relinearize"
     min_time_interval: float = 0.1
+    max_wait: float = 3.0             # seconds collision avoidance may delay one agent
     foot_locking: bool = True
 
 

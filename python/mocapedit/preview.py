@@ -168,8 +168,8 @@ def implausible_marks(report: Report | None, crowd: Crowd) -> list[tuple[str, np
         agent = crowd.agents[index[path]]
         if p.get("spinFrames", 0) > 0:
             out.append(("spin", _edited_at_frame(agent, p.get("worstTurnFrame", 0)), path))
-        deviation = p.get("maxDirectionDeviation")
-        if deviation is not None and np.isfinite(deviation) and deviation > 90.0:
+        deviation = p.get("maxDirectionDeviation")   # reports written before "reverses" was
+        if p.get("reverses", deviation is not None and np.isfinite(deviation) and deviation > 90.0):
             out.append(("reverse", _edited_at_frame(agent, p.get("worstDirectionFrame", 0)), path))
     return out
 
@@ -607,7 +607,7 @@ def write_png(scene: Scene, path: str, resolution=None, bounds: np.ndarray | Non
                             color=(0.6, 0.0, 0.35), zorder=8)
 
     for kind, marker, label in (("spin", "*", "spins (over 15 deg/frame)"),
-                                ("reverse", "v", "walks back (over 90 deg)")):
+                                ("reverse", "v", "walks back against its edit")):
         marks = [g for k, g, _ in scene.implausible if k == kind]
         if marks:
             pts = plan(np.array(marks), up)

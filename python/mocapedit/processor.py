@@ -101,17 +101,38 @@ def extract_trajectories(ctx: SolveContext) -> None:
     task.done()
 
 
-def output_frames(ctx: SolveContext, path: str) -> tuple[np.ndarray, np.ndarray]:
-    """(stage times to author, fractional source frame at each) for one agent."""
+def retimed_spec(ctx: SolveContext, path: str) -> tuple[str, str] | None:
+    """(clip layer, prim path) when the agent's only change of pose is its timing and its clip
+    can be re-timed by a value clip (one spec's samples, in a layer on disk); None when it is
+    baked instead (layered, ``bake_timing``, a clip split over specs or only in memory)."""
+    if ctx.options.bake_timing or path not in ctx.time_maps or path in ctx.pose_edits:
+        return None
+    if any(path in layer.agents for layer in ctx.data.layers):
+        return None
+    clip = ctx.data.clip_of(ctx.data.agents[path])
+    spec = clip.sample_spec
+    if spec is None or clip.spec_times is None or Sdf.Layer.IsAnonymousLayerIdentifier(spec[0]):
+        return None
+    return spec
+
+
+def output_frames(ctx: SolveContext, path: str, baked: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(stage times to author, fractional source frame at each) for one agent.
+
+    ``baked``: the times its animation has when baked, even if it is re-timed by a value clip
+    now (a pass that is about to give it a pose edit, which bakes it, asks for these)."""
     agent = ctx.data.agents[path]
     frames = np.arange(agent.frame_count, dtype=np.float64)
     time_map = ctx.time_maps.get(path)
     if time_map is None:
         times = ctx.out_times.get(path, agent.sample_times)
         return times, np.interp(times, agent.sample_times, frames)
+    if not baked and retimed_spec(ctx, path):
+        # A re-timed clip plays each source frame at its time on the map: those are its samples.
+        return np.asarray(time_map, dtype=np.float64), frames
     times = ctx.out_times.get(path)
     if times is None:
-        # A warped clip is authored on the shot's whole frames.
+        # A baked warped clip is authored on the shot's whole frames.
         times = np.arange(np.ceil(time_map[0] - 1e-9), np.floor(time_map[-1] + 1e-9) + 1.0)
     return times, np.interp(times, time_map, frames)
 
@@ -130,9 +151,8 @@ def compose_edits(ctx: SolveContext) -> None:
         times, frames = output_frames(ctx, path)
         edit = writer.AgentEdit()
         clip = ctx.data.clip_of(agent)
-        spec = clip.sample_spec if path not in ctx.pose_edits and not ctx.options.bake_timing else None
-        if (path in ctx.time_maps and spec and clip.spec_times is not None
-                and not Sdf.Layer.IsAnonymousLayerIdentifier(spec[0])):
+        spec = retimed_spec(ctx, path)
+        if spec:
             # Only the timing changed: the source clip plays on the time map, nothing is baked.
             edit.retimed = writer.RetimedClip(layer=spec[0], prim_path=spec[1], joints=list(clip.joints),
                                               stage_times=ctx.time_maps[path], clip_times=clip.spec_times)
@@ -202,6 +222,9 @@ def measure_plausibility(ctx: SolveContext) -> None:
             mask = before.contact if len(times) == len(agent.sample_times) else None
             skate = [before.mean, metrics.foot_skate_of_positions(edited[:, 1:, 3, :3], times, *units,
                                                                   contact=mask).mean]
+        locked = ctx.report.agents.get(path, {})
+        if "footSkateUnlocked" in locked:  # foot locking measured the legs as the layer plays them
+            skate = [locked["footSkateSource"], locked["footSkateEdited"]]
         p = metrics.plausibility_of(path, agent.sample_times * seconds, source[:, 0], times * seconds, edited[:, 0],
                                     up, info.meters_per_unit, *skate, edited_frames=frames)
         figures.append(p)
@@ -213,7 +236,9 @@ def measure_plausibility(ctx: SolveContext) -> None:
         entry["plausibility"] = {
             "maxFacingRate": p.max_facing_rate, "sourceMaxFacingRate": p.source_max_facing_rate,
             "maxExtraFacingRate": p.max_extra_facing_rate, "spinFrames": p.spin_frames,
-            "maxDirectionDeviation": p.max_direction_deviation, "lengthRatio": p.length_ratio,
+            "maxDirectionDeviation": p.max_direction_deviation,
+            "maxTurnedDirectionDeviation": p.max_turned_deviation, "maxEditTurn": p.max_edit_turn,
+            "reverses": p.reverses, "lengthRatio": p.length_ratio,
             "timeWarp": list(p.time_warp), "footSkateRatio": p.foot_skate_ratio,
             # Source frames where the largest extra turn and direction change happen (previews mark them).
             "worstTurnFrame": int(round(frames[max(p.worst_turn_frame, 0)])),
@@ -370,6 +395,10 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
         info=data.info, agents=data.agents, edits=ctx.edits, guides=ctx.guides,
         provenance=provenance, stats=report.stats, report=report.to_layer_dict(),
         anchor=os.path.dirname(os.path.abspath(output)) if output else None))
+    # The layer holds the edits now: their arrays (10,000 moved agents: 250 MB of transforms)
+    # go before USD's exporter allocates its own buffers.
+    for part in (ctx.edits, ctx.guides, ctx.paths, ctx.time_maps, ctx.pose_edits, ctx.trajectories):
+        part.clear()
     if output:
         timings["write"] = time.perf_counter() - t
         timings["total"] = time.perf_counter() - t0

@@ -679,6 +679,10 @@ class StageReader:
         s.match_speed = bool(_get(prim, "matchSpeed", s.match_speed))
         s.collision_strategy = str(_get(prim, "collisionStrategy", s.collision_strategy))
         s.min_time_interval = float(_get(prim, "minTimeInterval", s.min_time_interval))
+        s.max_wait = float(_get(prim, "maxWait", s.max_wait))
+        if not (np.isfinite(s.max_wait) and s.max_wait >= 0):
+            raise prim_error(prim.GetPath(), f"must be a finite number of seconds, 0 or more, got {s.max_wait:g}",
+                             "maxWait")
         s.foot_locking = bool(_get(prim, "footLocking", s.foot_locking))
         if s.max_iterations < 0:
             raise prim_error(prim.GetPath(), "must not be negative", "maxIterations")

@@ -90,8 +90,8 @@ def foot_locking_lines(stats: dict) -> list[str]:
     if "footContactsLocked" not in stats:
         return []
     return [f"feet: {stats['footContactsLocked']} contacts locked on {stats.get('footLockedAgents', 0)} agents; "
-            f"skate {_num(stats.get('footSkateSource'))} source, {_num(stats.get('footSkateEdited'))} edited, "
-            f"{_num(stats.get('footSkateLocked'))} locked (stage units/s, mean over agents); "
+            f"skate {_num(stats.get('footSkateSource'))} source, {_num(stats.get('footSkateUnlocked'))} after the "
+            f"edits, {_num(stats.get('footSkateEdited'))} locked (stage units/s, mean over agents); "
             f"largest pelvis drop {_num(stats.get('maxPelvisDrop'))}, "
             f"largest foot correction {_num(stats.get('maxFootCorrection'))}"]
 
@@ -107,7 +107,11 @@ def plausibility_lines(p: dict | None) -> list[str]:
         f"deg/frame at 60 fps ({p['maxExtraFacingRateAgent']}), {p['spinningAgents']} spinning (over 15)",
         f"  largest walking direction change {p['maxDirectionDeviation']:.1f} deg"
         + (f" ({p['maxDirectionDeviationAgent']})" if p.get("maxDirectionDeviationAgent") else "")
-        + f", {p['reversingAgents']} reversing (over 90)",
+        + (f", {p['maxTurnedDirectionDeviation']:.1f} deg against the edit's own turn"
+           + (f" ({p['maxTurnedDirectionDeviationAgent']})" if p.get("maxTurnedDirectionDeviationAgent") else "")
+           if "maxTurnedDirectionDeviation" in p else "")
+        + f", {p['reversingAgents']} reversing"
+        + (" (over 90 against the edit's turn, or turned over 135)" if "maxEditTurn" in p else " (over 90)"),
         f"  path length ratio mean {p['meanLengthRatio']:.3f} ({lo:.3f}..{hi:.3f}); time warp {wlo:.3f}..{whi:.3f}; "
         f"foot skate ratio mean {p['meanFootSkateRatio']:.2f} (max {p['maxFootSkateRatio']:.2f})"]
 
@@ -210,7 +214,7 @@ def select(stored: StoredReport, patterns: list[str] | None = None) -> StoredRep
 _UNIT_NAMES = {1.0: "m", 0.01: "cm", 0.001: "mm", 0.1: "dm", 1000.0: "km"}
 _TIME_KINDS = ("time", "sync")
 _KNOWN_FIGURES = ("frames", "edited", "lengthRatio", "maxDisplacement", "meanDisplacement", "shapeChange",
-                  "footSkateSource", "footSkateEdited", "footSkateLocked", "footContactsLocked", "maxPelvisDrop",
+                  "footSkateSource", "footSkateEdited", "footSkateUnlocked", "footContactsLocked", "maxPelvisDrop",
                   "maxFootCorrection", "minSeparation", "minInterval", "solver", "notes",
                   "plausibility", "trajectoryJoint")
 
@@ -250,7 +254,7 @@ def format_text(stored: StoredReport, show_all: bool = False) -> str:
     others = {k: v for k, v in sorted(s.items()) if k not in (
         "agents", "editedAgents", "clips", "constraints", "groups", "avoidRegions", "animationLayers",
         "remainingOverlaps", "plausibility", "footContactsLocked", "footLockedAgents", "footSkateSource",
-        "footSkateEdited", "footSkateLocked", "maxPelvisDrop", "maxFootCorrection")}
+        "footSkateEdited", "footSkateUnlocked", "maxPelvisDrop", "maxFootCorrection")}
     lines.extend(plausibility_lines(s.get("plausibility")))
     lines.extend(foot_locking_lines(s))
     if others:
@@ -286,7 +290,7 @@ def format_text(stored: StoredReport, show_all: bool = False) -> str:
         if "footSkateSource" in fig or "footSkateEdited" in fig:
             a, b = fig.get("footSkateSource"), fig.get("footSkateEdited")
             change = f" ({'+' if b - a >= 0 else ''}{_num(b - a)})" if a is not None and b is not None else ""
-            locked = f" -> locked {_num(fig['footSkateLocked'])}" if "footSkateLocked" in fig else ""
+            locked = f" (before locking {_num(fig['footSkateUnlocked'])})" if "footSkateUnlocked" in fig else ""
             parts.append(f"foot skate {_num(a)} -> {_num(b)}{change}{locked}")
         if "footContactsLocked" in fig:
             parts.append(f"contacts locked {fig['footContactsLocked']}, pelvis drop {_num(fig.get('maxPelvisDrop'))}, "

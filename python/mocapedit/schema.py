@@ -507,6 +507,7 @@ class SolveSettings(_Typed):
     GetMatchSpeedAttr, CreateMatchSpeedAttr = _attribute("matchSpeed")
     GetCollisionStrategyAttr, CreateCollisionStrategyAttr = _attribute("collisionStrategy")
     GetMinTimeIntervalAttr, CreateMinTimeIntervalAttr = _attribute("minTimeInterval")
+    GetMaxWaitAttr, CreateMaxWaitAttr = _attribute("maxWait")
     GetFootLockingAttr, CreateFootLockingAttr = _attribute("footLocking")
 
 

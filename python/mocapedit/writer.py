@@ -10,7 +10,8 @@ UsdSkel and UsdGeom. Layout:
   speed matching) gets a SkelAnimation under ``/MocapEdit/Animations`` that references its
   source clip and re-times it with USD value clips (``clips:times`` maps shot time to the
   clip's own time, ``clips:active`` plays the one clip): nothing is baked, the layer grows
-  by one time pair per source frame;
+  by one time pair per source frame (an edit op of such an agent is sampled at the same
+  shot times);
 - an agent whose poses changed (layering) gets a baked SkelAnimation there instead;
   either is bound to its skeleton with ``skel:animationSource``, and agents whose
   animations are identical share one;

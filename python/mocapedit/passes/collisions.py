@@ -10,19 +10,30 @@ are kept out of the footprint by capsule radius plus margin, through the same so
 
 What held before holds after: every hard position constraint keeps its frame where it is,
 every hard relative constraint keeps its offset, stationary ranges move rigidly. Agents
-with ``mocap:collide = false`` are left alone. Time maps are not changed.
+with ``mocap:collide = false`` are left alone. Walkers that wait (``maxWait``) get a time
+map that plays them slower before the crossing and later from there on; agents that a
+time, sync or relative constraint or a hard position constraint names keep their timing.
 
 Report: ``stats`` ``collisionStrategy``, ``collisionIterations``, ``collisionsPerIteration``
 (collision intervals found before each solve, then after the last), ``remainingOverlaps``,
-``regionFramesLeft``, ``minSeparation``; per agent ``minSeparation``; one ``collision``
-entry per overlap left (agent pair, shot time, where) and one ``avoid-region`` entry per
-agent a region had to push; notes naming agents hard constraints hold together.
+``regionFramesLeft``, ``minSeparation``, ``delayedAgents`` and ``largestDelay`` (seconds),
+``collisionStalled`` (when the iterations stopped making progress before
+``maxIterations``); per agent ``minSeparation`` and ``delay`` (seconds it waited); one
+``collision`` entry per overlap left (agent pair, shot time, where) and one
+``avoid-region`` entry per agent a region had to push; notes naming agents hard
+constraints hold together (once per hard relative constraint that holds two agents
+closer than their clearance, naming it).
+
+Bad input: a capsule radius above :data:`MAX_RADIUS_M` (no character is that wide; a
+typing slip in it would push the whole crowd kilometres) is an error naming the agent
+and ``mocap:collisionRadius``; so is a hard constraint that holds an agent inside an avoid
+region it must keep out of (the error names both prims).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .. import avoidance, collisions, ground, writer
+from .. import avoidance, collisions, ground, retime, writer
 from ..errors import prim_error
 from ..processor import EditedPath, SolveContext, register_pass
 from ..report import describe_left
@@ -33,6 +44,8 @@ SEPARATION_REACH_M = 2.0
 #: Sides of the outline drawn for a circular region.
 OUTLINE_SIDES = 64
 REGION_COLOR = (0.9, 0.35, 0.1)
+#: Largest capsule radius (metres) collision avoidance accepts.
+MAX_RADIUS_M = 10.0
 
 
 def _settings(ctx: SolveContext):
@@ -59,14 +72,42 @@ def collision_pass(ctx: SolveContext) -> None:
     names = [p for p in sorted(data.agents) if data.agents[p].collide]
     if len(names) < (2 if not footprints else 1):
         return
+    _check_radii(ctx, names)
     problem = _problem(ctx, names, footprints, enabled)
+    _check_pins_outside_regions(ctx, problem)
     outcome = avoidance.resolve(problem, avoidance.Settings(
         strategy=settings.collision_strategy, max_iterations=int(settings.max_iterations),
-        meters_per_unit=info.meters_per_unit), ctx.progress)
+        meters_per_unit=info.meters_per_unit, max_wait_s=float(settings.max_wait),
+        time_codes_per_second=float(info.time_codes_per_second)), ctx.progress)
     _apply(ctx, problem, outcome)
     _report(ctx, problem, outcome, enabled)
     if ctx.options.guides and data.avoid_regions:
         _region_guides(ctx, footprints)
+
+
+def _check_radii(ctx: SolveContext, names: list[str]) -> None:
+    largest = ctx.data.info.metres(MAX_RADIUS_M)
+    for name in names:
+        radius = ctx.data.agents[name].collision_radius
+        if radius > largest:
+            raise prim_error(name, f"collision radius {radius:g} is more than {MAX_RADIUS_M:g} m "
+                             f"({largest:g} stage units): no character is that wide", "mocap:collisionRadius")
+
+
+def _check_pins_outside_regions(ctx: SolveContext, problem: avoidance.Problem) -> None:
+    """A hard constraint holding an agent inside a region it must avoid contradicts the region."""
+    for region in problem.regions:
+        for pin in problem.pins:
+            at = np.searchsorted(region.agents, pin.agent)
+            if pin.softness != 0 or at >= len(region.agents) or region.agents[at] != pin.agent:
+                continue
+            clearance = region.clearance[at]
+            depth = clearance - float(collisions.signed_distance(region.footprint, pin.position[None])[0])
+            if depth > 1e-6 * max(clearance, 1.0):
+                raise prim_error(pin.name, f"holds agent <{problem.names[pin.agent]}> at frame {pin.frame} "
+                                 f"{depth:g} stage units inside avoid region <{region.name}> (its footprint grown "
+                                 "by the agent's collision radius and the region's margin); move the constraint "
+                                 "or the region, or make one of them soft or inactive")
 
 
 def _problem(ctx: SolveContext, names: list[str], footprints, enabled: bool) -> avoidance.Problem:
@@ -78,10 +119,17 @@ def _problem(ctx: SolveContext, names: list[str], footprints, enabled: bool) -> 
         paths.append(np.array(edited.ground if edited is not None else ctx.trajectories[p].ground, dtype=np.float64))
         times.append(np.asarray(ctx.time_maps.get(p, data.agents[p].sample_times), dtype=np.float64))
     agents = [data.agents[p] for p in names]
+    # Constraints fix the timing of the agents they name: a time or sync constraint states
+    # it, a relative constraint meets another agent at a moment, a position constraint marks
+    # where the agent is at a moment of the shot.
+    timed = {c.agent for c in data.time_constraints} | {a for c in data.sync_constraints for a in (c.agent, c.target)}
+    timed |= {a for c in data.relative_constraints for a in (c.agent, c.target)}
+    timed |= {c.agent for c in data.position_constraints if c.hard}
     problem = avoidance.Problem(
         names=names, paths=paths, frame_times=times,
         radius=np.array([a.collision_radius for a in agents]), height=np.array([a.collision_height for a in agents]),
-        margin=float(data.settings.margin), sample_step=float(data.settings.sample_step), collide_agents=enabled)
+        margin=float(data.settings.margin), sample_step=float(data.settings.sample_step), collide_agents=enabled,
+        fixed_timing=np.array([p in timed for p in names], dtype=bool))
     for i, a in enumerate(agents):
         problem.rigid.extend((i, first, last) for _, first, last in a.stationary)
     # What the artist fixed stays where it is now.
@@ -113,6 +161,11 @@ def _problem(ctx: SolveContext, names: list[str], footprints, enabled: bool) -> 
 
 def _apply(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Outcome) -> None:
     still = 1e-5 / ctx.data.info.meters_per_unit
+    for i in np.flatnonzero(outcome.delays > 0):
+        name = problem.names[i]
+        ctx.time_maps[name] = outcome.frame_times[i]
+        if name in ctx.out_times:
+            ctx.out_times[name] = retime.shot_times(outcome.frame_times[i])
     for i, name in enumerate(problem.names):
         if not outcome.moved[i]:
             continue
@@ -149,6 +202,13 @@ def _report(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Ou
                 report.agent(name)["minSeparation"] = float(c)
         if np.isfinite(clearance).any():
             stats["minSeparation"] = float(np.min(clearance))
+    fps = data.info.time_codes_per_second
+    delayed = np.flatnonzero(outcome.delays > 0)
+    if enabled and data.settings.max_wait > 0:
+        stats["delayedAgents"] = int(len(delayed))
+        stats["largestDelay"] = float(outcome.delays.max(initial=0.0) / fps)
+    for i in delayed:
+        report.agent(names[i])["delay"] = float(outcome.delays[i] / fps)
     times = outcome.sampling.times
     blocked = {(a, b) for a, b, _ in outcome.blocked}
     left = outcome.remaining
@@ -160,7 +220,15 @@ def _report(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Ou
             "time": float(times[k]), "hard": False, "residual": float(depth), "met": False,
             "heldByConstraints": (int(a), int(b)) in blocked,
             "position": _world(ctx, 0.5 * (pa + pb)).tolist()})
+    by_link = {(a, b): (t0, t1) for _, a, b, t0, t1, _ in outcome.link_held}
+    for name, a, b, t0, t1, distance in outcome.link_held:
+        report.note(f"<{name}> holds agents <{names[a]}> and <{names[b]}> {distance:g} apart, closer than "
+                    f"their clearance ({problem.radius[a] + problem.radius[b] + problem.margin:g}): they are "
+                    f"not pushed apart from time {t0:g} to {t1:g}; the rest of their shot is")
     for a, b, t in outcome.blocked:
+        t0, t1 = by_link.get((min(a, b), max(a, b)), (np.inf, -np.inf))
+        if t0 <= t <= t1:
+            continue
         report.note(f"agents <{names[a]}> and <{names[b]}> cannot be separated at time {t:g}: hard "
                     "constraints hold both of them there")
     _region_entries(ctx, problem, outcome)
@@ -172,8 +240,16 @@ def _report(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Ou
                f"({problem.names and stats['collisionStrategy']})")
         report.note(f"collision avoidance: {how}")
         if len(left) and not blocked:
-            report.note(f"collision avoidance stopped at maxIterations ({data.settings.max_iterations}) with "
-                        f"{left_text}; see the collision entries")
+            why = (f"after {stats['collisionIterations']} iterations without progress "
+                   "(constraints that cannot all hold)" if outcome.stalled
+                   else f"at maxIterations ({data.settings.max_iterations})")
+            report.note(f"collision avoidance stopped {why} with {left_text}; see the collision entries")
+    if outcome.stalled:
+        stats["collisionStalled"] = True
+        if outcome.region_left:
+            report.note(f"avoid regions: {len(outcome.region_left)} frames left inside after "
+                        f"{stats['collisionIterations']} iterations without progress (constraints that cannot "
+                        "all hold); see the avoid-region entries")
 
 
 def _region_entries(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Outcome) -> None:

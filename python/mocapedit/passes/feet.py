@@ -10,8 +10,9 @@ solver's foot-locking job (:mod:`mocapedit.footlock`) moves the legs of all agen
 rotations (and the skeleton root's translation where the pelvis is lowered), so the writer
 bakes their animation.
 
-The report gets, per agent, the foot skate (mean ground speed of the ankles during
-contacts, stage units per second) of the source, after the edits and after locking, the
+The report gets, per agent, the foot skate (as :func:`mocapedit.metrics.foot_skate` measures
+it, stage units per second) of the source (``footSkateSource``), after the edits alone
+(``footSkateUnlocked``) and as the edits layer plays it, locked (``footSkateEdited``); the
 contacts locked, the largest pelvis drop and the largest IK correction (stage units).
 """
 from __future__ import annotations
@@ -141,15 +142,14 @@ def _ramp(frames: np.ndarray, first: int, last: int, blend: float) -> np.ndarray
 class _AgentLock:
     """One agent's side of the job: what it needs, and what it gets back."""
 
-    def __init__(self, ctx: processor.SolveContext, path: str, source_contacts: list, source_skate: float,
-                 shared: dict):
+    def __init__(self, ctx: processor.SolveContext, path: str, source_contacts: list, shared: dict):
         data = ctx.data
-        self.source_skate = source_skate
         info = data.info
         self.path = path
         agent = self.agent = data.agents[path]
         self.legs = agent.legs
-        self.times, self.frames = processor.output_frames(ctx, path)
+        # Locked legs are a pose edit, and a pose edit bakes the animation: lock on its frames.
+        self.times, self.frames = processor.output_frames(ctx, path, baked=True)
         self.root = _top(agent, self.legs[0].hip)
         pose, skel_pos, skel_rot = _posed_legs(ctx, path, self.frames, self.times, shared)
         self.pose = pose
@@ -174,6 +174,7 @@ class _AgentLock:
                 animation.interp_frames(traj.ground, self.frames), src_h,
                 animation.interp_frames(edited.ground, self.frames), new_h, info.up_axis)
             turn = new_h - src_h
+        self.motion = motion
         turn_q = _yaw_quat(turn, up_vector)
         world_q = trs_from_matrices(to_world)[1].astype(np.float64)        # (1 or T, 4)
         # World, before the ground motion (the posed source) and as edited.
@@ -329,15 +330,36 @@ def _source(ctx, agent: Agent, cache: dict) -> tuple[list[list[tuple[int, int]]]
             found = [[(a, b) for _, ankle, a, b in agent.foot_contacts if ankle == leg.ankle] for leg in agent.legs]
         else:
             found = contacts.detect_agent(agent, clip, info)
-        ankles = np.stack([trajectory.joint_world(agent, clip, leg.ankle)[:, 3, :3] for leg in agent.legs], 1)
-        mask = np.stack([contacts.mask_of(r, agent.frame_count) for r in found], 1)
-        hit = cache[key] = (found, _skate(ankles, mask, agent.sample_times, info))
+        hit = cache[key] = found
     return hit
 
 
-def _skate(positions, contact, times, info) -> float:
-    return metrics.foot_skate_of_positions(positions, times, info.up_axis, info.meters_per_unit,
-                                           info.time_codes_per_second, contact=contact).mean
+def _report_skate(ctx, lock: "_AgentLock", locked_pose, chains: dict) -> tuple[float, float, float] | None:
+    """(source, after the edits, after locking) foot skate of a locked agent, stage units per
+    second, as :func:`mocapedit.metrics.foot_skate` measures it on the input and on the composed
+    stage: joints named like feet, over the source's planted frames (a retimed agent: over its own).
+    None for a skeleton without such joints."""
+    agent, info = lock.agent, ctx.data.info
+    feet = metrics.default_foot_joints(agent.joints)
+    if not feet:
+        return None
+    units = (info.up_axis, info.meters_per_unit, info.time_codes_per_second)
+    clip = ctx.data.clip_of(agent)
+    source = np.stack([trajectory.joint_world(agent, clip, f, chains)[:, 3, :3] for f in feet], axis=1)
+    before = metrics.foot_skate_of_positions(source, agent.sample_times, *units)
+    same = len(lock.times) == agent.frame_count and np.allclose(lock.times, agent.sample_times)
+    count = len(lock.times)
+    place = np.broadcast_to(lock.to_world, (count, 4, 4)) @ lock.motion
+
+    def skate(pose):
+        skel = _skel_space(agent, pose, feet)
+        world = np.stack([np.einsum("ti,tij->tj", skel[f][:, 3, :3], place[:, :3, :3]) + place[:, 3, :3]
+                          for f in feet], axis=1)
+        return metrics.foot_skate_of_positions(world, lock.times, *units,
+                                               contact=before.contact if same else None).mean
+
+    unlocked = skate(lock.pose)
+    return before.mean, unlocked, skate(locked_pose) if locked_pose is not None else unlocked
 
 
 def foot_locking_pass(ctx: processor.SolveContext) -> None:
@@ -359,8 +381,7 @@ def foot_locking_pass(ctx: processor.SolveContext) -> None:
             entry.setdefault("notes", []).append(
                 "foot locking skipped: legs not found by name; set mocap:leftLegJoints and mocap:rightLegJoints")
         else:
-            found, skate = _source(ctx, agent, cache)
-            lock = _AgentLock(ctx, path, found, skate, shared)
+            lock = _AgentLock(ctx, path, _source(ctx, agent, cache), shared)
             why = lock.writable()
             if why:
                 entry.setdefault("notes", []).append(f"foot locking skipped: {why}")
@@ -379,14 +400,16 @@ def foot_locking_pass(ctx: processor.SolveContext) -> None:
         up=up, **{k: np.concatenate([p[k] for p in parts]) for k in parts[0]})
     out = footlock.lock_feet(inputs)
     changed = contacts_locked = 0
+    chains: dict = {}
+    skates = []
     for lock, lo, hi in zip(locks, offsets[:-1], offsets[1:]):
         locked_pose = lock.apply(out, int(lo), int(hi), up, info.meters_per_unit)
         entry = ctx.report.agent(lock.path)
-        edited = _skate(lock.ankle, lock.contact, lock.times, info)
-        after = _skate(lock.reached, lock.contact, lock.times, info) if locked_pose is not None else edited
-        entry["footSkateSource"] = lock.source_skate
-        entry["footSkateEdited"] = edited
-        entry["footSkateLocked"] = after
+        skate = _report_skate(ctx, lock, locked_pose, chains)
+        if skate is not None and np.isfinite(skate).all():
+            # footSkateEdited is what the edits layer plays; footSkateUnlocked, the edits alone.
+            entry["footSkateSource"], entry["footSkateUnlocked"], entry["footSkateEdited"] = skate
+            skates.append(skate)
         entry["footContactsLocked"] = lock.locked
         entry["maxPelvisDrop"] = lock.max_drop
         entry["maxFootCorrection"] = lock.max_correction
@@ -401,10 +424,8 @@ def foot_locking_pass(ctx: processor.SolveContext) -> None:
     stats["footLockedAgents"] = changed
     stats["footContactsLocked"] = contacts_locked
     # The shot's figures: mean skate over the agents with contacts, the largest corrections.
-    for key in ("footSkateSource", "footSkateEdited", "footSkateLocked"):
-        values = [ctx.report.agent(lock.path)[key] for lock in locks]
-        values = [v for v in values if np.isfinite(v)]
-        if values:
+    if skates:
+        for key, values in zip(("footSkateSource", "footSkateUnlocked", "footSkateEdited"), np.transpose(skates)):
             stats[key] = float(np.mean(values))
     stats["maxPelvisDrop"] = max(lock.max_drop for lock in locks)
     stats["maxFootCorrection"] = max(lock.max_correction for lock in locks)
