@@ -422,3 +422,28 @@ def test_a_z_up_centimetre_stage_at_60_fps_with_a_time_offset(tmp_path):
     assert bones < 1e-4 and flips == 0 and speed < 1.5          # 1e-4 cm = 1e-6 m
     entry = result.report.agents[a]
     assert entry["maxFootCorrection"] <= 8.0 + 1e-6 and entry["footContactsLocked"] >= 12
+
+
+def test_an_edit_that_keeps_the_feet_planted_is_not_locked_nor_baked(tmp_path, walk_clip):
+    """A ten-metre walk whose middle is nudged 25 cm aside moves its feet a few millimetres from
+    where they were planted, but slides them by less than 0.5 cm/s more than its source: its legs
+    are kept and no animation is baked. The same walk bent 1.5 m aside is locked."""
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", walk_clip)], up_axis="Y",
+                                       fps=FPS, clips_dir=tmp_path / "clips")
+    a = f"{CROWD}/a"
+    start, middle, end = metrics.agent_root_positions(stage, a, [0.0, 96.0, 192.0])
+    for name, frame, where in (("start", 0, start), ("middle", 96, middle + (0.25, 0.0, 0.0)), ("end", 192, end)):
+        examples.add_position_constraint(stage, f"/Edits/{name}", a, frame, tuple(map(float, where)))
+    stage.GetRootLayer().Save()
+    result, _ = _solve(tmp_path, "nudged")
+    entry = result.report.agents[a]
+    assert entry["maxFootCorrection"] > 0.002, "the nudge must be one the job would act on"
+    assert 0 < entry["footSkateUnlocked"] - entry["footSkateSource"] < 0.005
+    assert entry["footSkateEdited"] == entry["footSkateUnlocked"]
+    assert result.report.stats["footLockedAgents"] == 0 and result.report.stats["footLockingNotNeeded"] == 1
+    assert "SkelAnimation" not in result.layer.ExportToString()
+
+    _bent_path_stage(tmp_path, walk_clip)
+    result, _ = _solve(tmp_path, "bent")
+    assert result.report.stats["footLockedAgents"] == 1
+    assert "SkelAnimation" in result.layer.ExportToString()

@@ -30,6 +30,10 @@ BLEND_SECONDS = 0.1
 LEASH_M = 0.08
 #: Degrees a plant may be turned from the edited foot before it is turned along.
 LEASH_DEGREES = 15.0
+#: Agents whose feet the edits make slide by at most this much more than the source's (metres
+#: per second, the issue's quality bar) keep their legs: locking them would bake their whole
+#: animation for a change no one sees.
+SKATE_TOLERANCE_M = 0.005
 #: Agents whose ankles all stay within this of where the edit puts them, and whose pelvis
 #: drops less, keep their legs (metres): locking would move a foot by less than this over a
 #: whole contact, and leaving them saves baking their animation.
@@ -402,10 +406,16 @@ def foot_locking_pass(ctx: processor.SolveContext) -> None:
     changed = contacts_locked = 0
     chains: dict = {}
     skates = []
+    tolerance = SKATE_TOLERANCE_M / info.meters_per_unit
+    kept = 0
     for lock, lo, hi in zip(locks, offsets[:-1], offsets[1:]):
         locked_pose = lock.apply(out, int(lo), int(hi), up, info.meters_per_unit)
         entry = ctx.report.agent(lock.path)
         skate = _report_skate(ctx, lock, locked_pose, chains)
+        if locked_pose is not None and skate is not None and skate[1] <= skate[0] + tolerance:
+            # The edit left the feet as planted as the source's: keep the legs, bake nothing.
+            locked_pose, skate = None, (skate[0], skate[1], skate[1])
+            kept += 1
         if skate is not None and np.isfinite(skate).all():
             # footSkateEdited is what the edits layer plays; footSkateUnlocked, the edits alone.
             entry["footSkateSource"], entry["footSkateUnlocked"], entry["footSkateEdited"] = skate
@@ -422,6 +432,7 @@ def foot_locking_pass(ctx: processor.SolveContext) -> None:
         _plant_guides(ctx, [lock for lock in locks if lock.path in ctx.pose_edits])
     stats = ctx.report.stats
     stats["footLockedAgents"] = changed
+    stats["footLockingNotNeeded"] = kept
     stats["footContactsLocked"] = contacts_locked
     # The shot's figures: mean skate over the agents with contacts, the largest corrections.
     if skates:
