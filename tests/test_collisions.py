@@ -677,3 +677,33 @@ def test_region_footprints_follow_the_transform(tmp_path):
     np.testing.assert_allclose(d[:2], 0.0, atol=1e-9)
     assert d[2] > 0 and d[3] > 0
     assert isinstance(c, _solver.GroundRegion)
+
+
+def test_a_standing_agent_pushed_aside_does_not_spin(tmp_path):
+    """A walker crosses the spot where another stands for 4 s with a jittering root (60 fps, Z-up,
+    cm; no waiting, so the stander is pushed). The stander's body turns with the push, never by
+    the tangent of its jitter: with the tangent rule it turned 28 degrees in one frame, 14 times."""
+    spec = importlib.util.spec_from_file_location("mocapedit_stages_path", REPO / "example_stages" / "stages_path.py")
+    stages_path = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(stages_path)
+    clip, (first, last) = stages_path.long_stand_clip()
+    middle = (first + last) // 2
+    spot = clip.translations[middle, 0].astype(np.float64)
+    crosser = walker.walk(frames=600, fps=60.0, up="Z", meters_per_unit=0.01, name="crosser")
+    turn = np.radians(90.0)
+    rot = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
+    there = rot @ crosser.translations[middle, 0, :2].astype(np.float64)
+    place = (float(spot[0] - there[0] + 20.0), float(spot[1] - there[1]), 0.0)
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("stander", clip),
+                                                                 examples.AgentSpec("crosser", crosser, place, 90.0)],
+                                       up_axis="Z", meters_per_unit=0.01, fps=60.0, clips_dir=tmp_path / "clips")
+    examples.define_mocap_prim(stage, "/Edits/settings", "MocapSolveSettings", attributes={
+        "collisionAvoidance": (Sdf.ValueTypeNames.Bool, True), "maxWait": (Sdf.ValueTypeNames.Double, 0.0)})
+    stage.GetRootLayer().Save()
+    result, out = _solve(tmp_path, tmp_path / "shot.usda", foot_locking=False)
+    assert result.report.stats["remainingOverlaps"] == 0
+    stander = "/World/Crowd/stander"
+    assert result.report.agents[stander]["edited"]
+    measured = metrics.plausibility(Usd.Stage.Open(str(tmp_path / "shot.usda")), out, stander)
+    assert measured.spin_frames == 0
+    assert measured.max_extra_facing_rate < 5.0 * 60.0     # under 5 degrees per frame at 60 fps

@@ -890,47 +890,6 @@ def _link_held(state: _State) -> list[tuple[str, int, int, float, float, float]]
             for i, a, b, first, last in state.link_holds]
 
 
-def _tangents(path: np.ndarray) -> np.ndarray:
-    t = np.zeros_like(path)
-    if len(path) > 1:
-        t[1:-1] = path[2:] - path[:-2]
-        t[0] = path[1] - path[0]
-        t[-1] = path[-1] - path[-2]
-    return t
-
-
-def heading_change(before: np.ndarray, after: np.ndarray, ranges, still: float) -> np.ndarray:
-    """(F,) turn (radians, CCW) of each frame's heading when a path goes from before to after.
-
-    Where the agent walks, the turn of its path tangent; in a rigid range, the range's own
-    rotation (one that stands still turns with the frames around it); where the agent
-    stands, or a push dominates its own motion, the turn of the nearest walking frames,
-    so standing agents that are pushed slide without spinning.
-
-    Args:
-      before, after: (F,2) ground paths
-      ranges: (first, last, angle) rigid ranges and the rotation the solve gave each
-      still: tangent length (stage units) below which a frame stands
-    """
-    d0, d1 = _tangents(np.asarray(before)), _tangents(np.asarray(after))
-    n0 = np.linalg.norm(d0, axis=1)
-    valid = (n0 > still) & (np.linalg.norm(d1, axis=1) > still) & (n0 > 2.0 * np.linalg.norm(d1 - d0, axis=1))
-    turn = np.arctan2(d0[:, 0] * d1[:, 1] - d0[:, 1] * d1[:, 0], np.sum(d0 * d1, axis=1))
-    fixed = np.zeros(len(turn), bool)
-    for first, last, angle in ranges:
-        valid[first:last + 1] = False
-        if np.ptp(np.asarray(before)[first:last + 1], axis=0).max(initial=0.0) > still:
-            turn[first:last + 1] = angle
-            fixed[first:last + 1] = True
-    known = valid | fixed
-    if not known.any():
-        return np.zeros(len(turn))
-    idx = np.flatnonzero(known)
-    out = np.interp(np.arange(len(turn)), idx, turn[idx])
-    out[known] = turn[known]
-    return out
-
-
 # ---- waiting: delays through the time maps ---------------------------------------------------
 
 #: Cosine of the angle between two walkers' directions beyond which they pass head-on or

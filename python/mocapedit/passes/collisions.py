@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import avoidance, collisions, ground, retime, writer
+from .. import avoidance, collisions, ground, path_edit, retime, trajectory, writer
 from ..errors import prim_error
 from ..processor import EditedPath, SolveContext, register_pass
 from ..report import describe_left
@@ -160,7 +160,8 @@ def _problem(ctx: SolveContext, names: list[str], footprints, enabled: bool) -> 
 
 
 def _apply(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Outcome) -> None:
-    still = 1e-5 / ctx.data.info.meters_per_unit
+    info = ctx.data.info
+    window = path_edit.turn_settings(info.time_codes_per_second, info.meters_per_unit)
     for i in np.flatnonzero(outcome.delays > 0):
         name = problem.names[i]
         ctx.time_maps[name] = outcome.frame_times[i]
@@ -171,8 +172,13 @@ def _apply(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Out
             continue
         before = ctx.paths.get(name)
         heading = before.heading if before is not None else ctx.trajectories[name].heading
-        ranges = [(f, l, outcome.rigid_angles[k]) for k, (a, f, l) in enumerate(problem.rigid) if a == i]
-        turn = avoidance.heading_change(problem.paths[i], outcome.paths[i], ranges, still)
+        # The body turns by the rotation the avoidance applies to its path locally (the path
+        # editor's rule), each rigid range by its own angle: never by a tangent that the jitter
+        # of a standing root can flip.
+        ranges = [(0, f, l) for a, f, l in problem.rigid if a == i]
+        angles = [outcome.rigid_angles[k] for k, (a, _, _) in enumerate(problem.rigid) if a == i]
+        turn = trajectory.deformation_turns(problem.paths[i], outcome.paths[i], [0, len(outcome.paths[i])],
+                                            ranges, angles, window["turn_window"], window["turn_min_travel"])
         ctx.paths[name] = EditedPath(ground=outcome.paths[i], heading=np.asarray(heading) + turn)
 
 
