@@ -18,8 +18,6 @@ struct PathEditHandle {
   int handles = 0, links = 0;
 };
 
-PyObject* contradiction_type = nullptr;
-
 py::dict StepDict(const mocapedit::StepInfo& s) {
   py::dict d;
   d["solver"] = s.solver;
@@ -47,25 +45,6 @@ MOCAPEDIT_BINDINGS(BindPathEdit) {
       .def_readonly("rigid_angle", &mocapedit::PathEditResult::rigid_angle, "that motion's rotation (radians)")
       .def_property_readonly("step1", [](const mocapedit::PathEditResult& r) { return StepDict(r.step1); })
       .def_property_readonly("step2", [](const mocapedit::PathEditResult& r) { return StepDict(r.step2); });
-
-  auto cls = py::exception<mocapedit::ContradictionError>(m, "ContradictionError", PyExc_ValueError);
-  contradiction_type = cls.ptr();
-  cls.doc() =
-      "Hard constraints that cannot all hold. `constraints` lists (kind, index) of every input in the\n"
-      "cycle, kind one of 'handle', 'link', 'rigid'; `mismatch` is by how much it fails (stage units).";
-  py::register_exception_translator([](std::exception_ptr p) {
-    try {
-      if (p) std::rethrow_exception(p);
-    } catch (const mocapedit::ContradictionError& e) {
-      static const char* kinds[] = {"handle", "link", "rigid"};
-      py::list refs;
-      for (const auto& r : e.constraints) refs.append(py::make_tuple(kinds[r.kind], r.index));
-      py::object inst = py::reinterpret_borrow<py::object>(contradiction_type)(e.what());
-      inst.attr("constraints") = refs;
-      inst.attr("mismatch") = e.mismatch;
-      PyErr_SetObject(contradiction_type, inst.ptr());
-    }
-  });
 
   m.def(
       "path_edit_precompute",
@@ -96,10 +75,11 @@ MOCAPEDIT_BINDINGS(BindPathEdit) {
         p.force_qr = force_qr;
         if (vertex_times) p.vertex_times = *vertex_times;
         PathEditHandle h;
+        h.data = std::make_shared<mocapedit::PathEditData>();
         h.handles = static_cast<int>(handles.size());
         h.links = static_cast<int>(links.rows());
         py::gil_scoped_release release;
-        mocapedit::PathEditPrecompute(p, h.data);
+        mocapedit::PathEditPrecompute(p, *h.data);
         return h;
       },
       py::arg("rest"), py::arg("triangles") = mocapedit::IndexTriples(0, 3),

@@ -50,7 +50,7 @@ class SeparationSolver {
     mocapedit::SeparationResult result;
     {
       py::gil_scoped_release release;
-      mocapedit::SeparationSolve(*data_, rows, settings, *cache_, result);
+      mocapedit::SeparationSolve(data_, rows, settings, *cache_, result);
     }
     py::dict d;
     d["positions"] = result.positions;
@@ -69,11 +69,11 @@ class SeparationSolver {
     return d;
   }
 
-  int agents() const { return mocapedit::SeparationAgentCount(*data_); }
-  int vertices() const { return mocapedit::SeparationVertexCount(*data_); }
+  int agents() const { return mocapedit::SeparationAgentCount(data_); }
+  int vertices() const { return mocapedit::SeparationVertexCount(data_); }
 
  private:
-  std::shared_ptr<mocapedit::SeparationData> data_;
+  mocapedit::SeparationData data_;
   std::unique_ptr<mocapedit::SeparationCache, mocapedit::SeparationCacheDeleter> cache_;
 };
 

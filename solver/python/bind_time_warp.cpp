@@ -8,8 +8,6 @@ namespace py = pybind11;
 
 namespace {
 
-using mocapedit::TimeWarpConflict;
-
 mocapedit::TimeWarpProblem MakeProblem(std::vector<Eigen::VectorXd> rest_times, const mocapedit::FramePairs& time_frames,
                                        const mocapedit::Flags& time_hard, const Eigen::VectorXd& time_weights,
                                        const mocapedit::FrameQuads& sync_frames, const mocapedit::Flags& sync_hard,
@@ -45,29 +43,9 @@ py::dict ToDict(const mocapedit::TimeWarpResult& r) {
   return d;
 }
 
-PyObject* g_conflict = nullptr;  // the Python TimeWarpConflict type, alive as long as the module
-
 }  // namespace
 
 MOCAPEDIT_BINDINGS(BindTimeWarp) {
-  g_conflict = py::exception<TimeWarpConflict>(m, "TimeWarpConflict", PyExc_ValueError).release().ptr();
-  py::register_exception_translator([](std::exception_ptr p) {
-    try {
-      if (p) std::rethrow_exception(p);
-    } catch (const TimeWarpConflict& e) {
-      py::dict info;
-      info["kind"] = e.kind == TimeWarpConflict::Kind::kCycle ? "cycle" : "backwards";
-      info["time_constraints"] = e.time_constraints;
-      info["sync_constraints"] = e.sync_constraints;
-      info["mismatch"] = e.mismatch;
-      info["agent"] = e.agent;
-      info["frames"] = py::make_tuple(e.frame_a, e.frame_b);
-      info["gap"] = e.gap;
-      info["minimum"] = e.minimum;
-      PyErr_SetObject(g_conflict, py::make_tuple(py::str(e.what()), info).ptr());
-    }
-  });
-
   py::class_<mocapedit::TimeWarpData>(m, "TimeWarpData",
                                       "Factored time-warp components; re-solve with new constraint values.")
       .def_readonly("agents", &mocapedit::TimeWarpData::agents)
@@ -79,7 +57,7 @@ MOCAPEDIT_BINDINGS(BindTimeWarp) {
             mocapedit::TimeWarpResult r;
             {
               py::gil_scoped_release release;
-              r = mocapedit::TimeWarpSolve(d, times, offsets);
+              mocapedit::TimeWarpSolve(d, times, offsets, r);
             }
             return ToDict(r);
           },
@@ -104,11 +82,12 @@ MOCAPEDIT_BINDINGS(BindTimeWarp) {
         auto data = std::make_unique<mocapedit::TimeWarpData>();
         {
           py::gil_scoped_release release;
-          mocapedit::TimeWarpPrecompute(
+          mocapedit::TimeWarpProblem p =
               MakeProblem(std::move(rest_times), time_frames, time_hard, time_weights, sync_frames, sync_hard,
                           sync_weights, min_interval_fraction, std::move(min_intervals), stretch_weight,
-                          anchor_weight, max_active_set_iterations),
-              *data, responses);
+                          anchor_weight, max_active_set_iterations);
+          p.precompute_responses = responses;
+          mocapedit::TimeWarpPrecompute(p, *data);
         }
         return data;
       },
@@ -132,11 +111,11 @@ MOCAPEDIT_BINDINGS(BindTimeWarp) {
         mocapedit::TimeWarpResult r;
         {
           py::gil_scoped_release release;
-          r = mocapedit::TimeWarp(MakeProblem(std::move(rest_times), time_frames, time_hard, time_weights,
-                                              sync_frames, sync_hard, sync_weights, min_interval_fraction,
-                                              std::move(min_intervals), stretch_weight, anchor_weight,
-                                              max_active_set_iterations),
-                                  times, offsets);
+          mocapedit::TimeWarp(MakeProblem(std::move(rest_times), time_frames, time_hard, time_weights,
+                                          sync_frames, sync_hard, sync_weights, min_interval_fraction,
+                                          std::move(min_intervals), stretch_weight, anchor_weight,
+                                          max_active_set_iterations),
+                              times, offsets, r);
         }
         return ToDict(r);
       },

@@ -2,6 +2,7 @@
 
 #include <stdexcept>
 
+#include "errors.h"
 #include "registry.h"
 
 namespace mocapedit::python {
@@ -15,7 +16,6 @@ std::vector<BindFunction>& Registry() {
 
 PYBIND11_MODULE(_solver, m) {
   m.doc() = "mocapedit's C++ solver (Eigen + SuiteSparse). Arrays in, arrays out; no USD.";
-  // std::invalid_argument maps to ValueError and std::runtime_error to RuntimeError by
-  // pybind11's default translators.
+  mocapedit::python::BindErrors(m);
   for (auto fn : mocapedit::python::Registry()) fn(m);
 }

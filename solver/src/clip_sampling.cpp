@@ -1,4 +1,5 @@
 #include "mocapedit/clip_sampling.h"
+#include "mocapedit/errors.h"
 
 #include <algorithm>
 #include <cmath>
@@ -50,18 +51,18 @@ void SampleClip(const Eigen::Ref<const Vec3fRows>& translations, const Eigen::Re
                 const Eigen::Ref<const Vec3fRows>& scales, int joints,
                 const Eigen::Ref<const Eigen::VectorXd>& frames, Eigen::Ref<Vec3fRows> out_translations,
                 Eigen::Ref<Quatf4Rows> out_rotations, Eigen::Ref<Vec3fRows> out_scales) {
-  if (joints <= 0) throw std::invalid_argument("SampleClip: joints must be positive");
+  if (joints <= 0) throw InvalidInput("SampleClip", "joints must be positive");
   const Eigen::Index rows = translations.rows();
   if (rows == 0 || rows % joints != 0)
-    throw std::invalid_argument("SampleClip: translations must hold a whole number (> 0) of frames of " +
+    throw InvalidInput("SampleClip", "translations must hold a whole number (> 0) of frames of " +
                                 std::to_string(joints) + " joints");
   if (rotations.rows() != rows || scales.rows() != rows)
-    throw std::invalid_argument("SampleClip: translations, rotations and scales need the same number of rows");
-  if (!frames.allFinite()) throw std::invalid_argument("SampleClip: frames must be finite");
+    throw InvalidInput("SampleClip", "translations, rotations and scales need the same number of rows");
+  if (!frames.allFinite()) throw InvalidInput("SampleClip", "frames must be finite");
   const Eigen::Index count = rows / joints;
   const Eigen::Index out_rows = frames.size() * joints;
   if (out_translations.rows() != out_rows || out_rotations.rows() != out_rows || out_scales.rows() != out_rows)
-    throw std::invalid_argument("SampleClip: the outputs need " + std::to_string(out_rows) + " rows");
+    throw InvalidInput("SampleClip", "the outputs need " + std::to_string(out_rows) + " rows");
   for (Eigen::Index i = 0; i < frames.size(); ++i) {
     const double f = std::clamp(frames[i], 0.0, static_cast<double>(count - 1));
     const Eigen::Index i0 = static_cast<Eigen::Index>(std::floor(f));
@@ -88,11 +89,11 @@ void SampleClip(const Eigen::Ref<const Vec3fRows>& translations, const Eigen::Re
 Eigen::VectorXd FramesAtTimes(const Eigen::Ref<const Eigen::VectorXd>& time_map,
                               const Eigen::Ref<const Eigen::VectorXd>& times) {
   const Eigen::Index n = time_map.size();
-  if (n == 0) throw std::invalid_argument("FramesAtTimes: the time map is empty");
+  if (n == 0) throw InvalidInput("FramesAtTimes", "the time map is empty");
   for (Eigen::Index i = 1; i < n; ++i)
     if (!(time_map[i] > time_map[i - 1]))
-      throw std::invalid_argument("FramesAtTimes: the time map must increase (frame " + std::to_string(i) + ")");
-  if (!times.allFinite()) throw std::invalid_argument("FramesAtTimes: times must be finite");
+      throw InvalidInput("FramesAtTimes", "the time map must increase (frame " + std::to_string(i) + ")");
+  if (!times.allFinite()) throw InvalidInput("FramesAtTimes", "times must be finite");
   Eigen::VectorXd out(times.size());
   const double* begin = time_map.data();
   const double* end = begin + n;

@@ -1,4 +1,5 @@
 #include "mocapedit/collisions.h"
+#include "mocapedit/errors.h"
 #include "mocapedit/two_threads.h"
 
 #include <algorithm>
@@ -85,40 +86,40 @@ bool IsActive(const CapsuleSet& c, int a) { return c.active.empty() || c.active[
 Problem Validate(const Eigen::Ref<const Trajectory2>& positions, int samples,
                  const CapsuleSet& capsules, const CollisionSettings& settings) {
   const Eigen::Index n = capsules.radius.size();
-  if (samples < 0) throw std::invalid_argument("DetectCollisions: samples must not be negative");
+  if (samples < 0) throw InvalidInput("DetectCollisions", "samples must not be negative");
   if (capsules.height.size() != n || capsules.base.size() != n)
-    throw std::invalid_argument("DetectCollisions: radius, height and base need one value per agent");
+    throw InvalidInput("DetectCollisions", "radius, height and base need one value per agent");
   if (!capsules.active.empty() && static_cast<Eigen::Index>(capsules.active.size()) != n)
-    throw std::invalid_argument("DetectCollisions: active needs one flag per agent (or none)");
+    throw InvalidInput("DetectCollisions", "active needs one flag per agent (or none)");
   if (positions.rows() != static_cast<Eigen::Index>(samples) * n)
-    throw std::invalid_argument("DetectCollisions: positions has " + std::to_string(positions.rows()) +
+    throw InvalidInput("DetectCollisions", "positions has " + std::to_string(positions.rows()) +
                                 " rows, expected samples * agents = " +
                                 std::to_string(static_cast<Eigen::Index>(samples) * n));
   if (!(settings.margin >= 0.0) || !std::isfinite(settings.margin))
-    throw std::invalid_argument("DetectCollisions: margin must be finite and not negative");
+    throw InvalidInput("DetectCollisions", "margin must be finite and not negative");
   if (std::isnan(settings.report_distance))
-    throw std::invalid_argument("DetectCollisions: report_distance must not be NaN");
+    throw InvalidInput("DetectCollisions", "report_distance must not be NaN");
   double max_radius = 0.0;
   for (Eigen::Index a = 0; a < n; ++a) {
     if (!IsActive(capsules, static_cast<int>(a))) continue;
     if (!(capsules.radius[a] > 0.0) || !std::isfinite(capsules.radius[a]))
-      throw std::invalid_argument("DetectCollisions: agent " + std::to_string(a) +
+      throw InvalidInput("DetectCollisions", "agent " + std::to_string(a) +
                                   " has a non-positive radius");
     if (!(capsules.height[a] > 0.0) || !std::isfinite(capsules.height[a]))
-      throw std::invalid_argument("DetectCollisions: agent " + std::to_string(a) +
+      throw InvalidInput("DetectCollisions", "agent " + std::to_string(a) +
                                   " has a non-positive height");
     if (!std::isfinite(capsules.base[a]))
-      throw std::invalid_argument("DetectCollisions: agent " + std::to_string(a) + " has a non-finite base");
+      throw InvalidInput("DetectCollisions", "agent " + std::to_string(a) + " has a non-finite base");
     for (int k = 0; k < samples; ++k) {
       const auto row = positions.row(static_cast<Eigen::Index>(k) * n + a);
       if (!std::isfinite(row[0]) || !std::isfinite(row[1]))
-        throw std::invalid_argument("DetectCollisions: agent " + std::to_string(a) +
+        throw InvalidInput("DetectCollisions", "agent " + std::to_string(a) +
                                     " has a non-finite position at sample " + std::to_string(k));
     }
     max_radius = std::max(max_radius, capsules.radius[a]);
   }
   if (std::isnan(settings.watch_distance) || std::isinf(settings.watch_distance))
-    throw std::invalid_argument("DetectCollisions: watch_distance must be finite");
+    throw InvalidInput("DetectCollisions", "watch_distance must be finite");
   const double watch = settings.watch_distance > settings.margin ? settings.watch_distance : settings.margin;
   const double report = std::max(settings.margin, settings.report_distance);
   return Problem{positions, samples, static_cast<int>(n), capsules, settings.margin, watch, report,

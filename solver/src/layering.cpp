@@ -1,4 +1,5 @@
 #include "mocapedit/layering.h"
+#include "mocapedit/errors.h"
 
 #include "view_checks.h"
 
@@ -497,13 +498,13 @@ bool LayeringJob::Run(std::string* error) const {
 std::vector<float> SubtreeJointWeights(Span<const int> parents, int root) {
   const int n = static_cast<int>(parents.size);
   if (root < -1 || root >= n)
-    throw std::invalid_argument("SubtreeJointWeights: root " + std::to_string(root) +
+    throw InvalidInput("SubtreeJointWeights", "root " + std::to_string(root) +
                                 " is not a joint index (0.." + std::to_string(n - 1) + ") or -1");
   std::vector<float> weights(parents.size, root < 0 ? 1.f : 0.f);
   for (int j = 0; j < n; ++j) {
     const int p = parents[j];
     if (p < -1 || p >= j)
-      throw std::invalid_argument("SubtreeJointWeights: the parent of joint " + std::to_string(j) +
+      throw InvalidInput("SubtreeJointWeights", "the parent of joint " + std::to_string(j) +
                                   " is " + std::to_string(p) + "; parents must precede their children");
     if (root >= 0) weights[j] = (j == root || (p >= 0 && weights[p] == 1.f)) ? 1.f : 0.f;
   }

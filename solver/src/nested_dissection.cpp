@@ -1,4 +1,5 @@
 #include "mocapedit/nested_dissection.h"
+#include "mocapedit/errors.h"
 
 #include <algorithm>
 #include <cmath>
@@ -20,7 +21,7 @@ class Dissector {
       for (int p = col_ptr[j]; p < col_ptr[j + 1]; ++p) {
         const int i = row_index[p];
         if (i < 0 || i >= n)
-          throw std::invalid_argument("CoordinateDissection: row index " + std::to_string(i) + " out of range");
+          throw InvalidInput("CoordinateDissection", "row index " + std::to_string(i) + " out of range");
         if (i != j) ++ptr_[i + 1], ++ptr_[j + 1];
       }
     for (int v = 0; v < n; ++v) ptr_[v + 1] += ptr_[v];
@@ -33,7 +34,7 @@ class Dissector {
       }
     for (int k = 0; k < n * dims; ++k)
       if (!std::isfinite(coords[k]))
-        throw std::invalid_argument("CoordinateDissection: coordinate " + std::to_string(k % dims) + " of vertex " +
+        throw InvalidInput("CoordinateDissection", "coordinate " + std::to_string(k % dims) + " of vertex " +
                                     std::to_string(k / dims) + " is not finite");
     side_.assign(n, kOutside);
     match_.assign(n, -1);
@@ -223,7 +224,7 @@ class Dissector {
 
 Dissection CoordinateDissection(int n, const int* col_ptr, const int* row_index, const double* coords, int dims,
                                 int leaf) {
-  if (n < 0 || dims < 1) throw std::invalid_argument("CoordinateDissection: bad size");
+  if (n < 0 || dims < 1) throw InvalidInput("CoordinateDissection", "bad size");
   return Dissector(n, col_ptr, row_index, coords, dims, leaf).Run();
 }
 

@@ -1,4 +1,5 @@
 #include "mocapedit/path_terms.h"
+#include "mocapedit/errors.h"
 
 #include <algorithm>
 #include <array>
@@ -19,15 +20,13 @@ namespace mocapedit {
 
 namespace {
 
-void Check(bool ok, const std::string& what) {
-  if (!ok) throw std::invalid_argument(what);
-}
+using detail::Require;
 
 void CheckOffsets(const Eigen::Ref<const Eigen::VectorXi>& offsets, Eigen::Index total, const char* what) {
-  Check(offsets.size() >= 1 && offsets[0] == 0 && offsets[offsets.size() - 1] == total,
-        std::string(what) + ": offsets must start at 0 and end at " + std::to_string(total));
+  Require(offsets.size() >= 1 && offsets[0] == 0 && offsets[offsets.size() - 1] == total, what,
+                  "offsets must start at 0 and end at " + std::to_string(total));
   for (Eigen::Index a = 1; a < offsets.size(); ++a)
-    Check(offsets[a] >= offsets[a - 1], std::string(what) + ": offsets must not decrease");
+    Require(offsets[a] >= offsets[a - 1], what, "offsets must not decrease");
 }
 
 // Distance as numpy's norm computes it (sqrt of the summed squares), so that ties and
@@ -67,12 +66,12 @@ void KeyFrames(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const
                double min_baseline, Eigen::VectorXi& keys, Eigen::VectorXi& before) {
   const Eigen::Index n = rest.rows();
   CheckOffsets(offsets, n, "KeyFrames");
-  Check(keyed.size() == offsets.size() - 1, "KeyFrames: one keyed flag per agent is needed");
+  Require(keyed.size() == offsets.size() - 1, "KeyFrames", "one keyed flag per agent is needed");
   std::vector<char> key(static_cast<size_t>(n), 0);
   for (Eigen::Index a = 0; a < keyed.size(); ++a)
     if (!keyed[a]) std::fill(key.begin() + offsets[a], key.begin() + offsets[a + 1], 1);
   for (Eigen::Index i = 0; i < forced.size(); ++i) {
-    Check(forced[i] >= 0 && forced[i] < n, "KeyFrames: forced frame out of range");
+    Require(forced[i] >= 0 && forced[i] < n, "KeyFrames", "forced frame out of range");
     key[forced[i]] = 1;
   }
   // Keys of one agent closer than min_baseline: every frame between them is a key too
@@ -101,9 +100,9 @@ void KeyFrames(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const
 void ExpandKeyFrames(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& keys,
                      const Eigen::Ref<const Trajectory2>& positions, Trajectory2& out) {
   const Eigen::Index n = rest.rows(), k = keys.size();
-  Check(positions.rows() == k, "ExpandKeyFrames: one position per key is needed");
-  Check(n == 0 || (k >= 1 && keys[0] == 0 && keys[k - 1] == n - 1),
-        "ExpandKeyFrames: the first and last frames must be keys");
+  Require(positions.rows() == k, "ExpandKeyFrames", "one position per key is needed");
+  Require(n == 0 || (k >= 1 && keys[0] == 0 && keys[k - 1] == n - 1), "ExpandKeyFrames",
+                  "the first and last frames must be keys");
   out.resize(n, 2);
   using Cplx = std::complex<double>;
   const auto z = [&](int f) { return Cplx(rest(f, 0), rest(f, 1)); };
@@ -112,7 +111,7 @@ void ExpandKeyFrames(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref
   std::vector<Cplx> m(static_cast<size_t>(k));
   std::vector<char> smooth(static_cast<size_t>(k), 0);
   for (Eigen::Index j = 0; j < k; ++j) {
-    Check(j == 0 || keys[j] > keys[j - 1], "ExpandKeyFrames: keys must increase");
+    Require(j == 0 || keys[j] > keys[j - 1], "ExpandKeyFrames", "keys must increase");
     out.row(keys[j]) = positions.row(j);
     if (j == 0 || keys[j] == keys[j - 1] + 1) continue;
     const Cplx dz = z(keys[j]) - z(keys[j - 1]);
@@ -150,7 +149,7 @@ void GroupSampleFrames(const Eigen::Ref<const Eigen::VectorXd>& sample_times,
   for (Eigen::Index m = 0; m < members; ++m) {
     const double* first = sample_times.data() + offsets[m];
     const double* last = sample_times.data() + offsets[m + 1];
-    Check(last > first, "GroupSampleFrames: member " + std::to_string(m) + " has no frame");
+    Require(last > first, "GroupSampleFrames", "member " + std::to_string(m) + " has no frame");
     const Eigen::Index count = last - first;
     for (Eigen::Index t = 0; t < times.size(); ++t) {
       const Eigen::Index f =
@@ -197,13 +196,13 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
                     int neighbours, const Eigen::Ref<const Eigen::VectorXi>& partner, IndexTriples& triangles,
                     IndexPairs& edges) {
   const Eigen::Index m = members.rows(), times = members.cols(), n = rest.rows();
-  Check(partner.size() == n, "GroupMeshTerms: one partner per vertex is needed");
-  Check(neighbours >= 0 && (m == 0 || neighbours < m),
-        "GroupMeshTerms: neighbours must be at least 0 and less than the member count");
-  Check(members.size() == 0 || (members.minCoeff() >= 0 && members.maxCoeff() < n),
-        "GroupMeshTerms: member vertex out of range");
+  Require(partner.size() == n, "GroupMeshTerms", "one partner per vertex is needed");
+  Require(neighbours >= 0 && (m == 0 || neighbours < m), "GroupMeshTerms",
+                  "neighbours must be at least 0 and less than the member count");
+  Require(members.size() == 0 || (members.minCoeff() >= 0 && members.maxCoeff() < n), "GroupMeshTerms",
+                  "member vertex out of range");
   for (Eigen::Index v = 0; v < n; ++v)
-    Check(partner[v] >= -1 && partner[v] < n, "GroupMeshTerms: partner out of range");
+    Require(partner[v] >= -1 && partner[v] < n, "GroupMeshTerms", "partner out of range");
 
   // Pairs packed as (min << 32 | max): sorting integers is cheaper than sorting pairs. The
   // sampled times are independent: large groups split them between two threads (the pairs
@@ -356,7 +355,7 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
       double x0 = std::numeric_limits<double>::infinity(), y0 = x0, x1 = -x0, y1 = -x0;
       for (Eigen::Index a = 0; a < m; ++a) {
         x[a] = rest(members(a, t), 0), y[a] = rest(members(a, t), 1);
-        Check(std::isfinite(x[a]) && std::isfinite(y[a]), "GroupMeshTerms: rest positions must be finite");
+        Require(std::isfinite(x[a]) && std::isfinite(y[a]), "GroupMeshTerms", "rest positions must be finite");
         x0 = std::min(x0, x[a]), x1 = std::max(x1, x[a]), y0 = std::min(y0, y[a]), y1 = std::max(y1, y[a]);
       }
       const double extent = std::max(x1 - x0, y1 - y0);
@@ -423,8 +422,8 @@ void BlockDeformationTurns(const Eigen::Ref<const Trajectory2>& source, const Ei
                            const Eigen::Ref<const IndexPairs>& blocks, const Eigen::Ref<const IndexTriples>& fixed,
                            const Eigen::Ref<const Eigen::VectorXd>& fixed_turn, int window, double min_travel,
                            Eigen::VectorXd& turns) {
-  Check(fixed.rows() == fixed_turn.size(), "BlockDeformationTurns: one turn is needed per fixed range");
-  Check(source.rows() == edited.rows(), "BlockDeformationTurns: source and edited differ in rows");
+  Require(fixed.rows() == fixed_turn.size(), "BlockDeformationTurns", "one turn is needed per fixed range");
+  Require(source.rows() == edited.rows(), "BlockDeformationTurns", "source and edited differ in rows");
   turns.setZero(source.rows());
   // Each block's first fixed range; the blocks are independent.
   const Eigen::Index count = blocks.rows();
@@ -433,14 +432,14 @@ void BlockDeformationTurns(const Eigen::Ref<const Trajectory2>& source, const Ei
   bool disjoint = true;  // in order, each after the last: the threads below write apart
   for (Eigen::Index b = 0; b < count; ++b) {
     const int begin = blocks(b, 0), end = blocks(b, 1);
-    Check(0 <= begin && begin <= end && end <= source.rows(), "BlockDeformationTurns: block out of range");
+    Require(0 <= begin && begin <= end && end <= source.rows(), "BlockDeformationTurns", "block out of range");
     if (b > 0 && begin < blocks(b - 1, 1)) disjoint = false;
     first_range[b] = r;
     while (r < fixed.rows() && fixed(r, 0) == b) ++r;
     frames += end - begin;
   }
   first_range[count] = r;
-  Check(r == fixed.rows(), "BlockDeformationTurns: fixed ranges must be grouped by block, in block order");
+  Require(r == fixed.rows(), "BlockDeformationTurns", "fixed ranges must be grouped by block, in block order");
   const auto turn = [&](Eigen::Index b0, Eigen::Index b1) {
     std::vector<FrameRange> ranges;
     for (Eigen::Index b = b0; b < b1; ++b) {
@@ -488,19 +487,20 @@ std::vector<char> NullSpaceSupport(const Eigen::Ref<const Eigen::VectorXi>& rows
                                    const Eigen::Ref<const Eigen::VectorXi>& cols,
                                    const Eigen::Ref<const Eigen::VectorXcd>& values, int num_rows, int num_cols,
                                    double tolerance) {
-  Check(num_rows >= 0 && num_cols >= 0, "NullSpaceSupport: negative size");
-  Check(rows.size() == cols.size() && rows.size() == values.size(),
-        "NullSpaceSupport: rows, cols and values must have one entry each");
-  Check(tolerance > 0 && std::isfinite(tolerance), "NullSpaceSupport: tolerance must be finite and > 0");
+  Require(num_rows >= 0 && num_cols >= 0, "NullSpaceSupport", "negative size");
+  Require(rows.size() == cols.size() && rows.size() == values.size(), "NullSpaceSupport",
+                  "rows, cols and values must have one entry each");
+  Require(tolerance > 0 && std::isfinite(tolerance), "NullSpaceSupport", "tolerance must be finite and > 0");
   std::vector<char> used(static_cast<size_t>(num_cols), 1);
   if (num_rows == 0) return used;
 
   // Rows as sorted sparse vectors, repeated positions summed; columns scaled to unit max.
   std::vector<std::array<int, 2>> at(static_cast<size_t>(rows.size()));
   for (Eigen::Index e = 0; e < rows.size(); ++e) {
-    Check(rows[e] >= 0 && rows[e] < num_rows && cols[e] >= 0 && cols[e] < num_cols,
-          "NullSpaceSupport: entry out of range");
-    Check(std::isfinite(values[e].real()) && std::isfinite(values[e].imag()), "NullSpaceSupport: entries must be finite");
+    Require(rows[e] >= 0 && rows[e] < num_rows && cols[e] >= 0 && cols[e] < num_cols, "NullSpaceSupport",
+                    "entry out of range");
+    Require(std::isfinite(values[e].real()) && std::isfinite(values[e].imag()), "NullSpaceSupport",
+                    "entries must be finite");
     at[static_cast<size_t>(e)] = {rows[e], cols[e]};
   }
   std::vector<int> perm(at.size());

@@ -1,4 +1,5 @@
 #include "mocapedit/regions.h"
+#include "mocapedit/errors.h"
 
 #include <algorithm>
 #include <cmath>
@@ -47,7 +48,7 @@ bool Inside(const Trajectory2& poly, const Eigen::Vector2d& p) {
 }
 
 void CheckFinite(const Eigen::Ref<const Trajectory2>& points, const char* what) {
-  if (!points.allFinite()) throw std::invalid_argument(std::string(what) + ": points must be finite");
+  if (!points.allFinite()) throw InvalidInput(what, "points must be finite");
 }
 
 }  // namespace
@@ -79,9 +80,9 @@ Trajectory2 ConvexHull(const Eigen::Ref<const Trajectory2>& points) {
 }
 
 GroundRegion CircleRegion(const Eigen::Vector2d& center, double radius) {
-  if (!center.allFinite()) throw std::invalid_argument("CircleRegion: the centre must be finite");
+  if (!center.allFinite()) throw InvalidInput("CircleRegion", "the centre must be finite");
   if (!(radius > 0.0) || !std::isfinite(radius))
-    throw std::invalid_argument("CircleRegion: the radius must be positive and finite");
+    throw InvalidInput("CircleRegion", "the radius must be positive and finite");
   GroundRegion r;
   r.is_circle = true;
   r.center = center;
@@ -92,7 +93,7 @@ GroundRegion CircleRegion(const Eigen::Vector2d& center, double radius) {
 GroundRegion HullRegion(const Eigen::Ref<const Trajectory2>& points) {
   GroundRegion r;
   r.polygon = ConvexHull(points);
-  if (r.polygon.rows() < 3) throw std::invalid_argument("HullRegion: the footprint has no area");
+  if (r.polygon.rows() < 3) throw InvalidInput("HullRegion", "the footprint has no area");
   return r;
 }
 
@@ -116,7 +117,7 @@ Eigen::VectorXd RegionSignedDistance(const GroundRegion& region,
 RegionNearest NearestOnRegion(const GroundRegion& region, const Eigen::Ref<const Trajectory2>& points) {
   CheckFinite(points, "NearestOnRegion");
   if (!region.is_circle && region.polygon.rows() < 3)
-    throw std::invalid_argument("NearestOnRegion: the region's polygon has fewer than three corners");
+    throw InvalidInput("NearestOnRegion", "the region's polygon has fewer than three corners");
   RegionNearest out;
   const Eigen::Index n = points.rows();
   out.boundary.resize(n, 2);
@@ -149,11 +150,11 @@ RegionPush PushOutOfRegion(const GroundRegion& region, const Eigen::Ref<const Tr
   CheckFinite(points, "PushOutOfRegion");
   const Eigen::Index n = points.rows();
   if (clearance.size() != n && clearance.size() != 1)
-    throw std::invalid_argument("PushOutOfRegion: clearance needs one value per point, or one value");
+    throw InvalidInput("PushOutOfRegion", "clearance needs one value per point, or one value");
   if (!clearance.allFinite() || (clearance.size() && clearance.minCoeff() < 0.0))
-    throw std::invalid_argument("PushOutOfRegion: clearances must be finite and not negative");
+    throw InvalidInput("PushOutOfRegion", "clearances must be finite and not negative");
   if (!region.is_circle && region.polygon.rows() < 3)
-    throw std::invalid_argument("PushOutOfRegion: the region's polygon has fewer than three corners");
+    throw InvalidInput("PushOutOfRegion", "the region's polygon has fewer than three corners");
   std::vector<Eigen::Index> hit;
   std::vector<Eigen::Vector2d> targets, normals;
   std::vector<double> depths;

@@ -1,4 +1,5 @@
 #include "mocapedit/trajectory.h"
+#include "mocapedit/errors.h"
 
 #include <algorithm>
 #include <cmath>
@@ -37,11 +38,11 @@ Eigen::VectorXd TangentHeadings(const Eigen::Ref<const Trajectory2>& points,
                                 double min_step) {
   const Eigen::Index n = points.rows();
   if (static_cast<Eigen::Index>(fixed.size()) != fallback.size())
-    throw std::invalid_argument("TangentHeadings: one fallback heading is needed per fixed range");
+    throw InvalidInput("TangentHeadings", "one fallback heading is needed per fixed range");
   std::vector<char> is_fixed(static_cast<size_t>(n), 0);
   for (const auto& r : fixed) {
     if (r.first < 0 || r.second >= n || r.first > r.second)
-      throw std::invalid_argument("TangentHeadings: frame range [" + std::to_string(r.first) + ", " +
+      throw InvalidInput("TangentHeadings", "frame range [" + std::to_string(r.first) + ", " +
                                   std::to_string(r.second) + "] is outside 0.." +
                                   std::to_string(n - 1));
     for (int i = r.first; i <= r.second; ++i) is_fixed[static_cast<size_t>(i)] = 1;
@@ -83,12 +84,12 @@ Eigen::VectorXd DeformationTurns(const Eigen::Ref<const Trajectory2>& source,
                                  const Eigen::Ref<const Eigen::VectorXd>& fixed_turn, int window,
                                  double min_travel) {
   const Eigen::Index n = source.rows();
-  if (edited.rows() != n) throw std::invalid_argument("DeformationTurns: source and edited differ in frames");
+  if (edited.rows() != n) throw InvalidInput("DeformationTurns", "source and edited differ in frames");
   if (static_cast<Eigen::Index>(fixed.size()) != fixed_turn.size())
-    throw std::invalid_argument("DeformationTurns: one turn is needed per fixed range");
+    throw InvalidInput("DeformationTurns", "one turn is needed per fixed range");
   for (const auto& r : fixed)
     if (r.first < 0 || r.second >= n || r.first > r.second)
-      throw std::invalid_argument("DeformationTurns: frame range [" + std::to_string(r.first) + ", " +
+      throw InvalidInput("DeformationTurns", "frame range [" + std::to_string(r.first) + ", " +
                                   std::to_string(r.second) + "] is outside 0.." + std::to_string(n - 1));
   Eigen::VectorXd turn = Eigen::VectorXd::Zero(n);
   if (n == 0) return turn;

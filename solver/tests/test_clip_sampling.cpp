@@ -48,29 +48,29 @@ TEST(ClipSampling, ValidityRejectsBadInput) {
   Quatf4Rows orr(2, 4);
   const Eigen::VectorXd one = Eigen::VectorXd::Zero(1);
   {
-    EXPECT_THROW(mocapedit::SampleClip(c.t, c.r, c.s, 0, one, ot, orr, os), std::invalid_argument);
+    EXPECT_THROW(mocapedit::SampleClip(c.t, c.r, c.s, 0, one, ot, orr, os), mocapedit::InvalidInput);
   }
   {
-    EXPECT_THROW(mocapedit::SampleClip(c.t, c.r, c.s, 4, one, ot, orr, os), std::invalid_argument);
+    EXPECT_THROW(mocapedit::SampleClip(c.t, c.r, c.s, 4, one, ot, orr, os), mocapedit::InvalidInput);
   }
   {
     const Quatf4Rows fewer = c.r.topRows(4);
-    EXPECT_THROW(mocapedit::SampleClip(c.t, fewer, c.s, 2, one, ot, orr, os), std::invalid_argument);
+    EXPECT_THROW(mocapedit::SampleClip(c.t, fewer, c.s, 2, one, ot, orr, os), mocapedit::InvalidInput);
   }
   {
     Vec3fRows small(1, 3);
-    EXPECT_THROW(mocapedit::SampleClip(c.t, c.r, c.s, 2, one, small, orr, os), std::invalid_argument);
+    EXPECT_THROW(mocapedit::SampleClip(c.t, c.r, c.s, 2, one, small, orr, os), mocapedit::InvalidInput);
   }
   {
     Eigen::VectorXd bad(1);
     bad << std::nan("");
-    EXPECT_THROW(mocapedit::SampleClip(c.t, c.r, c.s, 2, bad, ot, orr, os), std::invalid_argument);
+    EXPECT_THROW(mocapedit::SampleClip(c.t, c.r, c.s, 2, bad, ot, orr, os), mocapedit::InvalidInput);
   }
   {
     Eigen::VectorXd map(3);
     map << 0, 1, 1;
-    EXPECT_THROW(mocapedit::FramesAtTimes(map, one), std::invalid_argument);
-    EXPECT_THROW(mocapedit::FramesAtTimes(Eigen::VectorXd(0), one), std::invalid_argument);
+    EXPECT_THROW(mocapedit::FramesAtTimes(map, one), mocapedit::InvalidInput);
+    EXPECT_THROW(mocapedit::FramesAtTimes(Eigen::VectorXd(0), one), mocapedit::InvalidInput);
   }
 }
 

@@ -59,37 +59,37 @@ TEST(Collisions, ValidityRejectsBadInput) {
   Trajectory2 p = Trajectory2::Zero(4, 2);
   CollisionSettings s;
   {
-    EXPECT_THROW(mocapedit::DetectCollisions(p, 3, Capsules(2), s), std::invalid_argument);  // rows
+    EXPECT_THROW(mocapedit::DetectCollisions(p, 3, Capsules(2), s), mocapedit::InvalidInput);  // rows
   }
   {
     CapsuleSet c = Capsules(2);
     c.radius[1] = 0.0;
-    EXPECT_THROW(mocapedit::DetectCollisions(p, 2, c, s), std::invalid_argument);
+    EXPECT_THROW(mocapedit::DetectCollisions(p, 2, c, s), mocapedit::InvalidInput);
   }
   {
     CapsuleSet c = Capsules(2);
     c.height[0] = -1.0;
-    EXPECT_THROW(mocapedit::DetectCollisions(p, 2, c, s), std::invalid_argument);
+    EXPECT_THROW(mocapedit::DetectCollisions(p, 2, c, s), mocapedit::InvalidInput);
   }
   {
     CapsuleSet c = Capsules(2);
     c.base.resize(1);
-    EXPECT_THROW(mocapedit::DetectCollisions(p, 2, c, s), std::invalid_argument);
+    EXPECT_THROW(mocapedit::DetectCollisions(p, 2, c, s), mocapedit::InvalidInput);
   }
   {
     CapsuleSet c = Capsules(2);
     c.active = {1};
-    EXPECT_THROW(mocapedit::DetectCollisions(p, 2, c, s), std::invalid_argument);
+    EXPECT_THROW(mocapedit::DetectCollisions(p, 2, c, s), mocapedit::InvalidInput);
   }
   {
     CollisionSettings bad;
     bad.margin = -0.1;
-    EXPECT_THROW(mocapedit::DetectCollisions(p, 2, Capsules(2), bad), std::invalid_argument);
+    EXPECT_THROW(mocapedit::DetectCollisions(p, 2, Capsules(2), bad), mocapedit::InvalidInput);
   }
   {
     Trajectory2 q = p;
     q(3, 1) = NAN;
-    EXPECT_THROW(mocapedit::DetectCollisions(q, 2, Capsules(2), s), std::invalid_argument);
+    EXPECT_THROW(mocapedit::DetectCollisions(q, 2, Capsules(2), s), mocapedit::InvalidInput);
     // An inactive agent's positions are never read.
     CapsuleSet c = Capsules(2);
     c.active = {1, 0};
@@ -224,5 +224,5 @@ TEST(Collisions, WatchDistanceGathersNearMissesInTheSamePass) {
   }
   CollisionSettings bad = s;
   bad.watch_distance = std::numeric_limits<double>::infinity();
-  EXPECT_THROW(mocapedit::DetectCollisions(p, K, Capsules(A), bad), std::invalid_argument);
+  EXPECT_THROW(mocapedit::DetectCollisions(p, K, Capsules(A), bad), mocapedit::InvalidInput);
 }

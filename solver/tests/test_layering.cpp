@@ -245,9 +245,9 @@ TEST(Layering, SubtreeMaskFollowsParents) {
             (std::vector<float>{0, 0, 0, 0, 0, 1}));
   EXPECT_EQ(mocapedit::SubtreeJointWeights(Span<const int>(parents), -1),
             (std::vector<float>{1, 1, 1, 1, 1, 1}));
-  EXPECT_THROW(mocapedit::SubtreeJointWeights(Span<const int>(parents), 6), std::invalid_argument);
+  EXPECT_THROW(mocapedit::SubtreeJointWeights(Span<const int>(parents), 6), mocapedit::InvalidInput);
   const std::vector<int> misordered{-1, 2, 0};
-  EXPECT_THROW(mocapedit::SubtreeJointWeights(Span<const int>(misordered), 0), std::invalid_argument);
+  EXPECT_THROW(mocapedit::SubtreeJointWeights(Span<const int>(misordered), 0), mocapedit::InvalidInput);
 }
 
 TEST(Layering, SlerpMatchesExactSlerpOnTheShortArc) {

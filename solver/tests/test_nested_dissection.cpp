@@ -209,8 +209,8 @@ TEST(NestedDissection, RejectsBadInput) {
   const Grid g(3, 3, 3);
   std::vector<double> coords = g.coords;
   coords[5] = std::numeric_limits<double>::infinity();
-  EXPECT_THROW(CoordinateDissection(g.Size(), g.ptr.data(), g.idx.data(), coords.data(), 3, 4), std::invalid_argument);
+  EXPECT_THROW(CoordinateDissection(g.Size(), g.ptr.data(), g.idx.data(), coords.data(), 3, 4), mocapedit::InvalidInput);
   std::vector<int> idx = g.idx;
   idx[2] = g.Size();
-  EXPECT_THROW(CoordinateDissection(g.Size(), g.ptr.data(), idx.data(), g.coords.data(), 3, 4), std::invalid_argument);
+  EXPECT_THROW(CoordinateDissection(g.Size(), g.ptr.data(), idx.data(), g.coords.data(), 3, 4), mocapedit::InvalidInput);
 }

@@ -43,10 +43,10 @@ void SetHandles(PathEditProblem& p, std::initializer_list<int> vs, double weight
 }
 
 PathEditResult Solve(const PathEditProblem& p, const Trajectory2& handles, const Trajectory2& links = Trajectory2(0, 2)) {
-  std::shared_ptr<PathEditData> d;
+  PathEditData d;
   mocapedit::PathEditPrecompute(p, d);
   PathEditResult r;
-  mocapedit::PathEditSolve(*d, handles, links, r);
+  mocapedit::PathEditSolve(d, handles, links, r);
   return r;
 }
 
@@ -72,53 +72,53 @@ double Length(const Trajectory2& z) { return mocapedit::PathLength(z); }
 
 TEST(PathEdit, ValidityRejectsBadProblems) {
   const Trajectory2 z = Walk(10);
-  std::shared_ptr<PathEditData> d;
+  PathEditData d;
   {
     PathEditProblem p = Chain(z);
     p.triangles(0, 1) = 42;
-    EXPECT_THROW(mocapedit::PathEditPrecompute(p, d), std::invalid_argument);
+    EXPECT_THROW(mocapedit::PathEditPrecompute(p, d), mocapedit::InvalidInput);
   }
   {
     PathEditProblem p = Chain(z);
     p.edge_weights = Eigen::VectorXd::Constant(p.edges.rows(), -1.0);
-    EXPECT_THROW(mocapedit::PathEditPrecompute(p, d), std::invalid_argument);
+    EXPECT_THROW(mocapedit::PathEditPrecompute(p, d), mocapedit::InvalidInput);
   }
   {
     PathEditProblem p = Chain(z);
     p.triangle_weights = Eigen::VectorXd::Constant(p.triangles.rows(), kHard);  // shape terms cannot be hard
-    EXPECT_THROW(mocapedit::PathEditPrecompute(p, d), std::invalid_argument);
+    EXPECT_THROW(mocapedit::PathEditPrecompute(p, d), mocapedit::InvalidInput);
   }
   {
     PathEditProblem p = Chain(z);
     SetHandles(p, {0, 9});
     p.handle_weights.resize(1);
-    EXPECT_THROW(mocapedit::PathEditPrecompute(p, d), std::invalid_argument);
+    EXPECT_THROW(mocapedit::PathEditPrecompute(p, d), mocapedit::InvalidInput);
   }
   {
     PathEditProblem p = Chain(z);
     p.links.resize(1, 2);
     p.links << 3, 3;
-    EXPECT_THROW(mocapedit::PathEditPrecompute(p, d), std::invalid_argument);
+    EXPECT_THROW(mocapedit::PathEditPrecompute(p, d), mocapedit::InvalidInput);
   }
   {
     PathEditProblem p = Chain(z);
     p.rigid = {{{2, 3, 4}, RigidMode::kRotate}, {{4, 5}, RigidMode::kRotate}};
-    EXPECT_THROW(mocapedit::PathEditPrecompute(p, d), std::invalid_argument);
+    EXPECT_THROW(mocapedit::PathEditPrecompute(p, d), mocapedit::InvalidInput);
   }
   {
     PathEditProblem p = Chain(z);
     p.rest.row(4) = p.rest.row(2);  // triangle (3; 2, 4) has no frame
-    EXPECT_THROW(mocapedit::PathEditPrecompute(p, d), std::invalid_argument);
+    EXPECT_THROW(mocapedit::PathEditPrecompute(p, d), mocapedit::InvalidInput);
   }
   {
     PathEditProblem p = Chain(z);
     SetHandles(p, {0, 9});
     mocapedit::PathEditPrecompute(p, d);
     PathEditResult r;
-    EXPECT_THROW(mocapedit::PathEditSolve(*d, Trajectory2::Zero(3, 2), Trajectory2(0, 2), r), std::invalid_argument);
+    EXPECT_THROW(mocapedit::PathEditSolve(d, Trajectory2::Zero(3, 2), Trajectory2(0, 2), r), mocapedit::InvalidInput);
     Trajectory2 nan = Trajectory2::Zero(2, 2);
     nan(1, 0) = std::nan("");
-    EXPECT_THROW(mocapedit::PathEditSolve(*d, nan, Trajectory2(0, 2), r), std::invalid_argument);
+    EXPECT_THROW(mocapedit::PathEditSolve(d, nan, Trajectory2(0, 2), r), mocapedit::InvalidInput);
   }
 }
 
@@ -380,13 +380,13 @@ TEST(PathEdit, QRAndResponsesAgreeWithTheDirectSolve) {
   EXPECT_LE((qr.positions - direct.positions).cwiseAbs().maxCoeff(), 1e-8);
   PathEditProblem i = p;
   i.precompute_responses = true;
-  std::shared_ptr<PathEditData> d;
+  PathEditData d;
   mocapedit::PathEditPrecompute(i, d);
   PathEditResult r;
   Trajectory2 other = h;
   other(1, 0) += 30.0;
-  mocapedit::PathEditSolve(*d, other, Trajectory2(0, 2), r);  // a drag, then back
-  mocapedit::PathEditSolve(*d, h, Trajectory2(0, 2), r);
+  mocapedit::PathEditSolve(d, other, Trajectory2(0, 2), r);  // a drag, then back
+  mocapedit::PathEditSolve(d, h, Trajectory2(0, 2), r);
   EXPECT_LE((r.positions - direct.positions).cwiseAbs().maxCoeff(), 1e-8);
   EXPECT_LE((r.shape - direct.shape).cwiseAbs().maxCoeff(), 1e-8);
 }
@@ -446,7 +446,7 @@ TEST(PathEdit, SolvesFromSeveralThreadsAgree) {
   const Trajectory2 z = Walk(500);
   PathEditProblem p = Chain(z);
   SetHandles(p, {0, 250, 499});
-  std::shared_ptr<PathEditData> d;
+  PathEditData d;
   mocapedit::PathEditPrecompute(p, d);
   std::vector<PathEditResult> out(4);
   std::vector<std::thread> threads;
@@ -454,7 +454,7 @@ TEST(PathEdit, SolvesFromSeveralThreadsAgree) {
     threads.emplace_back([&, k] {
       Trajectory2 h = Rows(z, p.handles);
       h(1, 1) += 10.0 * (k % 2);
-      mocapedit::PathEditSolve(*d, h, Trajectory2(0, 2), out[k]);
+      mocapedit::PathEditSolve(d, h, Trajectory2(0, 2), out[k]);
     });
   for (auto& t : threads) t.join();
   EXPECT_EQ(out[0].positions, out[2].positions);
@@ -561,12 +561,12 @@ TEST(PathEdit, SingularWideMeshesFallBackToQR) {
 TEST(PathEdit, RejectsBadVertexTimes) {
   Trajectory2 h;
   PathEditProblem p = WideMesh(h, 2, 2, 10);
-  std::shared_ptr<PathEditData> d;
+  PathEditData d;
   p.vertex_times = Eigen::VectorXd::Zero(p.rest.rows() - 1);
-  EXPECT_THROW(mocapedit::PathEditPrecompute(p, d), std::invalid_argument);
+  EXPECT_THROW(mocapedit::PathEditPrecompute(p, d), mocapedit::InvalidInput);
   p.vertex_times = Eigen::VectorXd::Zero(p.rest.rows());
   p.vertex_times[3] = std::numeric_limits<double>::quiet_NaN();
-  EXPECT_THROW(mocapedit::PathEditPrecompute(p, d), std::invalid_argument);
+  EXPECT_THROW(mocapedit::PathEditPrecompute(p, d), mocapedit::InvalidInput);
 }
 
 TEST(PathEdit, WideMeshesFactoredOnSeveralThreadsAtOnceAgree) {

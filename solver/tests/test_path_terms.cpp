@@ -37,21 +37,21 @@ TEST(PathTerms, ValidityRejectsBadInput) {
   {
     Eigen::VectorXi bad(3);
     bad << 0, 10, 20;  // does not end at #V
-    EXPECT_THROW(mocapedit::ComponentChainTerms(rest, bad, 0.01, t, e), std::invalid_argument);
+    EXPECT_THROW(mocapedit::ComponentChainTerms(rest, bad, 0.01, t, e), mocapedit::InvalidInput);
   }
   {
     Eigen::VectorXi bad(4);
     bad << 0, 20, 10, 30;  // decreasing
     Eigen::VectorXi partner;
-    EXPECT_THROW(mocapedit::FramePartners(rest, bad, 0.01, partner), std::invalid_argument);
+    EXPECT_THROW(mocapedit::FramePartners(rest, bad, 0.01, partner), mocapedit::InvalidInput);
   }
   {
     IntGrid members(3, 1);
     members << 0, 10, 20;
     const Eigen::VectorXi partner = Eigen::VectorXi::Constant(30, -1);
-    EXPECT_THROW(mocapedit::GroupMeshTerms(rest, members, 3, partner, t, e), std::invalid_argument);  // k >= M
+    EXPECT_THROW(mocapedit::GroupMeshTerms(rest, members, 3, partner, t, e), mocapedit::InvalidInput);  // k >= M
     members(2, 0) = 30;
-    EXPECT_THROW(mocapedit::GroupMeshTerms(rest, members, 1, partner, t, e), std::invalid_argument);
+    EXPECT_THROW(mocapedit::GroupMeshTerms(rest, members, 1, partner, t, e), mocapedit::InvalidInput);
   }
   {
     Eigen::VectorXi rows(1), cols(1);
@@ -59,9 +59,9 @@ TEST(PathTerms, ValidityRejectsBadInput) {
     cols << 2;
     Eigen::VectorXcd values(1);
     values << 1.0;
-    EXPECT_THROW(mocapedit::NullSpaceSupport(rows, cols, values, 1, 2, 1e-9), std::invalid_argument);
+    EXPECT_THROW(mocapedit::NullSpaceSupport(rows, cols, values, 1, 2, 1e-9), mocapedit::InvalidInput);
     cols << 0;
-    EXPECT_THROW(mocapedit::NullSpaceSupport(rows, cols, values, 1, 2, 0.0), std::invalid_argument);
+    EXPECT_THROW(mocapedit::NullSpaceSupport(rows, cols, values, 1, 2, 0.0), mocapedit::InvalidInput);
   }
   {
     IndexPairs blocks(1, 2);
@@ -69,7 +69,7 @@ TEST(PathTerms, ValidityRejectsBadInput) {
     Eigen::VectorXd turns;
     EXPECT_THROW(mocapedit::BlockDeformationTurns(rest, rest, blocks, IndexTriples(0, 3), Eigen::VectorXd(), 2, 0.0,
                                                   turns),
-                 std::invalid_argument);
+                 mocapedit::InvalidInput);
   }
 }
 
@@ -204,7 +204,7 @@ TEST(PathTerms, KeyFramesKeepShortStretchesAndUnkeyedAgents) {
   EXPECT_EQ(keys, expected_keys);
   EXPECT_EQ(before, expected_before);
   forced[0] = 10;
-  EXPECT_THROW(mocapedit::KeyFrames(rest, offsets, keyed, forced, 0.01, keys, before), std::invalid_argument);
+  EXPECT_THROW(mocapedit::KeyFrames(rest, offsets, keyed, forced, 0.01, keys, before), mocapedit::InvalidInput);
 }
 
 TEST(PathTerms, ExpandedFramesTurnSmoothlyThroughKeys) {
@@ -248,5 +248,5 @@ TEST(PathTerms, ExpandedFramesFollowTheSimilarityOfTheirKeys) {
     EXPECT_NEAR(out(f, 1), move(f).imag(), 1e-12) << "frame " << f;
   }
   keys[2] = 4;  // the last frame must be a key
-  EXPECT_THROW(mocapedit::ExpandKeyFrames(rest, keys, positions, out), std::invalid_argument);
+  EXPECT_THROW(mocapedit::ExpandKeyFrames(rest, keys, positions, out), mocapedit::InvalidInput);
 }

@@ -9,21 +9,21 @@ using mocapedit::Trajectory2;
 
 TEST(Regions, ValidityRejectsEmptyRegions) {
   {
-    EXPECT_THROW(mocapedit::CircleRegion(Eigen::Vector2d(0, 0), 0.0), std::invalid_argument);
+    EXPECT_THROW(mocapedit::CircleRegion(Eigen::Vector2d(0, 0), 0.0), mocapedit::InvalidInput);
   }
   {
-    EXPECT_THROW(mocapedit::CircleRegion(Eigen::Vector2d(0, NAN), 1.0), std::invalid_argument);
+    EXPECT_THROW(mocapedit::CircleRegion(Eigen::Vector2d(0, NAN), 1.0), mocapedit::InvalidInput);
   }
   {
     Trajectory2 line(3, 2);
     line << 0, 0, 1, 1, 2, 2;
-    EXPECT_THROW(mocapedit::HullRegion(line), std::invalid_argument);
+    EXPECT_THROW(mocapedit::HullRegion(line), mocapedit::InvalidInput);
   }
   {
     const GroundRegion r = mocapedit::CircleRegion(Eigen::Vector2d(0, 0), 1.0);
     Trajectory2 p = Trajectory2::Zero(2, 2);
-    EXPECT_THROW(mocapedit::PushOutOfRegion(r, p, Eigen::VectorXd::Constant(3, 0.1)), std::invalid_argument);
-    EXPECT_THROW(mocapedit::PushOutOfRegion(r, p, Eigen::VectorXd::Constant(1, -0.1)), std::invalid_argument);
+    EXPECT_THROW(mocapedit::PushOutOfRegion(r, p, Eigen::VectorXd::Constant(3, 0.1)), mocapedit::InvalidInput);
+    EXPECT_THROW(mocapedit::PushOutOfRegion(r, p, Eigen::VectorXd::Constant(1, -0.1)), mocapedit::InvalidInput);
   }
 }
 

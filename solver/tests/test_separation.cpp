@@ -62,13 +62,13 @@ struct RowBuilder {
 };
 
 SeparationResult Solve(const SeparationProblem& p, const SeparationRows& rows, int sweeps = 500) {
-  std::shared_ptr<mocapedit::SeparationData> data;
+  mocapedit::SeparationData data;
   mocapedit::SeparationPrecompute(p, data);
   SeparationSettings settings;
   settings.max_sweeps = sweeps;
   settings.tolerance = 1e-9;
   SeparationResult result;
-  mocapedit::SeparationSolve(*data, rows, settings, result);
+  mocapedit::SeparationSolve(data, rows, settings, result);
   return result;
 }
 
@@ -78,44 +78,44 @@ TEST(Separation, ValidityRejectsBadInput) {
   {
     SeparationProblem p = HeadOn();
     p.starts[2] = 5;
-    std::shared_ptr<mocapedit::SeparationData> data;
-    EXPECT_THROW(mocapedit::SeparationPrecompute(p, data), std::invalid_argument);
+    mocapedit::SeparationData data;
+    EXPECT_THROW(mocapedit::SeparationPrecompute(p, data), mocapedit::InvalidInput);
   }
   {
     SeparationProblem p = HeadOn();
     p.anchor_weight = 0.0;
-    std::shared_ptr<mocapedit::SeparationData> data;
-    EXPECT_THROW(mocapedit::SeparationPrecompute(p, data), std::invalid_argument);
+    mocapedit::SeparationData data;
+    EXPECT_THROW(mocapedit::SeparationPrecompute(p, data), mocapedit::InvalidInput);
   }
   {
     SeparationProblem p = HeadOn();
     p.rigid = {{70, 90}};  // spans both agents
-    std::shared_ptr<mocapedit::SeparationData> data;
-    EXPECT_THROW(mocapedit::SeparationPrecompute(p, data), std::invalid_argument);
+    mocapedit::SeparationData data;
+    EXPECT_THROW(mocapedit::SeparationPrecompute(p, data), mocapedit::InvalidInput);
   }
   {
     SeparationProblem p = HeadOn();
     p.rigid = {{10, 20}, {15, 30}};
-    std::shared_ptr<mocapedit::SeparationData> data;
-    EXPECT_THROW(mocapedit::SeparationPrecompute(p, data), std::invalid_argument);
+    mocapedit::SeparationData data;
+    EXPECT_THROW(mocapedit::SeparationPrecompute(p, data), mocapedit::InvalidInput);
   }
-  std::shared_ptr<mocapedit::SeparationData> data;
+  mocapedit::SeparationData data;
   mocapedit::SeparationPrecompute(HeadOn(), data);
   SeparationResult result;
   {
     RowBuilder b;
     b.Add(1, 0, 0, 0, 0, {{500, 1.0}});  // vertex out of range
-    EXPECT_THROW(mocapedit::SeparationSolve(*data, b.Build(), SeparationSettings{}, result), std::invalid_argument);
+    EXPECT_THROW(mocapedit::SeparationSolve(data, b.Build(), SeparationSettings{}, result), mocapedit::InvalidInput);
   }
   {
     RowBuilder b;
     b.Add(1, 0, 0, -1.0, 0, {{5, 1.0}});  // negative softness
-    EXPECT_THROW(mocapedit::SeparationSolve(*data, b.Build(), SeparationSettings{}, result), std::invalid_argument);
+    EXPECT_THROW(mocapedit::SeparationSolve(data, b.Build(), SeparationSettings{}, result), mocapedit::InvalidInput);
   }
   {
     RowBuilder b;
     b.Add(1, 0, 0, 0, 0, {{5, 0.0}});  // a row that touches nothing
-    EXPECT_THROW(mocapedit::SeparationSolve(*data, b.Build(), SeparationSettings{}, result), std::invalid_argument);
+    EXPECT_THROW(mocapedit::SeparationSolve(data, b.Build(), SeparationSettings{}, result), mocapedit::InvalidInput);
   }
 }
 
@@ -209,7 +209,7 @@ TEST(Separation, ContradictingHardRowsAreRegularized) {
 TEST(Separation, TheCacheGivesTheSameAnswer) {
   const int n = 81;
   const SeparationProblem p = HeadOn(n);
-  std::shared_ptr<mocapedit::SeparationData> data;
+  mocapedit::SeparationData data;
   mocapedit::SeparationPrecompute(p, data);
   auto cache = mocapedit::SeparationNewCache();
   SeparationSettings settings;
@@ -219,8 +219,8 @@ TEST(Separation, TheCacheGivesTheSameAnswer) {
     for (int k = 0; k <= round; ++k) b.Add(0, -1, 0.7, 0, 1, {{38 + 2 * k, -1.0}, {n + 38 + 2 * k, 1.0}});
     const SeparationRows rows = b.Build();
     SeparationResult cached, fresh;
-    mocapedit::SeparationSolve(*data, rows, settings, *cache, cached);
-    mocapedit::SeparationSolve(*data, rows, settings, fresh);
+    mocapedit::SeparationSolve(data, rows, settings, *cache, cached);
+    mocapedit::SeparationSolve(data, rows, settings, fresh);
     EXPECT_NEAR((cached.positions - fresh.positions).cwiseAbs().maxCoeff(), 0.0, 1e-12) << "round " << round;
   }
 }
@@ -234,13 +234,13 @@ TEST(Separation, WarmStartsOfBothStepsResumeTheSolve) {
   RowBuilder b;
   for (int k = 30; k <= 50; k += 4) b.Add(0, -1, 0.7, 0, 1, {{k, -1.0}, {n + k, 1.0}});
   SeparationRows rows = b.Build();
-  std::shared_ptr<mocapedit::SeparationData> data;
+  mocapedit::SeparationData data;
   mocapedit::SeparationPrecompute(p, data);
   auto cache = mocapedit::SeparationNewCache();
   SeparationSettings settings;
   settings.tolerance = 1e-9;
   SeparationResult cold;
-  mocapedit::SeparationSolve(*data, rows, settings, *cache, cold);
+  mocapedit::SeparationSolve(data, rows, settings, *cache, cold);
   ASSERT_TRUE(cold.converged);
   EXPECT_GT(cold.updates, 0);
   EXPECT_GT(cold.inverse_columns, 0);
@@ -248,14 +248,14 @@ TEST(Separation, WarmStartsOfBothStepsResumeTheSolve) {
   rows.initial_forces = cold.forces;
   rows.initial_shape_forces = cold.shape_forces;
   SeparationResult warm;
-  mocapedit::SeparationSolve(*data, rows, settings, *cache, warm);
+  mocapedit::SeparationSolve(data, rows, settings, *cache, warm);
   EXPECT_EQ(warm.updates, 0);
   EXPECT_EQ(warm.inverse_columns, 0);
   EXPECT_NEAR((warm.positions - cold.positions).cwiseAbs().maxCoeff(), 0.0, 1e-12);
   // Step 1 started from step 2's forces (the old warm start) has work to do.
   rows.initial_shape_forces.resize(0);
   SeparationResult mixed;
-  mocapedit::SeparationSolve(*data, rows, settings, *cache, mixed);
+  mocapedit::SeparationSolve(data, rows, settings, *cache, mixed);
   EXPECT_GT(mixed.updates, 0);
   EXPECT_NEAR((mixed.positions - cold.positions).cwiseAbs().maxCoeff(), 0.0, 1e-6);
 }

@@ -46,8 +46,19 @@ struct Builder {
   }
   Eigen::VectorXd Times() const { return Eigen::Map<const Eigen::VectorXd>(times.data(), times.size()); }
   Eigen::VectorXd Offsets() const { return Eigen::Map<const Eigen::VectorXd>(offsets.data(), offsets.size()); }
-  TimeWarpResult Solve() const { return mocapedit::TimeWarp(p, Times(), Offsets()); }
+  TimeWarpResult Solve() const {
+    TimeWarpResult r;
+    mocapedit::TimeWarp(p, Times(), Offsets(), r);
+    return r;
+  }
 };
+
+TimeWarpResult SolveWith(const mocapedit::TimeWarpData& data, const Eigen::VectorXd& times,
+                         const Eigen::VectorXd& offsets) {
+  TimeWarpResult r;
+  mocapedit::TimeWarpSolve(data, times, offsets, r);
+  return r;
+}
 
 Eigen::VectorXd Intervals(const Eigen::VectorXd& t) { return t.tail(t.size() - 1) - t.head(t.size() - 1); }
 
@@ -140,59 +151,59 @@ TEST(TimeWarp, ValidityRejectsBadInput) {
   const Eigen::VectorXd one = Eigen::VectorXd::Constant(1, 5.0), none(0);
   {
     Builder b({Eigen::VectorXd(0)});
-    EXPECT_THROW(b.Solve(), std::invalid_argument);  // an agent without frames
+    EXPECT_THROW(b.Solve(), mocapedit::InvalidInput);  // an agent without frames
   }
   {
     Eigen::VectorXd rest(3);
     rest << 0, 2, 1;
     Builder b({rest});
-    EXPECT_THROW(b.Solve(), std::invalid_argument);  // rest times that go back
+    EXPECT_THROW(b.Solve(), mocapedit::InvalidInput);  // rest times that go back
   }
   {
     Builder b({Range(10)});
     b.Time(0, 10, 3.0);
-    EXPECT_THROW(b.Solve(), std::invalid_argument);  // frame outside the clip
+    EXPECT_THROW(b.Solve(), mocapedit::InvalidInput);  // frame outside the clip
   }
   {
     Builder b({Range(10)});
     b.Sync(0, 2, 1, 2, 0.0);
-    EXPECT_THROW(b.Solve(), std::invalid_argument);  // target agent that does not exist
+    EXPECT_THROW(b.Solve(), mocapedit::InvalidInput);  // target agent that does not exist
   }
   {
     Builder b({Range(10)});
     b.Time(0, 2, 3.0, false, -1.0);
-    EXPECT_THROW(b.Solve(), std::invalid_argument);  // negative weight
+    EXPECT_THROW(b.Solve(), mocapedit::InvalidInput);  // negative weight
   }
   {
     Builder b({Range(10)});
     b.Time(0, 2, 3.0);
     b.p.time_weights.resize(0);
-    EXPECT_THROW(b.Solve(), std::invalid_argument);  // weights of the wrong length
+    EXPECT_THROW(b.Solve(), mocapedit::InvalidInput);  // weights of the wrong length
   }
   for (double fraction : {0.0, 1.5}) {
     Builder b({Range(10)});
     b.p.min_interval_fraction = fraction;
-    EXPECT_THROW(b.Solve(), std::invalid_argument);
+    EXPECT_THROW(b.Solve(), mocapedit::InvalidInput);
   }
   {
     Builder b({Range(10)});
     b.p.anchor_weight = 0.0;
-    EXPECT_THROW(b.Solve(), std::invalid_argument);
+    EXPECT_THROW(b.Solve(), mocapedit::InvalidInput);
   }
   {
     Builder b({Range(10)});
     b.p.min_intervals = {Range(3)};
-    EXPECT_THROW(b.Solve(), std::invalid_argument);  // min intervals of the wrong length
+    EXPECT_THROW(b.Solve(), mocapedit::InvalidInput);  // min intervals of the wrong length
   }
   {
     Builder b({Range(10)});
     b.Time(0, 2, 3.0);
     mocapedit::TimeWarpData data;
     mocapedit::TimeWarpPrecompute(b.p, data);
-    EXPECT_THROW(mocapedit::TimeWarpSolve(data, none, none), std::invalid_argument);  // one time is missing
+    EXPECT_THROW(SolveWith(data, none, none), mocapedit::InvalidInput);  // one time is missing
     Eigen::VectorXd nan = Eigen::VectorXd::Constant(1, std::nan(""));
-    EXPECT_THROW(mocapedit::TimeWarpSolve(data, nan, none), std::invalid_argument);
-    EXPECT_NO_THROW(mocapedit::TimeWarpSolve(data, one, none));
+    EXPECT_THROW(SolveWith(data, nan, none), mocapedit::InvalidInput);
+    EXPECT_NO_THROW(SolveWith(data, one, none));
   }
 }
 
@@ -394,7 +405,7 @@ TEST(TimeWarp, PrecomputeOnceSolveForNewValues) {
   for (double end : {140.0, 170.0, 200.0}) {
     b.times[1] = end;
     const TimeWarpResult once = b.Solve();
-    const TimeWarpResult again = mocapedit::TimeWarpSolve(data, b.Times(), b.Offsets());
+    const TimeWarpResult again = SolveWith(data, b.Times(), b.Offsets());
     EXPECT_LT((once.time_maps[1] - again.time_maps[1]).cwiseAbs().maxCoeff(), 1e-12);
     EXPECT_NEAR(again.time_maps[0][150], end, 1e-9);
     EXPECT_LT(again.sync_residuals[0], 1e-9);
@@ -411,14 +422,16 @@ TEST(TimeWarp, ResponsesGiveTheSolveForAnyValues) {
   b.p.min_interval_fraction = 0.5;
   mocapedit::TimeWarpData plain, fast;
   mocapedit::TimeWarpPrecompute(b.p, plain);
-  mocapedit::TimeWarpPrecompute(b.p, fast, true);
+  TimeWarpProblem with_responses = b.p;
+  with_responses.precompute_responses = true;
+  mocapedit::TimeWarpPrecompute(with_responses, fast);
   ASSERT_EQ(fast.components.size(), 1u);
   int bounded = 0;
   for (double end : {240.0, 300.0, 160.0, 145.0}) {  // the last ones squeeze frames 20..250
     b.times[1] = end;
     b.offsets[0] = end / 100.0;
-    const TimeWarpResult solved = mocapedit::TimeWarpSolve(plain, b.Times(), b.Offsets());
-    const TimeWarpResult summed = mocapedit::TimeWarpSolve(fast, b.Times(), b.Offsets());
+    const TimeWarpResult solved = SolveWith(plain, b.Times(), b.Offsets());
+    const TimeWarpResult summed = SolveWith(fast, b.Times(), b.Offsets());
     for (int a = 0; a < 3; ++a)  // as accurate as the solve: 1e-11 of the times
       EXPECT_LT((solved.time_maps[a] - summed.time_maps[a]).cwiseAbs().maxCoeff(),
                 1e-11 * (1 + solved.time_maps[a].cwiseAbs().maxCoeff())) << "end " << end;

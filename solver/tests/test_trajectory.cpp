@@ -12,22 +12,22 @@ TEST(Trajectory, ValidityRejectsBadRanges) {
   Eigen::VectorXd one(1);
   one << 0.0;
   {
-    EXPECT_THROW(mocapedit::TangentHeadings(p, {{2, 9}}, one, 1e-9), std::invalid_argument);
+    EXPECT_THROW(mocapedit::TangentHeadings(p, {{2, 9}}, one, 1e-9), mocapedit::InvalidInput);
   }
   {
-    EXPECT_THROW(mocapedit::TangentHeadings(p, {{3, 1}}, one, 1e-9), std::invalid_argument);
+    EXPECT_THROW(mocapedit::TangentHeadings(p, {{3, 1}}, one, 1e-9), mocapedit::InvalidInput);
   }
   {
-    EXPECT_THROW(mocapedit::TangentHeadings(p, {}, one, 1e-9), std::invalid_argument);
+    EXPECT_THROW(mocapedit::TangentHeadings(p, {}, one, 1e-9), mocapedit::InvalidInput);
   }
   {
-    EXPECT_THROW(mocapedit::DeformationTurns(p, p.topRows(3), {}, Eigen::VectorXd(), 2, 0.0), std::invalid_argument);
+    EXPECT_THROW(mocapedit::DeformationTurns(p, p.topRows(3), {}, Eigen::VectorXd(), 2, 0.0), mocapedit::InvalidInput);
   }
   {
-    EXPECT_THROW(mocapedit::DeformationTurns(p, p, {{2, 9}}, one, 2, 0.0), std::invalid_argument);
+    EXPECT_THROW(mocapedit::DeformationTurns(p, p, {{2, 9}}, one, 2, 0.0), mocapedit::InvalidInput);
   }
   {
-    EXPECT_THROW(mocapedit::DeformationTurns(p, p, {}, one, 2, 0.0), std::invalid_argument);
+    EXPECT_THROW(mocapedit::DeformationTurns(p, p, {}, one, 2, 0.0), mocapedit::InvalidInput);
   }
 }
 

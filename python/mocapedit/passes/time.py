@@ -49,7 +49,7 @@ def _validate(ctx: SolveContext) -> float:
 
 
 def _conflict_error(exc, agents: list[str], ctx: SolveContext):
-    info = exc.args[1]
+    info = vars(exc)  # the attributes of _solver.TimeWarpConflict
     times = [ctx.data.time_constraints[i] for i in info["time_constraints"]]
     syncs = [ctx.data.sync_constraints[i] for i in info["sync_constraints"]]
     prims = sorted({c.path for c in times} | {c.path for c in syncs})

@@ -8,6 +8,8 @@
 
 #include <Eigen/Core>
 
+#include "mocapedit/errors.h"
+
 namespace mocapedit {
 
 using Vec3fRows = Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor>;
@@ -25,7 +27,7 @@ using Quatf4Rows = Eigen::Matrix<float, Eigen::Dynamic, 4, Eigen::RowMajor>;
 //   out_translations  #T*J by 3
 //   out_rotations     #T*J by 4, unit length
 //   out_scales        #T*J by 3
-// Throws std::invalid_argument on inconsistent shapes or non-finite frames.
+// Throws InvalidInput on inconsistent shapes or non-finite frames.
 void SampleClip(const Eigen::Ref<const Vec3fRows>& translations, const Eigen::Ref<const Quatf4Rows>& rotations,
                 const Eigen::Ref<const Vec3fRows>& scales, int joints,
                 const Eigen::Ref<const Eigen::VectorXd>& frames, Eigen::Ref<Vec3fRows> out_translations,
@@ -38,7 +40,7 @@ void SampleClip(const Eigen::Ref<const Vec3fRows>& translations, const Eigen::Re
 //   time_map  #F strictly increasing shot times, one per source frame
 //   times     #T shot times (any order)
 // Returns #T fractional frames; a time equal to time_map[f] gives exactly f.
-// Throws std::invalid_argument when the time map is empty or does not increase.
+// Throws InvalidInput when the time map is empty or does not increase.
 Eigen::VectorXd FramesAtTimes(const Eigen::Ref<const Eigen::VectorXd>& time_map,
                               const Eigen::Ref<const Eigen::VectorXd>& times);
 

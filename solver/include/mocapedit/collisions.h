@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "mocapedit/trajectory.h"
+#include "mocapedit/errors.h"
 
 namespace mocapedit {
 
@@ -75,7 +76,7 @@ double CapsuleClearance(double dx, double dy, double radius_a, double height_a, 
 //   capsules   #A radii, heights, bases and active flags
 //   settings   margin, report distance, threads
 // Returns the intervals and each agent's minimum clearance.
-// Throws std::invalid_argument on bad shapes, non-positive radii or heights, a negative
+// Throws InvalidInput on bad shapes, non-positive radii or heights, a negative
 // margin, or non-finite positions of an active agent.
 CollisionResult DetectCollisions(const Eigen::Ref<const Trajectory2>& positions, int samples,
                                  const CapsuleSet& capsules, const CollisionSettings& settings);

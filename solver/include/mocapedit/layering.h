@@ -28,6 +28,8 @@
 #include <utility>
 #include <vector>
 
+#include "mocapedit/errors.h"
+
 namespace mocapedit {
 
 // A non-owning view of a contiguous array (a C++17 stand-in for std::span).
@@ -128,7 +130,7 @@ struct LayeringJob {
 //   parents  #J parent index of each joint, -1 for a root; every parent precedes its
 //            children (UsdSkel's joint order)
 //   root     joint at the top of the subtree, or -1 for the whole skeleton
-// Throws std::invalid_argument when a parent does not precede its child or `root` is out of
+// Throws InvalidInput when a parent does not precede its child or `root` is out of
 // range.
 std::vector<float> SubtreeJointWeights(Span<const int> parents, int root);
 

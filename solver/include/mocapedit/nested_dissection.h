@@ -15,6 +15,8 @@
 
 #include <vector>
 
+#include "mocapedit/errors.h"
+
 namespace mocapedit {
 
 struct Dissection {
@@ -33,7 +35,7 @@ struct Dissection {
 //
 // The graph is the pattern of a symmetric n x n matrix in compressed columns (one triangle
 // or both; the diagonal is ignored). `coords` is n x dims, row-major. Throws
-// std::invalid_argument on an index out of range or a coordinate that is not finite.
+// InvalidInput on an index out of range or a coordinate that is not finite.
 Dissection CoordinateDissection(int n, const int* col_ptr, const int* row_index, const double* coords, int dims,
                                 int leaf);
 

@@ -74,10 +74,10 @@
 #include <Eigen/Core>
 #include <complex>
 #include <memory>
-#include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "mocapedit/errors.h"  // ContradictionError
 #include "mocapedit/trajectory.h"
 
 namespace mocapedit {
@@ -123,23 +123,6 @@ struct PathEditProblem {
   bool force_qr = false;
 };
 
-// Which input a contradiction or a structural error refers to.
-struct ConstraintRef {
-  enum Kind { kHandle, kLink, kRigid } kind;
-  int index;
-};
-
-// Hard constraints that cannot all hold: a cycle of hard links (and rigid ranges) whose
-// offsets do not add up, or several hard handles on vertices tied together at places that
-// disagree. `constraints` lists every input in the cycle.
-class ContradictionError : public std::invalid_argument {
- public:
-  ContradictionError(const std::string& what, std::vector<ConstraintRef> constraints, double mismatch)
-      : std::invalid_argument(what), constraints(std::move(constraints)), mismatch(mismatch) {}
-  std::vector<ConstraintRef> constraints;
-  double mismatch;  // stage units by which the cycle fails to close
-};
-
 // How one step was solved, for the report.
 struct StepInfo {
   std::string solver;      // "LDLT", "LDLT (AMD)", "CHOLMOD supernodal", "SPQR", "SPQR (singular)",
@@ -159,8 +142,21 @@ struct PathEditResult {
   StepInfo step1, step2;
 };
 
-// Precomputed structure and factorizations (opaque).
-struct PathEditData;
+namespace detail {
+struct PathEditState;  // defined in path_edit_internal.h
+}
+
+// Precomputed structure and factorizations, from PathEditPrecompute.
+struct PathEditData {
+  PathEditData();
+  ~PathEditData();
+  PathEditData(PathEditData&&) noexcept;
+  PathEditData& operator=(PathEditData&&) noexcept;
+
+  int handle_count = 0;  // #H of the problem
+  int link_count = 0;    // #L of the problem
+  std::unique_ptr<const detail::PathEditState> state;  // opaque
+};
 
 // Validates the problem, eliminates hard constraints and rigid ranges, builds and factors
 // both steps.
@@ -168,12 +164,13 @@ struct PathEditData;
 // Inputs:
 //   problem  as documented on PathEditProblem
 // Outputs:
-//   data     filled; reuse it for every PathEditSolve with the same structure
-// Throws std::invalid_argument for bad shapes, indices out of range, negative or
-// non-finite weights, overlapping rigid ranges, a triangle whose frame vertices j and k
-// share a rest position, a rigid range that holds more hard constraints than it can
-// (two for kRotate, one for kTranslate; each a ContradictionError naming them).
-void PathEditPrecompute(const PathEditProblem& problem, std::shared_ptr<PathEditData>& data);
+//   data     replaced; reuse it for every PathEditSolve with the same structure
+// Throws InvalidInput for bad shapes, indices out of range, negative or non-finite
+// weights, overlapping rigid ranges, a triangle whose frame vertices j and k share a rest
+// position; ContradictionError (an InvalidInput) for a rigid range that holds more hard
+// constraints than it can (two for kRotate, one for kTranslate), naming them;
+// NumericalError when a factorization fails.
+void PathEditPrecompute(const PathEditProblem& problem, PathEditData& data);
 
 // Solves both steps for the given handle positions and link offsets.
 //
@@ -185,7 +182,7 @@ void PathEditPrecompute(const PathEditProblem& problem, std::shared_ptr<PathEdit
 //   result            positions, step-1 positions, rigid angles and solver notes
 // Throws ContradictionError when hard constraints disagree by more than
 // 1e-7 + 1e-12 * (largest coordinate), naming every constraint in the cycle;
-// std::invalid_argument for wrong shapes or non-finite values.
+// InvalidInput for wrong shapes or non-finite values; NumericalError when a solve fails.
 void PathEditSolve(const PathEditData& data, const Eigen::Ref<const Trajectory2>& handle_positions,
                    const Eigen::Ref<const Trajectory2>& link_offsets, PathEditResult& result);
 

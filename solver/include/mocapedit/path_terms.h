@@ -30,7 +30,7 @@ namespace mocapedit {
 // Outputs (replaced):
 //   triangles     #T by 3, the agents' triangles in agent order
 //   edges         #V-#A by 2, consecutive frames of each agent
-// Throws std::invalid_argument when the offsets do not partition 0..#V-1.
+// Throws InvalidInput when the offsets do not partition 0..#V-1.
 void ComponentChainTerms(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& offsets,
                          double min_baseline, IndexTriples& triangles, IndexPairs& edges);
 
@@ -49,7 +49,7 @@ void ComponentChainTerms(const Eigen::Ref<const Trajectory2>& rest, const Eigen:
 //   keys          #K increasing frame indices of the keys (every frame of unkeyed agents)
 //   before        #V per frame, how many keys come before it: the solve's vertex of a key,
 //                 and of the next key for other frames
-// Throws std::invalid_argument on bad offsets or forced frames out of range.
+// Throws InvalidInput on bad offsets or forced frames out of range.
 void KeyFrames(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& offsets,
                const Eigen::Ref<const Eigen::VectorXi>& keyed, const Eigen::Ref<const Eigen::VectorXi>& forced,
                double min_baseline, Eigen::VectorXi& keys, Eigen::VectorXi& before);
@@ -73,7 +73,7 @@ void KeyFrames(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const
 //   positions  #K by 2 solved positions of the keys
 // Outputs:
 //   out        #V by 2
-// Throws std::invalid_argument on bad sizes or keys.
+// Throws InvalidInput on bad sizes or keys.
 void ExpandKeyFrames(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<const Eigen::VectorXi>& keys,
                      const Eigen::Ref<const Trajectory2>& positions, Trajectory2& out);
 
@@ -88,7 +88,7 @@ void ExpandKeyFrames(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref
 //   frames        #M by #T: member m's frame (0-based, its own) whose time is within 1e-6
 //                 of times[t], found as the first frame at or after times[t] - 1e-9 (the
 //                 last frame when there is none); -1 when that frame is not within 1e-6
-// Throws std::invalid_argument when the offsets do not partition sample_times or a
+// Throws InvalidInput when the offsets do not partition sample_times or a
 // member has no frame.
 void GroupSampleFrames(const Eigen::Ref<const Eigen::VectorXd>& sample_times,
                        const Eigen::Ref<const Eigen::VectorXi>& offsets, const Eigen::Ref<const Eigen::VectorXd>& times,
@@ -126,7 +126,7 @@ void FramePartners(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<c
 // Outputs:
 //   triangles   #t by 3 (i; j, k): vertex i in the frame of j -> k
 //   edges       #e by 2
-// Throws std::invalid_argument on indices out of range or a bad neighbour count.
+// Throws InvalidInput on indices out of range or a bad neighbour count.
 void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
                     const Eigen::Ref<const Eigen::Matrix<int, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>& members,
                     int neighbours, const Eigen::Ref<const Eigen::VectorXi>& partner, IndexTriples& triangles,
@@ -143,7 +143,7 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
 //   window, min_travel  as in DeformationTurns
 // Outputs:
 //   turns           #V: each block's rows filled as DeformationTurns fills them, other rows 0
-// Throws std::invalid_argument on blocks or ranges out of range.
+// Throws InvalidInput on blocks or ranges out of range.
 void BlockDeformationTurns(const Eigen::Ref<const Trajectory2>& source, const Eigen::Ref<const Trajectory2>& edited,
                            const Eigen::Ref<const IndexPairs>& blocks, const Eigen::Ref<const IndexTriples>& fixed,
                            const Eigen::Ref<const Eigen::VectorXd>& fixed_turn, int window, double min_travel,
@@ -165,7 +165,7 @@ void BlockDeformationTurns(const Eigen::Ref<const Trajectory2>& source, const Ei
 //   num_cols    #C
 //   tolerance   > 0, relative to the scaled columns (1e-9 is typical)
 // Returns #C flags (1: reached). With no rows, every column is reached.
-// Throws std::invalid_argument on sizes or indices out of range.
+// Throws InvalidInput on sizes or indices out of range.
 std::vector<char> NullSpaceSupport(const Eigen::Ref<const Eigen::VectorXi>& rows,
                                    const Eigen::Ref<const Eigen::VectorXi>& cols,
                                    const Eigen::Ref<const Eigen::VectorXcd>& values, int num_rows, int num_cols,

@@ -12,6 +12,7 @@
 #include <Eigen/Core>
 
 #include "mocapedit/trajectory.h"
+#include "mocapedit/errors.h"
 
 namespace mocapedit {
 
@@ -26,10 +27,10 @@ struct GroundRegion {
 // Returns #H by 2 (H may be below 3 when the points are collinear).
 Trajectory2 ConvexHull(const Eigen::Ref<const Trajectory2>& points);
 
-// A circle region. Throws std::invalid_argument unless radius > 0 and everything is finite.
+// A circle region. Throws InvalidInput unless radius > 0 and everything is finite.
 GroundRegion CircleRegion(const Eigen::Vector2d& center, double radius);
 
-// The convex hull of #N by 2 points as a region. Throws std::invalid_argument when the
+// The convex hull of #N by 2 points as a region. Throws InvalidInput when the
 // hull has no area (fewer than three non-collinear points) or a value is not finite.
 GroundRegion HullRegion(const Eigen::Ref<const Trajectory2>& points);
 

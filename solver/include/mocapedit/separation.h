@@ -37,6 +37,7 @@
 #include <memory>
 #include <vector>
 
+#include "mocapedit/errors.h"
 #include "mocapedit/trajectory.h"
 
 namespace mocapedit {
@@ -93,17 +94,34 @@ struct SeparationResult {
   Eigen::Vector4d seconds = Eigen::Vector4d::Zero();
 };
 
-struct SeparationData;  // opaque: every agent's factored steps
+namespace detail {
+struct SeparationState;  // defined in separation_internal.h
+}
+
+// Every agent's factored steps, from SeparationPrecompute.
+struct SeparationData {
+  SeparationData();
+  ~SeparationData();
+  SeparationData(SeparationData&&) noexcept;
+  SeparationData& operator=(SeparationData&&) noexcept;
+
+  std::unique_ptr<const detail::SeparationState> state;  // opaque
+};
 
 // Builds and factors each agent's two steps.
-// Throws std::invalid_argument on bad shapes, starts or ranges, non-finite rest positions,
-// or a non-positive anchor weight.
-void SeparationPrecompute(const SeparationProblem& problem, std::shared_ptr<SeparationData>& data);
+//
+// Inputs:
+//   problem  as documented on SeparationProblem
+// Outputs:
+//   data     replaced; reuse it for every SeparationSolve on the same agents
+// Throws InvalidInput on bad shapes, starts or ranges, non-finite rest positions, or a
+// non-positive anchor weight; NumericalError when an agent's energy cannot be factored.
+void SeparationPrecompute(const SeparationProblem& problem, SeparationData& data);
 
 // Solves both steps under the rows. Const on data; may run from several threads.
-// Throws std::invalid_argument on bad shapes, vertices out of range, a row without terms,
-// negative softness or non-finite values; std::runtime_error when the equality rows
-// cannot be solved even regularized.
+// Throws InvalidInput on bad shapes, vertices out of range, a row without terms, negative
+// softness or non-finite values; NumericalError when the equality rows cannot be solved
+// even regularized.
 void SeparationSolve(const SeparationData& data, const SeparationRows& rows, const SeparationSettings& settings,
                      SeparationResult& result);
 

@@ -32,9 +32,10 @@
 #include <Eigen/Core>
 #include <Eigen/Sparse>
 #include <memory>
-#include <stdexcept>
 #include <string>
 #include <vector>
+
+#include "mocapedit/errors.h"  // TimeWarpConflict
 
 namespace mocapedit {
 
@@ -70,26 +71,11 @@ struct TimeWarpProblem {
   double anchor_weight = 1e-6;
   // Cap on active-set iterations per component; < 0 means 10 * frames + 100.
   int max_active_set_iterations = -1;
-};
-
-// Constraints that cannot all be met. TimeWarpSolve throws it; it is a bad-input error.
-class TimeWarpConflict : public std::invalid_argument {
- public:
-  enum class Kind {
-    kCycle,     // hard constraints fix a frame's time (or two frames' difference) twice, differently
-    kBackwards  // hard constraints make time run backwards, or faster than the minimum interval allows
-  };
-  TimeWarpConflict(Kind kind, std::vector<int> time_constraints, std::vector<int> sync_constraints,
-                   double mismatch, int agent, int frame_a, int frame_b, double gap, double minimum,
-                   const std::string& what);
-  Kind kind;
-  std::vector<int> time_constraints;  // indices into TimeWarpProblem::time_frames
-  std::vector<int> sync_constraints;  // indices into TimeWarpProblem::sync_frames
-  double mismatch;                    // kCycle: how far the constraints disagree (time codes)
-  // kBackwards, when one agent's two frames are involved (else agent = -1): the frames,
-  // the time the constraints leave between them and the least the minimum interval allows.
-  int agent, frame_a, frame_b;
-  double gap, minimum;
+  // For re-solving as constraint values change (a dragged time): each component that reads
+  // at most 16 constraint values also keeps its unbounded solution's response to each of
+  // them (one solve per value), so that TimeWarpSolve only sums them; it still runs the
+  // active set when an interval falls below its minimum, and gives known times exactly.
+  bool precompute_responses = false;
 };
 
 struct TimeWarpComponent;  // one factored component (defined in time_warp.cpp)
@@ -123,32 +109,30 @@ struct TimeWarpResult {
 // Splits the agents into components and factors each one.
 //
 // Inputs:
-//   problem    the structure: rest time maps, constraint frames, hardness and weights
-//   responses  for re-solving as constraint values change (a dragged time): each component
-//              that reads at most 16 constraint values also keeps its unbounded solution's
-//              response to each of them (one solve per value), so that TimeWarpSolve only
-//              sums them; it still runs the active set when an interval falls below its
-//              minimum, and gives known times exactly.
+//   problem  the structure: rest time maps, constraint frames, hardness and weights
 // Outputs:
-//   data       the factored components, for TimeWarpSolve
-// Throws std::invalid_argument on bad shapes, indices, frames out of range, weights or
-// rest times that do not increase.
-void TimeWarpPrecompute(const TimeWarpProblem& problem, TimeWarpData& data, bool responses = false);
+//   data     replaced: the factored components, for TimeWarpSolve
+// Throws InvalidInput on bad shapes, indices, frames out of range, weights or rest times
+// that do not increase; NumericalError when a factorization fails.
+void TimeWarpPrecompute(const TimeWarpProblem& problem, TimeWarpData& data);
 
-// Warps every time map to the constraint values.
+// Warps every time map to the constraint values. Const on data; may run from several
+// threads.
 //
 // Inputs:
 //   data     from TimeWarpPrecompute
 //   times    #T shot times of the time constraints
 //   offsets  #S sync offsets (time codes)
-// Returns the warped time maps (agents without constraints keep their rest map) and the
-// figures to report. Throws TimeWarpConflict when hard constraints contradict each other
-// or the minimum interval, std::invalid_argument on bad shapes or non-finite values.
-TimeWarpResult TimeWarpSolve(const TimeWarpData& data, const Eigen::Ref<const Eigen::VectorXd>& times,
-                             const Eigen::Ref<const Eigen::VectorXd>& offsets);
+// Outputs:
+//   result   replaced: the warped time maps (agents without constraints keep their rest
+//            map) and the figures to report
+// Throws TimeWarpConflict (an InvalidInput) when hard constraints contradict each other or
+// the minimum interval, InvalidInput on bad shapes or non-finite values.
+void TimeWarpSolve(const TimeWarpData& data, const Eigen::Ref<const Eigen::VectorXd>& times,
+                   const Eigen::Ref<const Eigen::VectorXd>& offsets, TimeWarpResult& result);
 
 // Precompute and solve in one call.
-TimeWarpResult TimeWarp(const TimeWarpProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& times,
-                        const Eigen::Ref<const Eigen::VectorXd>& offsets);
+void TimeWarp(const TimeWarpProblem& problem, const Eigen::Ref<const Eigen::VectorXd>& times,
+              const Eigen::Ref<const Eigen::VectorXd>& offsets, TimeWarpResult& result);
 
 }  // namespace mocapedit

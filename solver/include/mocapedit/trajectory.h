@@ -9,6 +9,8 @@
 #include <utility>
 #include <vector>
 
+#include "mocapedit/errors.h"
+
 namespace mocapedit {
 
 using Trajectory2 = Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor>;
@@ -30,7 +32,7 @@ Eigen::VectorXd CumulativeArcLength(const Eigen::Ref<const Trajectory2>& points)
 //   fallback    #R headings, one per fixed range
 //   min_step    tangents shorter than this (stage units) are treated as standing still;
 //               such a frame keeps the heading of the nearest moving frame
-// Returns #N headings. Throws std::invalid_argument on bad shapes or ranges.
+// Returns #N headings. Throws InvalidInput on bad shapes or ranges.
 Eigen::VectorXd TangentHeadings(const Eigen::Ref<const Trajectory2>& points,
                                 const std::vector<FrameRange>& fixed,
                                 const Eigen::Ref<const Eigen::VectorXd>& fallback,
@@ -57,7 +59,7 @@ Eigen::VectorXd TangentHeadings(const Eigen::Ref<const Trajectory2>& points,
 //   fixed_turn      #R turn of each fixed range
 //   window          half-width of each box window, frames (at least 1)
 //   min_travel      stage units
-// Returns #N turns, unwrapped. Throws std::invalid_argument on bad shapes or ranges.
+// Returns #N turns, unwrapped. Throws InvalidInput on bad shapes or ranges.
 Eigen::VectorXd DeformationTurns(const Eigen::Ref<const Trajectory2>& source,
                                  const Eigen::Ref<const Trajectory2>& edited,
                                  const std::vector<FrameRange>& fixed,
