@@ -77,13 +77,10 @@ MOCAPEDIT_BINDINGS(BindFootLock) {
         job.threads = threads;
         job.hip_local = View(hip_local), job.knee_local = View(knee_local), job.ankle_local = View(ankle_local);
         job.drop = View(drop), job.reached = View(reached);
-        std::string error;
-        bool ok;
         {
           py::gil_scoped_release release;
-          ok = job.Run(&error);
+          job.Run();
         }
-        if (!ok) throw std::invalid_argument("lock_feet: " + error);
         return py::make_tuple(hip_local, knee_local, ankle_local, drop, reached);
       },
       py::arg("offsets"), py::arg("smooth"), py::arg("up"), py::arg("hip"), py::arg("knee"), py::arg("ankle"),

@@ -72,16 +72,11 @@ struct PoseOutput {
   py::tuple tuple() const { return py::make_tuple(t, r, s); }
 };
 
-// Runs a job or builder without the GIL; its validation failure becomes a ValueError.
+// Runs a job or builder without the GIL (its validation failure is an InvalidInput).
 template <typename Job>
-void RunOrThrow(const Job& job, const char* name) {
-  std::string error;
-  bool ok;
-  {
-    py::gil_scoped_release release;
-    ok = job.Run(&error);
-  }
-  if (!ok) throw std::invalid_argument(std::string(name) + ": " + error);
+void RunWithoutGil(const Job& job) {
+  py::gil_scoped_release release;
+  job.Run();
 }
 
 mocapedit::LayerMode ParseMode(const std::string& mode) {
@@ -118,7 +113,7 @@ MOCAPEDIT_BINDINGS(BindLayering) {
         builder.reference = ref.view();
         builder.clip = c.view();
         builder.output = out.view();
-        RunOrThrow(builder, "build_additive_clip");
+        RunWithoutGil(builder);
         return out.tuple();
       },
       py::arg("reference"), py::arg("clip"),
@@ -166,7 +161,7 @@ MOCAPEDIT_BINDINGS(BindLayering) {
         job.source = src.view();
         job.layers = Span<const mocapedit::LayeringJob::Layer>(job_layers.data(), job_layers.size());
         job.output = out.view();
-        RunOrThrow(job, "apply_layers");
+        RunWithoutGil(job);
         return out.tuple();
       },
       py::arg("source"), py::arg("layers"),

@@ -6,39 +6,37 @@
 #include <string>
 
 namespace mocapedit {
-using detail::Fail;
 using detail::ViewHasSize;
 using detail::ViewsPartiallyOverlap;
 
-bool AdditiveClipBuilder::Validate(std::string* error) const {
+void AdditiveClipBuilder::Validate() const {
   const std::size_t n = num_frames * num_joints;
   if (!ViewHasSize(reference, num_joints))
-    return Fail(error, "reference must hold one pose of #J = " + std::to_string(num_joints) +
+    throw InvalidInput("AdditiveClipBuilder", "reference must hold one pose of #J = " + std::to_string(num_joints) +
                            " transforms (translations and scales 3 floats each, rotations 4)");
   if (!ViewHasSize(clip, n))
-    return Fail(error, "clip must hold #F*#J = " + std::to_string(n) + " transforms");
+    throw InvalidInput("AdditiveClipBuilder", "clip must hold #F*#J = " + std::to_string(n) + " transforms");
   if (!ViewHasSize(ConstPoseStreamView(output), n))
-    return Fail(error, "output must hold #F*#J = " + std::to_string(n) + " transforms");
+    throw InvalidInput("AdditiveClipBuilder", "output must hold #F*#J = " + std::to_string(n) + " transforms");
   if (ViewsPartiallyOverlap(output, clip))
-    return Fail(error, "output partially overlaps clip (only the very same buffers may alias)");
+    throw InvalidInput("AdditiveClipBuilder", "output partially overlaps clip (only the very same buffers may alias)");
   for (std::size_t j = 0; j < num_joints; ++j) {
     const float* r = &reference.rotations[j * 4];
     const double len2 = double(r[0]) * r[0] + double(r[1]) * r[1] + double(r[2]) * r[2] + double(r[3]) * r[3];
     if (!(len2 > 0.0) || !std::isfinite(len2))
-      return Fail(error, "reference rotation of joint " + std::to_string(j) +
+      throw InvalidInput("AdditiveClipBuilder", "reference rotation of joint " + std::to_string(j) +
                              " has zero length or is not finite: it has no inverse");
     for (int k = 0; k < 3; ++k) {
       const float s = reference.scales[j * 3 + k];
       if (s == 0.f || !std::isfinite(s))
-        return Fail(error, "reference scale of joint " + std::to_string(j) +
+        throw InvalidInput("AdditiveClipBuilder", "reference scale of joint " + std::to_string(j) +
                                " is zero or not finite: deltas divide by it");
     }
   }
-  return true;
 }
 
-bool AdditiveClipBuilder::Run(std::string* error) const {
-  if (!Validate(error)) return false;
+void AdditiveClipBuilder::Run() const {
+  Validate();
   for (std::size_t f = 0; f < num_frames; ++f) {
     for (std::size_t j = 0; j < num_joints; ++j) {
       const std::size_t i = f * num_joints + j;
@@ -61,7 +59,6 @@ bool AdditiveClipBuilder::Run(std::string* error) const {
       for (int k = 0; k < 4; ++k) output.rotations[i * 4 + k] = static_cast<float>(sign * q[k] / len);
     }
   }
-  return true;
 }
 
 }  // namespace mocapedit

@@ -16,11 +16,6 @@ namespace {
 using Vec = Eigen::Vector3d;
 using Quat = Eigen::Quaterniond;
 
-bool Fail(std::string* error, const std::string& why) {
-  if (error) *error = why;
-  return false;
-}
-
 Vec V(const double* p) { return Vec(p[0], p[1], p[2]); }
 Quat Q(const double* p) { return Quat(p[3], p[0], p[1], p[2]); }
 void Put(const Vec& v, double* p) { p[0] = v.x(), p[1] = v.y(), p[2] = v.z(); }
@@ -103,46 +98,45 @@ bool Overlap(const double* a, std::size_t na, const double* b, std::size_t nb) {
 
 }  // namespace
 
-bool FootLockJob::Validate(std::string* error) const {
-  if (offsets.size == 0 || !offsets.data) return Fail(error, "offsets must hold #A + 1 values");
-  if (offsets[0] != 0) return Fail(error, "offsets must start at 0");
+void FootLockJob::Validate() const {
+  if (offsets.size == 0 || !offsets.data) throw InvalidInput("FootLockJob", "offsets must hold #A + 1 values");
+  if (offsets[0] != 0) throw InvalidInput("FootLockJob", "offsets must start at 0");
   for (std::size_t a = 1; a < offsets.size; ++a)
-    if (offsets[a] < offsets[a - 1]) return Fail(error, "offsets must not decrease");
+    if (offsets[a] < offsets[a - 1]) throw InvalidInput("FootLockJob", "offsets must not decrease");
   const std::size_t agents = offsets.size - 1, n = static_cast<std::size_t>(offsets[agents]);
-  if (smooth.size != agents || (agents && !smooth.data)) return Fail(error, "smooth must hold one value per agent");
+  if (smooth.size != agents || (agents && !smooth.data)) throw InvalidInput("FootLockJob", "smooth must hold one value per agent");
   for (std::size_t a = 0; a < agents; ++a)
-    if (smooth[a] < 0) return Fail(error, "smooth frames must not be negative");
-  if (!Sized(up, 3)) return Fail(error, "up must hold 3 values");
+    if (smooth[a] < 0) throw InvalidInput("FootLockJob", "smooth frames must not be negative");
+  if (!Sized(up, 3)) throw InvalidInput("FootLockJob", "up must hold 3 values");
   const double len = std::sqrt(up[0] * up[0] + up[1] * up[1] + up[2] * up[2]);
-  if (!std::isfinite(len) || std::abs(len - 1.0) > 1e-6) return Fail(error, "up must be a unit vector");
+  if (!std::isfinite(len) || std::abs(len - 1.0) > 1e-6) throw InvalidInput("FootLockJob", "up must be a unit vector");
   const struct { Span<const double> s; std::size_t w; const char* name; } inputs[] = {
       {hip, 3, "hip"}, {knee, 3, "knee"}, {ankle, 3, "ankle"}, {parent_rot, 4, "parent_rot"},
       {hip_rot, 4, "hip_rot"}, {knee_rot, 4, "knee_rot"}, {ankle_rot, 4, "ankle_rot"},
       {target, 3, "target"}, {target_rot, 4, "target_rot"}, {weight, 1, "weight"}, {hinge, 3, "hinge"}};
   for (const auto& in : inputs)
     if (!Sized(in.s, n * 2 * in.w))
-      return Fail(error, std::string(in.name) + " must hold " + std::to_string(n * 2 * in.w) + " values");
+      throw InvalidInput("FootLockJob", std::string(in.name) + " must hold " + std::to_string(n * 2 * in.w) + " values");
   for (std::size_t i = 0; i < n * 2; ++i)
-    if (!(weight[i] >= 0.0 && weight[i] <= 1.0)) return Fail(error, "weights must be within [0, 1]");
-  if (keep.size != 0 && (keep.size != n || !keep.data)) return Fail(error, "keep must be empty or hold #N flags");
-  if (!(max_reach > 0.0 && max_reach < 1.0)) return Fail(error, "max_reach must be within (0, 1)");
-  if (!(soft_reach > 0.0 && soft_reach <= max_reach)) return Fail(error, "soft_reach must be within (0, max_reach]");
-  if (!(bend_noise >= 0.0 && bend_trust > 0.0)) return Fail(error, "bend_noise must be >= 0 and bend_trust > 0");
+    if (!(weight[i] >= 0.0 && weight[i] <= 1.0)) throw InvalidInput("FootLockJob", "weights must be within [0, 1]");
+  if (keep.size != 0 && (keep.size != n || !keep.data)) throw InvalidInput("FootLockJob", "keep must be empty or hold #N flags");
+  if (!(max_reach > 0.0 && max_reach < 1.0)) throw InvalidInput("FootLockJob", "max_reach must be within (0, 1)");
+  if (!(soft_reach > 0.0 && soft_reach <= max_reach)) throw InvalidInput("FootLockJob", "soft_reach must be within (0, max_reach]");
+  if (!(bend_noise >= 0.0 && bend_trust > 0.0)) throw InvalidInput("FootLockJob", "bend_noise must be >= 0 and bend_trust > 0");
   const struct { Span<double> s; std::size_t size; const char* name; } outputs[] = {
       {hip_local, n * 8, "hip_local"}, {knee_local, n * 8, "knee_local"}, {ankle_local, n * 8, "ankle_local"},
       {drop, n, "drop"}, {reached, n * 6, "reached"}};
   for (const auto& out : outputs)
     if (!Sized(out.s, out.size))
-      return Fail(error, std::string(out.name) + " must hold " + std::to_string(out.size) + " values");
+      throw InvalidInput("FootLockJob", std::string(out.name) + " must hold " + std::to_string(out.size) + " values");
   for (std::size_t i = 0; i < 5; ++i) {
     for (const auto& in : inputs)
       if (Overlap(outputs[i].s.data, outputs[i].s.size, in.s.data, in.s.size))
-        return Fail(error, std::string(outputs[i].name) + " overlaps the input " + in.name);
+        throw InvalidInput("FootLockJob", std::string(outputs[i].name) + " overlaps the input " + in.name);
     for (std::size_t j = i + 1; j < 5; ++j)
       if (Overlap(outputs[i].s.data, outputs[i].s.size, outputs[j].s.data, outputs[j].s.size))
-        return Fail(error, std::string(outputs[i].name) + " overlaps " + outputs[j].name);
+        throw InvalidInput("FootLockJob", std::string(outputs[i].name) + " overlaps " + outputs[j].name);
   }
-  return true;
 }
 
 namespace {
@@ -265,8 +259,8 @@ struct Agent {
 
 }  // namespace
 
-bool FootLockJob::Run(std::string* error) const {
-  if (!Validate(error)) return false;
+void FootLockJob::Run() const {
+  Validate();
   const std::size_t agents = offsets.size - 1;
   const std::size_t n = static_cast<std::size_t>(offsets[agents]);
   const Vec up_v = V(up.data);
@@ -288,7 +282,6 @@ bool FootLockJob::Run(std::string* error) const {
         for (std::size_t leg = 0; leg < 2; ++leg) agent.SolveLeg(p, leg, up_v);
     }
   });
-  return true;
 }
 
 }  // namespace mocapedit

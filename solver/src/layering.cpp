@@ -15,7 +15,6 @@
 namespace mocapedit {
 namespace {
 
-using detail::Fail;
 using detail::HasSize;
 using detail::ViewHasSize;
 using detail::ViewsPartiallyOverlap;
@@ -448,43 +447,42 @@ void Slerp(const float a[4], const float b[4], float t, float out[4]) {
   std::memcpy(out, q, sizeof(q));
 }
 
-bool LayeringJob::Validate(std::string* error) const {
+void LayeringJob::Validate() const {
   const std::size_t n = num_poses * num_joints;
   if (!ViewHasSize(source, n))
-    return Fail(error, "source must hold #T*#J = " + std::to_string(n) +
+    throw InvalidInput("LayeringJob", "source must hold #T*#J = " + std::to_string(n) +
                            " transforms (translations and scales 3 floats each, rotations 4)");
   if (!ViewHasSize(ConstPoseStreamView(output), n))
-    return Fail(error, "output must hold #T*#J = " + std::to_string(n) + " transforms");
+    throw InvalidInput("LayeringJob", "output must hold #T*#J = " + std::to_string(n) + " transforms");
   if (ViewsPartiallyOverlap(output, source))
-    return Fail(error, "output partially overlaps source (only the very same buffers may alias)");
+    throw InvalidInput("LayeringJob", "output partially overlaps source (only the very same buffers may alias)");
   for (std::size_t l = 0; l < layers.size; ++l) {
     const Layer& layer = layers[l];
     const std::string which = "layer " + std::to_string(l) + ": ";
     if (layer.mode != LayerMode::kBlend && layer.mode != LayerMode::kAdditive)
-      return Fail(error, which + "mode must be blend or additive");
+      throw InvalidInput("LayeringJob", which + "mode must be blend or additive");
     if (!ViewHasSize(layer.transforms, n))
-      return Fail(error, which + "transforms must hold #T*#J = " + std::to_string(n) + " transforms");
+      throw InvalidInput("LayeringJob", which + "transforms must hold #T*#J = " + std::to_string(n) + " transforms");
     if (!HasSize(layer.weights, num_poses))
-      return Fail(error, which + "weights must hold one value per pose (" + std::to_string(num_poses) +
+      throw InvalidInput("LayeringJob", which + "weights must hold one value per pose (" + std::to_string(num_poses) +
                              "), got " + std::to_string(layer.weights.size));
     for (std::size_t t = 0; t < num_poses; ++t)
       if (!InUnitRange(layer.weights[t]))
-        return Fail(error, which + "weight of pose " + std::to_string(t) + " is " +
+        throw InvalidInput("LayeringJob", which + "weight of pose " + std::to_string(t) + " is " +
                                std::to_string(layer.weights[t]) + ", outside [0, 1]");
     if (!layer.joint_weights.empty() && !HasSize(layer.joint_weights, num_joints))
-      return Fail(error, which + "joint_weights must be empty or hold one value per joint (" +
+      throw InvalidInput("LayeringJob", which + "joint_weights must be empty or hold one value per joint (" +
                              std::to_string(num_joints) + "), got " +
                              std::to_string(layer.joint_weights.size));
     for (std::size_t j = 0; j < layer.joint_weights.size; ++j)
       if (!InUnitRange(layer.joint_weights[j]))
-        return Fail(error, which + "joint weight of joint " + std::to_string(j) + " is " +
+        throw InvalidInput("LayeringJob", which + "joint weight of joint " + std::to_string(j) + " is " +
                                std::to_string(layer.joint_weights[j]) + ", outside [0, 1]");
   }
-  return true;
 }
 
-bool LayeringJob::Run(std::string* error) const {
-  if (!Validate(error)) return false;
+void LayeringJob::Run() const {
+  Validate();
   CopySource(*this);
   for (const Layer& layer : layers) {
     if (layer.mode == LayerMode::kBlend)
@@ -492,7 +490,6 @@ bool LayeringJob::Run(std::string* error) const {
     else
       AddLayer(*this, layer);
   }
-  return true;
 }
 
 std::vector<float> SubtreeJointWeights(Span<const int> parents, int root) {

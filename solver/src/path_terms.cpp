@@ -185,238 +185,8 @@ void FramePartners(const Eigen::Ref<const Trajectory2>& rest, const Eigen::Ref<c
   }
 }
 
-// Groups with at least this many member samples (members x sampled times) find their
-// neighbours on two threads.
-constexpr Eigen::Index kParallelMemberSamples = 2000;
 // Heading sets of at least this many frames are computed on two threads.
 constexpr Eigen::Index kParallelHeadingFrames = 20000;
-
-void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
-                    const Eigen::Ref<const Eigen::Matrix<int, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>& members,
-                    int neighbours, const Eigen::Ref<const Eigen::VectorXi>& partner, IndexTriples& triangles,
-                    IndexPairs& edges) {
-  const Eigen::Index m = members.rows(), times = members.cols(), n = rest.rows();
-  Require(partner.size() == n, "GroupMeshTerms", "one partner per vertex is needed");
-  Require(neighbours >= 0 && (m == 0 || neighbours < m), "GroupMeshTerms",
-                  "neighbours must be at least 0 and less than the member count");
-  Require(members.size() == 0 || (members.minCoeff() >= 0 && members.maxCoeff() < n), "GroupMeshTerms",
-                  "member vertex out of range");
-  for (Eigen::Index v = 0; v < n; ++v)
-    Require(partner[v] >= -1 && partner[v] < n, "GroupMeshTerms", "partner out of range");
-
-  // Pairs packed as (min << 32 | max): sorting integers is cheaper than sorting pairs. The
-  // sampled times are independent: large groups split them between two threads (the pairs
-  // are sorted below, so the result does not depend on the split).
-  const auto pairs_at = [&](Eigen::Index t_begin, Eigen::Index t_end, std::vector<uint64_t>& pairs) {
-    pairs.reserve(static_cast<size_t>(m * (t_end - t_begin) * neighbours));
-    std::vector<double> x(static_cast<size_t>(m)), y(static_cast<size_t>(m));
-    const auto squared = [&](int a, int b) {  // as Distance, squared
-      const double dx = x[a] - x[b], dy = y[a] - y[b];
-      return dx * dx + dy * dy;
-    };
-    // Members bucketed in a grid of about one member per cell (rebuilt at each time).
-    std::vector<int> cell_of(static_cast<size_t>(m)), start, items(static_cast<size_t>(m));
-    int nx = 0, ny = 0;
-    double h = 1.0;
-    // visit(b) for the members b != a met ring by ring around a's cell, until the next ring
-    // is farther than bound() (a squared distance). Members outside the rings so far are at
-    // least (ring - 1) cells away along x or y. (Margins: the cells are found in rounded
-    // arithmetic, and every member at the bound itself must be met, for the ties.)
-    const auto search = [&](int a, auto&& bound, auto&& visit) {
-      const int ax = cell_of[a] % nx, ay = cell_of[a] / nx;
-      const auto cell = [&](int cx, int cy) {
-        const int c = cy * nx + cx;
-        for (int i = start[c]; i < start[c + 1]; ++i)
-          if (items[i] != a) visit(items[i]);
-      };
-      for (int ring = 0;; ++ring) {
-        const double reach = (ring - 1) * h * (1 - 1e-9);
-        if (ring > 0 && reach > 0 && reach * reach > bound() * (1 + 1e-13)) return;
-        if (ax - ring < 0 && ay - ring < 0 && ax + ring >= nx && ay + ring >= ny) return;
-        for (int cy = std::max(ay - ring, 0); cy <= std::min(ay + ring, ny - 1); ++cy) {
-          if (cy == ay - ring || cy == ay + ring) {
-            for (int cx = std::max(ax - ring, 0); cx <= std::min(ax + ring, nx - 1); ++cx) cell(cx, cy);
-          } else {
-            if (ax - ring >= 0) cell(ax - ring, cy);
-            if (ax + ring < nx) cell(ax + ring, cy);
-          }
-        }
-      }
-    };
-    // The members joined so far at the time being joined.
-    detail::UnionFind joined;
-    Eigen::Index now = 0;
-    const auto join = [&](int a, int b) {
-      const uint64_t va = static_cast<uint32_t>(members(a, now)), vb = static_cast<uint32_t>(members(b, now));
-      pairs.push_back(std::min(va, vb) << 32 | std::max(va, vb));
-      joined.Unite(a, b);
-    };
-    const int keep = neighbours + 1;
-    std::vector<std::pair<double, int>> near(static_cast<size_t>(keep)), close, met;
-    // Each member to its `neighbours` nearest.
-    const auto join_nearest = [&] {
-      for (int a = 0; a < m; ++a) {
-        // The k+1 smallest squared distances, ties to the earlier member...
-        int count = 0;
-        met.clear();
-        search(
-            a, [&] { return count == keep ? near[keep - 1].first : std::numeric_limits<double>::infinity(); },
-            [&](int b) {
-              const std::pair<double, int> e{squared(a, b), b};
-              met.push_back(e);
-              if (count == keep && !(e < near[count - 1])) return;
-              int at = count < keep ? count++ : count - 1;
-              for (; at > 0 && e < near[at - 1]; --at) near[at] = near[at - 1];
-              near[at] = e;
-            });
-        // ... and the k nearest as a stable sort of the distances themselves would rank them:
-        // two squared distances may differ and their square roots not, so when the next one
-        // is that close to the k-th, every member whose distance may equal the k-th is
-        // ranked by (distance, member).
-        const double bound = near[neighbours - 1].first * (1 + 1e-14);
-        close.assign(near.begin(), near.begin() + neighbours);
-        if (count > neighbours && near[neighbours].first <= bound) {
-          close.clear();
-          for (const auto& [sq, b] : met)
-            if (sq <= bound) close.emplace_back(std::sqrt(sq), b);
-          std::partial_sort(close.begin(), close.begin() + neighbours, close.end());
-        }
-        for (int k = 0; k < neighbours; ++k) join(a, close[k].second);
-      }
-    };
-    // Nearest neighbours can keep to separate clusters (a group walking as two blocks apart),
-    // each of which would then be free to move on its own. Each round finds every cluster's
-    // nearest other cluster (Boruvka; pairs ranked by squared distance, then member) and
-    // joins the two by their `neighbours` nearest pairs, so that each holds the other as
-    // firmly as a member holds its neighbours; until one cluster is left. Only groups in
-    // pieces pay this search: each member looks, ring by ring, for the nearest member of
-    // another cluster, no farther than the best its cluster has found. 1,000 members, 20
-    // sampled times: 6 ms in a block (one piece), 19 ms at random, 59 ms in clumps of five
-    // far apart.
-    std::vector<std::array<double, 3>> best;  // per cluster: squared distance, a, b
-    std::vector<int> cluster(static_cast<size_t>(m)), first(static_cast<size_t>(m) + 1), listed(static_cast<size_t>(m));
-    const auto join_clusters = [&] {
-      for (;;) {
-        int clusters = 0;
-        std::fill(first.begin(), first.end(), 0);
-        for (int a = 0; a < m; ++a) {
-          cluster[a] = joined.Find(a);
-          clusters += cluster[a] == a;
-          ++first[cluster[a] + 1];
-        }
-        if (clusters <= 1) return;
-        // Each cluster's members, listed by cluster.
-        for (int r = 0; r < m; ++r) first[r + 1] += first[r];
-        {
-          std::vector<int> next(first.begin(), first.end() - 1);
-          for (int a = 0; a < m; ++a) listed[next[cluster[a]]++] = a;
-        }
-        best.assign(static_cast<size_t>(m), {std::numeric_limits<double>::infinity(), -1, -1});
-        for (int a = 0; a < m; ++a) {
-          std::array<double, 3>& mine = best[cluster[a]];
-          search(
-              a, [&] { return mine[0]; },
-              [&](int b) {
-                if (cluster[b] == cluster[a]) return;
-                const int lo = std::min(a, b), hi = std::max(a, b);
-                const std::array<double, 3> e{squared(lo, hi), static_cast<double>(lo), static_cast<double>(hi)};
-                if (e < mine) mine = e;
-                if (e < best[cluster[b]]) best[cluster[b]] = e;
-              });
-        }
-        // The cluster pairs to join, as (smaller, larger), once each, and the member pairs
-        // across each.
-        std::vector<std::pair<int, int>> joins;
-        for (int r = 0; r < m; ++r)
-          if (best[r][1] >= 0) {
-            const int ra = cluster[static_cast<int>(best[r][1])], rb = cluster[static_cast<int>(best[r][2])];
-            joins.emplace_back(std::min(ra, rb), std::max(ra, rb));
-          }
-        std::sort(joins.begin(), joins.end());
-        joins.erase(std::unique(joins.begin(), joins.end()), joins.end());
-        std::vector<std::array<double, 3>> chosen, across;
-        for (const auto& [r1, r2] : joins) {
-          across.clear();
-          for (int i = first[r1]; i < first[r1 + 1]; ++i)
-            for (int j = first[r2]; j < first[r2 + 1]; ++j) {
-              const int lo = std::min(listed[i], listed[j]), hi = std::max(listed[i], listed[j]);
-              across.push_back({squared(lo, hi), static_cast<double>(lo), static_cast<double>(hi)});
-            }
-          const size_t take = std::min(across.size(), static_cast<size_t>(neighbours));
-          std::partial_sort(across.begin(), across.begin() + static_cast<std::ptrdiff_t>(take), across.end());
-          chosen.insert(chosen.end(), across.begin(), across.begin() + static_cast<std::ptrdiff_t>(take));
-        }
-        for (const auto& e : chosen) join(static_cast<int>(e[1]), static_cast<int>(e[2]));
-      }
-    };
-    for (Eigen::Index t = t_begin; t < t_end && neighbours > 0; ++t) {
-      now = t;
-      joined.Reset(static_cast<int>(m));
-      double x0 = std::numeric_limits<double>::infinity(), y0 = x0, x1 = -x0, y1 = -x0;
-      for (Eigen::Index a = 0; a < m; ++a) {
-        x[a] = rest(members(a, t), 0), y[a] = rest(members(a, t), 1);
-        Require(std::isfinite(x[a]) && std::isfinite(y[a]), "GroupMeshTerms", "rest positions must be finite");
-        x0 = std::min(x0, x[a]), x1 = std::max(x1, x[a]), y0 = std::min(y0, y[a]), y1 = std::max(y1, y[a]);
-      }
-      const double extent = std::max(x1 - x0, y1 - y0);
-      h = extent > 0 ? std::max(extent / std::ceil(std::sqrt(static_cast<double>(m))), extent * 1e-6) : 1.0;
-      nx = static_cast<int>((x1 - x0) / h) + 1, ny = static_cast<int>((y1 - y0) / h) + 1;
-      start.assign(static_cast<size_t>(nx) * ny + 1, 0);
-      for (int a = 0; a < m; ++a) {
-        const int cx = std::min(static_cast<int>((x[a] - x0) / h), nx - 1);
-        const int cy = std::min(static_cast<int>((y[a] - y0) / h), ny - 1);
-        cell_of[a] = cy * nx + cx;
-        ++start[cell_of[a] + 1];
-      }
-      for (size_t c = 1; c < start.size(); ++c) start[c] += start[c - 1];
-      {
-        std::vector<int> next(start.begin(), start.end() - 1);
-        for (int a = 0; a < m; ++a) items[next[cell_of[a]]++] = a;
-      }
-      join_nearest();
-      join_clusters();
-    }
-  };
-  std::vector<uint64_t> pairs;
-  if (times >= 2 && m * times >= kParallelMemberSamples) {
-    std::vector<uint64_t> later;
-    OnTwoThreads([&] { pairs_at(0, times / 2, pairs); }, [&] { pairs_at(times / 2, times, later); });
-    pairs.insert(pairs.end(), later.begin(), later.end());
-  } else {
-    pairs_at(0, times, pairs);
-  }
-  // Sorted and unique: bucketed by first vertex (vertex indices are bounded), each bucket
-  // (a few pairs) sorted on its own.
-  {
-    std::vector<int> first(static_cast<size_t>(n) + 1, 0);
-    for (const uint64_t pair : pairs) ++first[(pair >> 32) + 1];
-    for (Eigen::Index v = 0; v < n; ++v) first[v + 1] += first[v];
-    std::vector<uint64_t> sorted(pairs.size());
-    std::vector<int> next(first.begin(), first.end() - 1);
-    for (const uint64_t pair : pairs) sorted[next[pair >> 32]++] = pair;
-    pairs.clear();
-    for (Eigen::Index v = 0; v < n; ++v) {
-      const auto begin = sorted.begin() + first[v], end = sorted.begin() + first[v + 1];
-      std::sort(begin, end);
-      std::unique_copy(begin, end, std::back_inserter(pairs));
-    }
-  }
-
-  edges.resize(static_cast<Eigen::Index>(pairs.size()), 2);
-  for (size_t e = 0; e < pairs.size(); ++e)
-    edges.row(static_cast<Eigen::Index>(e)) << static_cast<int>(pairs[e] >> 32), static_cast<int>(pairs[e] & 0xffffffffu);
-  std::vector<std::array<int, 3>> tri;
-  tri.reserve(2 * pairs.size());
-  for (int side = 0; side < 2; ++side)
-    for (const uint64_t pair : pairs) {
-      const int a = static_cast<int>(pair >> 32), b = static_cast<int>(pair & 0xffffffffu);
-      const int v = side == 0 ? a : b, w = side == 0 ? b : a;
-      if (partner[w] >= 0 && Distance(rest, v, w) > 0) tri.push_back({v, w, partner[w]});
-    }
-  triangles.resize(static_cast<Eigen::Index>(tri.size()), 3);
-  for (size_t k = 0; k < tri.size(); ++k)
-    triangles.row(static_cast<Eigen::Index>(k)) << tri[k][0], tri[k][1], tri[k][2];
-}
 
 void BlockDeformationTurns(const Eigen::Ref<const Trajectory2>& source, const Eigen::Ref<const Trajectory2>& edited,
                            const Eigen::Ref<const IndexPairs>& blocks, const Eigen::Ref<const IndexTriples>& fixed,
@@ -481,20 +251,12 @@ Complex Phase(uint64_t stream, uint64_t k) {
   return std::polar(1.0, 2.0 * M_PI * static_cast<double>(z >> 11) * 0x1.0p-53);
 }
 
-}  // namespace
-
-std::vector<char> NullSpaceSupport(const Eigen::Ref<const Eigen::VectorXi>& rows,
-                                   const Eigen::Ref<const Eigen::VectorXi>& cols,
-                                   const Eigen::Ref<const Eigen::VectorXcd>& values, int num_rows, int num_cols,
-                                   double tolerance) {
-  Require(num_rows >= 0 && num_cols >= 0, "NullSpaceSupport", "negative size");
-  Require(rows.size() == cols.size() && rows.size() == values.size(), "NullSpaceSupport",
-                  "rows, cols and values must have one entry each");
-  Require(tolerance > 0 && std::isfinite(tolerance), "NullSpaceSupport", "tolerance must be finite and > 0");
-  std::vector<char> used(static_cast<size_t>(num_cols), 1);
-  if (num_rows == 0) return used;
-
-  // Rows as sorted sparse vectors, repeated positions summed; columns scaled to unit max.
+// The rows as sorted sparse vectors, repeated positions summed, each column scaled to unit
+// largest magnitude; `holders`: per column, the rows that may hold it.
+std::vector<SparseRow> ScaledRows(const Eigen::Ref<const Eigen::VectorXi>& rows,
+                                  const Eigen::Ref<const Eigen::VectorXi>& cols,
+                                  const Eigen::Ref<const Eigen::VectorXcd>& values, int num_rows, int num_cols,
+                                  std::vector<std::vector<int>>& holders) {
   std::vector<std::array<int, 2>> at(static_cast<size_t>(rows.size()));
   for (Eigen::Index e = 0; e < rows.size(); ++e) {
     Require(rows[e] >= 0 && rows[e] < num_rows && cols[e] >= 0 && cols[e] < num_cols, "NullSpaceSupport",
@@ -517,14 +279,21 @@ std::vector<char> NullSpaceSupport(const Eigen::Ref<const Eigen::VectorXi>& rows
   std::vector<double> scale(static_cast<size_t>(num_cols), 0.0);
   for (const auto& row : a)
     for (const auto& [c, v] : row) scale[c] = std::max(scale[c], std::abs(v));
-  std::vector<std::vector<int>> holders(static_cast<size_t>(num_cols));  // rows that may hold a column
+  holders.assign(static_cast<size_t>(num_cols), {});
   for (int r = 0; r < num_rows; ++r)
     for (auto& [c, v] : a[r]) {
       if (scale[c] > 0) v /= scale[c];
       holders[c].push_back(r);
     }
+  return a;
+}
 
-  // Row echelon form, column by column.
+// Row echelon form of the scaled rows, column by column, with partial pivoting among the
+// rows that hold the column; pivots of magnitude <= tolerance leave their column free
+// (pivot row -1). Returns each column's pivot row.
+std::vector<int> EchelonForm(std::vector<SparseRow>& a, std::vector<std::vector<int>>& holders, int num_cols,
+                             double tolerance) {
+  const int num_rows = static_cast<int>(a.size());
   std::vector<char> active(static_cast<size_t>(num_rows), 1);
   std::vector<int> pivot_row(static_cast<size_t>(num_cols), -1);
   std::vector<int> seen(static_cast<size_t>(num_rows), -1);
@@ -568,6 +337,24 @@ std::vector<char> NullSpaceSupport(const Eigen::Ref<const Eigen::VectorXi>& rows
       row.swap(merged);
     }
   }
+  return pivot_row;
+}
+
+}  // namespace
+
+std::vector<char> NullSpaceSupport(const Eigen::Ref<const Eigen::VectorXi>& rows,
+                                   const Eigen::Ref<const Eigen::VectorXi>& cols,
+                                   const Eigen::Ref<const Eigen::VectorXcd>& values, int num_rows, int num_cols,
+                                   double tolerance) {
+  Require(num_rows >= 0 && num_cols >= 0, "NullSpaceSupport", "negative size");
+  Require(rows.size() == cols.size() && rows.size() == values.size(), "NullSpaceSupport",
+          "rows, cols and values must have one entry each");
+  Require(tolerance > 0 && std::isfinite(tolerance), "NullSpaceSupport", "tolerance must be finite and > 0");
+  std::vector<char> used(static_cast<size_t>(num_cols), 1);
+  if (num_rows == 0) return used;
+  std::vector<std::vector<int>> holders;
+  std::vector<SparseRow> a = ScaledRows(rows, cols, values, num_rows, num_cols, holders);
+  const std::vector<int> pivot_row = EchelonForm(a, holders, num_cols, tolerance);
 
   // Back-substitute two pseudo-random null vectors; pivot rows hold no earlier pivot column.
   std::vector<double> reach(static_cast<size_t>(num_cols), 0.0);

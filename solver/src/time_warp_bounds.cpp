@@ -9,22 +9,25 @@
 
 namespace mocapedit::detail {
 
-// A time map for the hard constraints alone that keeps every interval at or above its
-// minimum (the start of the active-set method), or a TimeWarpConflict naming the hard
-// constraints that make that impossible. A system of difference constraints between the
-// classes of the hard forest, solved by Bellman-Ford.
-Eigen::VectorXd FeasibleStart(const TimeWarpComponent& c, const Eigen::VectorXd& pot) {
-  const Forest& f = c.forest;
-  const int ground = c.nodes;
-  auto touched = [&](int n) { return f.size[f.cls[n]] > 1; };
-  // Y[cls(b)] - Y[cls(a)] >= w for consecutive touched frames a < b of one agent.
-  struct Gap { int a, b; double w, span; };
+namespace {
+
+// Y[cls(b)] - Y[cls(a)] >= w between consecutive touched frames a < b of one agent: `span`
+// is the least time the minimum intervals leave between them.
+struct Gap {
+  int a, b;
+  double w, span;
+};
+
+// A frame whose class the hard constraints tie to other frames.
+bool Touched(const Forest& f, int n) { return f.size[f.cls[n]] > 1; }
+
+std::vector<Gap> Gaps(const TimeWarpComponent& c, const Eigen::VectorXd& pot) {
   std::vector<Gap> gaps;
   for (size_t la = 0; la < c.agents.size(); ++la) {
     int prev = -1;
     double span = 0.0;
     for (int n = c.first[la]; n < c.first[la + 1]; ++n) {
-      if (touched(n)) {
+      if (Touched(c.forest, n)) {
         if (prev >= 0) gaps.push_back({prev, n, span - pot[n] + pot[prev], span});
         prev = n;
         span = 0.0;
@@ -32,6 +35,89 @@ Eigen::VectorXd FeasibleStart(const TimeWarpComponent& c, const Eigen::VectorXd&
       if (c.has_next[n]) span += c.minimum[n];
     }
   }
+  return gaps;
+}
+
+// The negative cycle Bellman-Ford found through class `last` (its predecessor gaps in
+// `pred`): throws the TimeWarpConflict naming the hard constraints along it.
+[[noreturn]] void ThrowBackwards(const TimeWarpComponent& c, const Eigen::VectorXd& pot, const std::vector<Gap>& gaps,
+                                 const std::vector<int>& pred, int last) {
+  const Forest& f = c.forest;
+  const int classes = static_cast<int>(f.root.size());
+  // Walk back onto the cycle, then collect the hard constraints along it.
+  int x = last;
+  for (int i = 0; i < classes && pred[x] >= 0; ++i) x = f.cls[gaps[pred[x]].b];
+  std::vector<int> cycle;  // gaps, in reverse
+  int y = x;
+  do {
+    if (pred[y] < 0) break;
+    cycle.push_back(pred[y]);
+    y = f.cls[gaps[pred[y]].b];
+  } while (y != x && static_cast<int>(cycle.size()) <= classes);
+  std::set<int> time_ids, sync_ids;
+  if (cycle.empty() || y != x) {
+    cycle.clear();  // not traced: name every hard constraint of the component
+    std::vector<int> all(c.hard.size());
+    std::iota(all.begin(), all.end(), 0);
+    Collect(c.hard, all, time_ids, sync_ids);
+  }
+  for (size_t i = 0; i < cycle.size(); ++i) {
+    // The cycle leaves a class at the b-frame of one gap and enters it at the a-frame of the next.
+    const Gap& in = gaps[cycle[i]];
+    const Gap& out = gaps[cycle[(i + 1) % cycle.size()]];
+    Collect(c.hard, TreePath(f, in.b, out.a), time_ids, sync_ids);
+  }
+  int agent = -1, fa = -1, fb = -1;
+  double gap = 0.0, minimum = 0.0;
+  if (cycle.size() == 1) {
+    const Gap& g = gaps[cycle[0]];
+    const int la = c.node_agent[g.a];
+    agent = c.agents[la];
+    fa = g.a - c.first[la];
+    fb = g.b - c.first[la];
+    gap = pot[g.b] - pot[g.a];
+    minimum = g.span;
+  }
+  std::ostringstream what;
+  what << "hard constraints would run time backwards or below the minimum interval "
+       << "(time constraints [" << Join(time_ids) << "], sync constraints [" << Join(sync_ids) << "])";
+  throw TimeWarpConflict(TimeWarpConflict::Kind::kBackwards, {time_ids.begin(), time_ids.end()},
+                         {sync_ids.begin(), sync_ids.end()}, 0.0, agent, fa, fb, gap, minimum, what.str());
+}
+
+// Every frame's time from the known frames' (t, where `known` flags them) of one agent's
+// frames begin..end-1: between known frames, the time is spread in proportion to the
+// minimum intervals' excess; outside them, the rest intervals are kept.
+void SpreadBetweenKnown(const TimeWarpComponent& c, int begin, int end, const std::vector<int>& known,
+                        Eigen::VectorXd& t) {
+  if (known.empty()) {
+    t.segment(begin, end - begin) = c.rest.segment(begin, end - begin);
+    return;
+  }
+  for (int n = known.front() - 1; n >= begin; --n)
+    t[n] = t[n + 1] - std::max(c.rest[n + 1] - c.rest[n], c.minimum[n]);
+  for (int n = known.back() + 1; n < end; ++n)
+    t[n] = t[n - 1] + std::max(c.rest[n] - c.rest[n - 1], c.minimum[n - 1]);
+  for (size_t k = 0; k + 1 < known.size(); ++k) {
+    const int a = known[k], b = known[k + 1];
+    double span = 0.0, rest = 0.0;
+    for (int n = a; n < b; ++n) {
+      span += c.minimum[n];
+      rest += c.rest[n + 1] - c.rest[n];
+    }
+    const double extra = std::max(0.0, (t[b] - t[a]) - span);
+    for (int n = a + 1; n < b; ++n)
+      t[n] = t[n - 1] + c.minimum[n - 1] + extra * (c.rest[n] - c.rest[n - 1]) / rest;
+  }
+}
+
+}  // namespace
+
+// A system of difference constraints between the classes of the hard forest, solved by
+// Bellman-Ford.
+Eigen::VectorXd FeasibleStart(const TimeWarpComponent& c, const Eigen::VectorXd& pot) {
+  const Forest& f = c.forest;
+  const std::vector<Gap> gaps = Gaps(c, pot);
   const int classes = static_cast<int>(f.root.size());
   Eigen::VectorXd dist = Eigen::VectorXd::Zero(classes);
   std::vector<int> pred(classes, -1);
@@ -50,78 +136,18 @@ Eigen::VectorXd FeasibleStart(const TimeWarpComponent& c, const Eigen::VectorXd&
     }
     if (last < 0) break;
   }
-  if (last >= 0) {
-    // A negative cycle: walk back onto it, then collect the hard constraints along it.
-    int x = last;
-    for (int i = 0; i < classes && pred[x] >= 0; ++i) x = f.cls[gaps[pred[x]].b];
-    std::vector<int> cycle;  // gaps, in reverse
-    int y = x;
-    do {
-      if (pred[y] < 0) break;
-      cycle.push_back(pred[y]);
-      y = f.cls[gaps[pred[y]].b];
-    } while (y != x && static_cast<int>(cycle.size()) <= classes);
-    std::set<int> time_ids, sync_ids;
-    if (cycle.empty() || y != x) {
-      cycle.clear();  // not traced: name every hard constraint of the component
-      std::vector<int> all(c.hard.size());
-      std::iota(all.begin(), all.end(), 0);
-      Collect(c.hard, all, time_ids, sync_ids);
-    }
-    for (size_t i = 0; i < cycle.size(); ++i) {
-      // The cycle leaves a class at the b-frame of one gap and enters it at the a-frame of the next.
-      const Gap& in = gaps[cycle[i]];
-      const Gap& out = gaps[cycle[(i + 1) % cycle.size()]];
-      Collect(c.hard, TreePath(f, in.b, out.a), time_ids, sync_ids);
-    }
-    int agent = -1, fa = -1, fb = -1;
-    double gap = 0.0, minimum = 0.0;
-    if (cycle.size() == 1) {
-      const Gap& g = gaps[cycle[0]];
-      const int la = c.node_agent[g.a];
-      agent = c.agents[la];
-      fa = g.a - c.first[la];
-      fb = g.b - c.first[la];
-      gap = pot[g.b] - pot[g.a];
-      minimum = g.span;
-    }
-    std::ostringstream what;
-    what << "hard constraints would run time backwards or below the minimum interval "
-         << "(time constraints [" << Join(time_ids) << "], sync constraints [" << Join(sync_ids) << "])";
-    throw TimeWarpConflict(TimeWarpConflict::Kind::kBackwards, {time_ids.begin(), time_ids.end()},
-                           {sync_ids.begin(), sync_ids.end()}, 0.0, agent, fa, fb, gap, minimum, what.str());
-  }
-  const int ground_class = f.cls[ground];
+  if (last >= 0) ThrowBackwards(c, pot, gaps, pred, last);
+  const int ground_class = f.cls[c.nodes];
   Eigen::VectorXd t(c.nodes);
   for (size_t la = 0; la < c.agents.size(); ++la) {
     const int begin = c.first[la], end = c.first[la + 1];
     std::vector<int> known;
     for (int n = begin; n < end; ++n)
-      if (touched(n)) {
+      if (Touched(f, n)) {
         t[n] = dist[f.cls[n]] - dist[ground_class] + pot[n];
         known.push_back(n);
       }
-    if (known.empty()) {
-      t.segment(begin, end - begin) = c.rest.segment(begin, end - begin);
-      continue;
-    }
-    // Between known frames, spread the time in proportion to the minimum intervals' excess;
-    // outside them, keep the rest intervals.
-    for (int n = known.front() - 1; n >= begin; --n)
-      t[n] = t[n + 1] - std::max(c.rest[n + 1] - c.rest[n], c.minimum[n]);
-    for (int n = known.back() + 1; n < end; ++n)
-      t[n] = t[n - 1] + std::max(c.rest[n] - c.rest[n - 1], c.minimum[n - 1]);
-    for (size_t k = 0; k + 1 < known.size(); ++k) {
-      const int a = known[k], b = known[k + 1];
-      double span = 0.0, rest = 0.0;
-      for (int n = a; n < b; ++n) {
-        span += c.minimum[n];
-        rest += c.rest[n + 1] - c.rest[n];
-      }
-      const double extra = std::max(0.0, (t[b] - t[a]) - span);
-      for (int n = a + 1; n < b; ++n)
-        t[n] = t[n - 1] + c.minimum[n - 1] + extra * (c.rest[n] - c.rest[n - 1]) / rest;
-    }
+    SpreadBetweenKnown(c, begin, end, known, t);
   }
   return t;
 }

@@ -9,11 +9,6 @@
 
 namespace mocapedit::detail {
 
-inline bool Fail(std::string* error, const std::string& why) {
-  if (error) *error = why;
-  return false;
-}
-
 inline bool HasSize(Span<const float> s, std::size_t n) { return s.size == n && (n == 0 || s.data); }
 
 // True when the view holds n transforms: 3 floats per translation and scale, 4 per rotation.

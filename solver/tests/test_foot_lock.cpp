@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "mocapedit/foot_lock.h"
+#include "job_checks.h"
 
 namespace {
 
@@ -54,69 +55,69 @@ struct Legs {
 TEST(FootLockJob, Validate) {
   Legs legs(4);
   std::string why;
-  EXPECT_TRUE(legs.Job().Validate(&why)) << why;
+  EXPECT_EQ(Rejection(legs.Job()), "");
   {
     auto job = legs.Job();
     job.offsets = Span<const std::int64_t>();
-    EXPECT_FALSE(job.Validate(&why));
+    EXPECT_NE(why = Rejection(job), "");
   }
   {
     std::vector<std::int64_t> bad{1, 4};
     auto job = legs.Job();
     job.offsets = bad;
-    EXPECT_FALSE(job.Validate(&why));
+    EXPECT_NE(why = Rejection(job), "");
     EXPECT_NE(why.find("start at 0"), std::string::npos);
   }
   {
     std::vector<std::int64_t> negative{-1};
     auto job = legs.Job();
     job.smooth = negative;
-    EXPECT_FALSE(job.Validate(&why));
+    EXPECT_NE(why = Rejection(job), "");
   }
   {
     std::vector<double> tilted{0, 2, 0};
     auto job = legs.Job();
     job.up = tilted;
-    EXPECT_FALSE(job.Validate(&why));
+    EXPECT_NE(why = Rejection(job), "");
   }
   {
     auto job = legs.Job();
     job.knee.size -= 1;
-    EXPECT_FALSE(job.Validate(&why));
+    EXPECT_NE(why = Rejection(job), "");
     EXPECT_NE(why.find("knee"), std::string::npos);
   }
   {
     legs.weight[3] = 1.5;
-    EXPECT_FALSE(legs.Job().Validate(&why));
+    EXPECT_NE(why = Rejection(legs.Job()), "");
     legs.weight[3] = std::nan("");
-    EXPECT_FALSE(legs.Job().Validate(&why));
+    EXPECT_NE(why = Rejection(legs.Job()), "");
     legs.weight[3] = 0.0;
   }
   {
     auto job = legs.Job();
     job.soft_reach = 0.9999;
-    EXPECT_FALSE(job.Validate(&why));
+    EXPECT_NE(why = Rejection(job), "");
   }
   {
     auto job = legs.Job();
     job.reached = Span<double>(legs.weight.data(), legs.reached.size());  // an output over an input
-    EXPECT_FALSE(job.Validate(&why));
+    EXPECT_NE(why = Rejection(job), "");
   }
   {
     auto job = legs.Job();
     job.drop = Span<double>(legs.hip_local.data(), legs.drop.size());  // two outputs at once
-    EXPECT_FALSE(job.Validate(&why));
+    EXPECT_NE(why = Rejection(job), "");
   }
   {
     auto job = legs.Job();
     job.weight.size = 3;
-    EXPECT_FALSE(job.Run(&why));
+    EXPECT_THROW(job.Run(), mocapedit::InvalidInput);
   }
 }
 
 TEST(FootLockJob, WeightZeroLeavesTheLegs) {
   Legs legs(3);
-  ASSERT_TRUE(legs.Job().Run());
+  ASSERT_NO_THROW(legs.Job().Run());
   for (std::size_t i = 0; i < legs.poses * 2; ++i) {
     EXPECT_NEAR(legs.hip_local[4 * i + 3], 1.0, 1e-12);
     EXPECT_NEAR(legs.knee_local[4 * i + 3], 1.0, 1e-12);
@@ -133,7 +134,7 @@ TEST(FootLockJob, ReachesATargetKeepingBonesAndKneeSide) {
   const Quat turn(Eigen::AngleAxisd(0.3, Vec::UnitY()));
   legs.target_rot[0] = turn.x(), legs.target_rot[1] = turn.y(), legs.target_rot[2] = turn.z(),
   legs.target_rot[3] = turn.w();
-  ASSERT_TRUE(legs.Job().Run());
+  ASSERT_NO_THROW(legs.Job().Run());
   EXPECT_EQ(legs.drop[0], 0.0);
   EXPECT_LT((legs.At(legs.reached, 0) - Vec(0.16, 0.1, 0.12)).norm(), 1e-12);
   // Forward kinematics of the new locals from the unchanged hip gives the same ankle.
@@ -161,7 +162,7 @@ TEST(FootLockJob, LowersThePelvisOnlyWhereALegCannotReach) {
     legs.target[6 * p + 1] = p == 10 ? -0.1 : 0.032;  // one pose asks the left foot 13 cm lower
     legs.weight[2 * p] = 1.0;
   }
-  ASSERT_TRUE(legs.Job().Run());
+  ASSERT_NO_THROW(legs.Job().Run());
   EXPECT_GT(legs.drop[10], 0.1);
   EXPECT_EQ(legs.drop[0], 0.0);
   EXPECT_EQ(legs.drop[20], 0.0);

@@ -18,6 +18,7 @@
 #include <cstddef>
 #include <string>
 
+#include "mocapedit/errors.h"
 #include "mocapedit/layering.h"
 
 namespace mocapedit {
@@ -32,18 +33,18 @@ struct AdditiveClipBuilder {
   // #F * #J deltas written by Run(); may be the very same buffers as `clip`.
   PoseStreamView output;
 
-  // True when the builder can run. Otherwise false, with the reason in *error, when:
+  // Returns when the builder can run. Otherwise throws InvalidInput naming the reason, when:
   //  - reference translations/scales do not hold #J * 3 floats or rotations #J * 4;
   //  - clip or output translations/scales do not hold #F * #J * 3 floats or rotations
   //    #F * #J * 4;
   //  - an output buffer partially overlaps its clip buffer;
   //  - a reference rotation has zero length or is not finite (it has no inverse);
   //  - a reference scale component is zero or not finite (it cannot be divided by).
-  bool Validate(std::string* error = nullptr) const;
+  void Validate() const;
 
-  // Validates, then writes the deltas to `output`. Returns false (output untouched) when
-  // Validate() fails.
-  bool Run(std::string* error = nullptr) const;
+  // Validates, then writes the deltas to `output`. Throws InvalidInput (output untouched) when
+  // Validate() does.
+  void Run() const;
 };
 
 }  // namespace mocapedit

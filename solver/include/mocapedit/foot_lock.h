@@ -37,6 +37,7 @@
 #include <cstdint>
 #include <string>
 
+#include "mocapedit/errors.h"
 #include "mocapedit/layering.h"  // Span
 
 namespace mocapedit {
@@ -86,7 +87,7 @@ struct FootLockJob {
   Span<double> drop;         // #N: how far the pelvis is lowered along -up, world units
   Span<double> reached;      // #N * 2 * 3: world ankle positions after locking
 
-  // True when the job can run. Otherwise false, with the reason in *error, when:
+  // Returns when the job can run. Otherwise throws InvalidInput naming the reason, when:
   //  - offsets is empty, does not start at 0, or decreases; smooth does not hold #A values
   //    or one is negative;
   //  - up does not hold 3 finite values of unit length (to 1e-6);
@@ -96,11 +97,11 @@ struct FootLockJob {
 //    negative or bend_trust not positive;
   //  - an output overlaps an input or another output.
   // #N may be 0 (nothing to do).
-  bool Validate(std::string* error = nullptr) const;
+  void Validate() const;
 
-  // Validates, then writes every output. Returns false (outputs untouched) when Validate()
-  // fails.
-  bool Run(std::string* error = nullptr) const;
+  // Validates, then writes every output. Throws InvalidInput (outputs untouched) when
+  // Validate() does.
+  void Run() const;
 };
 
 }  // namespace mocapedit

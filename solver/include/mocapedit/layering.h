@@ -106,7 +106,7 @@ struct LayeringJob {
   // place); any other overlap with `source` is invalid.
   PoseStreamView output;
 
-  // True when the job can run. Otherwise false, with the reason in *error, when:
+  // Returns when the job can run. Otherwise throws InvalidInput naming the reason, when:
   //  - source or output translations/scales do not hold #T * #J * 3 floats, or
   //    rotations #T * #J * 4;
   //  - an output buffer partially overlaps its source buffer (same start is in place: fine);
@@ -115,13 +115,13 @@ struct LayeringJob {
   //  - a layer's weights do not hold #T values, or one is not within [0, 1] (or is NaN);
   //  - a layer's joint_weights is neither empty nor #J values, or one is not within [0, 1].
   // #T or #J may be 0 (nothing to do).
-  bool Validate(std::string* error = nullptr) const;
+  void Validate() const;
 
-  // Validates, then writes the layered poses to `output`. Returns false (output untouched)
-  // when Validate() fails. Poses whose layer weight is 0 and joints whose joint weight is 0
+  // Validates, then writes the layered poses to `output`. Throws InvalidInput (output untouched) when
+  // Validate() does. Poses whose layer weight is 0 and joints whose joint weight is 0
   // are left bit for bit as they were; a blend at weight 1 copies the layer bit for bit; an
   // additive delta of exactly identity leaves its joint bit for bit.
-  bool Run(std::string* error = nullptr) const;
+  void Run() const;
 };
 
 // #J joint weights: 1 for `root` and every joint below it, 0 for every other joint.
