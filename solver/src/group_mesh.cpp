@@ -208,8 +208,7 @@ class MeshJoiner {
   // nearest other cluster (Boruvka; pairs ranked by squared distance, then member) and
   // joins the two by their `neighbours` nearest pairs, so that each holds the other as
   // firmly as a member holds its neighbours; until one cluster is left. Only groups in
-  // pieces pay this search (bench/bench_path.py measures groups in a block, at random and
-  // in clumps).
+  // pieces pay this search.
   void JoinClusters() {
     std::vector<std::array<double, 3>> chosen, across;
     while (ListClusters() > 1) {

@@ -73,9 +73,9 @@ std::vector<double> ColumnCoordinates(const PathEditState& d, const Elimination&
 
 // The orders of a step's normal matrix for the supernodal factorization to choose from:
 // with vertex times, CAMD within a nested dissection by position and time, and AMD (whose
-// order fills less on some meshes: a 5 x 5 block of 251 key frames, 1.14 times fewer
-// flops; a 25 x 40 block of 21, 2.6 times fewer, where the formation's cross-section makes
-// every separator large). Both on two threads when `two_threads`.
+// order fills less on some meshes: long thin ones, and wide short ones where the
+// formation's cross-section makes every separator large). Both on two threads when
+// `two_threads`.
 // None when the system is small, banded (skyline) or without times: Factor then asks
 // CHOLMOD for its AMD order.
 template <typename Scalar>
@@ -148,7 +148,7 @@ void Factor(StepSystem<Scalar>& s, const CandidateOrders& orders, bool force_qr)
     ok = s.skyline.Factor();
     if (ok) diag = Eigen::Map<const Eigen::VectorXd>(s.skyline.D().data(), s.cols);
   } else if (s.cols >= kSupernodalColumns) {
-    // CHOLMOD's analysis (its AMD is several times faster than Eigen's) tells whether the
+    // CHOLMOD's analysis (its AMD is faster than Eigen's) tells whether the
     // factor has dense fronts: many flops per factor entry.
     SerialCholmod();
     s.supernodal = std::make_unique<SupernodalCholesky<Scalar>>();

@@ -58,23 +58,18 @@ constexpr int64_t kSkylineCostPerColumn = 64;
 constexpr int64_t kSkylineProfilePerColumn = 64;
 constexpr int kSupernodalColumns = 2000;
 // Parts of at most this many unknowns are not dissected further (nested_dissection.h):
-// CAMD orders them. CHOLMOD flops of step 1 by leaf size (1,000 / 1,500 / 2,300): groups of
-// 100 agents x 43 key frames 7.4e7 / 7.2e7 / 9.3e7 (AMD 1.25e8); 200 x 43: 3.5e8 / 3.5e8 /
-// 3.5e8 (AMD 6.2e8); 100 x 85: 2.9e8 / 2.8e8 / 2.6e8 (AMD 4.1e8); 400 x 21: 1.7e8 /
-// 1.6e8 / 1.7e8 (AMD 1.8e8).
+// CAMD orders them. Over groups of 100 to 400 agents, leaves of 1,000 to 2,300 unknowns
+// gave step 1 about the same CHOLMOD flop counts; 1,500 was never the worst.
 constexpr int kDissectionLeaf = 1500;
 // Problems with at least this many vertices build their two steps at once, order step 1
 // two ways at once, and factor the two steps at once (when the BLAS may be called from two
-// threads). Group of 100 agents x 43 key frames, setup and solve: median 63 ms against 78
-// ms with the steps in turn (40 solves each, interleaved, two cores); the three phases
-// against one thread per step: best 38.6 / 40.9 ms against 44.3 / 46.7 ms (60 each, two
-// runs), medians 1.5 ms lower.
+// threads): on a group mesh (bench/bench_path.py) that beats the steps in turn and one
+// thread per step.
 constexpr int kParallelStepsVertices = 2000;
 // CHOLMOD's flop count per factor entry above which its fronts are dense enough for the
 // supernodal factorization (BLAS on dense blocks) to beat the simplicial one; CHOLMOD's own
-// default. Group of 100 agents x 43 key frames: step 1 has 262 flops per entry (supernodal
-// 3.5x faster than simplicial), step 2 has 93 (supernodal 1.7x faster than CHOLMOD's
-// simplicial, 1.6x faster than Eigen's AMD LDLT with its analysis).
+// default. Both steps of a group mesh lie well above it, and there the supernodal
+// factorization beats CHOLMOD's simplicial one and Eigen's AMD LDLT.
 constexpr double kSupernodalFlopsPerEntry = 40;
 // LDLT pivots below this fraction of the largest mean a singular system.
 constexpr double kSingularPivot = 1e-13;

@@ -22,14 +22,14 @@ struct BlasInfo {
 
 // Looks the BLAS up on first use. When it is a threaded OpenBLAS and OPENBLAS_NUM_THREADS
 // is not set, its calls are kept on the calling thread (the solver parallelises over
-// independent factorizations instead, which measured faster than threads inside BLAS on
-// these small fronts).
+// independent factorizations instead, which beats threads inside BLAS on these small
+// fronts).
 const BlasInfo& Blas();
 
 // CHOLMOD's supernodal factorization parallelises its inner loops with OpenMP on up to four
 // threads. The solver runs independent factorizations on threads of its own, and on a
-// two-core machine those extra threads measured 1.3 to 2 times slower than one (group of
-// 100 agents x 43 key frames). Call this on every thread before it calls CHOLMOD: it keeps
+// two-core machine those extra threads make a group mesh's factorization slower than one
+// thread does. Call this on every thread before it calls CHOLMOD: it keeps
 // CHOLMOD's parallel regions on the calling thread. libgomp keeps that setting per thread:
 // a thread that did not make it spawns a team for every supernode and waits for it on
 // futexes. Without an OpenMP runtime loaded it does nothing.

@@ -32,29 +32,26 @@
 // offsets change (dragging a handle, re-linearised collision links). Solve is const on the
 // data and may run from several threads at once.
 //
-// Factorizations, chosen by measurement (bench/bench_path.py, on a shared 2-core machine):
+// Factorizations, chosen by measurement (bench/bench_path.py times a single path, a relay
+// of agents tied end to start and a group mesh, each next to a scipy peer):
 //  - Envelope LDLT (mocapedit/skyline_ldlt.h) in the natural column order, assembled
 //    straight from the rows, when its work is at most 64 multiply-adds per column: single
 //    paths (a band of 2 to a few columns) and chains of agents tied end to start (the
 //    relay: each agent's soft link between its first and last frames makes the bandwidth
 //    a whole agent, but the envelope only one extra entry per column, and fills nothing
-//    else). 1,000 frames: precompute and solve 0.70 -> 0.31 ms; relay of 78 agents x 500
-//    frames (39,000 unknowns): precompute 57-69 -> 14-16 ms (Eigen's AMD took 23 ms).
+//    else).
 //  - Otherwise CHOLMOD analyses the matrix; when its factor has at least 40 flops per
 //    entry (dense fronts: group meshes) CHOLMOD's supernodal Cholesky factors it with BLAS,
-//    its OpenMP regions kept on the calling thread (its four threads on two busy cores
-//    measured 1.3 to 2 times slower). Calls into BLAS hold the lock of
-//    mocapedit/blas_lock.h. The order of step 1, given vertex times: a nested dissection
-//    by position about the centroid at each time and by time (mocapedit/nested_dissection.h)
-//    with CAMD within its parts, or AMD's, whichever AMD's and CAMD's own counts say costs
-//    fewer flops (AMD wins on long thin and on wide short formations); otherwise, and for
-//    step 2, CHOLMOD's AMD (several times faster than Eigen's). Group of 100 agents x 43
-//    key frames, step 1 (4,298 complex unknowns): 7.24e7 flops against 1.43e8 in AMD order;
-//    its factorization 18 to 30 ms against 28 to 37 ms in interleaved runs. METIS (through
-//    CHOLMOD) reaches 6.6e7 flops but takes 21 ms to order; a reverse Cuthill-McKee band or
-//    a level-set dissection costs more flops than AMD.
+//    its OpenMP regions kept on the calling thread (mocapedit/blas_lock.h). Calls into
+//    BLAS hold the lock of mocapedit/blas_lock.h. The order of step 1, given vertex times:
+//    a nested dissection by position about the centroid at each time and by time
+//    (mocapedit/nested_dissection.h) with CAMD within its parts, or AMD's, whichever AMD's
+//    and CAMD's own counts say costs fewer flops (AMD wins on long thin and on wide short
+//    formations); otherwise, and for step 2, CHOLMOD's AMD. METIS (through CHOLMOD) finds
+//    slightly better orders but costs about as much as the factorization; a reverse
+//    Cuthill-McKee band or a level-set dissection costs more flops than AMD.
 //  - Else Eigen's simplicial LDLT in AMD order (small components with scattered links).
-// UMFPACK LU and CHOLMOD on single paths measured 5 to 30 times slower than a banded LDLT.
+// UMFPACK LU and CHOLMOD on single paths are several times slower than a banded LDLT.
 //
 // Accuracy. Step 1's normal equations have a condition number growing like L^4 for a
 // stretch of L frames between constraints (about 1e15 for 20,000 frames), so a plain
