@@ -184,12 +184,12 @@ def load(path: str) -> StoredReport:
                 layer = used
                 break
     if data is None:
-        raise MocapEditError(f"{path}: holds no mocapedit report (customLayerData mocapedit.model.report); "
+        raise MocapEditError(f"{path}: holds no mocapedit report (customLayerData mocapedit.report); "
                              "write one with `mocapedit solve STAGE -o EDITS`")
     try:
         parsed = json.loads(data["report"])
     except (TypeError, ValueError) as exc:
-        raise MocapEditError(f"{layer.identifier}: customLayerData mocapedit.model.report is not valid JSON: {exc}") from None
+        raise MocapEditError(f"{layer.identifier}: customLayerData mocapedit.report is not valid JSON: {exc}") from None
     root = layer.pseudoRoot
     return StoredReport(
         file=layer.identifier, report=Report.from_dict(parsed), version=str(data.get("version", "")),

@@ -7,7 +7,7 @@ import json
 HELP = "print the solve report stored in an edits layer (a table per agent, or JSON)"
 DESCRIPTION = """\
 Prints the report that `mocapedit solve` stores in the edits layer it writes
-(customLayerData mocapedit.model.report): run-wide counts and notes, then per agent the
+(customLayerData mocapedit.report): run-wide counts and notes, then per agent the
 constraints with their residuals and whether each is met, the path length ratio, the
 displacement, the foot-skate change, the minimum separation to other agents, and the
 solver and fallback notes. EDITS may also be a stage that sub-layers an edits layer.
