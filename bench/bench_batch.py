@@ -19,7 +19,7 @@ SHOTS = 8
 
 SEQUENTIAL = """
 import sys
-from mocapedit import processor
+from mocapedit.pipeline import processor
 for shot, out in zip(sys.argv[1::2], sys.argv[2::2]):
     processor.solve(shot, output=out)
 """

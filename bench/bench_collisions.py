@@ -6,7 +6,7 @@ lateral sway. Capsules are 0.3 m by 1.8 m, margin 0.05 m, one sample per frame.
 
 Figures, each beside a peer measured in the same run:
 - detection alone: the uniform grid (C++) against all pairs (C++, the same narrow phase)
-  and against the inspection's numpy grid (mocapedit.overlaps); at 10,000 agents the
+  and against the inspection's numpy grid (mocapedit.inspect.overlaps); at 10,000 agents the
   all-pairs peer runs on every tenth sample and is scaled up (it says so);
 - resolution per strategy: seconds to the end, iterations, overlaps left, mean and
   largest displacement, path length change, where the time went (factoring, detection,
@@ -16,7 +16,7 @@ Figures, each beside a peer measured in the same run:
   the rows the last solve pushed with, as hard equalities, both steps as one KKT system
   each (100 agents);
 - quality on a composed stage: the 128-walker crossing example solved with each strategy
-  and with steering alone (maxWait 0), measured with mocapedit.metrics by UsdSkel forward
+  and with steering alone (maxWait 0), measured with mocapedit.inspect.metrics by UsdSkel forward
   kinematics (overlaps in the shot; root displacement, path length and foot skate against
   the source, over the shot and the 3 s after it in which walkers that waited finish).
 """
@@ -30,8 +30,10 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from mocapedit import avoidance, collisions, examples, metrics, overlaps
-from mocapedit.processor import solve
+from mocapedit.solve import avoidance, collisions
+from mocapedit.data import examples
+from mocapedit.inspect import metrics, overlaps
+from mocapedit.pipeline.processor import solve
 
 FRAMES = 240
 DENSITY = 0.25          # agents per square metre

@@ -13,8 +13,9 @@ import time
 
 import numpy as np
 
-from mocapedit import examples, footlock, walker
-from mocapedit.processor import solve
+from mocapedit.data import examples, walker
+from mocapedit.solve import footlock
+from mocapedit.pipeline.processor import solve
 
 TARGET_S = 0.5
 

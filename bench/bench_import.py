@@ -17,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapedit import bvh, bvh_usd
+from mocapedit.formats import bvh
+from mocapedit.usd import bvh_usd
 
 ORDERS = ("ZXY", "ZYX", "XYZ", "YXZ", "XZY", "YZX")
 

@@ -20,8 +20,11 @@ import time
 import numpy as np
 from pxr import Sdf, Usd
 
-from mocapedit import _solver, examples, gestures, layering, schema, walker
-from mocapedit.processor import solve
+from mocapedit import _solver
+from mocapedit.data import examples, gestures, walker
+from mocapedit.solve import layering
+from mocapedit.usd import schema
+from mocapedit.pipeline.processor import solve
 
 TARGET = 50e6
 

@@ -1,4 +1,4 @@
-"""Path editing: the two-step ARAP solve (mocapedit.path_edit, _solver.path_edit_*).
+"""Path editing: the two-step ARAP solve (mocapedit.solve.path_edit, _solver.path_edit_*).
 
 Figures, each next to the same two-step solve written with scipy.sparse (``path_peer``:
 real unknowns, hard constraints as Lagrange rows, SuperLU on the KKT system of the
@@ -38,8 +38,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from path_peer import PeerProblem  # noqa: E402
 
-from mocapedit import _solver, path_edit  # noqa: E402
-from mocapedit.path_editor import PathEditor  # noqa: E402
+from mocapedit import _solver
+from mocapedit.solve import path_edit  # noqa: E402
+from mocapedit.solve.path_editor import PathEditor  # noqa: E402
 
 FPS = 24.0
 STEP, SWAY = 1.4 / FPS, 0.03   # metres per frame, sway amplitude
@@ -59,7 +60,7 @@ def _settings():
 
 
 def _agent(path, rest, times=None):
-    from mocapedit import trajectory
+    from mocapedit.geometry import trajectory
     return path_edit.AgentInput(path=path, rest=rest, source=rest, source_heading=trajectory.headings(rest, [], 1.0),
                                 stationary=[], sample_times=np.arange(len(rest), dtype=np.float64)
                                 if times is None else times)
@@ -303,8 +304,8 @@ def _examples(ctx):
 
     from pxr import Usd
 
-    from mocapedit import metrics
-    from mocapedit.processor import solve
+    from mocapedit.inspect import metrics
+    from mocapedit.pipeline.processor import solve
     here = Path(__file__).resolve().parents[1] / "example_stages" / "stages_path.py"
     spec = importlib.util.spec_from_file_location("stages_path", here)
     stages = importlib.util.module_from_spec(spec)

@@ -10,8 +10,9 @@ import time
 import numpy as np
 from pxr import Usd, UsdSkel
 
-from mocapedit import examples, reader, walker
-from mocapedit.processor import solve
+from mocapedit.data import examples, walker
+from mocapedit.usd import reader
+from mocapedit.pipeline.processor import solve
 
 
 def _build(ctx, agents: int, clips: int, frames: int):

@@ -23,11 +23,11 @@ import numpy as np
 from pxr import Usd
 
 import bench_stage
-from mocapedit import examples
+from mocapedit.data import examples
 
 CHILD = """
 import json, resource, sys, time
-from mocapedit import processor
+from mocapedit.pipeline import processor
 t = time.perf_counter()
 result = processor.solve(sys.argv[1], output=sys.argv[2], bake_timing=sys.argv[3] == "1")
 seconds = time.perf_counter() - t

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 from pxr import Sdf, Usd
 
-from mocapedit import examples, walker
+from mocapedit.data import examples, walker
 
 FINGERS = 9  # the walker's 22 joints plus finger joints: 31
 
@@ -51,7 +51,7 @@ def _build(ctx, agents: int, with_edits: bool) -> Path:
     stage = examples.build_crowd_stage(path, specs, up_axis="Y", meters_per_unit=1.0, fps=24.0,
                                        clips_dir=ctx.workdir / "clips31", clip_format="usdc")
     if with_edits:
-        from mocapedit import metrics
+        from mocapedit.inspect import metrics
         crowd = "/World/Crowd"
         for i in range(0, agents, agents // 100):
             a = f"{crowd}/agent_{i:04d}"

@@ -24,8 +24,11 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from mocapedit import _solver, animation, retime, walker
-from mocapedit.model import Clip
+from mocapedit import _solver
+from mocapedit.geometry import animation
+from mocapedit.solve import retime
+from mocapedit.data import walker
+from mocapedit.model.data import Clip
 
 FRAMES, JOINTS, CLIPS = 240, 20, 10
 STRETCH = 1e-6   # the solver's default stretch weight, for the peer

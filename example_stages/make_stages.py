@@ -25,7 +25,7 @@ try:
 except ImportError:  # run from a source checkout without PYTHONPATH
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "python"))
 
-from mocapedit import examples, walker  # noqa: E402
+from mocapedit.data import examples, walker  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 FRAMES = 120

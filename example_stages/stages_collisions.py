@@ -17,7 +17,7 @@
   each other at right angles in the middle of the shot.
 
 All of them are Y-up, in metres, at 24 fps, and carry a MocapSolveSettings prim that turns
-collision avoidance on. The walkers come from :mod:`mocapedit.walker`; positions and
+collision avoidance on. The walkers come from :mod:`mocapedit.data.walker`; positions and
 phases come from a seeded generator, so every run writes the same bytes.
 """
 from __future__ import annotations
@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 from pxr import Gf, Sdf, UsdGeom
 
-from mocapedit import examples, walker
+from mocapedit.data import examples, walker
 
 FPS = 24.0
 FRAMES = 120

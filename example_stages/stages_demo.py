@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 from pxr import Sdf, Usd
 
-from mocapedit import examples, metrics
+from mocapedit.data import examples
+from mocapedit.inspect import metrics
 
 CROWD = "/World/Crowd"
 

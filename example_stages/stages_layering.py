@@ -3,7 +3,7 @@ in and out, applied to several agents by one MocapAnimationLayer prim.
 
 - ``clips/street_walk.usda``: the procedural walk every agent plays (120 frames, 24 fps);
 - ``clips/phone_call.usda``: the phone-call gesture (the ``Spine`` subtree only, 96 frames,
-  a seamless 4 s loop), made by :func:`mocapedit.gestures.phone_call`;
+  a seamless 4 s loop), made by :func:`mocapedit.data.gestures.phone_call`;
 - ``/World/Layers/PhoneCall``: added on agents 0, 2 and 5 from ``Spine`` down, as a delta
   from the rest pose, easing in over frames 12-30 and out over frames 84-102;
 - ``/World/Layers/LateCall``: the same clip on agents 3 and 6, a second later in the
@@ -17,7 +17,8 @@ from pathlib import Path
 
 from pxr import Sdf, Usd
 
-from mocapedit import examples, gestures, schema, walker
+from mocapedit.data import examples, gestures, walker
+from mocapedit.usd import schema
 
 FPS = 24.0
 FRAMES = 120

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 from pxr import Usd
 
-from mocapedit import examples, walker
+from mocapedit.data import examples, walker
 
 FPS = 24.0
 CROWD = "/World/Crowd"

@@ -193,7 +193,7 @@ EULER_ORDERS = ("ZXY", "XYZ", "YZX", "ZYX", "XZY", "YXZ")
 
 
 def walker_rig(clip) -> tuple[Rig, np.ndarray]:
-    """A mocapedit.walker clip as BVH: (rig, values (F,C)).
+    """A mocapedit.data.walker clip as BVH: (rig, values (F,C)).
 
     Joints whose translation changes over the clip (the root and the hips) get six
     channels with absolute positions; the others three rotation channels, cycling

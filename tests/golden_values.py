@@ -71,7 +71,7 @@ def numeric_values(layer: Sdf.Layer) -> dict[str, np.ndarray]:
 
 
 def solve_stage(stage: Path, out_dir: Path) -> Sdf.Layer:
-    from mocapedit import processor
+    from mocapedit.pipeline import processor
     output = out_dir / f"{stage.stem}.edits.usdc"
     processor.solve(str(stage), output=str(output))
     return Sdf.Layer.FindOrOpen(str(output))

@@ -12,8 +12,10 @@ from __future__ import annotations
 import numpy as np
 from pxr import Gf, Usd, UsdGeom
 
-from mocapedit import ground, processor, schema
-from mocapedit.processor import EditedPath
+from mocapedit.geometry import ground
+from mocapedit.pipeline import processor
+from mocapedit.usd import schema
+from mocapedit.pipeline.processor import EditedPath
 
 from conftest import write_toy_stage
 

@@ -1,7 +1,7 @@
 """Every bad input through the command line: exit 1, a message naming the prim and property
 (or the file and line), no traceback, nothing written, the input unchanged.
 
-Most cases run ``mocapedit.cli.main`` in-process (a fresh folder each); a sample runs the
+Most cases run ``mocapedit.cli.main.main`` in-process (a fresh folder each); a sample runs the
 installed ``mocapedit`` command as a subprocess.
 """
 from __future__ import annotations
@@ -16,7 +16,7 @@ import pytest
 
 from bad_cases import CASES
 from conftest import run_cli
-from mocapedit import cli
+from mocapedit.cli import main as cli
 
 SUBPROCESS_SAMPLE = {"pin-frame-string", "pin-frame-double", "layer-missing-sublayer", "layer-up-axis",
                      "bvh-frame-time-huge", "stationary-reversed", "nodding-other-rig-before-collisions",

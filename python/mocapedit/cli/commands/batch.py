@@ -1,0 +1,83 @@
+"""mocapedit batch: solve many shots with the same options on a Dask cluster."""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+from mocapedit.cli.commands import add_solve_options
+
+HELP = "solve many shots with the same options on Dask (a local cluster or a running scheduler)"
+DESCRIPTION = """\
+Solves each SHOT as `mocapedit solve` would, with the same options for all, and writes
+OUTDIR/<shot name>.edits.usdc (atomically, byte for byte what `mocapedit solve` writes)
+and OUTDIR/batch-summary.json (every shot's result, figures and error).
+
+The shots run on dask.distributed: by default on a local cluster of worker processes
+(--workers), or on a running cluster given by --scheduler tcp://host:port (`dask
+scheduler` and `dask worker`, dask-jobqueue, Kubernetes); its workers must have
+mocapedit installed and see SHOT and OUTDIR at the same paths. One failing shot does
+not stop the others. A shot whose output already records the same input content hash
+and options is skipped (--force solves it again).
+
+Exit status: 0 when every shot was solved or skipped, 1 when any failed or on bad
+input (a missing shot, two shots writing the same output, an unreachable scheduler:
+then nothing is solved), 2 on bad usage."""
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("batch", help=HELP, description=DESCRIPTION,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("shots", metavar="SHOT", nargs="+", help="input shot stages")
+    p.add_argument("-o", "--outdir", required=True, metavar="OUTDIR", help="folder for the edits layers")
+    p.add_argument("--suffix", default=".edits.usdc",
+                   help="output name after the shot's stem (default .edits.usdc; .edits.usda for text)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="a running Dask scheduler (tcp://host:port) instead of a local cluster")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="worker processes of the local cluster (default: the CPU count, at most 8)")
+    p.add_argument("--force", action="store_true", help="solve shots whose outputs are up to date too")
+    p.add_argument("--summary", metavar="JSON", help="where to write the summary (default OUTDIR/batch-summary.json)")
+    add_solve_options(p)
+    p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
+    p.set_defaults(run=run)
+
+
+def run(args) -> int:
+    from mocapedit.pipeline import batch
+    from mocapedit.model.errors import MocapEditError
+    from mocapedit.usd.outputs import save_text
+
+    if args.workers is not None and args.workers < 1:
+        raise MocapEditError(f"--workers must be at least 1, got {args.workers}")
+    jobs = batch.plan(args.shots, args.outdir, args.suffix)
+    options = {"guides": args.guides, "collisions": args.collisions}
+    if args.match_speed is not None:
+        options["match_speed"] = args.match_speed
+    if args.foot_locking is not None:
+        options["foot_locking"] = args.foot_locking
+    t = time.perf_counter()
+    client, cluster = batch.connect(args.scheduler, args.workers)
+
+    def report(result, done, failed, remaining):
+        if args.quiet:
+            return
+        what = result.status + (f": {result.error}" if result.error else f" in {result.seconds:.2f} s")
+        print(f"batch: {done - failed} done, {failed} failed, {remaining} remaining  "
+              f"[{os.path.basename(result.shot)} {what}]", file=sys.stderr, flush=True)
+
+    try:
+        results = batch.run(jobs, options, client, force=args.force, on_result=report)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    summary = batch.summary(results, options, time.perf_counter() - t)
+    path = args.summary or os.path.join(args.outdir, batch.SUMMARY)
+    save_text(path, json.dumps(summary, indent=2, sort_keys=True) + "\n")
+    if not args.quiet:
+        print(f"batch: {summary['solved']} solved, {summary['skipped']} skipped, {summary['failed']} failed "
+              f"in {summary['seconds']:.1f} s; summary {os.path.abspath(path)}", file=sys.stderr)
+    return 1 if summary["failed"] else 0

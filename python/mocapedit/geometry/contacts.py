@@ -1,0 +1,196 @@
+"""Legs and foot contacts of a source clip (numpy, no USD).
+
+A leg is a chain hip (thigh) -> knee -> ankle, each joint the child of the one before,
+with an optional toe below the ankle. Legs are found by joint name on common rigs (CMU
+and Mixamo ``LeftUpLeg/LeftLeg/LeftFoot/LeftToeBase``, Character Creator
+``CC_Base_L_Thigh/L_Calf/L_Foot/L_ToeBase``, the project's walker) or given by
+``mocap:leftLegJoints`` / ``mocap:rightLegJoints``.
+
+A foot is planted when its ankle or its toe is near the lowest height that joint reaches
+in the clip and barely moves over the ground. The test has hysteresis (stricter to enter
+a contact than to stay in it; the speeds grow with a fast clip's mean foot speed) and a
+minimum duration; a contact then extends over the
+landing and the lift-off while the joint stays under the release height. Thresholds are
+in metres and seconds, converted with ``metersPerUnit`` and the clip's frame times.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mocapedit.geometry import ground, trajectory
+from mocapedit.model.data import Agent, Clip, StageInfo
+from mocapedit.geometry.stationary import runs
+
+SIDES = ("left", "right")
+
+# Leaf names (lower case, any "namespace:" prefix removed) of hip, knee, ankle, toe per rig
+# family; "{S}" is Left/Right, "{s}" is L/R.
+_NAME_PATTERNS = (
+    ("{S}UpLeg", "{S}Leg", "{S}Foot", ("{S}ToeBase", "{S}Toe", "{S}Toes")),
+    ("CC_Base_{s}_Thigh", "CC_Base_{s}_Calf", "CC_Base_{s}_Foot", ("CC_Base_{s}_ToeBase",)),
+    ("{S}Thigh", "{S}Calf", "{S}Foot", ("{S}ToeBase", "{S}Toe")),
+    ("{S}Hip", "{S}Knee", "{S}Ankle", ("{S}Toe", "{S}Ball")),
+)
+
+
+@dataclass(frozen=True)
+class Leg:
+    side: str                 # "left" | "right"
+    hip: int                  # skeleton joint indices
+    knee: int
+    ankle: int
+    toe: int | None = None
+
+    @property
+    def joints(self) -> tuple[int, ...]:
+        return (self.hip, self.knee, self.ankle) + ((self.toe,) if self.toe is not None else ())
+
+
+def _leaf(joint: str) -> str:
+    return joint.rsplit("/", 1)[-1].rsplit(":", 1)[-1].lower()
+
+
+def chain_problem(names: list[str], parents: np.ndarray, indices: list[int]) -> str | None:
+    """Why ``indices`` (hip, knee, ankle[, toe]) is not a leg chain, or None when it is one."""
+    if len(indices) not in (3, 4):
+        return f"a leg is hip, knee, ankle and optionally toe: got {len(indices)} joints"
+    what = ("knee", "ankle", "toe")
+    for k in range(1, len(indices)):
+        if int(parents[indices[k]]) != indices[k - 1]:
+            return (f"the {what[k - 1]} '{names[indices[k]]}' is not a child of '{names[indices[k - 1]]}': "
+                    "a leg is hip, knee, ankle, each the child of the one before")
+    return None
+
+
+def find_legs(joints: list[str], parents: np.ndarray) -> list[Leg]:
+    """The legs found by joint name, left first; a side not found is left out."""
+    by_leaf: dict[str, list[int]] = {}
+    for i, j in enumerate(joints):
+        by_leaf.setdefault(_leaf(j), []).append(i)
+
+    def one(name: str) -> int | None:
+        hits = by_leaf.get(name.lower(), [])
+        return hits[0] if len(hits) == 1 else None
+
+    legs = []
+    for side in SIDES:
+        words = {"S": side.capitalize(), "s": side[0].upper()}
+        for hip, knee, ankle, toes in _NAME_PATTERNS:
+            chain = [one(p.format(**words)) for p in (hip, knee, ankle)]
+            if None in chain or chain_problem(joints, parents, chain) is not None:
+                continue
+            toe = next((t for t in (one(p.format(**words)) for p in toes)
+                        if t is not None and int(parents[t]) == chain[2]), None)
+            legs.append(Leg(side, *chain, toe))
+            break
+    return legs
+
+
+@dataclass
+class DetectSettings:
+    height: float = 0.04          # metres above the joint's lowest height in the clip, to enter a contact
+    release_height: float = 0.06  # metres, to stay in it
+    speed: float = 0.25           # metres per second of ground speed, to enter
+    release_speed: float = 0.45   # metres per second, to stay
+    min_duration: float = 0.06    # seconds a contact must last
+    max_gap: float = 0.04         # seconds: shorter breaks between two contacts are bridged
+    relative_speed: float = 0.2   # the speed thresholds grow to this fraction of the joint's mean ground speed
+
+    def validate(self) -> None:
+        for name in ("height", "speed", "min_duration"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name.replace('_', '-')} must be a positive number, got {value}")
+        if not (self.release_height >= self.height and self.release_speed >= self.speed):
+            raise ValueError("release thresholds must not be below the entry thresholds")
+        if not (np.isfinite(self.max_gap) and self.max_gap >= 0):
+            raise ValueError(f"max-gap must be zero or positive, got {self.max_gap}")
+        if not (np.isfinite(self.relative_speed) and self.relative_speed >= 0):
+            raise ValueError(f"relative-speed must be zero or positive, got {self.relative_speed}")
+
+
+def ground_speed(seconds: np.ndarray, points: np.ndarray, up_axis: str) -> np.ndarray:
+    """(F,...) ground speed of (F,...,3) world points, stage units per second (central differences)."""
+    uv = ground.to_ground(points, up_axis)
+    if len(seconds) < 2:
+        return np.zeros(uv.shape[:-1])
+    return np.linalg.norm(np.gradient(uv, seconds, axis=0), axis=-1)
+
+
+def _hysteresis(enter: np.ndarray, stay: np.ndarray) -> np.ndarray:
+    out = np.zeros(len(enter), dtype=bool)
+    on = False
+    for i in range(len(enter)):
+        on = bool(enter[i]) if not on else bool(stay[i])
+        out[i] = on
+    return out
+
+
+def detect_joint(seconds: np.ndarray, points: np.ndarray, up_axis: str, meters_per_unit: float,
+                 settings: DetectSettings) -> np.ndarray:
+    """(F,) contact mask of one joint from its (F,3) world positions at the clip's frames."""
+    h = ground.height(points, up_axis) * meters_per_unit
+    h = h - h.min() if len(h) else h
+    v = ground_speed(seconds, points, up_axis) * meters_per_unit
+    # Speeds relative to the clip: a running foot that slips a little while planted is still planted.
+    scale = max(1.0, settings.relative_speed * float(v.mean()) / settings.speed) if len(v) else 1.0
+    mask = _hysteresis((h <= settings.height) & (v <= settings.speed * scale),
+                       (h <= settings.release_height) & (v <= settings.release_speed * scale))
+    # A contact reaches out over the landing and the lift-off, while the joint is still low:
+    # the lock carries the source foot's own motion there, and blends where the foot is in the air.
+    low = h <= settings.height
+    for a, b in runs(mask):
+        while a > 0 and low[a - 1]:
+            a -= 1
+        while b + 1 < len(mask) and low[b + 1]:
+            b += 1
+        mask[a:b + 1] = True
+    return mask
+
+
+def clean_ranges(mask: np.ndarray, seconds: np.ndarray, settings: DetectSettings) -> list[tuple[int, int]]:
+    """Inclusive frame ranges of a mask, short breaks bridged and short ranges dropped."""
+    ranges = runs(mask)
+    merged: list[list[int]] = []
+    for a, b in ranges:
+        if merged and seconds[a] - seconds[merged[-1][1]] <= settings.max_gap + 1e-9:
+            merged[-1][1] = b
+        else:
+            merged.append([a, b])
+    return [(a, b) for a, b in merged if seconds[b] - seconds[a] >= settings.min_duration - 1e-9]
+
+
+def detect_leg(seconds: np.ndarray, ankle: np.ndarray, toe: np.ndarray | None, up_axis: str,
+               meters_per_unit: float, settings: DetectSettings | None = None) -> list[tuple[int, int]]:
+    """Contact ranges of one foot: frames where its ankle or its toe is planted."""
+    settings = settings or DetectSettings()
+    mask = detect_joint(seconds, ankle, up_axis, meters_per_unit, settings)
+    if toe is not None:
+        mask |= detect_joint(seconds, toe, up_axis, meters_per_unit, settings)
+    return clean_ranges(mask, seconds, settings)
+
+
+def detect_agent(agent: Agent, clip: Clip, info: StageInfo,
+                 settings: DetectSettings | None = None) -> list[list[tuple[int, int]]]:
+    """Detected contact ranges of each leg of an agent (``agent.legs``), on its source clip."""
+    seconds = agent.sample_times / info.time_codes_per_second
+    out = []
+    for leg in agent.legs:
+        ankle = trajectory.joint_world(agent, clip, leg.ankle)[:, 3, :3]
+        toe = trajectory.joint_world(agent, clip, leg.toe)[:, 3, :3] if leg.toe is not None else None
+        out.append(detect_leg(seconds, ankle, toe, info.up_axis, info.meters_per_unit, settings))
+    return out
+
+
+def mask_of(ranges, frame_count: int) -> np.ndarray:
+    """(F,) bool mask of inclusive frame ranges."""
+    out = np.zeros(frame_count, dtype=bool)
+    for a, b in ranges:
+        out[a:b + 1] = True
+    return out
+
+
+__all__ = ["Leg", "SIDES", "find_legs", "chain_problem", "DetectSettings", "detect_leg", "detect_joint", "detect_agent",
+           "clean_ranges", "mask_of", "ground_speed"]

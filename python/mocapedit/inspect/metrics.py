@@ -1,0 +1,1041 @@
+"""Quality measures for edited crowd motion ("what good means, measured").
+
+Two families of functions live here:
+
+* plain numpy measures of trajectories and time maps (path length, constraint residuals, shape
+  change, rigidity of stationary ranges, capsule separation, positive time intervals);
+* measures read from a composed ``Usd.Stage`` by forward kinematics through UsdSkel (joint world
+  positions, root positions, foot skate), so an edited stage is judged by what plain UsdSkel plays.
+
+Conventions: positions are world space in stage units; quaternions, where they appear, are
+``(x, y, z, w)``. The ground plane follows the stage's ``upAxis``: for Y-up the ground coordinates
+of a point are ``(x, -z)``, for Z-up ``(x, y)``, so in both cases a heading angle is
+counter-clockwise about the up axis.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Iterable, Sequence, Union
+
+import numpy as np
+from pxr import Sdf, Usd, UsdGeom, UsdSkel
+
+from mocapedit.geometry import ground as _ground
+from mocapedit.geometry import stationary as _stationary
+
+__all__ = [
+    "ground_axes", "to_ground", "from_ground",
+    "path_length", "length_ratio", "position_residuals",
+    "local_coordinates", "shape_change", "rigidity_error", "neighbour_distance_change",
+    "Separation", "capsule_clearance", "min_separation",
+    "time_intervals_positive",
+    "joint_world_positions", "agent_root_positions", "default_foot_joints",
+    "FootSkate", "foot_skate",
+    "SPIN_DEGREES_AT_60FPS", "CHORD_SECONDS", "default_facing_joint", "joint_world_matrices",
+    "body_facing", "facing_change_per_second", "spin_threshold", "spins", "direction_deviation",
+    "Plausibility", "plausibility_of", "plausibility", "shot_plausibility", "foot_skate_of_positions", "worst_plausibility",
+]
+
+PathLike = Union[str, Sdf.Path]
+
+# ---------------------------------------------------------------------------------------------
+# Ground plane
+# ---------------------------------------------------------------------------------------------
+
+
+def _up_token(up_axis) -> str:
+    token = str(up_axis).upper()
+    if token not in ("Y", "Z"):
+        raise ValueError(f"up axis must be 'Y' or 'Z', got {up_axis!r}")
+    return token
+
+
+def ground_axes(up_axis) -> tuple[int, tuple[int, float], tuple[int, float]]:
+    """Where the up axis and the two ground coordinates sit in a 3D point.
+
+    Returns ``(up_index, (u_index, u_sign), (v_index, v_sign))`` such that the ground coordinates of
+    point ``p`` are ``(u_sign * p[u_index], v_sign * p[v_index])``: ``(x, -z)`` for ``"Y"`` up and
+    ``(x, y)`` for ``"Z"`` up (the convention of :mod:`mocapedit.geometry.ground`). Both frames are
+    right-handed seen from above, so angles in the ground plane are counter-clockwise about up.
+    """
+    if _up_token(up_axis) == "Y":
+        return 1, (0, 1.0), (2, -1.0)
+    return 2, (0, 1.0), (1, 1.0)
+
+
+def to_ground(points, up_axis) -> np.ndarray:
+    """Ground-plane coordinates of 3D points: ``(..., 3)`` -> ``(..., 2)`` float64."""
+    p = np.asarray(points, dtype=np.float64)
+    if p.shape[-1:] != (3,):
+        raise ValueError(f"to_ground expects points of shape (..., 3), got {p.shape}")
+    return _ground.to_ground(p, _up_token(up_axis))
+
+
+def from_ground(ground, height, up_axis) -> np.ndarray:
+    """3D points from ground coordinates ``(..., 2)`` and heights along up (broadcast)."""
+    g = np.asarray(ground, dtype=np.float64)
+    if g.shape[-1:] != (2,):
+        raise ValueError(f"from_ground expects ground points of shape (..., 2), got {g.shape}")
+    return _ground.from_ground(g, height, _up_token(up_axis))
+
+
+# ---------------------------------------------------------------------------------------------
+# Trajectory measures
+# ---------------------------------------------------------------------------------------------
+
+
+def _points(points, name: str, dims=(2, 3)) -> np.ndarray:
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] not in dims:
+        want = " or ".join(f"(N, {d})" for d in dims)
+        raise ValueError(f"{name} must have shape {want}, got {p.shape}")
+    return p
+
+
+def path_length(points) -> float:
+    """Length of the polyline through ``points`` ``(N, 2)`` or ``(N, 3)``; 0 for fewer than 2."""
+    p = _points(points, "points")
+    if len(p) < 2:
+        return 0.0
+    return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
+
+
+def length_ratio(edited, source) -> float:
+    """Distance travelled on the edited path over that of the source path.
+
+    1 means the edit kept the distance travelled. A source that does not move gives 1.0 when the
+    edited path does not move either and ``inf`` when it does.
+    """
+    le, ls = path_length(edited), path_length(source)
+    if ls == 0.0:
+        return 1.0 if le == 0.0 else float("inf")
+    return le / ls
+
+
+def position_residuals(points, targets) -> np.ndarray:
+    """Euclidean distance of each point to its target: ``(N, d)``, ``(N, d)`` -> ``(N,)``."""
+    p = np.asarray(points, dtype=np.float64)
+    t = np.asarray(targets, dtype=np.float64)
+    if p.shape != t.shape or p.ndim != 2:
+        raise ValueError(f"points {p.shape} and targets {t.shape} must both be (N, d)")
+    return np.linalg.norm(p - t, axis=1)
+
+
+def local_coordinates(points, min_base: float = 0.0) -> np.ndarray:
+    """Local coordinates ``(x, y)`` of each interior path point in its neighbour triangle.
+
+    ``points`` is ``(N, 2)``; the result is ``(N - 2, 2)``, row ``k`` for point ``i = k + 1``:
+    ``P_i = P_{i-1} + x (P_{i+1} - P_{i-1}) + y R90 (P_{i+1} - P_{i-1})`` with
+    ``R90 = [[0, 1], [-1, 0]]``. These coordinates do not change under translation, rotation and
+    uniform scale of the whole path. A triangle whose base ``|P_{i+1} - P_{i-1}|`` is not longer
+    than ``min_base`` has no local frame: its row is NaN.
+    """
+    p = _points(points, "points", dims=(2,))
+    if len(p) < 3:
+        return np.zeros((0, 2))
+    d = p[2:] - p[:-2]
+    e = p[1:-1] - p[:-2]
+    rd = np.stack((d[:, 1], -d[:, 0]), axis=1)
+    dd = np.einsum("ij,ij->i", d, d)
+    ok = dd > float(min_base) ** 2
+    safe = np.where(ok, dd, 1.0)
+    along = np.einsum("ij,ij->i", e, d)
+    across = np.einsum("ij,ij->i", e, rd)
+    xy = np.stack((along, across), axis=1) / safe[:, None]
+    xy[~ok] = np.nan
+    return xy
+
+
+def shape_change(source, edited, min_base: float | None = None) -> float:
+    """RMS change of the interior points' local coordinates between two paths ``(N, 2)``.
+
+    Zero for any similarity transform of the source (translation, rotation, uniform scale); a
+    reflection or a bend is not. Points whose source triangle is degenerate (base not longer than
+    ``min_base``; default 1e-9 of the source's bounding-box diagonal) carry no shape and are
+    skipped. A point whose source triangle is fine but whose edited triangle collapsed has lost its
+    shape entirely: the result is ``inf``. Returns 0 when no point is measurable.
+    """
+    s = _points(source, "source", dims=(2,))
+    e = _points(edited, "edited", dims=(2,))
+    if s.shape != e.shape:
+        raise ValueError(f"source {s.shape} and edited {e.shape} must have the same shape")
+    if min_base is None:
+        diag = float(np.linalg.norm(np.ptp(s, axis=0))) if len(s) else 0.0
+        min_base = 1e-9 * diag
+    ls = local_coordinates(s, min_base)
+    measured = np.isfinite(ls).all(axis=1)
+    if not measured.any():
+        return 0.0
+    le = local_coordinates(e, 0.0)[measured]
+    if not np.isfinite(le).all():
+        return float("inf")
+    diff = le - ls[measured]
+    return float(np.sqrt(np.mean(np.einsum("ij,ij->i", diff, diff))))
+
+
+def _range_array(ranges, n: int) -> np.ndarray:
+    r = np.asarray(ranges, dtype=np.int64)
+    if r.size == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    r = r.reshape(-1, 2) if r.ndim == 1 and r.shape == (2,) else r
+    if r.ndim != 2 or r.shape[1] != 2:
+        raise ValueError(f"ranges must be (start, end) pairs, got shape {r.shape}")
+    bad = (r[:, 0] < 0) | (r[:, 1] >= n) | (r[:, 0] > r[:, 1])
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"frame range {tuple(int(v) for v in r[k])} is not inside 0..{n - 1}")
+    return r
+
+
+def rigidity_error(source, edited, ranges) -> np.ndarray:
+    """How far each stationary range is from moving by one rigid transform.
+
+    ``source`` and ``edited`` are ``(N, 2)`` ground paths; ``ranges`` a sequence of inclusive
+    ``(start, end)`` frame pairs. For each range the best rotation and translation (no scale, no
+    reflection; least squares) taking the source points onto the edited ones is found, and the
+    largest distance between a moved source point and its edited point is returned: ``(R,)``.
+    """
+    s = _points(source, "source", dims=(2,))
+    e = _points(edited, "edited", dims=(2,))
+    if s.shape != e.shape:
+        raise ValueError(f"source {s.shape} and edited {e.shape} must have the same shape")
+    r = _range_array(ranges, len(s))
+    out = np.empty(len(r))
+    for k, (a, b) in enumerate(r):
+        ss, ee = s[a:b + 1], e[a:b + 1]
+        sc, ec = ss - ss.mean(axis=0), ee - ee.mean(axis=0)
+        cross = np.sum(sc[:, 0] * ec[:, 1] - sc[:, 1] * ec[:, 0])
+        dot = np.sum(sc * ec)
+        angle = np.arctan2(cross, dot)
+        c, sn = np.cos(angle), np.sin(angle)
+        fitted = np.stack((c * sc[:, 0] - sn * sc[:, 1], sn * sc[:, 0] + c * sc[:, 1]), axis=1)
+        out[k] = np.max(np.linalg.norm(fitted - ec, axis=1))
+    return out
+
+
+def neighbour_distance_change(source, edited, neighbours: int = 3) -> np.ndarray:
+    """How much a group's formation changed: relative change of neighbour distances.
+
+    ``source`` and ``edited`` are ``(A, T, 2)`` ground positions of A agents at T shared times.
+    At each time, each agent's ``neighbours`` nearest agents in the source are its neighbours;
+    the result is ``(T, A, neighbours)`` of ``|d_edited - d_source| / d_source`` (take the mean
+    for the average change). Pairs that coincide in the source are NaN.
+    """
+    s = np.asarray(source, dtype=np.float64)
+    e = np.asarray(edited, dtype=np.float64)
+    if s.shape != e.shape or s.ndim != 3 or s.shape[2] != 2:
+        raise ValueError(f"source {s.shape} and edited {e.shape} must both be (agents, times, 2)")
+    k = min(int(neighbours), s.shape[0] - 1)
+    if k < 1:
+        return np.zeros((s.shape[1], s.shape[0], 0))
+    s, e = np.swapaxes(s, 0, 1), np.swapaxes(e, 0, 1)                  # (T, A, 2)
+    ds = np.linalg.norm(s[:, :, None] - s[:, None], axis=-1)             # (T, A, A)
+    de = np.linalg.norm(e[:, :, None] - e[:, None], axis=-1)
+    far = np.where(np.eye(s.shape[1], dtype=bool), np.inf, ds)
+    near = np.argsort(far, axis=2, kind="stable")[:, :, :k]
+    d0 = np.take_along_axis(ds, near, axis=2)
+    d1 = np.take_along_axis(de, near, axis=2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(d0 > 0, np.abs(d1 - d0) / np.where(d0 > 0, d0, 1.0), np.nan)
+
+
+def time_intervals_positive(time_map, min_interval: float = 0.0) -> bool:
+    """True when every interval of a time map is longer than ``min_interval`` (default: positive).
+
+    ``time_map`` gives the shot time at which each source frame plays: ``(N,)`` for one agent or
+    ``(A, N)`` for several (intervals along the last axis). A map with fewer than two frames has no
+    interval and passes. NaN fails.
+    """
+    t = np.asarray(time_map, dtype=np.float64)
+    if t.ndim not in (1, 2):
+        raise ValueError(f"time_map must be (N,) or (A, N), got {t.shape}")
+    if t.shape[-1] < 2:
+        return True
+    return bool(np.all(np.diff(t, axis=-1) > min_interval))
+
+
+# ---------------------------------------------------------------------------------------------
+# Capsule separation
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Separation:
+    """Result of :func:`min_separation`.
+
+    ``clearance``: smallest capsule clearance over all agent pairs and time samples, stage units
+    (negative = the capsules overlap by that much; ``inf`` when no two agents are ever present at
+    the same sample). ``agents``: the pair ``(a, b)``, ``a < b``, where it happens, and
+    ``time_index`` the sample; both ``None`` with ``inf``. ``overlaps``: number of (pair, sample)
+    combinations with negative clearance.
+    """
+
+    clearance: float
+    agents: tuple[int, int] | None
+    time_index: int | None
+    overlaps: int
+
+
+def _capsule_extent(base, radius, height):
+    """Bottom and top of the axis segment of a vertical capsule standing on ``base``."""
+    lo = base + radius
+    hi = base + np.maximum(height, 2.0 * radius) - radius
+    return lo, hi
+
+
+def capsule_clearance(ground_a, base_a, radius_a, height_a, ground_b, base_b, radius_b, height_b):
+    """Clearance between vertical capsules (broadcasting; stage units, negative = overlap).
+
+    A capsule stands on ``base`` (its height along up), has total height ``height`` (at least
+    ``2 * radius``) and radius ``radius``; ``ground`` is its ``(..., 2)`` ground position.
+    """
+    horiz = np.linalg.norm(np.asarray(ground_a, float) - np.asarray(ground_b, float), axis=-1)
+    lo_a, hi_a = _capsule_extent(np.asarray(base_a, float), radius_a, height_a)
+    lo_b, hi_b = _capsule_extent(np.asarray(base_b, float), radius_b, height_b)
+    gap = np.maximum(0.0, np.maximum(lo_b - hi_a, lo_a - hi_b))
+    return np.hypot(horiz, gap) - radius_a - radius_b
+
+
+_PAIR_BUDGET = 2_000_000  # candidate pairs evaluated at once; bounds memory on dense crowds
+
+
+def _grid_pairs(cell_xy: np.ndarray, tix: np.ndarray):
+    """Cell pairs of a uniform grid, per time sample, that can hold close items.
+
+    Returns the sort order of the items and, per candidate cell pair, the start and count of each
+    cell in that order; same-cell pairs come first (``n_same`` of them). Only half of the 3x3
+    neighbourhood is visited so every pair of items is produced once.
+    """
+    nx = int(cell_xy[:, 0].max()) + 2  # one empty column/row of padding: offsets never wrap
+    ny = int(cell_xy[:, 1].max()) + 2
+    key = (tix * ny + cell_xy[:, 1]) * nx + cell_xy[:, 0]
+    order = np.argsort(key, kind="stable")
+    sorted_key = key[order]
+    start = np.flatnonzero(np.r_[True, sorted_key[1:] != sorted_key[:-1]])
+    count = np.diff(np.r_[start, len(key)])
+    ukey = sorted_key[start]
+    multi = count > 1
+    s1, n1, s2, n2 = [start[multi]], [count[multi]], [start[multi]], [count[multi]]
+    last = len(ukey) - 1
+    # The next cell on the row is the next key, if it is there; the three cells of the next row
+    # are found with one search and then follow each other.
+    pos = np.minimum(np.arange(1, len(ukey) + 1), last)
+    row = np.searchsorted(ukey, ukey + (nx - 1))
+    for offset in (1, nx - 1, nx, nx + 1):
+        if offset == nx - 1:
+            pos = np.minimum(row, last)
+        elif offset > nx - 1:
+            pos = np.minimum(pos + (ukey[pos] == ukey + (offset - 1)), last)
+        hit = ukey[pos] == ukey + offset
+        s1.append(start[hit]); n1.append(count[hit])
+        s2.append(start[pos[hit]]); n2.append(count[pos[hit]])
+    cat = lambda parts: np.concatenate(parts).astype(np.int64)  # noqa: E731
+    return order, cat(s1), cat(n1), cat(s2), cat(n2), int(multi.sum())
+
+
+def _grid_pass(gx, gy, lo, hi, rad, tix, cell, origin):
+    """Minimum clearance and overlap count among pairs in neighbouring grid cells."""
+    cell_xy = np.floor((np.stack((gx, gy), axis=1) - origin) / cell).astype(np.int64)
+    order, s1, n1, s2, n2, n_same = _grid_pairs(cell_xy, tix)
+    gx, gy, lo, hi, rad = gx[order], gy[order], lo[order], hi[order], rad[order]
+    sizes = n1 * n2
+    bounds = np.cumsum(sizes)
+    # Index arithmetic in int32 when it fits: it halves the memory traffic of the pair expansion.
+    itype = np.int32 if len(order) < 2 ** 31 and (len(sizes) == 0 or bounds[-1] < 2 ** 31) \
+        else np.int64
+    best, best_i, best_j, overlaps = np.inf, -1, -1, 0
+    first = 0
+    while first < len(sizes):
+        # Take cell pairs until the chunk holds about _PAIR_BUDGET item pairs (at least one).
+        base = bounds[first] - sizes[first]
+        last = max(int(np.searchsorted(bounds, base + _PAIR_BUDGET, "right")), first + 1)
+        sz = sizes[first:last].astype(itype)
+        rep = np.repeat(np.arange(first, last, dtype=itype), sz)
+        local = np.arange(int(bounds[last - 1] - base), dtype=itype)
+        local -= np.repeat((np.cumsum(sz) - sz).astype(itype), sz)
+        width = n2.astype(itype)[rep]
+        i = s1.astype(itype)[rep] + local // width
+        j = s2.astype(itype)[rep] + local % width
+        if first < n_same:  # same-cell blocks hold every ordered pair: keep i < j
+            keep = (rep >= n_same) | (i < j)
+            i, j = i[keep], j[keep]
+        first = last
+        if len(i) == 0:
+            continue
+        gap = np.maximum(lo[j] - hi[i], lo[i] - hi[j])
+        np.maximum(gap, 0.0, out=gap)
+        clear = np.hypot(np.hypot(gx[i] - gx[j], gy[i] - gy[j]), gap)
+        clear -= rad[i]
+        clear -= rad[j]
+        overlaps += int(np.count_nonzero(clear < 0.0))
+        k = int(np.argmin(clear))
+        if clear[k] < best:
+            best, best_i, best_j = float(clear[k]), int(order[i[k]]), int(order[j[k]])
+    exhaustive = cell_xy[:, 0].max() <= 1 and cell_xy[:, 1].max() <= 1
+    return best, best_i, best_j, overlaps, exhaustive
+
+
+def min_separation(positions, radius, height, up_axis) -> Separation:
+    """Smallest clearance between agents' vertical capsules over all time samples.
+
+    ``positions`` ``(A, T, 3)``: each agent's capsule base (its ground point) per sample, world
+    space; non-finite rows mean the agent is absent at that sample. ``radius`` and ``height``:
+    ``(A,)`` or scalars, stage units; a capsule spans ``height`` along up from its base (at least
+    ``2 * radius``). A uniform grid in the ground plane finds the candidate pairs of each sample,
+    so the cost grows with the number of agents, not its square; the grid is coarsened until the
+    minimum it finds is provably the minimum over all pairs.
+    """
+    p = np.asarray(positions, dtype=np.float64)
+    if p.ndim != 3 or p.shape[2] != 3:
+        raise ValueError(f"positions must be (A, T, 3), got {p.shape}")
+    n_agents, n_times = p.shape[:2]
+    rad = np.broadcast_to(np.asarray(radius, dtype=np.float64), (n_agents,))
+    hgt = np.broadcast_to(np.asarray(height, dtype=np.float64), (n_agents,))
+    if np.any(~np.isfinite(rad)) or np.any(rad < 0) or np.any(~np.isfinite(hgt)) or np.any(hgt < 0):
+        raise ValueError("capsule radius and height must be finite and not negative")
+    iup = ground_axes(up_axis)[0]
+    present = np.isfinite(p[..., 0]) & np.isfinite(p[..., 1]) & np.isfinite(p[..., 2])
+    agent, tix = np.nonzero(present)
+    if len(agent) < 2:
+        return Separation(float("inf"), None, None, 0)
+    ground = to_ground(p[agent, tix], up_axis)
+    gx, gy = np.ascontiguousarray(ground[:, 0]), np.ascontiguousarray(ground[:, 1])
+    lo, hi = _capsule_extent(p[agent, tix, iup], rad[agent], hgt[agent])
+    r_item = rad[agent]
+    r_max = float(rad.max())
+
+    origin = ground.min(axis=0)
+    extent = ground.max(axis=0) - origin
+    # Start with cells of 1.5 capsule diameters: overlaps and near misses are then found among
+    # very few candidate pairs; sparser crowds coarsen the grid from there.
+    cell = 3.0 * r_max
+    if cell <= 0.0:  # points, not capsules: start from the typical spacing at one sample
+        per_t = np.bincount(tix, minlength=n_times)
+        area = float(np.prod(np.maximum(extent, 1e-12)))
+        cell = float(np.sqrt(area / max(float(per_t.max()), 1.0)))
+    # Keep the grid keys (time, row, column) inside int64.
+    cell = max(cell, float(extent.max()) / 2.0 ** 20, 1e-300)
+    for attempt in range(64):
+        best, bi, bj, overlaps, exhaustive = _grid_pass(gx, gy, lo, hi, r_item, tix, cell, origin)
+        # Items in cells that are not neighbours are more than `cell` apart on the ground.
+        if exhaustive or best <= cell - 2.0 * r_max:
+            break
+        # A pair already found: cells just wide enough to certify it (the minimum only drops).
+        cell = (best + 2.0 * r_max) * (1.0 + 1e-9) if np.isfinite(best) else 2.0 * cell
+        if attempt == 62:  # never expected; one cell per sample is exhaustive by construction
+            cell = 2.0 * float(extent.max()) + 1.0
+    if bi < 0:
+        return Separation(float("inf"), None, None, 0)
+    a, b = int(agent[bi]), int(agent[bj])
+    return Separation(best, (min(a, b), max(a, b)), int(tix[bi]), overlaps)
+
+
+# ---------------------------------------------------------------------------------------------
+# Forward kinematics on the composed stage
+# ---------------------------------------------------------------------------------------------
+
+
+class _Skel:
+    """A skeleton of an agent, resolved once: its query, joints and composed sample times."""
+
+    def __init__(self, stage: Usd.Stage, path: PathLike, cache: UsdSkel.Cache | None = None):
+        prim = stage.GetPrimAtPath(Sdf.Path(str(path)))
+        if not prim or not prim.IsValid():
+            raise ValueError(f"{path}: no prim at this path")
+        skel = _find_skeleton(prim)
+        self.path = str(path)
+        self.skeleton = skel
+        cache = cache or UsdSkel.Cache()
+        # Populate so animation sources bound (and inherited) under the SkelRoot resolve.
+        roots = []
+        for p in (prim, skel.GetPrim()):
+            root = UsdSkel.Root(p) if p.IsA(UsdSkel.Root) else UsdSkel.Root.Find(p)
+            if root and root.GetPath() not in [r.GetPath() for r in roots]:
+                roots.append(root)
+        for root in roots:
+            cache.Populate(root, Usd.PrimDefaultPredicate)
+        self.query = cache.GetSkelQuery(skel)
+        if not self.query:
+            raise ValueError(f"{skel.GetPath()}: skeleton is not valid "
+                             "(check its joints and rest pose)")
+        self.joints = [str(j) for j in self.query.GetJointOrder()]
+        anim = self.query.GetAnimQuery()
+        samples = anim.GetJointTransformTimeSamples() if anim else []
+        self.sample_times = np.asarray(sorted(samples), dtype=np.float64)
+
+    def joint_index(self, joint) -> int:
+        if isinstance(joint, (int, np.integer)):
+            if not 0 <= int(joint) < len(self.joints):
+                raise ValueError(f"{self.skeleton.GetPath()}: joint index {joint} out of range "
+                                 f"0..{len(self.joints) - 1}")
+            return int(joint)
+        name = str(joint)
+        if name in self.joints:
+            return self.joints.index(name)
+        hits = [k for k, j in enumerate(self.joints) if j.rsplit("/", 1)[-1] == name]
+        if len(hits) != 1:
+            why = "no joint" if not hits else "several joints"
+            raise ValueError(f"{self.skeleton.GetPath()}: {why} named {name!r}")
+        return hits[0]
+
+    def default_times(self) -> np.ndarray:
+        if len(self.sample_times) == 0:
+            raise ValueError(f"{self.path}: the animation of {self.skeleton.GetPath()} has no time "
+                             "samples; pass times explicitly")
+        return self.sample_times
+
+    def world_translations(self, xform_cache: UsdGeom.XformCache) -> np.ndarray:
+        return self.world_matrices(xform_cache)[:, 3, :3]  # row-vector: translation is the last row
+
+    def world_matrices(self, xform_cache: UsdGeom.XformCache) -> np.ndarray:
+        return np.asarray(self.query.ComputeJointWorldTransforms(xform_cache))
+
+
+def _find_skeleton(prim: Usd.Prim) -> UsdSkel.Skeleton:
+    if prim.IsA(UsdSkel.Skeleton):
+        return UsdSkel.Skeleton(prim)
+    inherited = UsdSkel.BindingAPI(prim).GetInheritedSkeleton()
+    if inherited:
+        return inherited
+    bound, found = [], []
+    for p in Usd.PrimRange(prim):
+        if p.IsA(UsdSkel.Skeleton):
+            found.append(p.GetPath())
+        rel = p.GetRelationship("skel:skeleton")
+        if rel:
+            for target in rel.GetForwardedTargets():
+                if target not in bound:
+                    bound.append(target)
+    for candidates in (bound, found):
+        if len(candidates) == 1:
+            skel = UsdSkel.Skeleton.Get(prim.GetStage(), candidates[0])
+            if skel:
+                return skel
+    if not bound and not found:
+        raise ValueError(f"{prim.GetPath()}: no Skeleton at or below this prim")
+    names = ", ".join(str(c) for c in (bound or found))
+    raise ValueError(f"{prim.GetPath()}: several skeletons ({names}); name the Skeleton prim")
+
+
+def _times(times) -> np.ndarray:
+    out = []
+    for t in times:
+        if isinstance(t, Usd.TimeCode):
+            if t.IsDefault():
+                raise ValueError("the default time code has no place among sample times")
+            t = t.GetValue()
+        out.append(float(t))
+    return np.asarray(out, dtype=np.float64)
+
+
+def joint_world_positions(stage: Usd.Stage, skel_or_root_path: PathLike,
+                          times: Iterable | None = None) -> np.ndarray:
+    """World positions of every joint by UsdSkel forward kinematics: ``(T, J, 3)`` stage units.
+
+    ``skel_or_root_path`` names a Skeleton, or a SkelRoot / agent prim from which the skeleton is
+    found (its ``skel:skeleton`` binding, else the one skeleton below it). ``times`` are time codes
+    (default: the animation's authored joint-transform samples as composed). Joints are in the
+    skeleton's joint order.
+    """
+    skel = _Skel(stage, skel_or_root_path)
+    t = skel.default_times() if times is None else _times(times)
+    out = np.empty((len(t), len(skel.joints), 3))
+    xfc = UsdGeom.XformCache()
+    for k, tc in enumerate(t):
+        xfc.SetTime(Usd.TimeCode(tc))
+        out[k] = skel.world_translations(xfc)
+    return out
+
+
+def agent_root_positions(stage: Usd.Stage, agent_path, times: Iterable,
+                         root_joint: Union[int, str] = 0) -> np.ndarray:
+    """World position of one joint (default: the skeleton's root) for one or many agents.
+
+    ``agent_path``: one path -> ``(T, 3)``; a sequence of paths -> ``(A, T, 3)``, all evaluated
+    through one UsdSkel cache and one transform cache per time. ``root_joint``: index into the
+    joint order, a full joint path or a unique joint name.
+    """
+    single = isinstance(agent_path, (str, Sdf.Path))
+    paths = [agent_path] if single else list(agent_path)
+    t = _times(times)
+    cache = UsdSkel.Cache()
+    skels = [_Skel(stage, p, cache) for p in paths]
+    index = [s.joint_index(root_joint) for s in skels]
+    out = np.empty((len(skels), len(t), 3))
+    xfc = UsdGeom.XformCache()
+    for k, tc in enumerate(t):
+        xfc.SetTime(Usd.TimeCode(tc))
+        for a, (s, j) in enumerate(zip(skels, index)):
+            out[a, k] = s.world_translations(xfc)[j]
+    return out[0] if single else out
+
+
+_FOOT_WORDS = ("foot", "toe", "ankle")
+_NOT_FOOT_WORDS = ("end", "site")
+
+
+def default_foot_joints(joints: Sequence[str]) -> list[int]:
+    """Indices of the joints whose own name says foot, toe or ankle (not an end site)."""
+    out = []
+    for k, j in enumerate(joints):
+        leaf = str(j).rsplit("/", 1)[-1].lower()
+        if any(w in leaf for w in _FOOT_WORDS) and not any(w in leaf for w in _NOT_FOOT_WORDS):
+            out.append(k)
+    return out
+
+
+@dataclass(frozen=True)
+class FootSkate:
+    """Result of :func:`foot_skate`.
+
+    ``joints``: the measured foot joints (paths in the skeleton). ``speeds``: per foot, mean
+    horizontal speed while in contact, stage units per second (NaN without contact).
+    ``contact_seconds``: per foot, how long it was measured in contact. ``contact``: ``(T, F)``
+    contact flag per sample time. ``times``: the sample times used. ``mean``: over all feet, total
+    horizontal slide during contact divided by total contact time (NaN when no foot touches).
+    """
+
+    joints: tuple[str, ...]
+    speeds: np.ndarray
+    contact_seconds: np.ndarray
+    contact: np.ndarray
+    times: np.ndarray
+    mean: float
+
+
+def foot_skate(stage: Usd.Stage, agent_path: PathLike, times: Iterable | None = None,
+               foot_joints: Sequence[Union[int, str]] | None = None,
+               contact_height: float | None = None,
+               contact: np.ndarray | None = None) -> FootSkate:
+    """Foot skate: mean horizontal foot speed while the foot is in contact with the ground.
+
+    Evaluated by forward kinematics on the composed stage. A foot is in contact at a sample when it
+    is within ``contact_height`` (default 2 cm in stage units, from ``metersPerUnit``) above its
+    lowest height over the clip and the sample lies within the clip's sample range. The speed of a
+    foot over an interval between consecutive samples that are both in contact is its horizontal
+    (ground-plane) displacement over the interval's duration in seconds (``timeCodesPerSecond``).
+
+    ``times``: time codes (default: the animation's authored samples as composed). ``foot_joints``:
+    joint indices, full joint paths or unique joint names (default: joints named like a foot, toe
+    or ankle, but not an end site). ``contact``: a (T, feet) boolean mask to use instead of the
+    height test, typically ``source.contact`` from the source stage, so that an edited stage is
+    measured over the frames where the source feet were planted (pass ``times=source.times``).
+    """
+    skel = _Skel(stage, agent_path)
+    t = np.unique(skel.default_times() if times is None else _times(times))
+    if foot_joints is None:
+        feet = default_foot_joints(skel.joints)
+        if not feet:
+            raise ValueError(f"{skel.skeleton.GetPath()}: no joint is named like a foot, toe or "
+                             "ankle; pass foot_joints")
+    else:
+        feet = [skel.joint_index(j) for j in foot_joints]
+    pos = np.empty((len(t), len(feet), 3))
+    xfc = UsdGeom.XformCache()
+    for k, tc in enumerate(t):
+        xfc.SetTime(Usd.TimeCode(tc))
+        pos[k] = skel.world_translations(xfc)[feet]
+    if len(skel.sample_times):
+        first, last = skel.sample_times[0], skel.sample_times[-1]
+        in_clip = (t >= first - 1e-9) & (t <= last + 1e-9)
+    else:
+        in_clip = np.ones(len(t), dtype=bool)
+    return foot_skate_of_positions(pos, t, UsdGeom.GetStageUpAxis(stage), UsdGeom.GetStageMetersPerUnit(stage),
+                                   stage.GetTimeCodesPerSecond(), tuple(skel.joints[f] for f in feet),
+                                   in_clip, contact_height, contact)
+
+
+def foot_skate_of_positions(pos: np.ndarray, t: np.ndarray, up, meters_per_unit: float,
+                            time_codes_per_second: float, joints: tuple[str, ...] = (),
+                            in_clip: np.ndarray | None = None, contact_height: float | None = None,
+                            contact: np.ndarray | None = None) -> FootSkate:
+    """:func:`foot_skate` of feet whose world positions are known: ``pos`` (T, F, 3) stage
+    units at increasing time codes ``t`` (T,); ``in_clip`` (T,) marks the samples inside
+    the clip (default: all). The other arguments are :func:`foot_skate`'s."""
+    t = np.asarray(t, dtype=np.float64)
+    if contact_height is None:
+        contact_height = 0.02 / meters_per_unit
+    seconds_per_code = 1.0 / time_codes_per_second
+    in_clip = np.ones(len(t), dtype=bool) if in_clip is None else np.asarray(in_clip, dtype=bool)
+    height = pos[..., ground_axes(up)[0]]
+    if contact is not None:
+        contact = np.asarray(contact, dtype=bool)
+        if contact.shape != height.shape:
+            raise ValueError(f"contact mask has shape {contact.shape}; expected {height.shape} "
+                             "(times, feet)")
+    elif in_clip.any():
+        contact = np.zeros(height.shape, dtype=bool)
+        lowest = height[in_clip].min(axis=0)
+        contact = in_clip[:, None] & (height - lowest <= contact_height)
+    else:
+        contact = np.zeros(height.shape, dtype=bool)
+
+    ground = to_ground(pos, up)
+    step = np.linalg.norm(np.diff(ground, axis=0), axis=2)          # (T-1, F)
+    dt = (np.diff(t) * seconds_per_code)[:, None]                    # (T-1, 1)
+    both = contact[1:] & contact[:-1]
+    slide = np.where(both, step, 0.0).sum(axis=0)
+    duration = np.where(both, dt, 0.0).sum(axis=0)
+    speeds = np.where(duration > 0, slide / np.where(duration > 0, duration, 1.0), np.nan)
+    total = float(duration.sum())
+    mean = float(slide.sum() / total) if total > 0 else float("nan")
+    return FootSkate(tuple(joints), speeds, duration, contact, t, mean)
+
+
+# ---------------------------------------------------------------------------------------------
+# Plausibility: does the edited body turn and walk like its source?
+# ---------------------------------------------------------------------------------------------
+
+#: A body turning more than this in one frame at 60 fps spins (scaled with the frame rate:
+#: 30 degrees per frame at 30 fps, 7.5 at 120 fps; that is 900 degrees per second).
+SPIN_DEGREES_AT_60FPS = 15.0
+#: Walking direction is measured on chords of this many seconds.
+CHORD_SECONDS = 0.25
+#: Ground speed (metres per second) below which the source is said not to walk.
+WALKING_SPEED_M = 0.2
+#: The turn an edit gives a walk is measured on chords of this many seconds, centred on each
+#: frame: long enough to span a gait cycle and a rounded corner's overshoot, short enough to
+#: follow a deliberate turn.
+EDIT_TURN_SECONDS = 2.0
+#: An edit that turns a walk by more than this (degrees) sends it back the way it came: half
+#: way between a right-angle turn and a full reversal.
+REVERSE_TURN_DEGREES = 135.0
+
+_FACING_NAMES = ("hips", "hip", "pelvis")
+
+
+def default_facing_joint(joints: Sequence[str]) -> int:
+    """Index of the joint whose frame stands for the body's facing: the one named hips, hip or
+    pelvis (leaf name, any case), else the first joint whose leaf name contains one of those
+    words without naming a leg, else the skeleton's root (0)."""
+    leaves = [str(j).rsplit("/", 1)[-1].lower() for j in joints]
+    for k, leaf in enumerate(leaves):
+        if leaf in _FACING_NAMES:
+            return k
+    for k, leaf in enumerate(leaves):
+        if any(w in leaf for w in ("hip", "pelvis")) and not any(w in leaf for w in ("leg", "thigh", "up", "left", "right")):
+            return k
+    return 0
+
+
+def joint_world_matrices(stage: Usd.Stage, agent_path: PathLike, times: Iterable | None = None,
+                         joint: Union[int, str, None] = None) -> tuple[np.ndarray, np.ndarray]:
+    """World matrices of one joint by UsdSkel FK: ``(times (T,), matrices (T, 4, 4))``.
+
+    ``joint``: index, full path or unique name (default :func:`default_facing_joint`). ``times``:
+    time codes (default: the animation's authored samples as composed). Matrices are USD's
+    row-vector convention: row k is the joint's local axis k in world space, row 3 its position.
+    """
+    skel = _Skel(stage, agent_path)
+    t = skel.default_times() if times is None else _times(times)
+    j = default_facing_joint(skel.joints) if joint is None else skel.joint_index(joint)
+    out = np.empty((len(t), 4, 4))
+    xfc = UsdGeom.XformCache()
+    for k, tc in enumerate(t):
+        xfc.SetTime(Usd.TimeCode(tc))
+        out[k] = skel.world_matrices(xfc)[j]
+    return t, out
+
+
+def body_facing(matrices, up_axis) -> np.ndarray:
+    """(T,) facing of a body from its hip (or root) joint's world matrices ``(T, 4, 4)``:
+    the horizontal projection of the joint's local axis that stays the most horizontal over the
+    clip (any joint convention works), radians counter-clockwise about up, unwrapped. Taken from
+    the skeleton, never from the path: a side step or a turn on the spot faces where the body
+    faces. Two clips of the same joint that differ by a yaw pick the same axis."""
+    return np.unwrap(_stationary.facing(np.asarray(matrices, dtype=np.float64), _up_token(up_axis)))
+
+
+def facing_change_per_second(facing, seconds) -> np.ndarray:
+    """(T-1,) unsigned turning rate of a facing between consecutive samples, degrees per second.
+    ``facing`` (T,) radians; ``seconds`` (T,) increasing sample times in seconds."""
+    f = np.unwrap(np.asarray(facing, dtype=np.float64))
+    s = np.asarray(seconds, dtype=np.float64)
+    if f.shape != s.shape or f.ndim != 1:
+        raise ValueError(f"facing {f.shape} and seconds {s.shape} must both be (T,)")
+    dt = np.diff(s)
+    if np.any(dt <= 0):
+        raise ValueError("sample times must increase")
+    return np.degrees(np.abs(np.diff(f))) / dt
+
+
+def spin_threshold() -> float:
+    """Turning rate (degrees per second) above which a body spins: 15 degrees per frame at
+    60 fps, scaled with the frame rate."""
+    return SPIN_DEGREES_AT_60FPS * 60.0
+
+
+def spins(source_rate, edited_rate) -> np.ndarray:
+    """(T-1,) bool: the edited body turns faster than :func:`spin_threshold` over an interval
+    where its source does not (rates from :func:`facing_change_per_second`, paired by frame)."""
+    s, e = np.asarray(source_rate, dtype=np.float64), np.asarray(edited_rate, dtype=np.float64)
+    if s.shape != e.shape:
+        raise ValueError(f"source rates {s.shape} and edited rates {e.shape} must pair by frame")
+    limit = spin_threshold()
+    return (e > limit) & (s <= limit)
+
+
+def direction_deviation(source_ground, edited_ground, seconds, min_speed: float,
+                        chord: float = CHORD_SECONDS, turn=None) -> np.ndarray:
+    """(T,) angle (degrees, 0..180) between the edited and the source walking direction.
+
+    The walking direction at frame i is the chord from i to the first frame at least ``chord``
+    seconds later (``seconds``: (T,) source sample times). Frames where the source chord is
+    slower than ``min_speed`` (stage units per second), and frames without a full chord, are NaN:
+    the source does not walk there. Paths are ``(T, 2)`` ground points paired by frame.
+    ``turn`` (T,) radians, counter-clockwise: the source direction at each chord's first frame
+    is turned by it before comparing (:func:`edit_turn` gives the turn an edit means to make)."""
+    s = _points(source_ground, "source_ground", dims=(2,))
+    e = _points(edited_ground, "edited_ground", dims=(2,))
+    t = np.asarray(seconds, dtype=np.float64)
+    if s.shape != e.shape or t.shape != (len(s),):
+        raise ValueError(f"source {s.shape}, edited {e.shape} and seconds {t.shape} must pair by frame")
+    out = np.full(len(s), np.nan)
+    if len(s) < 2:
+        return out
+    end = np.searchsorted(t, t + chord - 1e-9, side="left")
+    ok = end < len(s)
+    i = np.flatnonzero(ok)
+    j = end[ok]
+    ds, de = s[j] - s[i], e[j] - e[i]
+    speed = np.linalg.norm(ds, axis=1) / (t[j] - t[i])
+    walk = speed >= min_speed
+    if turn is not None:
+        a = np.asarray(turn, dtype=np.float64)
+        if a.shape != t.shape:
+            raise ValueError(f"turn {a.shape} must pair with seconds {t.shape}")
+        c, n = np.cos(a[i]), np.sin(a[i])
+        ds = np.stack((c * ds[:, 0] - n * ds[:, 1], n * ds[:, 0] + c * ds[:, 1]), axis=1)
+    cross = ds[:, 0] * de[:, 1] - ds[:, 1] * de[:, 0]
+    dot = np.einsum("ij,ij->i", ds, de)
+    angle = np.degrees(np.abs(np.arctan2(cross, dot)))
+    out[i[walk]] = angle[walk]
+    return out
+
+
+def edit_turn(source_ground, edited_ground, seconds, min_speed: float,
+              span: float = EDIT_TURN_SECONDS) -> np.ndarray:
+    """(T,) the turn (radians, counter-clockwise, unwrapped) an edit gives a walk at each frame:
+    the angle from the source's chord to the edited chord over ``span`` seconds centred on the
+    frame (cut at the clip's ends). This is the turn the artist asks for (a group turned round a
+    corner turns by 90 degrees); a walk that goes back against it over a short chord
+    (:func:`direction_deviation` with ``turn``) hooks, zig-zags or loops. Where the source does
+    not walk over the span (slower than ``min_speed``) the turn is interpolated from the frames
+    around it where it does (held at the ends); 0 everywhere when it never does. Paths ``(T, 2)``, paired by frame."""
+    s = _points(source_ground, "source_ground", dims=(2,))
+    e = _points(edited_ground, "edited_ground", dims=(2,))
+    t = np.asarray(seconds, dtype=np.float64)
+    if s.shape != e.shape or t.shape != (len(s),):
+        raise ValueError(f"source {s.shape}, edited {e.shape} and seconds {t.shape} must pair by frame")
+    if len(s) < 2:
+        return np.zeros(len(s))
+    a = np.searchsorted(t, t - 0.5 * span, side="left")
+    b = np.minimum(np.searchsorted(t, t + 0.5 * span, side="right") - 1, len(s) - 1)
+    ds, de = s[b] - s[a], e[b] - e[a]
+    dt = np.maximum(t[b] - t[a], 1e-12)
+    walk = (b > a) & (np.linalg.norm(ds, axis=1) / dt >= min_speed) & (np.linalg.norm(de, axis=1) > 0)
+    if not walk.any():
+        return np.zeros(len(s))
+    angle = np.unwrap(np.arctan2(ds[walk, 0] * de[walk, 1] - ds[walk, 1] * de[walk, 0],
+                                 np.einsum("ij,ij->i", ds[walk], de[walk])))
+    return np.interp(np.arange(len(s)), np.flatnonzero(walk), angle)
+
+
+@dataclass(frozen=True)
+class Plausibility:
+    """Plausibility figures of one agent, edited against its source (:func:`plausibility`).
+
+    Turning rates are degrees per second of the body's facing (:func:`body_facing`):
+    ``max_facing_rate`` of the edited body, ``source_max_facing_rate`` of the source,
+    ``max_extra_facing_rate`` the largest excess of the edited rate over the source's at the same
+    frame (divide by 60 for degrees per frame at 60 fps); ``spin_frames`` how many frames spin
+    (:func:`spins`). ``max_direction_deviation``: degrees (:func:`direction_deviation`; NaN when
+    the source never walks): against the source's direction as it is, so a group turned 90 degrees
+    on purpose measures 90. ``max_turned_deviation``: degrees, against the source's direction
+    turned by the edit's own turn (:func:`edit_turn`): a hook, zig-zag or small loop that walks
+    back against where the edit sends the agent. ``max_edit_turn``: degrees, the largest turn the
+    edit gives the walk (:func:`edit_turn`; a walk sent back turns by 180, a loop past it).
+    ``length_ratio``: edited over source ground path of the facing joint.
+    ``time_warp``: smallest and largest shot time per source time (from the time map when the
+    caller gives ``edited_frames``, else the ratio of edited to source sample intervals). ``foot_skate_source``
+    and ``foot_skate_edited``: mean foot speed in contact (stage units per second, over the
+    source's contact frames), ``foot_skate_ratio`` their ratio (1 when both are 0).
+    ``worst_turn_frame`` and ``worst_direction_frame``: the edited samples where those happen."""
+
+    agent: str
+    max_facing_rate: float
+    source_max_facing_rate: float
+    max_extra_facing_rate: float
+    spin_frames: int
+    max_direction_deviation: float
+    length_ratio: float
+    time_warp: tuple[float, float]
+    foot_skate_source: float
+    foot_skate_edited: float
+    foot_skate_ratio: float
+    worst_turn_frame: int = -1        # edited sample where the extra turn is largest (interval start)
+    worst_direction_frame: int = -1   # edited sample where the direction deviates most (-1: none)
+    max_turned_deviation: float = float("nan")
+    max_edit_turn: float = 0.0
+
+    @property
+    def spins(self) -> bool:
+        return self.spin_frames > 0
+
+    @property
+    def reverses(self) -> bool:
+        """Walks back: more than 90 degrees away from its source direction as the edit turns it
+        (``max_turned_deviation``: a hook, a zig-zag), or turned by the edit nearer to the way
+        it came than to a right angle (``max_edit_turn`` over ``REVERSE_TURN_DEGREES``: sent
+        back, or a loop). A deliberate turn of 90 degrees, the overshoot of its rounded corner
+        included, is not a reversal."""
+        return bool(self.max_turned_deviation > 90.0 or self.max_edit_turn > REVERSE_TURN_DEGREES)
+
+
+def _resample(values: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Per-sample ``values`` ``(N, ...)`` linearly interpolated at fractional sample indices."""
+    values = np.asarray(values, dtype=np.float64)
+    x = np.arange(len(values), dtype=np.float64)
+    flat = values.reshape(len(values), -1)
+    out = np.stack([np.interp(at, x, flat[:, c]) for c in range(flat.shape[1])], axis=1)
+    return out.reshape((len(at),) + values.shape[1:])
+
+
+def _pair(source: np.ndarray, count: int) -> np.ndarray:
+    """Source samples paired with ``count`` edited samples: the same ones when the counts agree,
+    else resampled over the clip by frame fraction (an edit that re-sampled the time)."""
+    if len(source) == count:
+        return source
+    return _resample(source, np.linspace(0.0, len(source) - 1.0, count))
+
+
+def _ratio(edited: float, source: float) -> float:
+    if not (np.isfinite(edited) and np.isfinite(source)):
+        return float("nan")
+    if source > 0:
+        return edited / source
+    return 1.0 if edited == 0 else float("inf")
+
+
+def plausibility_of(agent: str, source_seconds, source_hip, edited_seconds, edited_hip, up_axis,
+                    meters_per_unit: float, foot_skate_source: float = float("nan"),
+                    foot_skate_edited: float = float("nan"), edited_frames=None) -> Plausibility:
+    """:class:`Plausibility` from the facing joint's world matrices of the source ``(T, 4, 4)``
+    at ``source_seconds`` ``(T,)`` and of the edited agent ``(T', 4, 4)`` at ``edited_seconds``,
+    and the two foot skate means (stage units per second). ``edited_frames`` ``(T',)``: the
+    (fractional) source frame each edited sample plays, as a time warp knows it; the source is
+    then compared at those frames and the time warp is shot time per source time. Without it,
+    edited samples pair with source samples by frame (resampled by frame fraction when T'
+    differs) and the time warp is the ratio of their intervals. :func:`plausibility` measures
+    these on stages by FK."""
+    ss, se = np.asarray(source_seconds, np.float64), np.asarray(edited_seconds, np.float64)
+    ms, me = np.asarray(source_hip, np.float64), np.asarray(edited_hip, np.float64)
+    fs, fe = body_facing(ms, up_axis), body_facing(me, up_axis)
+    gs, ge = to_ground(ms[:, 3, :3], up_axis), to_ground(me[:, 3, :3], up_axis)
+    if len(se) >= 2 and len(ss) >= 2:
+        rate_e = facing_change_per_second(fe, se)
+        if edited_frames is None:
+            rate_s = _pair(facing_change_per_second(fs, ss), len(rate_e))
+            warp = np.diff(se) / _pair(np.diff(ss), len(se) - 1)
+            gs_at, ss_at = _pair(gs, len(ge)), _pair(ss, len(se))
+        else:
+            f = np.asarray(edited_frames, dtype=np.float64)
+            if f.shape != se.shape:
+                raise ValueError(f"edited_frames {f.shape} must pair with edited_seconds {se.shape}")
+            # The source's turn over each edited interval, per second of the source.
+            d_frames = np.diff(f)
+            moving = d_frames > 1e-9
+            src_turn = np.abs(np.diff(_resample(fs, f)))
+            src_dt = np.diff(_resample(ss, f))
+            rate_s = np.where(moving, np.degrees(src_turn) / np.where(moving, src_dt, 1.0), 0.0)
+            warp = (np.diff(se) / np.where(moving, src_dt, 1.0))[moving] if moving.any() else np.ones(1)
+            gs_at, ss_at = _resample(gs, f), _resample(ss, f)
+        turn_frame = int(np.argmax(rate_e - rate_s))
+        extra = float(rate_e[turn_frame] - rate_s[turn_frame])
+        spin = int(np.count_nonzero(spins(rate_s, rate_e)))
+        # Held ends of a warped clip: measure on the frames that advance.
+        keep = np.r_[True, np.diff(ss_at) > 0]
+        walking = WALKING_SPEED_M / meters_per_unit
+        dev, turned = np.full(len(ge), np.nan), np.full(len(ge), np.nan)
+        turn = edit_turn(gs_at[keep], ge[keep], ss_at[keep], walking)
+        dev[keep] = direction_deviation(gs_at[keep], ge[keep], ss_at[keep], walking)
+        turned[keep] = direction_deviation(gs_at[keep], ge[keep], ss_at[keep], walking, turn=turn)
+        dev_frame = int(np.nanargmax(dev)) if np.isfinite(dev).any() else -1
+        max_dev = float(dev[dev_frame]) if dev_frame >= 0 else float("nan")
+        max_turned = float(np.nanmax(turned)) if np.isfinite(turned).any() else float("nan")
+        max_turn = float(np.degrees(np.abs(turn).max(initial=0.0)))
+        rates = (float(rate_e.max()), float(rate_s.max()))
+        warp_range = (float(warp.min()), float(warp.max()))
+    else:
+        rates, extra, spin, max_dev, warp_range = (0.0, 0.0), 0.0, 0, float("nan"), (1.0, 1.0)
+        max_turned, max_turn = float("nan"), 0.0
+        turn_frame, dev_frame = -1, -1
+    return Plausibility(agent=str(agent), max_facing_rate=rates[0], source_max_facing_rate=rates[1],
+                        max_extra_facing_rate=extra, spin_frames=spin, max_direction_deviation=max_dev,
+                        length_ratio=length_ratio(ge, gs),
+                        time_warp=warp_range, foot_skate_source=float(foot_skate_source),
+                        foot_skate_edited=float(foot_skate_edited),
+                        foot_skate_ratio=_ratio(float(foot_skate_edited), float(foot_skate_source)),
+                        worst_turn_frame=turn_frame, worst_direction_frame=dev_frame,
+                        max_turned_deviation=max_turned, max_edit_turn=max_turn)
+
+
+def plausibility(source_stage: Usd.Stage, edited_stage: Usd.Stage, agent_path: PathLike,
+                 joint: Union[int, str, None] = None, foot_joints=None) -> Plausibility:
+    """Plausibility of one agent: its edited motion on ``edited_stage`` (the input with the edits
+    layer on top) against its source on ``source_stage``, both by UsdSkel FK at their own composed
+    samples, paired by frame. ``joint``: the facing joint (default :func:`default_facing_joint`)."""
+    ts, ms = joint_world_matrices(source_stage, agent_path, None, joint)
+    te, me = joint_world_matrices(edited_stage, agent_path, None, joint)
+    skate_s = foot_skate(source_stage, agent_path, foot_joints=foot_joints)
+    contact = skate_s.contact if len(skate_s.times) == len(te) else None
+    skate_e = foot_skate(edited_stage, agent_path, times=te if contact is not None else None,
+                         foot_joints=foot_joints, contact=contact)
+    return plausibility_of(str(agent_path), ts / source_stage.GetTimeCodesPerSecond(), ms,
+                           te / edited_stage.GetTimeCodesPerSecond(), me, UsdGeom.GetStageUpAxis(source_stage),
+                           UsdGeom.GetStageMetersPerUnit(source_stage), skate_s.mean, skate_e.mean)
+
+
+def shot_plausibility(source_stage: Usd.Stage, edited_stage: Usd.Stage,
+                      agent_paths: Iterable[PathLike], joint=None, foot_joints=None) -> list[Plausibility]:
+    """:func:`plausibility` of each agent, in the order given."""
+    return [plausibility(source_stage, edited_stage, p, joint, foot_joints) for p in agent_paths]
+
+
+def worst_plausibility(figures: Sequence[Plausibility]) -> dict:
+    """The shot's worst figures over agents' :class:`Plausibility`: the largest extra facing rate
+    (degrees per second, and per frame at 60 fps) and its agent, how many agents spin, the largest
+    direction deviation and its agent, the largest deviation from the direction the edit turns the
+    walk to (``maxTurnedDirectionDeviation``) and its agent, the largest turn an edit gives a walk
+    (``maxEditTurn``), how many agents reverse
+    (:attr:`Plausibility.reverses`), the mean and
+    extreme path length ratios, the time-warp range, and the mean and largest foot skate ratio."""
+    figs = list(figures)
+    if not figs:
+        return {"agents": 0}
+    extra = max(figs, key=lambda f: f.max_extra_facing_rate)
+    devs = [f for f in figs if np.isfinite(f.max_direction_deviation)]
+    dev = max(devs, key=lambda f: f.max_direction_deviation) if devs else None
+    turned = [f for f in figs if np.isfinite(f.max_turned_deviation)]
+    back = max(turned, key=lambda f: f.max_turned_deviation) if turned else None
+    lengths = np.array([f.length_ratio for f in figs])
+    skates = np.array([f.foot_skate_ratio for f in figs])
+    skates = skates[np.isfinite(skates)]
+    return {
+        "agents": len(figs),
+        "maxExtraFacingRate": extra.max_extra_facing_rate,
+        "maxExtraTurnPerFrameAt60fps": extra.max_extra_facing_rate / 60.0,
+        "maxExtraFacingRateAgent": extra.agent,
+        "spinningAgents": sum(f.spins for f in figs),
+        "maxDirectionDeviation": dev.max_direction_deviation if dev else float("nan"),
+        "maxDirectionDeviationAgent": dev.agent if dev else None,
+        "maxTurnedDirectionDeviation": back.max_turned_deviation if back else float("nan"),
+        "maxTurnedDirectionDeviationAgent": back.agent if back else None,
+        "maxEditTurn": max(f.max_edit_turn for f in figs),
+        "reversingAgents": sum(f.reverses for f in figs),
+        "meanLengthRatio": float(lengths.mean()),
+        "lengthRatioRange": (float(lengths.min()), float(lengths.max())),
+        "timeWarpRange": (min(f.time_warp[0] for f in figs), max(f.time_warp[1] for f in figs)),
+        "meanFootSkateRatio": float(skates.mean()) if len(skates) else float("nan"),
+        "maxFootSkateRatio": float(skates.max()) if len(skates) else float("nan"),
+    }

@@ -1,0 +1,81 @@
+"""Hard limits on the work that input values ask for.
+
+A value that is valid on its own can still ask for more than any machine has: a
+``sampleStep`` of 1e-7 time codes asks for billions of collision samples, a time
+constraint at 1e308 for a clip stretched over forever. Each limit below stops such a
+solve before the work starts, with an error that names the property and says what
+value would do. The limits are far beyond any real shot (tens of thousands of agents,
+clips of hours at 120 fps).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from mocapedit.model.errors import prim_error
+from mocapedit.model.data import StageData
+
+#: Largest magnitude of a shot time code a constraint may name (at 120 fps, 96 days).
+MAX_TIME_CODE = 1e9
+#: Most collision-avoidance iterations a solve may ask for.
+MAX_ITERATIONS = 1000
+#: Most (agent, shot time) samples the overlap checks may take over a shot.
+MAX_SAMPLES = 20_000_000
+#: A retimed clip may play over at most this many times its source duration ...
+MAX_STRETCH = 100.0
+#: ... or this many time codes more than its source, whichever is larger.
+MAX_EXTRA_TIME = 100_000.0
+
+
+def check_settings(data: StageData) -> None:
+    """Raises MocapEditError when the solve settings ask for more work than the limits allow."""
+    s = data.settings
+    where = s.path or "MocapSolveSettings"
+    if s.max_iterations > MAX_ITERATIONS:
+        raise prim_error(where, f"{s.max_iterations} is more than the {MAX_ITERATIONS} collision iterations a "
+                         "solve may take; a crowd that is not clear after a few dozen will not be clear after "
+                         "more (look at the report's remaining collisions)", "maxIterations")
+    samples = sum(float(a.sample_times[-1] - a.sample_times[0]) / s.sample_step + 1.0
+                  for a in data.agents.values() if len(a.sample_times))
+    if samples > MAX_SAMPLES:
+        least = s.sample_step * samples / MAX_SAMPLES
+        raise prim_error(where, f"{s.sample_step:g} time codes between samples asks for {samples:.3g} collision "
+                         f"samples over {len(data.agents)} agents, more than the {MAX_SAMPLES:.0e} a solve may "
+                         f"take; use at least {_round_up(least):g}", "sampleStep")
+
+
+def check_constraint_times(data: StageData) -> None:
+    """Raises MocapEditError for a time or sync value beyond :data:`MAX_TIME_CODE`."""
+    for c in data.time_constraints:
+        if math.isfinite(c.time) and abs(c.time) > MAX_TIME_CODE:
+            raise prim_error(c.path, f"{c.time:g} is beyond the +-{MAX_TIME_CODE:g} time codes a shot may span",
+                             "time")
+    for c in data.sync_constraints:
+        if math.isfinite(c.offset) and abs(c.offset) > MAX_TIME_CODE:
+            raise prim_error(c.path, f"{c.offset:g} is beyond the +-{MAX_TIME_CODE:g} time codes a shot may span",
+                             "offset")
+
+
+def check_time_map(agent_path: str, source_times: np.ndarray, time_map: np.ndarray, constraints: list) -> None:
+    """Raises MocapEditError when a warped clip would play over far longer than its source.
+
+    ``constraints`` are the time and sync constraints that hold the agent; the error names them.
+    """
+    source = float(source_times[-1] - source_times[0])
+    warped = float(time_map[-1] - time_map[0])
+    allowed = max(MAX_STRETCH * source, source + MAX_EXTRA_TIME)
+    if warped > allowed:
+        prim = constraints[0].path if constraints else agent_path
+        prop = "time" if constraints and hasattr(constraints[0], "time") else "offset"
+        named = ", ".join(f"<{c.path}>" for c in constraints)
+        raise prim_error(prim, f"the constraints {named} stretch <{agent_path}>'s clip of {source:g} time codes "
+                         f"over {warped:.3g}; at most {allowed:.3g} can be baked; check the times", prop)
+
+
+def _round_up(x: float) -> float:
+    """x rounded up to two significant digits."""
+    if x <= 0:
+        return x
+    scale = 10.0 ** (math.floor(math.log10(x)) - 1)
+    return math.ceil(x / scale) * scale

@@ -1,0 +1,187 @@
+"""Many shots solved with the same options on ``dask.distributed`` (``mocapedit batch``).
+
+A batch is a list of :class:`Job` (one shot, one output), planned and checked before any
+work starts (:func:`plan`), then run as one task per shot (:func:`solve_shot`) on a Dask
+cluster: a local cluster of worker processes by default, or any running scheduler by its
+address (``dask scheduler`` / ``dask worker``, dask-jobqueue on a farm, Kubernetes). Each
+task is an ordinary :func:`mocapedit.pipeline.processor.solve` writing its edits layer atomically,
+so a batch result is byte for byte what ``mocapedit solve`` writes for that shot named by
+its absolute path (the layer records the input path as given).
+
+One failing shot does not stop the others: its error goes into its :class:`ShotResult`.
+A shot whose output already holds the same input content hash and the same options is
+skipped (``force`` solves it anyway). Workers must see the shots and the output folder at
+the same paths as the client (a shared file system) and have mocapedit installed.
+"""
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import asdict, dataclass, field
+
+from mocapedit.usd import outputs
+from mocapedit.model.errors import MocapEditError
+
+#: Seconds to wait for a scheduler given by address before giving up.
+CONNECT_TIMEOUT = 5.0
+#: File name of the summary written in the output folder.
+SUMMARY = "batch-summary.json"
+
+
+@dataclass(frozen=True)
+class Job:
+    shot: str            # absolute path of the input stage
+    output: str          # absolute path of the edits layer to write
+
+
+@dataclass
+class ShotResult:
+    shot: str
+    output: str
+    status: str                      # "solved" | "skipped" | "failed"
+    seconds: float = 0.0
+    error: str | None = None
+    contentHash: str | None = None
+    figures: dict = field(default_factory=dict)
+
+
+def output_name(shot: str, suffix: str) -> str:
+    """``shots/a.usda`` -> ``a.edits.usdc`` for suffix ``.edits.usdc``."""
+    return os.path.splitext(os.path.basename(shot))[0] + suffix
+
+
+def plan(shots: list[str], outdir: str, suffix: str = ".edits.usdc") -> list[Job]:
+    """The jobs of a batch, checked before any work starts.
+
+    Raises:
+      MocapEditError: no shots, a shot path that is not a file, two shots that would
+        write the same output, or an output that would overwrite a shot.
+    """
+    if not shots:
+        raise MocapEditError("batch: no shots given")
+    jobs, by_output = [], {}
+    for shot in shots:
+        path = os.path.abspath(shot)
+        if not os.path.isfile(path):
+            raise MocapEditError(f"{shot}: no such shot file")
+        output = os.path.abspath(os.path.join(outdir, output_name(path, suffix)))
+        if output in by_output:
+            raise MocapEditError(f"{shot} and {by_output[output]} would both write {output}; "
+                                 "give the shots different file names or run them in separate batches")
+        by_output[output] = shot
+        jobs.append(Job(path, output))
+    inputs = {j.shot for j in jobs}
+    for job in jobs:
+        if job.output in inputs:
+            raise MocapEditError(f"{job.output}: the output would overwrite an input shot")
+    # Extensions and folders; each solve checks its output against every layer its shot uses.
+    outputs.check_outputs([outputs.Output(j.output, "-o/--suffix") for j in jobs])
+    return jobs
+
+
+def _recorded(output: str) -> tuple[str | None, str | None]:
+    """(content hash, options text) recorded in an existing edits layer, if any."""
+    from pxr import Sdf
+    if not os.path.isfile(output):
+        return None, None
+    try:
+        layer = Sdf.Layer.OpenAsAnonymous(output)
+    except Exception:  # an unreadable old output is solved again
+        return None, None
+    data = (layer.customLayerData or {}).get("mocapedit", {}) if layer else {}
+    return data.get("contentHash"), data.get("options")
+
+
+def _figures(report) -> dict:
+    stats = report.stats
+    hard = [c.get("residual") or 0.0 for c in report.constraints if c.get("hard")]
+    figures = {k: stats[k] for k in ("agents", "editedAgents", "constraints", "remainingOverlaps")
+               if k in stats}
+    figures["worstHardResidual"] = max(hard, default=0.0)
+    return figures
+
+
+def solve_shot(job: Job, options: dict, force: bool = False) -> ShotResult:
+    """Solves one shot (a Dask task; also runs in-process). Never raises: a failure is a
+    result with its error."""
+    from mocapedit.pipeline import processor
+    from mocapedit.usd import reader
+    t = time.perf_counter()
+    result = ShotResult(shot=job.shot, output=job.output, status="failed")
+    try:
+        if not force and os.path.isfile(job.output):
+            stage = reader.open_stage(job.shot)
+            digest = processor.content_hash(stage)
+            if _recorded(job.output) == (digest, processor.options_text(**options)):
+                result.status, result.contentHash = "skipped", digest
+                return result
+        solved = processor.solve(job.shot, output=job.output, **options)
+        result.status = "solved"
+        result.figures = _figures(solved.report)
+        result.contentHash = solved.layer.customLayerData["mocapedit"]["contentHash"]
+    except MocapEditError as exc:
+        result.error = str(exc)
+    except Exception as exc:  # any other failure of one shot is reported, the batch goes on
+        result.error = f"{type(exc).__name__}: {exc}"
+    finally:
+        result.seconds = round(time.perf_counter() - t, 3)
+    return result
+
+
+def connect(scheduler: str | None, workers: int | None):
+    """A ``distributed.Client``: to ``scheduler`` (``tcp://host:port``) or to a new local
+    cluster of ``workers`` single-threaded processes. Returns (client, cluster or None).
+
+    Raises:
+      MocapEditError: the scheduler cannot be reached within :data:`CONNECT_TIMEOUT` seconds.
+    """
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise MocapEditError("mocapedit batch runs on dask.distributed, which is not installed: "
+                             "pip install 'mocapedit[batch]' (or dask[distributed])") from None
+    if scheduler:
+        try:
+            return Client(scheduler, timeout=CONNECT_TIMEOUT), None
+        except (OSError, TimeoutError) as exc:
+            raise MocapEditError(f"--scheduler {scheduler}: cannot reach a Dask scheduler there within "
+                                 f"{CONNECT_TIMEOUT:g} s ({type(exc).__name__}); start one with "
+                                 "`dask scheduler` or check the address") from None
+        except ValueError as exc:
+            raise MocapEditError(f"--scheduler {scheduler}: {exc}") from None
+    import dask
+    n = workers or max(1, min(os.cpu_count() or 1, 8))
+    # Workers forked from a fresh server process start in about a second; spawned ones, which
+    # import everything again, took four (and a batch of small shots waits for them).
+    with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
+    return Client(cluster), cluster
+
+
+def run(jobs: list[Job], options: dict, client, force: bool = False, on_result=None) -> list[ShotResult]:
+    """Runs the jobs on a Dask ``client``, one task per shot, and returns their results in
+    job order. ``on_result(result, done, failed, remaining)`` is called as each finishes."""
+    from distributed import as_completed
+    futures = {client.submit(solve_shot, job, options, force, key=f"mocapedit-shot-{i}-{job.output}",
+                             pure=False): i for i, job in enumerate(jobs)}
+    results: list[ShotResult | None] = [None] * len(jobs)
+    done = failed = 0
+    for future in as_completed(futures):
+        i = futures[future]
+        try:
+            result = future.result()
+        except Exception as exc:  # the worker itself died (killed, out of memory)
+            result = ShotResult(shot=jobs[i].shot, output=jobs[i].output, status="failed",
+                                error=f"worker lost: {type(exc).__name__}: {exc}")
+        results[i] = result
+        done += 1
+        failed += result.status == "failed"
+        if on_result:
+            on_result(result, done, failed, len(jobs) - done)
+    return results
+
+
+def summary(results: list[ShotResult], options: dict, seconds: float) -> dict:
+    counts = {s: sum(r.status == s for r in results) for s in ("solved", "skipped", "failed")}
+    return {"options": options, "shots": [asdict(r) for r in results], "seconds": round(seconds, 3),
+            **counts}

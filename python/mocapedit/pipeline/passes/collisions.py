@@ -1,0 +1,302 @@
+"""Pass 300: collision avoidance between agents, and avoid regions (chapter 6, section 4.3.2).
+
+A post-process on what the path (100) and time (200) passes produced: agents are
+compared at constant shot-time steps (``MocapSolveSettings.sampleStep``) on their edited
+paths, as time-warped, and pushed apart by re-solving their paths
+(:mod:`mocapedit.solve.avoidance`) until no two capsules overlap or ``maxIterations`` is reached.
+It runs when ``MocapSolveSettings.collisionAvoidance`` is on or ``mocapedit solve
+--collisions`` asks for it. Active ``MocapAvoidRegion`` prims always apply: their agents
+are kept out of the footprint by capsule radius plus margin, through the same solve.
+
+What held before holds after: every hard position constraint keeps its frame where it is,
+every hard relative constraint keeps its offset, stationary ranges move rigidly. Agents
+with ``mocap:collide = false`` are left alone. Walkers that wait (``maxWait``) get a time
+map that plays them slower before the crossing and later from there on; agents that a
+time, sync or relative constraint or a hard position constraint names keep their timing.
+
+Report: ``stats`` ``collisionStrategy``, ``collisionIterations``, ``collisionsPerIteration``
+(collision intervals found before each solve, then after the last), ``remainingOverlaps``,
+``regionFramesLeft``, ``minSeparation``, ``delayedAgents`` and ``largestDelay`` (seconds),
+``collisionStalled`` (when the iterations stopped making progress before
+``maxIterations``); per agent ``minSeparation`` and ``delay`` (seconds it waited); one
+``collision`` entry per overlap left (agent pair, shot time, where) and one
+``avoid-region`` entry per agent a region had to push; notes naming agents hard
+constraints hold together (once per hard relative constraint that holds two agents
+closer than their clearance, naming it).
+
+Bad input: a capsule radius above :data:`MAX_RADIUS_M` (no character is that wide; a
+typing slip in it would push the whole crowd kilometres) is an error naming the agent
+and ``mocap:collisionRadius``; so is a hard constraint that holds an agent inside an avoid
+region it must keep out of (the error names both prims).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from mocapedit.solve import avoidance, collisions, path_edit, retime
+from mocapedit.geometry import ground, trajectory
+from mocapedit.usd import writer
+from mocapedit.model.errors import prim_error
+from mocapedit.pipeline.processor import EditedPath, SolveContext, register_pass
+from mocapedit.model.report import describe_left
+
+ORDER = 300
+#: Clearance (metres) up to which each agent's nearest neighbour is measured for the report.
+SEPARATION_REACH_M = 2.0
+#: Sides of the outline drawn for a circular region.
+OUTLINE_SIDES = 64
+REGION_COLOR = (0.9, 0.35, 0.1)
+#: Largest capsule radius (metres) collision avoidance accepts.
+MAX_RADIUS_M = 10.0
+
+
+def _settings(ctx: SolveContext):
+    s = ctx.data.settings
+    where = s.path or "MocapSolveSettings"
+    if s.collision_strategy not in avoidance.STRATEGIES:
+        raise prim_error(where, f"must be one of {', '.join(avoidance.STRATEGIES)}, got "
+                         f"'{s.collision_strategy}'", "collisionStrategy")
+    if not (np.isfinite(s.margin) and s.margin >= 0):
+        raise prim_error(where, f"must not be negative, got {s.margin:g}", "margin")
+    if s.max_iterations < 0:
+        raise prim_error(where, "must not be negative", "maxIterations")
+    return s
+
+
+def collision_pass(ctx: SolveContext) -> None:
+    data = ctx.data
+    info = data.info
+    settings = _settings(ctx)
+    footprints = [collisions.region_footprint(r, info.up_axis) for r in data.avoid_regions]
+    enabled = settings.collision_avoidance if ctx.options.collisions is None else bool(ctx.options.collisions)
+    if not enabled and not footprints:
+        return
+    names = [p for p in sorted(data.agents) if data.agents[p].collide]
+    if len(names) < (2 if not footprints else 1):
+        return
+    _check_radii(ctx, names)
+    problem = _problem(ctx, names, footprints, enabled)
+    _check_pins_outside_regions(ctx, problem)
+    outcome = avoidance.resolve(problem, avoidance.Settings(
+        strategy=settings.collision_strategy, max_iterations=int(settings.max_iterations),
+        meters_per_unit=info.meters_per_unit, max_wait_s=float(settings.max_wait),
+        time_codes_per_second=float(info.time_codes_per_second)), ctx.progress)
+    _apply(ctx, problem, outcome)
+    _report(ctx, problem, outcome, enabled)
+    if ctx.options.guides and data.avoid_regions:
+        _region_guides(ctx, footprints)
+
+
+def _check_radii(ctx: SolveContext, names: list[str]) -> None:
+    largest = ctx.data.info.metres(MAX_RADIUS_M)
+    for name in names:
+        radius = ctx.data.agents[name].collision_radius
+        if radius > largest:
+            raise prim_error(name, f"collision radius {radius:g} is more than {MAX_RADIUS_M:g} m "
+                             f"({largest:g} stage units): no character is that wide", "mocap:collisionRadius")
+
+
+def _check_pins_outside_regions(ctx: SolveContext, problem: avoidance.Problem) -> None:
+    """A hard constraint holding an agent inside a region it must avoid contradicts the region."""
+    for region in problem.regions:
+        for pin in problem.pins:
+            at = np.searchsorted(region.agents, pin.agent)
+            if pin.softness != 0 or at >= len(region.agents) or region.agents[at] != pin.agent:
+                continue
+            clearance = region.clearance[at]
+            depth = clearance - float(collisions.signed_distance(region.footprint, pin.position[None])[0])
+            if depth > 1e-6 * max(clearance, 1.0):
+                raise prim_error(pin.name, f"holds agent <{problem.names[pin.agent]}> at frame {pin.frame} "
+                                 f"{depth:g} stage units inside avoid region <{region.name}> (its footprint grown "
+                                 "by the agent's collision radius and the region's margin); move the constraint "
+                                 "or the region, or make one of them soft or inactive")
+
+
+def _problem(ctx: SolveContext, names: list[str], footprints, enabled: bool) -> avoidance.Problem:
+    data = ctx.data
+    index = {p: i for i, p in enumerate(names)}
+    paths, times = [], []
+    for p in names:
+        edited = ctx.paths.get(p)
+        paths.append(np.array(edited.ground if edited is not None else ctx.trajectories[p].ground, dtype=np.float64))
+        times.append(np.asarray(ctx.time_maps.get(p, data.agents[p].sample_times), dtype=np.float64))
+    agents = [data.agents[p] for p in names]
+    # Constraints fix the timing of the agents they name: a time or sync constraint states
+    # it, a relative constraint meets another agent at a moment, a position constraint marks
+    # where the agent is at a moment of the shot.
+    timed = {c.agent for c in data.time_constraints} | {a for c in data.sync_constraints for a in (c.agent, c.target)}
+    timed |= {a for c in data.relative_constraints for a in (c.agent, c.target)}
+    timed |= {c.agent for c in data.position_constraints if c.hard}
+    problem = avoidance.Problem(
+        names=names, paths=paths, frame_times=times,
+        radius=np.array([a.collision_radius for a in agents]), height=np.array([a.collision_height for a in agents]),
+        margin=float(data.settings.margin), sample_step=float(data.settings.sample_step), collide_agents=enabled,
+        fixed_timing=np.array([p in timed for p in names], dtype=bool))
+    for i, a in enumerate(agents):
+        problem.rigid.extend((i, first, last) for _, first, last in a.stationary)
+    # What the artist fixed stays where it is now.
+    pinned = set()
+    for c in data.position_constraints:
+        if c.hard and c.agent in index and (c.agent, c.frame) not in pinned:
+            pinned.add((c.agent, c.frame))
+            i = index[c.agent]
+            problem.pins.append(avoidance.Pin(i, c.frame, paths[i][c.frame].copy(), name=c.path))
+    for c in data.relative_constraints:
+        if not c.hard:
+            continue
+        a, b = index.get(c.agent), index.get(c.target)
+        if a is not None and b is not None:
+            problem.links.append(avoidance.Link(a, c.frame, b, c.target_frame,
+                                                paths[a][c.frame] - paths[b][c.target_frame], name=c.path))
+        else:   # the other agent does not move: this one stays put at that frame
+            for i, f in ((a, c.frame), (b, c.target_frame)):
+                if i is not None and (names[i], f) not in pinned:
+                    pinned.add((names[i], f))
+                    problem.pins.append(avoidance.Pin(i, f, paths[i][f].copy(), name=c.path))
+    for region, footprint in zip(data.avoid_regions, footprints):
+        members = [index[p] for p in collisions.region_agents(region, names)]
+        members = np.array(sorted(members), dtype=np.int64)
+        problem.regions.append(avoidance.Region(region.path, footprint, members,
+                                                problem.radius[members] + region.margin))
+    return problem
+
+
+def _apply(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Outcome) -> None:
+    info = ctx.data.info
+    window = path_edit.turn_settings(info.time_codes_per_second, info.meters_per_unit)
+    for i in np.flatnonzero(outcome.delays > 0):
+        name = problem.names[i]
+        ctx.time_maps[name] = outcome.frame_times[i]
+        if name in ctx.out_times:
+            ctx.out_times[name] = retime.shot_times(outcome.frame_times[i])
+    for i, name in enumerate(problem.names):
+        if not outcome.moved[i]:
+            continue
+        before = ctx.paths.get(name)
+        heading = before.heading if before is not None else ctx.trajectories[name].heading
+        # The body turns by the rotation the avoidance applies to its path locally (the path
+        # editor's rule), each rigid range by its own angle: never by a tangent that the jitter
+        # of a standing root can flip.
+        ranges = [(0, f, l) for a, f, l in problem.rigid if a == i]
+        angles = [outcome.rigid_angles[k] for k, (a, _, _) in enumerate(problem.rigid) if a == i]
+        turn = trajectory.deformation_turns(problem.paths[i], outcome.paths[i], [0, len(outcome.paths[i])],
+                                            ranges, angles, window["turn_window"], window["turn_min_travel"])
+        ctx.paths[name] = EditedPath(ground=outcome.paths[i], heading=np.asarray(heading) + turn)
+
+
+def _world(ctx: SolveContext, uv: np.ndarray) -> np.ndarray:
+    return ground.from_ground(np.asarray(uv, dtype=np.float64), 0.0, ctx.data.info.up_axis)
+
+
+def _report(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Outcome, enabled: bool) -> None:
+    data, report = ctx.data, ctx.report
+    names = problem.names
+    settings_prim = data.settings.path
+    stats = report.stats
+    stats["collisionStrategy"] = data.settings.collision_strategy
+    stats["collisionIterations"] = len(outcome.iterations) - 1
+    stats["collisionsPerIteration"] = [it.collisions for it in outcome.iterations]
+    stats["remainingOverlaps"] = len(outcome.remaining)
+    stats["regionFramesLeft"] = len(outcome.region_left)
+    # Nearest neighbour of each agent on the final paths, within reach.
+    reach = data.info.metres(SEPARATION_REACH_M)
+    final = collisions.detect(outcome.sampling, problem.radius, problem.height, problem.margin,
+                              report_distance=problem.margin + reach,
+                              active=np.full(len(names), enabled))
+    clearance = final.min_clearance
+    if enabled:
+        for name, c in zip(names, clearance):
+            if np.isfinite(c):
+                report.agent(name)["minSeparation"] = float(c)
+        if np.isfinite(clearance).any():
+            stats["minSeparation"] = float(np.min(clearance))
+    fps = data.info.time_codes_per_second
+    delayed = np.flatnonzero(outcome.delays > 0)
+    if enabled and data.settings.max_wait > 0:
+        stats["delayedAgents"] = int(len(delayed))
+        stats["largestDelay"] = float(outcome.delays.max(initial=0.0) / fps)
+    for i in delayed:
+        report.agent(names[i])["delay"] = float(outcome.delays[i] / fps)
+    times = outcome.sampling.times
+    blocked = {(a, b) for a, b, _ in outcome.blocked}
+    left = outcome.remaining
+    for a, b, k, depth in zip(left.agent_a, left.agent_b, left.deepest, left.depth):
+        pa, pb = outcome.sampling.positions[k, a], outcome.sampling.positions[k, b]
+        report.constraints.append({
+            "prim": settings_prim, "kind": "collision", "agent": names[a], "target": names[b],
+            "frame": int(round(outcome.sampling.frames[k, a])), "targetFrame": int(round(outcome.sampling.frames[k, b])),
+            "time": float(times[k]), "hard": False, "residual": float(depth), "met": False,
+            "heldByConstraints": (int(a), int(b)) in blocked,
+            "position": _world(ctx, 0.5 * (pa + pb)).tolist()})
+    by_link = {(a, b): (t0, t1) for _, a, b, t0, t1, _ in outcome.link_held}
+    for name, a, b, t0, t1, distance in outcome.link_held:
+        report.note(f"<{name}> holds agents <{names[a]}> and <{names[b]}> {distance:g} apart, closer than "
+                    f"their clearance ({problem.radius[a] + problem.radius[b] + problem.margin:g}): they are "
+                    f"not pushed apart from time {t0:g} to {t1:g}; the rest of their shot is")
+    for a, b, t in outcome.blocked:
+        t0, t1 = by_link.get((min(a, b), max(a, b)), (np.inf, -np.inf))
+        if t0 <= t <= t1:
+            continue
+        report.note(f"agents <{names[a]}> and <{names[b]}> cannot be separated at time {t:g}: hard "
+                    "constraints hold both of them there")
+    _region_entries(ctx, problem, outcome)
+    its = stats["collisionsPerIteration"]
+    if enabled:
+        left_text = describe_left(len(left), len(outcome.region_left))
+        how = (f"{its[0]} collision interval{'s' if its[0] != 1 else ''} at first, {left_text} after "
+               f"{stats['collisionIterations']} iteration{'s' if stats['collisionIterations'] != 1 else ''} "
+               f"({problem.names and stats['collisionStrategy']})")
+        report.note(f"collision avoidance: {how}")
+        if len(left) and not blocked:
+            why = (f"after {stats['collisionIterations']} iterations without progress "
+                   "(constraints that cannot all hold)" if outcome.stalled
+                   else f"at maxIterations ({data.settings.max_iterations})")
+            report.note(f"collision avoidance stopped {why} with {left_text}; see the collision entries")
+    if outcome.stalled:
+        stats["collisionStalled"] = True
+        if outcome.region_left:
+            report.note(f"avoid regions: {len(outcome.region_left)} frames left inside after "
+                        f"{stats['collisionIterations']} iterations without progress (constraints that cannot "
+                        "all hold); see the avoid-region entries")
+
+
+def _region_entries(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Outcome) -> None:
+    """One avoid-region entry per (region, agent) that the region had to push or still holds."""
+    names = problem.names
+    worst: dict[tuple[int, int], tuple[float, int]] = {}
+    for r, a, f, depth in outcome.region_left:
+        if depth > worst.get((r, a), (0.0, 0))[0]:
+            worst[(r, a)] = (depth, f)
+    for r, region in enumerate(problem.regions):
+        if len(region.agents) == 0:
+            continue
+        flat = np.concatenate([problem.paths[a] for a in region.agents])
+        owner = np.concatenate([np.full(len(problem.paths[a]), a) for a in region.agents])
+        push = collisions.push_out(region.footprint, flat, region.clearance[np.searchsorted(region.agents, owner)])
+        touched = sorted(set(owner[push["index"]].tolist()) | {a for (rr, a) in worst if rr == r})
+        for a in touched:
+            depth, frame = worst.get((r, a), (0.0, None))
+            if frame is None:
+                frame = int(np.argmin(collisions.signed_distance(region.footprint, outcome.paths[a])))
+            ctx.report.constraints.append({
+                "prim": region.name, "kind": "avoid-region", "agent": names[a], "frame": int(frame),
+                "target": None, "targetFrame": None, "hard": True, "residual": float(depth),
+                "met": depth <= 1e-6,
+                "position": _world(ctx, outcome.paths[a][frame]).tolist()})
+
+
+def _region_guides(ctx: SolveContext, footprints) -> None:
+    info = ctx.data.info
+    curves = []
+    for region, footprint in zip(ctx.data.avoid_regions, footprints):
+        for grow in (0.0, region.margin):
+            if grow == 0.0 and curves and region.margin == 0.0:
+                continue
+            outline = collisions.outline(footprint, grow, OUTLINE_SIDES)
+            curves.append(ground.from_ground(np.vstack([outline, outline[:1]]), info.metres(0.05), info.up_axis))
+    ctx.guides.append(writer.GuideCurves(
+        name="AvoidRegions", curves=curves, color=REGION_COLOR, width=info.metres(0.03),
+        doc="Each avoid region's ground footprint and, when it has a margin, the footprint grown by it."))
+
+
+register_pass(ORDER, "collisions", collision_pass)

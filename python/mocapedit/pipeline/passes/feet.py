@@ -1,0 +1,477 @@
+"""Pass 500: foot locking, after every other edit (path, time warp, avoidance, layering).
+
+For each edited agent with two legs (found by name or set by ``mocap:leftLegJoints`` /
+``mocap:rightLegJoints``), the pose every earlier pass produced is evaluated by forward
+kinematics and carried by the agent's edited ground motion. Each foot contact of the
+source clip (authored with ``MocapFootContactAPI``, else detected) gets one plant: the
+source foot carried by one turn and one ground shift, chosen by least squares where the
+edit puts the foot, and leashed to stay within ``LEASH_M`` and ``LEASH_DEGREES`` of it. The
+solver's foot-locking job (:mod:`mocapedit.solve.footlock`) moves the legs of all agents at once. Agents whose legs change get a pose edit that replaces their hip, knee and ankle
+rotations (and the skeleton root's translation where the pelvis is lowered), so the writer
+bakes their animation.
+
+The report gets, per agent, the foot skate (as :func:`mocapedit.inspect.metrics.foot_skate` measures
+it, stage units per second) of the source (``footSkateSource``), after the edits alone
+(``footSkateUnlocked``) and as the edits layer plays it, locked (``footSkateEdited``); the
+contacts locked, the largest pelvis drop and the largest IK correction (stage units).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from mocapedit.geometry import animation, contacts, ground, kinematics, trajectory
+from mocapedit.solve import footlock
+from mocapedit.inspect import metrics
+from mocapedit.pipeline import processor
+from mocapedit.usd import writer
+from mocapedit.model.errors import MocapEditError
+from mocapedit.solve.layering import quat_multiply, trs_from_matrices
+from mocapedit.model.data import Agent
+
+#: Seconds over which a lock blends in before a contact and out after it.
+BLEND_SECONDS = 0.1
+#: Metres a plant may lie from where the edit puts the foot before it is dragged along.
+LEASH_M = 0.08
+#: Degrees a plant may be turned from the edited foot before it is turned along.
+LEASH_DEGREES = 15.0
+#: Agents whose feet the edits make slide by at most this much more than the source's (metres
+#: per second, the issue's quality bar) keep their legs: locking them would bake their whole
+#: animation for a change no one sees.
+SKATE_TOLERANCE_M = 0.005
+#: Agents whose ankles all stay within this of where the edit puts them, and whose pelvis
+#: drops less, keep their legs (metres): locking would move a foot by less than this over a
+#: whole contact, and leaving them saves baking their animation.
+STILL_M = 0.002
+
+
+def _skel_space(agent: Agent, pose: animation.Pose, joints: list[int]) -> dict[int, np.ndarray]:
+    """(T,4,4) skeleton-space matrices of the given joints and their ancestors, from a pose
+    whose joint order may differ from the skeleton's (joints it lacks take the rest pose)."""
+    column = {name: k for k, name in enumerate(pose.joints)}
+    count = pose.translations.shape[0]
+    out: dict[int, np.ndarray] = {}
+
+    def world(j: int) -> np.ndarray:
+        if j not in out:
+            k = column.get(agent.joints[j])
+            if k is None:
+                local = np.broadcast_to(agent.rest_transforms[j], (count, 4, 4))
+            else:
+                local = kinematics.compose_trs(pose.translations[:, k], pose.rotations[:, k], pose.scales[:, k])
+            p = int(agent.parents[j])
+            out[j] = local if p < 0 else local @ world(p)
+        return out[j]
+
+    for j in joints:
+        world(j)
+    return out
+
+
+def _yaw_quat(angle: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """(T,4) quaternions turning by ``angle`` (radians, counter-clockwise) about the unit ``up``."""
+    half = 0.5 * np.asarray(angle, dtype=np.float64)[:, None]
+    return np.concatenate([np.sin(half) * up, np.cos(half)], axis=1)
+
+
+def _posed_legs(ctx, path: str, frames: np.ndarray, times: np.ndarray, shared: dict):
+    """(pose after the earlier passes, skeleton-space positions (T,3) and rotations (T,4) of the
+    leg joints and the hips' parents). Agents that play one clip at the same frames without
+    pose edits share them."""
+    agent = ctx.data.agents[path]
+    edits = ctx.pose_edits.get(path, [])
+    needed = sorted({j for leg in agent.legs for j in (leg.hip, leg.knee, leg.ankle, int(agent.parents[leg.hip]))
+                     if j >= 0})
+    key = None if edits else (agent.clip_key, tuple(agent.joints), agent.rest_transforms.tobytes(),
+                              tuple(needed), frames.tobytes())
+    hit = shared.get(key) if key is not None else None
+    if hit is None:
+        pose = animation.sample_pose(ctx.data.clip_of(agent), frames)
+        for fn in edits:
+            pose = fn(pose, times, frames)
+        skel = _skel_space(agent, pose, needed)
+        hit = (pose, {j: skel[j][:, 3, :3] for j in needed},
+               {j: trs_from_matrices(skel[j])[1].astype(np.float64) for j in needed})
+        if key is not None:
+            shared[key] = hit
+    return hit
+
+
+def _top(agent: Agent, joint: int) -> int:
+    while int(agent.parents[joint]) >= 0:
+        joint = int(agent.parents[joint])
+    return joint
+
+
+def _leash(offset: np.ndarray, base: np.ndarray, inside: np.ndarray, rigid: np.ndarray, radius: float) -> np.ndarray:
+    """(T,D) plant shifts (or turns, D = 1) over one contact (frames ``inside``, increasing).
+
+    The plant stays at ``base`` while the edited foot (``offset``, (T,D)) stays within ``radius``
+    of it; where the edit drags the body further (a long idle moved by a path edit), the plant
+    follows at that distance, so the legs never stretch beyond it. Frames ``rigid`` (a stationary
+    range, inside the contact) keep ``base``, and the plant is followed from them outwards.
+    Frames before and after the contact take its first and last plant."""
+    out = np.broadcast_to(base, offset.shape).copy()
+    if not len(inside) or np.linalg.norm(offset[inside] - base, axis=-1).max() <= radius:
+        return out
+    if len(rigid):
+        runs = [inside[inside < rigid[0]][::-1], inside[inside > rigid[-1]]]
+    else:
+        runs = [inside]
+    for run in runs:
+        current = base.copy()
+        for i in run:
+            v = offset[i] - current
+            d = float(np.linalg.norm(v))
+            if d > radius:
+                current = offset[i] - v * (radius / d)
+            out[i] = current
+    out[:inside[0]] = out[inside[0]]
+    out[inside[-1] + 1:] = out[inside[-1]]
+    return out
+
+
+def _leash_rows(offset: np.ndarray, base: np.ndarray, inside: np.ndarray, rigid: np.ndarray,
+                radius: float) -> np.ndarray:
+    """:func:`_leash` for many contacts at once: (C,W,D) offsets, (C,D) bases, (C,W) masks."""
+    out = np.broadcast_to(base[:, None], offset.shape).copy()
+    far = np.where(inside, np.linalg.norm(offset - base[:, None], axis=-1), 0.0).max(axis=1) > radius
+    for c in np.flatnonzero(far):
+        out[c] = _leash(offset[c], base[c], np.flatnonzero(inside[c]), np.flatnonzero(rigid[c]), radius)
+    return out
+
+
+def _ramp(frames: np.ndarray, first: int, last: int, blend: float) -> np.ndarray:
+    """1 inside [first, last], easing to 0 over ``blend`` frames outside (smoothstep)."""
+    outside = np.maximum(first - frames, 0.0) + np.maximum(frames - last, 0.0)
+    x = np.clip(1.0 - outside / blend, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+class _AgentLock:
+    """One agent's side of the job: what it needs, and what it gets back."""
+
+    def __init__(self, ctx: processor.SolveContext, path: str, source_contacts: list, shared: dict):
+        data = ctx.data
+        info = data.info
+        self.path = path
+        agent = self.agent = data.agents[path]
+        self.legs = agent.legs
+        # Locked legs are a pose edit, and a pose edit bakes the animation: lock on its frames.
+        self.times, self.frames = processor.output_frames(ctx, path, baked=True)
+        self.root = _top(agent, self.legs[0].hip)
+        pose, skel_pos, skel_rot = _posed_legs(ctx, path, self.frames, self.times, shared)
+        self.pose = pose
+        self.columns = {name: k for k, name in enumerate(pose.joints)}
+        to_world = agent.skel_to_world
+        if to_world.shape[0] > 1:
+            to_world = animation.interp_frames(to_world, self.frames)
+        self.to_world = to_world
+        count = len(self.times)
+        up_vector = np.zeros(3)
+        up_vector[ground.up_index(info.up_axis)] = 1.0
+        # The edited ground motion (identity without a path edit): a turn about up, then a shift.
+        edited = ctx.paths.get(path)
+        if edited is None:
+            motion = np.broadcast_to(np.eye(4), (count, 4, 4))
+            turn = np.zeros(count)
+        else:
+            traj = ctx.trajectories[path]
+            src_h = animation.interp_frames(traj.heading, self.frames)
+            new_h = animation.interp_frames(edited.heading, self.frames)
+            motion = trajectory.ground_motion(
+                animation.interp_frames(traj.ground, self.frames), src_h,
+                animation.interp_frames(edited.ground, self.frames), new_h, info.up_axis)
+            turn = new_h - src_h
+        self.motion = motion
+        turn_q = _yaw_quat(turn, up_vector)
+        world_q = trs_from_matrices(to_world)[1].astype(np.float64)        # (1 or T, 4)
+        # World, before the ground motion (the posed source) and as edited.
+        posed = {j: np.einsum("ti,tij->tj", p, to_world[:, :3, :3]) + to_world[:, 3, :3] for j, p in skel_pos.items()}
+        pos = {j: np.einsum("ti,tij->tj", p, motion[:, :3, :3]) + motion[:, 3, :3] for j, p in posed.items()}
+        posed_rot = {j: quat_multiply(world_q, q) for j, q in skel_rot.items()}
+        rot = {j: quat_multiply(turn_q, q) for j, q in posed_rot.items()}
+
+        def per_leg(values, key):
+            return np.stack([values[getattr(leg, key)] for leg in self.legs], axis=1)
+
+        self.hip, self.knee, self.ankle = (per_leg(pos, k) for k in ("hip", "knee", "ankle"))
+        self.hip_rot, self.knee_rot, self.ankle_rot = (per_leg(rot, k) for k in ("hip", "knee", "ankle"))
+        parent_rot = []
+        for leg in self.legs:
+            p = int(agent.parents[leg.hip])
+            parent_rot.append(rot[p] if p >= 0 else quat_multiply(turn_q, np.broadcast_to(world_q, turn_q.shape)))
+        self.parent_rot = np.stack(parent_rot, axis=1)
+        self.hinge = np.stack([footlock.world_hinge(rot[leg.knee], footlock.knee_hinge(
+            skel_pos[leg.hip], skel_pos[leg.knee], skel_pos[leg.ankle], skel_rot[leg.knee])) for leg in self.legs], 1)
+
+        # Plants: per contact, the source foot carried by one turn and one ground translation.
+        fps = info.time_codes_per_second
+        step = np.median(np.diff(agent.sample_times)) if agent.frame_count > 1 else 1.0
+        blend = max(2.0, BLEND_SECONDS * fps / max(step, 1e-9))
+        self.blend_frames = int(np.ceil(blend))
+        self.target = self.ankle.copy()
+        self.target_rot = self.ankle_rot.copy()
+        self.weight = np.zeros((count, len(self.legs)))
+        self.contact = np.zeros((count, len(self.legs)), dtype=bool)
+        self.locked = 0
+        pos_sum = np.zeros((count, len(self.legs), 3))
+        rot_sum = np.zeros((count, len(self.legs), 4))
+        w_sum = np.zeros((count, len(self.legs)))
+        up = ground.up_index(info.up_axis)
+        stationary = self.keep = np.zeros(count, dtype=bool)
+        for _, first, last in agent.stationary:
+            stationary |= (self.frames >= first - 1e-9) & (self.frames <= last + 1e-9)
+        radius = LEASH_M / info.meters_per_unit
+        for k, leg in enumerate(self.legs):
+            ranges = np.array(source_contacts[k], dtype=np.float64).reshape(-1, 2)
+            # The contacts of this foot at once, one row each over the frames its ramp reaches.
+            inside = (self.frames >= ranges[:, :1] - 1e-9) & (self.frames <= ranges[:, 1:] + 1e-9)   # (C,T)
+            used = inside.any(axis=1)
+            ranges, inside = ranges[used], inside[used]
+            if not len(ranges):
+                continue
+            self.locked += len(ranges)
+            self.contact[:, k] = inside.any(axis=0)
+            w_all = _ramp(self.frames, ranges[:, :1], ranges[:, 1:], blend)                          # (C,T)
+            reached = w_all > 0
+            lo = reached.argmax(axis=1)
+            width = int((reached.sum(axis=1)).max())
+            at = lo[:, None] + np.arange(width)                                                      # (C,W)
+            valid = at < count
+            at = np.minimum(at, count - 1)
+            valid &= np.take_along_axis(reached, at, axis=1)
+            w = np.where(valid, np.take_along_axis(w_all, at, axis=1), 0.0)
+            inside = np.take_along_axis(inside, at, axis=1) & valid
+            # Where a contact meets a stationary range, the body moves rigidly there: the plant
+            # is that motion, so the range keeps its shape (no correction inside it).
+            rigid = inside & stationary[at]
+            chosen = np.where(rigid.any(axis=1, keepdims=True), rigid, inside)
+            n_chosen = chosen.sum(axis=1)[:, None]
+            turn_c = turn[at]
+            yaw0 = np.arctan2((np.sin(turn_c) * chosen).sum(1), (np.cos(turn_c) * chosen).sum(1))[:, None]
+            # An edit that turns the body far during a contact turns the plant too.
+            apart = np.angle(np.exp(1j * (turn_c - yaw0)))
+            yaw = yaw0 + _leash_rows(apart[..., None], np.zeros((len(at), 1)), inside, rigid,
+                                     np.radians(LEASH_DEGREES))[..., 0]
+            spin = kinematics.yaw_matrix(yaw, info.up_axis)[..., :3, :3]
+            # Turned about the planted foot itself, so a plant that turns along does not slide.
+            foot = posed[leg.ankle][at]                                                               # (C,W,3)
+            pivot = (foot * chosen[..., None]).sum(1) / n_chosen
+            base = kinematics.yaw_matrix((yaw * chosen).sum(1) / n_chosen[:, 0], info.up_axis)[:, :3, :3]
+            carried = np.einsum("cti,ctij->ctj", foot - pivot[:, None], spin) + np.einsum("ci,cij->cj", pivot, base)[:, None]
+            offset = pos[leg.ankle][at] - carried
+            offset[..., up] = 0.0  # feet stay at their source height: never below their ground
+            shift = _leash_rows(offset, (offset * chosen[..., None]).sum(1) / n_chosen, inside, rigid, radius)
+            plant_rot = quat_multiply(_yaw_quat(yaw.reshape(-1), up_vector).reshape(yaw.shape + (4,)),
+                                      posed_rot[leg.ankle][at])
+            plant_rot *= np.where(np.sum(plant_rot * rot[leg.ankle][at], -1) < 0, -1.0, 1.0)[..., None]
+            # Where the ramps of two contacts meet, their plants blend by weight: no jump.
+            rows = at[valid]
+            np.add.at(pos_sum[:, k], rows, (w[..., None] * (carried + shift))[valid])
+            np.add.at(rot_sum[:, k], rows, (w[..., None] * plant_rot)[valid])
+            np.add.at(w_sum[:, k], rows, w[valid])
+            np.maximum.at(self.weight[:, k], rows, w[valid])
+        some = w_sum > 0
+        self.target[some] = pos_sum[some] / w_sum[some][:, None]
+        self.target_rot[some] = footlock._normalize(rot_sum[some])
+
+    def inputs(self) -> dict:
+        return {"hip": self.hip, "knee": self.knee, "ankle": self.ankle, "parent_rot": self.parent_rot,
+                "hip_rot": self.hip_rot, "knee_rot": self.knee_rot, "ankle_rot": self.ankle_rot,
+                "target": self.target, "target_rot": self.target_rot, "weight": self.weight, "hinge": self.hinge, "keep": self.keep}
+
+    def writable(self) -> str | None:
+        """Why the legs cannot be baked into this agent's pose, or None."""
+        for leg in self.legs:
+            for j in (leg.hip, leg.knee, leg.ankle):
+                if self.agent.joints[j] not in self.columns:
+                    return f"leg joint '{self.agent.joints[j]}' is not animated by the clip"
+        return None
+
+    def apply(self, out: footlock.LegOutputs, lo: int, hi: int, up: np.ndarray,
+              meters_per_unit: float) -> animation.Pose | None:
+        """The locked pose, or None when locking leaves the legs as they are."""
+        pose = self.pose
+        rotations = pose.rotations.copy()
+        translations = pose.translations.copy()
+        for k, leg in enumerate(self.legs):
+            for j, new in ((leg.hip, out.hip_local), (leg.knee, out.knee_local), (leg.ankle, out.ankle_local)):
+                rotations[:, self.columns[self.agent.joints[j]]] = new[lo:hi, k]
+        drop = out.drop[lo:hi]
+        if np.any(drop > 0):
+            root = self.columns.get(self.agent.joints[self.root])
+            if root is None:
+                raise MocapEditError(
+                    f"<{self.path}>: the pelvis must be lowered but the skeleton root "
+                    f"'{self.agent.joints[self.root]}' is not animated by the clip")
+            # World offset -drop * up, in the root's parent space (the skeleton's).
+            inv = np.linalg.inv(self.to_world[:, :3, :3])
+            translations[:, root] += (-drop[:, None] * up) @ inv if inv.ndim == 2 else \
+                np.einsum("ti,tij->tj", -drop[:, None] * up, inv)
+        correction = np.linalg.norm(out.reached[lo:hi] - self.ankle, axis=-1)
+        self.max_correction = float(correction.max(initial=0.0))
+        self.max_drop = float(drop.max(initial=0.0))
+        self.reached = out.reached[lo:hi]
+        still = STILL_M / meters_per_unit
+        if self.max_correction <= still and self.max_drop <= still:
+            return None
+        return animation.Pose(joints=list(pose.joints), translations=translations.astype(np.float32),
+                              rotations=rotations.astype(np.float32), scales=pose.scales)
+
+
+def _source(ctx, agent: Agent, cache: dict) -> tuple[list[list[tuple[int, int]]], float]:
+    """(per leg, the inclusive frame ranges of its foot contacts on the source clip; the source
+    foot skate over them, stage units per second). Agents that play one clip share them."""
+    place = agent.skel_to_world
+    # A static placement's translation and turn about up change neither the contacts nor the
+    # skate: what matters is how it maps the skeleton to height (its up column) and its scale.
+    up = ground.up_index(ctx.data.info.up_axis)
+    placement = (np.round(place[0, :3, up], 12).tobytes(), round(float(np.linalg.norm(place[0, 0, :3])), 12)) \
+        if place.shape[0] == 1 else place.tobytes()
+    key = (agent.clip_key, tuple(agent.joints), tuple(leg.joints for leg in agent.legs),
+           tuple(agent.foot_contacts or ()), placement)
+    hit = cache.get(key)
+    if hit is None:
+        info = ctx.data.info
+        clip = ctx.data.clip_of(agent)
+        if agent.foot_contacts is not None:
+            found = [[(a, b) for _, ankle, a, b in agent.foot_contacts if ankle == leg.ankle] for leg in agent.legs]
+        else:
+            found = contacts.detect_agent(agent, clip, info)
+        hit = cache[key] = found
+    return hit
+
+
+def _report_skate(ctx, lock: "_AgentLock", locked_pose, chains: dict) -> tuple[float, float, float] | None:
+    """(source, after the edits, after locking) foot skate of a locked agent, stage units per
+    second, as :func:`mocapedit.inspect.metrics.foot_skate` measures it on the input and on the composed
+    stage: joints named like feet, over the source's planted frames (a retimed agent: over its own).
+    None for a skeleton without such joints."""
+    agent, info = lock.agent, ctx.data.info
+    feet = metrics.default_foot_joints(agent.joints)
+    if not feet:
+        return None
+    units = (info.up_axis, info.meters_per_unit, info.time_codes_per_second)
+    clip = ctx.data.clip_of(agent)
+    source = np.stack([trajectory.joint_world(agent, clip, f, chains)[:, 3, :3] for f in feet], axis=1)
+    before = metrics.foot_skate_of_positions(source, agent.sample_times, *units)
+    same = len(lock.times) == agent.frame_count and np.allclose(lock.times, agent.sample_times)
+    count = len(lock.times)
+    place = np.broadcast_to(lock.to_world, (count, 4, 4)) @ lock.motion
+
+    def skate(pose):
+        skel = _skel_space(agent, pose, feet)
+        world = np.stack([np.einsum("ti,tij->tj", skel[f][:, 3, :3], place[:, :3, :3]) + place[:, 3, :3]
+                          for f in feet], axis=1)
+        return metrics.foot_skate_of_positions(world, lock.times, *units,
+                                               contact=before.contact if same else None).mean
+
+    unlocked = skate(lock.pose)
+    return before.mean, unlocked, skate(locked_pose) if locked_pose is not None else unlocked
+
+
+def foot_locking_pass(ctx: processor.SolveContext) -> None:
+    data = ctx.data
+    info = data.info
+    if not data.settings.foot_locking:
+        return
+    touched = sorted(set(ctx.paths) | set(ctx.time_maps) | set(ctx.pose_edits))
+    cache: dict = {}
+    shared: dict = {}
+    locks: list[_AgentLock] = []
+    task = ctx.progress.task("foot locking", len(touched))
+    for i, path in enumerate(touched):
+        agent = data.agents[path]
+        entry = ctx.report.agent(path)
+        if not agent.foot_locking:
+            entry.setdefault("notes", []).append("foot locking off (mocap:footLocking = false)")
+        elif len(agent.legs) != 2:
+            entry.setdefault("notes", []).append(
+                "foot locking skipped: legs not found by name; set mocap:leftLegJoints and mocap:rightLegJoints")
+        else:
+            lock = _AgentLock(ctx, path, _source(ctx, agent, cache), shared)
+            why = lock.writable()
+            if why:
+                entry.setdefault("notes", []).append(f"foot locking skipped: {why}")
+            elif lock.locked:
+                locks.append(lock)
+        task.update(i + 1)
+    task.done()
+    if not locks:
+        return
+    up = np.zeros(3)
+    up[ground.up_index(info.up_axis)] = 1.0
+    offsets = np.cumsum([0] + [len(lock.times) for lock in locks])
+    parts = [lock.inputs() for lock in locks]
+    inputs = footlock.LegInputs(
+        offsets=offsets.astype(np.int64), smooth=np.array([lock.blend_frames for lock in locks], dtype=np.int64),
+        up=up, **{k: np.concatenate([p[k] for p in parts]) for k in parts[0]})
+    out = footlock.lock_feet(inputs)
+    changed = contacts_locked = 0
+    chains: dict = {}
+    skates = []
+    tolerance = SKATE_TOLERANCE_M / info.meters_per_unit
+    kept = 0
+    for lock, lo, hi in zip(locks, offsets[:-1], offsets[1:]):
+        locked_pose = lock.apply(out, int(lo), int(hi), up, info.meters_per_unit)
+        entry = ctx.report.agent(lock.path)
+        skate = _report_skate(ctx, lock, locked_pose, chains)
+        if locked_pose is not None and skate is not None and skate[1] <= skate[0] + tolerance:
+            # The edit left the feet as planted as the source's: keep the legs, bake nothing.
+            locked_pose, skate = None, (skate[0], skate[1], skate[1])
+            kept += 1
+        if skate is not None and np.isfinite(skate).all():
+            # footSkateEdited is what the edits layer plays; footSkateUnlocked, the edits alone.
+            entry["footSkateSource"], entry["footSkateUnlocked"], entry["footSkateEdited"] = skate
+            skates.append(skate)
+        entry["footContactsLocked"] = lock.locked
+        entry["maxPelvisDrop"] = lock.max_drop
+        entry["maxFootCorrection"] = lock.max_correction
+        contacts_locked += lock.locked
+        if locked_pose is not None:
+            changed += 1
+            ctx.pose_edits.setdefault(lock.path, []).append(
+                lambda pose, out_times, src_frames, locked=locked_pose, lock=lock: _replace_legs(pose, locked, lock))
+    if ctx.options.guides:
+        _plant_guides(ctx, [lock for lock in locks if lock.path in ctx.pose_edits])
+    stats = ctx.report.stats
+    stats["footLockedAgents"] = changed
+    stats["footLockingNotNeeded"] = kept
+    stats["footContactsLocked"] = contacts_locked
+    # The shot's figures: mean skate over the agents with contacts, the largest corrections.
+    if skates:
+        for key, values in zip(("footSkateSource", "footSkateUnlocked", "footSkateEdited"), np.transpose(skates)):
+            stats[key] = float(np.mean(values))
+    stats["maxPelvisDrop"] = max(lock.max_drop for lock in locks)
+    stats["maxFootCorrection"] = max(lock.max_correction for lock in locks)
+
+
+#: Guide colours of the left and right feet's plants.
+PLANT_COLORS = np.array([[0.2, 0.5, 1.0], [1.0, 0.55, 0.1]])
+
+
+def _plant_guides(ctx, locks: list) -> None:
+    """Guide points where the locked feet are planted: the ankle at the first fully locked frame
+    of each contact, blue for left feet and orange for right."""
+    points, colors = [], []
+    for lock in locks:
+        for k, leg in enumerate(lock.legs):
+            full = lock.weight[:, k] >= 1.0
+            starts = np.flatnonzero(full & ~np.concatenate([[False], full[:-1]]))
+            points.append(lock.target[starts, k])
+            colors.append(np.tile(PLANT_COLORS[0 if leg.side == "left" else 1], (len(starts), 1)))
+    if points:
+        ctx.guides.append(writer.GuidePoints(
+            name="FootPlants", points=np.concatenate(points), colors=np.concatenate(colors),
+            width=ctx.data.info.metres(0.06),
+            doc="Where foot locking plants each contact of the locked agents: left feet blue, right orange."))
+
+
+def _replace_legs(pose: animation.Pose, locked: animation.Pose, lock: _AgentLock) -> animation.Pose:
+    """The pose with the locked legs (and lowered root) of ``locked``, whose joints it shares."""
+    if pose.joints != locked.joints or pose.rotations.shape != locked.rotations.shape:
+        raise MocapEditError(f"<{lock.path}>: foot locking was computed for another pose")
+    return locked
+
+
+processor.register_pass(500, "foot locking", foot_locking_pass)

@@ -1,0 +1,294 @@
+"""Path edits (order 100): position and relative constraints, stationary tags, path curves
+and groups (chapters 4 and 5 of the deliverable).
+
+Agents tied together by relative constraints or groups form a component; each component
+with something to do (a position or relative constraint, a path curve) is one two-step
+ARAP solve (:mod:`mocapedit.solve.path_edit`), independent of the others, so components run on
+a thread pool with the solver releasing the GIL. An agent's result does not depend on
+what else is on the stage.
+
+Fills ``ctx.paths`` (ground path and heading per source frame), a report entry per
+position constraint, relative constraint, stationary range and path curve of the edited
+agents, and per agent ``lengthRatio``, ``shapeChange`` and ``solver``.
+"""
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from mocapedit import _solver
+from mocapedit.geometry import curves, ground
+from mocapedit.inspect import metrics
+from mocapedit.solve import path_edit
+from mocapedit.model.errors import MocapEditError, prim_error
+from mocapedit.pipeline.processor import EditedPath, SolveContext, register_pass
+
+ORDER = 100
+MET = 1e-6  # stage units: a hard constraint's residual within this is met
+
+#: Lengths that set the solve's tolerances, in metres.
+MIN_BASELINE_M = 0.01      # local frames of the shape terms are at least this long
+#: A path curve holds its agent on the remapped path by soft handles this far apart (s),
+#: so other constraints bend the path away from the curve only where they act.
+CURVE_ANCHOR_S = 0.5
+CURVE_ANCHOR_WEIGHT = 0.05
+RIGID_MIN_EXTENT_M = 0.02  # smaller stationary ranges turn with the path around them
+STILL_M = 1e-5             # as trajectory.headings: tangents shorter than this stand still
+#: A group's mesh joins its members this often (seconds); the frames between follow.
+GROUP_SAMPLE_S = 0.5
+
+
+def _validate(ctx: SolveContext) -> None:
+    for c in ctx.data.relative_constraints:
+        if c.agent == c.target and c.frame == c.target_frame:
+            raise prim_error(c.path, f"ties frame {c.frame} of <{c.agent}> to itself; the target (or the target "
+                             "frame) must differ from the agent's", "target")
+        if not np.all(np.isfinite(c.offset)):
+            raise prim_error(c.path, "offset must be finite", "offset")
+    for c in ctx.data.position_constraints:
+        if not np.all(np.isfinite(c.position)):
+            raise prim_error(c.path, "position must be finite", "position")
+    for g in ctx.data.groups:
+        if len(g.members) < 2:
+            raise prim_error(g.path, f"a group needs at least two members, got {len(g.members)}", "members")
+
+
+def _components(ctx: SolveContext) -> list[list[str]]:
+    """Agents tied by relative constraints and groups, each component sorted, in order."""
+    data = ctx.data
+    parent = {a: a for a in data.agents}
+
+    def find(a):
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    def union(a, b):
+        ra, rb = find(a), find(b)
+        if ra != rb:
+            parent[max(ra, rb)] = min(ra, rb)
+    for c in data.relative_constraints:
+        union(c.agent, c.target)
+    for g in data.groups:
+        for m in g.members[1:]:
+            union(g.members[0], m)
+    active = {c.agent for c in data.position_constraints} | {c.agent for c in data.relative_constraints}
+    active |= {a.path for a in data.agents.values() if a.path_curve}
+    groups: dict[str, list[str]] = {}
+    for a in sorted(data.agents):
+        groups.setdefault(find(a), []).append(a)
+    return [members for _, members in sorted(groups.items()) if active & set(members)]
+
+
+def _by_component(ctx: SolveContext, components: list[list[str]]) -> list[tuple[list, list, list]]:
+    """The position and relative constraints and the groups of each component, in stage order."""
+    data = ctx.data
+    which = {a: n for n, members in enumerate(components) for a in members}
+    out = [([], [], []) for _ in components]
+    for c in data.position_constraints:
+        if c.agent in which:
+            out[which[c.agent]][0].append(c)
+    for c in data.relative_constraints:
+        if c.agent in which:
+            out[which[c.agent]][1].append(c)
+    for g in data.groups:
+        if g.members and g.members[0] in which and all(which.get(m) == which[g.members[0]] for m in g.members):
+            out[which[g.members[0]]][2].append(g)
+    return out
+
+
+def _merged_ranges(agent) -> tuple[list[tuple[int, int]], list[list[str]]]:
+    """Stationary ranges of an agent, overlapping ones merged, with the tags behind each."""
+    out, names = [], []
+    for name, first, last in sorted(agent.stationary, key=lambda t: (t[1], t[2])):
+        if out and first <= out[-1][1] + 1:
+            out[-1] = (out[-1][0], max(out[-1][1], last))
+            names[-1].append(name)
+        else:
+            out.append((first, last))
+            names.append([name])
+    return out, names
+
+
+def _agent_input(ctx: SolveContext, path: str, fps: float) -> path_edit.AgentInput:
+    data, info = ctx.data, ctx.data.info
+    agent, traj = data.agents[path], ctx.trajectories[path]
+    ranges, names = _merged_ranges(agent)
+    rest, turn = traj.ground, None
+    if agent.path_curve:
+        poly = curves.ground_polyline(data.curves[agent.path_curve], agent.path_curve, info.up_axis)
+        try:
+            remapped = curves.remap(traj.ground, poly, ranges, fps, info.metres(STILL_M))
+        except ValueError as exc:
+            raise prim_error(agent.path_curve, f"cannot remap <{path}> onto this curve: {exc}", "points") from None
+        rest, turn = remapped.ground, remapped.range_turn
+    refs = [f"{agent.animation_path}.stationary:{'/'.join(n)}:frames" for n in names]
+    return path_edit.AgentInput(path=path, rest=np.ascontiguousarray(rest, dtype=np.float64), source=traj.ground,
+                                source_heading=traj.heading, stationary=ranges, stationary_refs=refs,
+                                rest_turn=turn, sample_times=agent.sample_times)
+
+
+class _Component:
+    """The inputs of one component, and (after run) its result."""
+
+    def __init__(self, ctx: SolveContext, members: list[str], fps: float, positions: list, relatives: list,
+                 groups: list):
+        """``positions``, ``relatives``, ``groups``: the stage's constraints and groups on these
+        members (see ``_by_component``)."""
+        data, info = ctx.data, ctx.data.info
+        up = info.up_axis
+        self.members = members
+        self.inputs = [_agent_input(ctx, p, fps) for p in members]
+        self.positions, self.relatives, self.groups = positions, relatives, groups
+        self.handles = [path_edit.Handle(c.agent, c.frame, ground.to_ground(c.position, up), _weight(c), c.path)
+                        for c in self.positions]
+        self.links = [path_edit.Link(c.agent, c.frame, c.target, c.target_frame, ground.to_ground(c.offset, up),
+                                     c.space, _weight(c), c.path) for c in self.relatives]
+        self.curve_only = not self.handles and not self.links
+        step = max(1, int(round(CURVE_ANCHOR_S * fps)))
+        for a in self.inputs:
+            curve = data.agents[a.path].path_curve
+            if curve:
+                frames = sorted(set(range(0, a.frames, step)) | {a.frames - 1})
+                self.handles.extend(path_edit.Handle(a.path, f, a.rest[f], CURVE_ANCHOR_WEIGHT, curve) for f in frames)
+        self.settings = path_edit.Settings(
+            min_baseline=info.metres(MIN_BASELINE_M), rigid_min_extent=info.metres(RIGID_MIN_EXTENT_M),
+            still=info.metres(STILL_M), group_step=max(1.0, round(GROUP_SAMPLE_S * fps)),
+            **path_edit.turn_settings(fps, info.meters_per_unit))
+        self.result: path_edit.ComponentResult | None = None
+        self.problem: path_edit.ComponentProblem | None = None
+
+    def run(self) -> None:
+        if self.curve_only:   # path curves alone: the remapped paths
+            self.result = path_edit.ComponentResult(
+                agents={a.path: path_edit.AgentResult(ground=a.rest, heading=path_edit.rest_heading(a, self.settings),
+                                                      range_turn=a.rest_turn if a.rest_turn is not None
+                                                      else np.zeros(len(a.stationary)))
+                        for a in self.inputs},
+                solver="none", notes=[], link_offsets=np.zeros((0, 2)))
+            return
+        try:
+            self.problem = path_edit.ComponentProblem(self.inputs, self.handles, self.links,
+                                                      [path_edit.Group(g.members, g.stiffness, g.path)
+                                                       for g in self.groups], self.settings)
+            self.result = self.problem.solve()
+        except _solver.ContradictionError as exc:
+            raise self._contradiction(exc) from None
+
+    def _contradiction(self, exc) -> MocapEditError:
+        p = self.problem
+        prims, stationary, held = [], [], []
+        for kind, index in exc.constraints:
+            if kind == "handle" and p is not None and index < len(p.handle_refs) and p.handle_refs[index]:
+                prims.append(p.handle_refs[index])
+            elif kind == "link" and p is not None and index < len(p.link_refs) and p.link_refs[index]:
+                prims.append(p.link_refs[index])
+            elif kind == "rigid" and p is not None and p.rigid_refs[index][0] == "stationary":
+                _, agent, r = p.rigid_refs[index]
+                stationary.append(next(a for a in self.inputs if a.path == agent).stationary_refs[r])
+            elif kind == "rigid" and p is not None:
+                held.extend(p.rigid_refs[index][1])
+        if p is None or (not prims and not stationary):
+            return MocapEditError(f"hard constraints contradict each other: {exc}")
+        named = ", ".join(f"<{x}>" for x in sorted(set(prims)))
+        positions = {c.path: c for c in self.positions}
+        same_frame = len(prims) == 2 and all(x in positions for x in prims) and \
+            len({(positions[x].agent, positions[x].frame) for x in prims}) == 1 and not stationary
+        if same_frame:
+            c = positions[prims[0]]
+            message = (f"hard position constraints {named} pin frame {c.frame} of <{c.agent}> to places "
+                       f"{exc.mismatch:g} apart; keep one, or make the others soft")
+            prop = "position"
+        else:
+            extra = (" and the stationary range " + ", ".join(stationary) + " (which moves rigidly)") if stationary else ""
+            if held:
+                extra += (", which hold " + ", ".join(f"<{h}>" for h in held) + " at a single place (so it only "
+                          "moves by one translation)")
+            message = (f"hard constraints {named}{extra} contradict each other: they cannot all hold (they miss by "
+                       f"{exc.mismatch:g} stage units); make some of them soft")
+            prop = "offset" if any(x not in positions for x in prims) else "position"
+        return prim_error(sorted(set(prims))[0] if prims else stationary[0], message, prop)
+
+
+def _weight(c) -> float:
+    return path_edit.HARD if c.hard else float(c.weight)
+
+
+def _world(ctx: SolveContext, path: str, uv, frame: int) -> list[float]:
+    h = ctx.trajectories[path].height[frame]
+    return ground.from_ground(np.asarray(uv, dtype=np.float64), h, ctx.data.info.up_axis).tolist()
+
+
+def _report(ctx: SolveContext, comp: _Component) -> None:
+    res = comp.result
+    edited = {p: r.ground for p, r in res.agents.items()}
+    for c in comp.positions:
+        target = ground.to_ground(c.position, ctx.data.info.up_axis)
+        residual = float(np.linalg.norm(edited[c.agent][c.frame] - target))
+        ctx.report.constraints.append({
+            "prim": c.path, "kind": "position", "agent": c.agent, "frame": c.frame, "target": None,
+            "targetFrame": None, "hard": c.hard, "residual": residual, "met": residual <= MET,
+            "position": [float(v) for v in c.position]})
+    for c, offset in zip(comp.relatives, res.link_offsets):
+        d = edited[c.agent][c.frame] - edited[c.target][c.target_frame]
+        residual = float(np.linalg.norm(d - offset))
+        ctx.report.constraints.append({
+            "prim": c.path, "kind": "relative", "agent": c.agent, "frame": c.frame, "target": c.target,
+            "targetFrame": c.target_frame, "hard": c.hard, "residual": residual, "met": residual <= MET,
+            "position": _world(ctx, c.agent, edited[c.agent][c.frame], c.frame)})
+    for a in comp.inputs:
+        g = edited[a.path]
+        for (first, last), ref in zip(a.stationary, a.stationary_refs):
+            residual = float(metrics.rigidity_error(a.source, g, [(first, last)])[0])
+            ctx.report.constraints.append({
+                "prim": ref.split(".stationary:")[0], "kind": "stationary", "agent": a.path, "frame": first,
+                "target": None, "targetFrame": None, "hard": True, "residual": residual, "met": residual <= MET,
+                "position": _world(ctx, a.path, g[first], first)})
+        agent = ctx.data.agents[a.path]
+        if agent.path_curve:
+            residual = float(np.linalg.norm(g - a.rest, axis=1).max(initial=0.0))
+            ctx.report.constraints.append({
+                "prim": agent.path_curve, "kind": "path-curve", "agent": a.path, "frame": 0, "target": None,
+                "targetFrame": None, "hard": False, "residual": residual, "met": residual <= MET})
+        entry = ctx.report.agent(a.path)
+        entry.update(path_edit.shape_figures(a, g, ctx.data.info.metres(MIN_BASELINE_M)))
+        r = res.agents[a.path]
+        entry["solver"] = "translation only" if r.translate_only and res.solver not in ("none",) else res.solver
+        if res.notes:
+            entry.setdefault("notes", []).extend(n for n in res.notes if n not in entry.get("notes", []))
+    if "SPQR" in res.solver:
+        ctx.report.note(f"path solve of {', '.join(comp.members[:5])}{' ...' if len(comp.members) > 5 else ''}: "
+                        f"fell back to sparse QR ({res.solver})")
+
+
+def path_pass(ctx: SolveContext) -> None:
+    _validate(ctx)
+    members = _components(ctx)
+    if not members:
+        return
+    fps = ctx.data.info.time_codes_per_second
+    comps = [_Component(ctx, m, fps, *mine) for m, mine in zip(members, _by_component(ctx, members))]
+    task = ctx.progress.task("path edits", len(comps))
+    workers = min(len(comps), os.cpu_count() or 1, 2)
+    if workers > 1:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            futures = [pool.submit(c.run) for c in comps]
+            for i, f in enumerate(futures):
+                f.result()   # re-raises the first failure, in component order
+                task.update(i + 1)
+    else:
+        for i, c in enumerate(comps):
+            c.run()
+            task.update(i + 1)
+    task.done()
+    for comp in comps:
+        for path, r in comp.result.agents.items():
+            ctx.paths[path] = EditedPath(ground=r.ground, heading=r.heading)
+        _report(ctx, comp)
+    ctx.report.stats["pathComponents"] = len(comps)
+
+
+register_pass(ORDER, "path", path_pass)

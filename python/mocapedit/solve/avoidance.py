@@ -1,0 +1,1095 @@
+"""Collision avoidance by waiting and path editing (chapter 6 of the deliverable), and avoid regions.
+
+The agents' ground paths are re-solved with the two-step Laplacian energy of the path
+editor (:class:`mocapedit._solver.SeparationSolver`: each agent factored once, rows that
+push points apart added per solve) until no two capsules overlap and no agent stands in
+an avoid region, or ``max_iterations`` is reached. Two strategies:
+
+``accumulate`` (the deliverable, sections 6.2 and 6.3)
+  At each iteration, every maximal collision (the deepest sample of each contiguous
+  collision interval of a pair) adds a mesh-based constraint joining the two colliding
+  points at capsule clearance plus margin, along the line between them; the paths are
+  re-solved with the previous iteration's result as the new source. The deliverable notes
+  that this accumulates deformation, since every iteration's source is already deformed.
+
+``relinearize`` (the default)
+  The source stays the input paths, factored once. Every sample where two agents have
+  overlapped or come within ``buffer_m`` of it stays a one-sided row ("at least the
+  clearance apart along this direction"), re-linearised around the latest result at each
+  iteration; each solve finds the row forces of that complementarity problem (a row
+  pushes or stays idle, it never pulls), so near misses switch on by themselves when a
+  push drives them into contact. Where two agents overlap they are pushed sideways to
+  their relative motion, on one side per pair, so a walker steps round the other instead
+  of being held back before the crossing and thrown forward after it. Each solve starts
+  from the original source, so deformation does not accumulate.
+
+  What makes it fast: the detection that counts the collisions also gathers the near
+  misses (one pass); a row keeps the direction it was solved with while the fresh one
+  turns less than ``keep_degrees`` (any direction is a conservative separation), so rows
+  are re-sent unchanged and the solver reuses their agents' Schur blocks; each solve
+  step starts from the last solve's forces of the same step; a pair that still overlaps
+  where it was already held apart is held at every sample of its intervals, a little
+  further apart each time it resists, so the iterations do not stall on it.
+
+Before either, walkers wait (``Settings.max_wait_s``, ``MocapSolveSettings.maxWait``):
+of two walkers whose paths cross, the one that reaches the crossing later slows down
+before it, through its time map, until the other has passed (of two walking the same
+way, the one behind waits). A wait changes no path: no detour, no turn, no length added,
+and feet planted in the source stay planted (the pose plays slower, it does not slide).
+What waiting cannot part (head-on, overtaking without room, standing agents, agents whose
+timing constraints fix) the paths then resolve. Measured on the example scenes by FK
+(README), waiting first and then steering with a weak anchor (detours spread over about
+0.75 s each side at 24 fps) beat steering alone on foot skate, path length and walking
+direction.
+
+Artist constraints hold throughout: hard pins and links are hard rows of every solve,
+stationary ranges move rigidly. Pairs that hard constraints hold together are reported,
+not looped on. The iterations stop when ``patience`` of them in a row make no progress.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mocapedit import _solver
+from mocapedit.solve import collisions
+from mocapedit.model import report
+
+STRATEGIES = ("relinearize", "accumulate")
+
+#: Softness of separation and region rows (1 / weight, relative to the shape terms): nearly
+#: hard, but two constraints that cannot both hold give way instead of failing.
+SEPARATION_SOFTNESS = 1e-5
+
+
+@dataclass
+class Pin:
+    """The agent's ground position at a frame: hard (softness 0) or soft (1 / weight)."""
+    agent: int
+    frame: int
+    position: np.ndarray          # (2,) ground, stage units
+    softness: float = 0.0
+    name: str = ""
+
+
+@dataclass
+class Link:
+    """Agent a at frame fa minus agent b at frame fb equals offset (hard)."""
+    a: int
+    fa: int
+    b: int
+    fb: int
+    offset: np.ndarray            # (2,) ground, stage units
+    name: str = ""
+
+
+@dataclass
+class Region:
+    """An avoid region: the listed agents stay outside its footprint by their clearance."""
+    name: str
+    footprint: object             # mocapedit._solver.GroundRegion
+    agents: np.ndarray            # (N,) agent indices
+    clearance: np.ndarray         # (N,) capsule radius plus margin, stage units
+
+
+@dataclass
+class Problem:
+    names: list[str]                    # (A,) agent paths
+    paths: list[np.ndarray]             # (F_a,2) ground path per source frame before avoidance
+    frame_times: list[np.ndarray]       # (F_a,) shot time of each source frame
+    radius: np.ndarray                  # (A,) capsule radius, stage units
+    height: np.ndarray                  # (A,) capsule height, stage units
+    margin: float = 0.0                 # extra clearance between capsules, stage units
+    sample_step: float = 1.0            # time codes between collision samples
+    rigid: list[tuple[int, int, int]] = field(default_factory=list)   # (agent, first, last) frames
+    pins: list[Pin] = field(default_factory=list)
+    links: list[Link] = field(default_factory=list)
+    regions: list[Region] = field(default_factory=list)
+    collide_agents: bool = True         # False: regions only
+    fixed_timing: np.ndarray | None = None  # (A,) bool: time constraints fix the agent's timing
+    span: tuple[float, float] | None = None  # shot times compared (default: all the frames play)
+
+
+@dataclass
+class Settings:
+    strategy: str = "relinearize"
+    max_iterations: int = 10
+    anchor_weight: float = 1e-5         # pull of every frame to its source (relative to shape terms)
+    overshoot: float = 0.03             # separations aim this fraction past the clearance
+    buffer_m: float = 0.3               # near misses watched by relinearize, metres
+    spread: int = 3                     # relinearize constrains every n-th sample of an interval
+    keep_degrees: float = 5.0           # relinearize keeps a row's direction while it turns less
+    sweeps: int = 20                    # Gauss-Seidel sweeps per solve step at least (warm-started)
+    sweep_budget: float = 1e6           # rows x sweeps per step allowed beyond that (up to 10x sweeps)
+    tolerance: float = 1e-3             # of the clearance: Gauss-Seidel stops when no row moves more
+    patience: int = 6                   # stop after this many iterations without progress
+    stiffen_after: int = 3              # relinearize: from this iteration on, the anchor is
+    stiffen: float = 10.0               # this many times stiffer
+    forward_keep: float | None = 0.5    # relinearize: least projection of an edited 0.25 s chord on
+                                        # the source's direction, in source chord lengths (None: none)
+    max_wait_s: float = 3.0             # most delay waiting may add to one agent, seconds (0: none)
+    wait_step_s: float = 0.25           # delays are tried in steps of this, seconds
+    wait_rounds: int = 8                # rounds of waiting at most
+    time_codes_per_second: float = 24.0
+    meters_per_unit: float = 1.0
+
+
+@dataclass
+class Iteration:
+    collisions: int                     # collision intervals (pair, contiguous samples)
+    colliding_samples: int
+    region_samples: int                 # frames inside an avoid region's clearance
+    deepest: float                      # largest overlap, stage units
+    rows: int = 0                       # separation and region rows of the solve that follows
+    solves: int = 0
+
+
+@dataclass
+class Outcome:
+    paths: list[np.ndarray]             # (F_a,2) edited ground paths
+    rigid_angles: np.ndarray            # per Problem.rigid: rotation of the range (radians, CCW)
+    iterations: list[Iteration]         # the state before each solve, then the final state
+    sampling: collisions.Sampling       # at the edited paths
+    remaining: collisions.Collisions    # collision intervals left
+    region_left: list[tuple[int, int, int, float]]  # (region, agent, frame, depth) inside still
+    blocked: list[tuple[int, int, float]]  # (agent a, agent b, shot time) held together by hard constraints
+    moved: np.ndarray                   # (A,) bool: the agent's path changed
+    solves: int = 0
+    seconds: float = 0.0
+    #: the iterations stopped before max_iterations because ``patience`` of them in a row
+    #: neither lowered the count of collisions and region frames nor the deepest overlap
+    stalled: bool = False
+    #: wall seconds by phase: "factor" (the agents' energies), "detect" (sampling and
+    #: detection), "gather", "blocks", "sweeps" and "responses" (inside the solves), "rows"
+    #: (the rest: forming the rows)
+    timing: dict = field(default_factory=dict)
+    #: work done, summed over the solves: "rows" sent, Gauss-Seidel "updates" passed on,
+    #: "inverseColumns" (back-substitutions for the agents' Schur blocks)
+    work: dict = field(default_factory=dict)
+
+    #: (A,) the shot time of each source frame after waiting (the problem's when none waits)
+    frame_times: list[np.ndarray] = field(default_factory=list)
+    #: (A,) delay each agent took up by waiting, time codes
+    delays: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: (constraint, agent a, agent b, first and last shot time, distance): hard links that hold
+    #: two agents closer than their clearance; the pair is left as it is over that time
+    link_held: list[tuple[str, int, int, float, float, float]] = field(default_factory=list)
+
+    @property
+    def converged(self) -> bool:
+        return len(self.remaining) == 0 and not self.region_left
+
+
+class _Rows:
+    """Rows of a SeparationSolver solve, gathered as numpy arrays."""
+
+    def __init__(self):
+        self.direction, self.rhs, self.softness, self.kind, self.force, self.force1 = [], [], [], [], [], []
+        self.term_row, self.term_vertex, self.term_weight = [], [], []
+        self.count = 0
+
+    def add(self, direction, rhs, softness, vertices, weights, at_least=False, force=0.0, force1=None):
+        """Rows in bulk: direction (R,2), rhs (R,), softness (R,), vertices/weights (R,T).
+
+        ``at_least``: one-sided rows (value >= rhs); ``force``, ``force1``: (R,) starting forces
+        of step 2 and step 1 (``force1`` defaults to ``force``).
+        """
+        direction = np.asarray(direction, dtype=np.float64).reshape(-1, 2)
+        r = len(direction)
+        if r == 0:
+            return np.zeros(0, np.int64)
+        idx = self.count + np.arange(r)
+        self.direction.append(direction)
+        self.rhs.append(np.broadcast_to(np.asarray(rhs, dtype=np.float64), (r,)))
+        self.softness.append(np.broadcast_to(np.asarray(softness, dtype=np.float64), (r,)))
+        self.kind.append(np.full(r, 1 if at_least else 0, dtype=np.int32))
+        self.force.append(np.broadcast_to(np.asarray(force, dtype=np.float64), (r,)))
+        self.force1.append(np.broadcast_to(np.asarray(force if force1 is None else force1, dtype=np.float64), (r,)))
+        vertices = np.asarray(vertices).reshape(r, -1)
+        weights = np.asarray(weights, dtype=np.float64).reshape(r, -1)
+        self.term_row.append(np.repeat(idx, vertices.shape[1]))
+        self.term_vertex.append(vertices.ravel())
+        self.term_weight.append(weights.ravel())
+        self.count += r
+        return idx
+
+    def solve(self, solver, tolerance: float = 1e-6, max_sweeps: int = 500):
+        cat = lambda parts, shape, dtype: (np.concatenate(parts) if parts else np.zeros(shape)).astype(dtype)  # noqa: E731
+        return solver.solve(cat(self.direction, (0, 2), np.float64).reshape(-1, 2),
+                            cat(self.rhs, 0, np.float64), cat(self.softness, 0, np.float64),
+                            cat(self.term_row, 0, np.int32), cat(self.term_vertex, 0, np.int32),
+                            cat(self.term_weight, 0, np.float64), cat(self.kind, 0, np.int32),
+                            cat(self.force, 0, np.float64), tolerance, max_sweeps,
+                            cat(self.force1, 0, np.float64))
+
+
+class _State:
+    """The problem laid out for the solver: concatenated paths, samples, fixed rows."""
+
+    def __init__(self, problem: Problem, settings: Settings):
+        self.p = problem
+        self.s = settings
+        counts = np.array([len(g) for g in problem.paths], dtype=np.int64)
+        self.starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
+        self.rest = np.concatenate(problem.paths).astype(np.float64) if len(counts) else np.zeros((0, 2))
+        self.rigid = [(int(self.starts[a] + f), int(self.starts[a] + l)) for a, f, l in problem.rigid]
+        self.times = {i: t for i, t in enumerate(problem.frame_times)}
+        idx = list(range(len(problem.names)))
+        self.sampling = collisions.sample(idx, self.times, {i: g for i, g in enumerate(problem.paths)},
+                                          problem.sample_step, problem.span)
+        self.resample = collisions.Resampler(self.sampling, self.starts)
+        pinned = np.zeros(len(self.rest), dtype=bool)
+        for pin in problem.pins:
+            if pin.softness == 0:
+                pinned[self.starts[pin.agent] + pin.frame] = True
+        self.pinned = pinned
+        self.link_holds = self._link_holds()
+
+    def _link_holds(self) -> list[tuple[int, int, int, int, int]]:
+        """(link, a, b, first, last): samples around each hard link that holds its two agents
+        closer than their clearance, over which their input paths stay that close. The pair
+        is not pushed apart there (the artist put them there); elsewhere it is."""
+        p, pos = self.p, self.sampling.positions
+        out = []
+        for i, link in enumerate(p.links):
+            need = p.radius[link.a] + p.radius[link.b] + p.margin
+            if np.linalg.norm(link.offset) >= need or not len(self.sampling.times):
+                continue
+            at = int(np.argmin(np.abs(self.sampling.times - self.times[link.a][link.fa])))
+            close = np.linalg.norm(pos[:, link.a] - pos[:, link.b], axis=1) < need * (1.0 + self.s.overshoot)
+            first, last = at, at
+            while first > 0 and close[first - 1]:
+                first -= 1
+            while last + 1 < len(close) and close[last + 1]:
+                last += 1
+            out.append((i, min(link.a, link.b), max(link.a, link.b), first, last))
+        return out
+
+    def split(self, flat: np.ndarray) -> list[np.ndarray]:
+        return [flat[self.starts[a]:self.starts[a + 1]].copy() for a in range(len(self.starts) - 1)]
+
+    def sample_terms(self, agents: np.ndarray, samples: np.ndarray):
+        """Vertices (N,2) and weights (N,2) of agents' positions at samples (interpolated)."""
+        f = self.sampling.frames[samples, agents]
+        counts = self.starts[agents + 1] - self.starts[agents]
+        f = np.clip(f, 0.0, counts - 1)
+        i0 = np.floor(f).astype(np.int64)
+        i1 = np.minimum(i0 + 1, counts - 1)
+        w1 = f - i0
+        base = self.starts[agents]
+        return np.stack([base + i0, base + i1], axis=1), np.stack([1.0 - w1, w1], axis=1)
+
+    def held(self, a: np.ndarray, b: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """(N,) True where hard constraints hold the pairs (a, b) at samples k: pins hold both
+        agents' points (no push can move them), or a link holds the two closer than their
+        clearance around that moment."""
+        va, wa = self.sample_terms(a, k)
+        vb, wb = self.sample_terms(b, k)
+        out = np.all(self.pinned[va] | (wa == 0), axis=1) & np.all(self.pinned[vb] | (wb == 0), axis=1)
+        lo, hi = np.minimum(a, b), np.maximum(a, b)
+        for _, la, lb, first, last in self.link_holds:
+            out |= (lo == la) & (hi == lb) & (k >= first) & (k <= last)
+        return out
+
+    def fixed_rows(self, rows: _Rows, forces: np.ndarray | None = None, forces1: np.ndarray | None = None) -> None:
+        """Artist pins and links, two rows each: every solve carries them (``forces``,
+        ``forces1``: the last solve's step-2 and step-1 forces, to start from)."""
+        count = len(self.p.pins) + len(self.p.links)
+
+        def start(f):
+            return np.zeros((count, 2)) if f is None or len(f) != 2 * count else f.reshape(-1, 2)
+
+        f2, f1 = start(forces), start(forces1)
+        for i, pin in enumerate(self.p.pins):
+            v = self.starts[pin.agent] + pin.frame
+            rows.add(np.eye(2), pin.position, pin.softness, [[v], [v]], [[1.0], [1.0]], force=f2[i], force1=f1[i])
+        for i, link in enumerate(self.p.links, len(self.p.pins)):
+            va, vb = self.starts[link.a] + link.fa, self.starts[link.b] + link.fb
+            rows.add(np.eye(2), link.offset, 0.0, [[va, vb], [va, vb]], [[1.0, -1.0], [1.0, -1.0]],
+                     force=f2[i], force1=f1[i])
+
+    def detect(self, flat: np.ndarray, extra: float = 0.0, watch: float | None = None) -> collisions.Collisions:
+        """Collisions at the paths ``flat`` closer than margin + ``extra``; with ``watch``, also
+        the near misses closer than margin + ``watch`` (as ``near``), in the same pass."""
+        self.resample(flat)
+        active = np.ones(len(self.p.names), dtype=bool) if self.p.collide_agents else np.zeros(len(self.p.names), bool)
+        return collisions.detect(self.sampling, self.p.radius, self.p.height, self.p.margin + extra,
+                                 report_distance=self.p.margin + extra, active=active,
+                                 watch=None if watch is None else self.p.margin + watch)
+
+    def region_hits(self, flat: np.ndarray, extra: float = 0.0):
+        """Per region: (vertices, agent of each, push) of frames within clearance + extra."""
+        out = []
+        for k, region in enumerate(self.p.regions):
+            verts = [np.arange(self.starts[a], self.starts[a + 1]) for a in region.agents]
+            if not verts:
+                out.append(None)
+                continue
+            owner = np.concatenate([np.full(len(v), i) for i, v in enumerate(verts)])
+            verts = np.concatenate(verts)
+            clearance = region.clearance[owner] + extra
+            push = _solver.push_out_of_region(region.footprint, np.ascontiguousarray(flat[verts]), clearance)
+            out.append((verts[push["index"]], region.agents[owner[push["index"]]], push))
+        return out
+
+
+def _unit(d: np.ndarray, fallback: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(d, axis=1)
+    ok = n > 1e-12
+    out = np.where(ok[:, None], d / np.where(ok, n, 1.0)[:, None], fallback)
+    return out
+
+
+def _fallback_normals(state: _State, a: np.ndarray, b: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """Where two points coincide: sideways to their relative motion (or along x)."""
+    pos = state.sampling.positions
+    k1 = np.minimum(k + 1, len(state.sampling.times) - 1)
+    k0 = np.maximum(k - 1, 0)
+    rel = (pos[k1, a] - pos[k0, a]) - (pos[k1, b] - pos[k0, b])
+    side = np.stack([-rel[:, 1], rel[:, 0]], axis=1)
+    n = np.linalg.norm(side, axis=1)
+    return np.where((n > 1e-12)[:, None], side / np.where(n > 1e-12, n, 1.0)[:, None], [[1.0, 0.0]])
+
+
+def _separation_normals(state: _State, a: np.ndarray, b: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """Directions pushing agent a away from agent b at samples k, one pass side per pair.
+
+    Two agents passing each other must keep to one side over the whole encounter: the
+    line between their points swings from side to side with the sway of a walk, and
+    following it would push them alternately left and right. The side (of b as seen
+    along their relative motion) is voted once per pair, by the samples where they are
+    closest, and where they overlap they are pushed sideways to their relative motion, on
+    that side (a conservative linearisation of the distance). The vote is taken again at each
+    iteration (among the samples that still overlap), so a pair that other pushes moved to
+    the other side is not pulled back through.
+    """
+    pos = state.sampling.positions
+    rel = pos[k, a] - pos[k, b]
+    k1 = np.minimum(k + 1, len(state.sampling.times) - 1)
+    k0 = np.maximum(k - 1, 0)
+    motion = (pos[k1, a] - pos[k0, a]) - (pos[k1, b] - pos[k0, b])
+    speed = np.linalg.norm(motion, axis=1)
+    # Passing, not walking together: over two samples they move by a fair part of a clearance.
+    moving = speed > 0.05 * _clearance(state, a, b)
+    t = np.where(moving[:, None], motion / np.where(moving, speed, 1.0)[:, None], [[1.0, 0.0]])
+    perp = np.stack([-t[:, 1], t[:, 0]], axis=1)
+    along, across = np.sum(rel * t, axis=1), np.sum(rel * perp, axis=1)
+    pair = a * np.int64(len(state.p.names)) + b
+    close = moving & (np.linalg.norm(rel, axis=1) < _clearance(state, a, b))
+    uniq, inverse = np.unique(pair, return_inverse=True)
+    vote = np.bincount(inverse, weights=np.where(close, across, 0.0), minlength=len(uniq))
+    side = np.where(vote >= 0, 1.0, -1.0)[inverse]
+    # Where they overlap they pass side by side on the voted side; the line between the
+    # points would turn along their motion before and after the crossing and hold one
+    # back on each side of it. Apart, each sample keeps its own direction.
+    d = np.where(close[:, None], side[:, None] * perp, along[:, None] * t + across[:, None] * perp)
+    return _unit(d, np.where(moving[:, None], side[:, None] * perp, [[1.0, 0.0]]))
+
+
+def _clearance(state: _State, a, b) -> np.ndarray:
+    return state.p.radius[a] + state.p.radius[b] + state.p.margin
+
+
+def _iteration(state: _State, found: collisions.Collisions, hits) -> Iteration:
+    return Iteration(collisions=len(found), colliding_samples=int(found.colliding_samples),
+                     region_samples=int(sum(len(h[0]) for h in hits if h is not None)),
+                     deepest=float(max([found.depth.max(initial=0.0)] +
+                                       [h[2]["depth"].max(initial=0.0) for h in hits if h is not None])))
+
+
+def _expand(found: collisions.Collisions, spread, colliding_depth: float = 0.0):
+    """(a, b, sample) to constrain for each interval: its deepest sample, and, for intervals
+    deeper than ``colliding_depth``, every spread-th sample and the last one too
+    (``spread``: one for all intervals, or (M,) one per interval)."""
+    if len(found) == 0:
+        z = np.zeros(0, np.int64)
+        return z, z, z
+    deep = found.depth > colliding_depth
+    spread = np.broadcast_to(np.asarray(spread, dtype=np.int64), (len(found),))
+    length = np.where(deep, (found.last - found.first) // spread + 2, 0)
+    rep = np.repeat(np.arange(len(found)), length)
+    offset = np.arange(int(length.sum())) - np.repeat(np.cumsum(length) - length, length)
+    k = np.minimum(found.first[rep] + offset * spread[rep], found.last[rep])
+    a = np.concatenate([found.agent_a, found.agent_a[rep]])
+    b = np.concatenate([found.agent_b, found.agent_b[rep]])
+    k = np.concatenate([found.deepest, k])
+    return a.astype(np.int64), b.astype(np.int64), k.astype(np.int64)
+
+
+def resolve(problem: Problem, settings: Settings | None = None, progress=None) -> Outcome:
+    """Pushes the agents' paths apart and out of the regions; see the module doc."""
+    settings = settings or Settings()
+    if settings.strategy not in STRATEGIES:
+        raise ValueError(f"unknown collision strategy '{settings.strategy}' (use {' or '.join(STRATEGIES)})")
+    t0 = time.perf_counter()
+    fixed = np.zeros(len(problem.names), bool) if problem.fixed_timing is None else np.asarray(problem.fixed_timing)
+    waits = _waits(problem, settings, fixed)
+    if waits.delay.any():
+        problem = dataclasses.replace(problem, frame_times=waits.frame_times, span=waits.span)
+    state = _State(problem, settings)
+    watch = settings.buffer_m / settings.meters_per_unit if settings.strategy == "relinearize" else None
+    run = _Run(state, progress, watch)
+    flat, angles = (_relinearize if settings.strategy == "relinearize" else _accumulate)(state, run)
+    found, hits = run.found, run.hits
+    region_left = []
+    for r, h in enumerate(hits):
+        if h is None:
+            continue
+        verts, agents, push = h
+        for v, a, d in zip(verts, agents, push["depth"]):
+            region_left.append((r, int(a), int(v - state.starts[a]), float(d)))
+    moved = np.array([not np.array_equal(flat[state.starts[a]:state.starts[a + 1]], problem.paths[a])
+                      for a in range(len(problem.names))], dtype=bool)
+    return Outcome(paths=state.split(flat), rigid_angles=angles, iterations=run.iterations,
+                   sampling=state.sampling, remaining=found, region_left=region_left,
+                   blocked=_blocked(state, found), link_held=_link_held(state), moved=moved, solves=run.solves, stalled=run.stalled,
+                   frame_times=waits.frame_times, delays=waits.delay,
+                   seconds=time.perf_counter() - t0, timing=run.timing(time.perf_counter() - t0), work=dict(run.work))
+
+
+class _Run:
+    """What both strategies share: the detection before each solve, its record, progress."""
+
+    def __init__(self, state: _State, progress, watch: float | None = None):
+        self.state = state
+        self.watch = watch              # near misses gathered by each detection (stage units)
+        self.iterations: list[Iteration] = []
+        self.solves = 0
+        self.seconds = {"factor": 0.0, "detect": 0.0, "gather": 0.0, "blocks": 0.0, "sweeps": 0.0, "responses": 0.0}
+        self.work = {"rows": 0, "updates": 0, "inverseColumns": 0}
+        self.found = None
+        self.hits = None
+        self.best = (np.inf, np.inf)    # fewest collisions and region frames, smallest deepest overlap
+        self.since_best = 0             # iterations since either improved
+        self.stalled = False
+        self.pending = False            # rows were added that the next solve must meet
+        self.task = progress.task("collision avoidance", state.s.max_iterations, "iterations") if progress else None
+
+    def observe(self, flat: np.ndarray, it: int) -> bool:
+        """Detects at the current paths; True when there is nothing (more) to solve."""
+        state = self.state
+        t = time.perf_counter()
+        self.found = state.detect(flat, watch=self.watch)
+        self.hits = state.region_hits(flat)
+        self.seconds["detect"] += time.perf_counter() - t
+        record = _iteration(state, self.found, self.hits)
+        self.iterations.append(record)
+        left = record.collisions + record.region_samples
+        # Constraints that cannot all hold (a wall closer than a capsule, a crowd packed
+        # tighter than its clearances) trade overlap for overlap forever: stop when the
+        # iterations no longer make progress, whatever max_iterations says.
+        if left < self.best[0] or record.deepest < self.best[1] * (1.0 - 1e-3):
+            self.since_best = 0
+        else:
+            self.since_best += 1
+        self.best = (min(self.best[0], left), min(self.best[1], record.deepest))
+        self.stalled = left > 0 and self.since_best >= state.s.patience and it < state.s.max_iterations
+        last = (left == 0 and not self.pending) or it == state.s.max_iterations or self.stalled
+        if self.task is not None:
+            left = report.describe_left(record.collisions, record.region_samples)
+            if last:
+                self.task.done(left, count=it)
+            else:
+                self.task.update(it, left)
+        return last
+
+    def timing(self, total: float) -> dict:
+        out = {k: round(v, 4) for k, v in self.seconds.items()}
+        out["rows"] = round(total - sum(self.seconds.values()), 4)
+        return out
+
+    def factor(self, *args):
+        """A SeparationSolver for (rest, starts, rigid, anchor_weight, still_extent, threads), timed."""
+        t = time.perf_counter()
+        solver = _solver.SeparationSolver(*args)
+        self.seconds["factor"] += time.perf_counter() - t
+        return solver
+
+    def solved(self, rows: "_Rows", out: dict) -> None:
+        for name, sec in zip(("blocks", "sweeps", "responses", "gather"), out["seconds"]):
+            self.seconds[name] += float(sec)
+        self.work["updates"] += int(out["updates"])
+        self.work["inverseColumns"] += int(out["inverse_columns"])
+        self.work["rows"] += rows.count
+        self.solves += 1
+        self.iterations[-1].rows = rows.count
+        self.iterations[-1].solves = 1
+
+
+def _accumulate(state: _State, run: _Run):
+    """The deliverable's scheme: each iteration re-solves from the previous result."""
+    p, s = state.p, state.s
+    flat = state.rest.copy()
+    angles = np.zeros(len(p.rigid))
+    for it in range(s.max_iterations + 1):
+        if run.observe(flat, it):
+            break
+        found = run.found
+        solver = run.factor(flat, state.starts, state.rigid, s.anchor_weight, _still(s), 0)
+        rows = _Rows()
+        state.fixed_rows(rows)
+        # A mesh-based constraint per maximal collision: the two colliding points joined by
+        # an edge of the clearance's length, along the line between them.
+        a, b, k = (found.agent_a.astype(np.int64), found.agent_b.astype(np.int64),
+                   found.deepest.astype(np.int64))
+        pa, pb = state.sampling.positions[k, a], state.sampling.positions[k, b]
+        offset = _unit(pa - pb, _fallback_normals(state, a, b, k)) * \
+            (_clearance(state, a, b) * (1.0 + s.overshoot))[:, None]
+        va, wa = state.sample_terms(a, k)
+        vb, wb = state.sample_terms(b, k)
+        verts, weights = np.concatenate([va, vb], axis=1), np.concatenate([wa, -wb], axis=1)
+        for axis in (0, 1):
+            rows.add(np.eye(2)[[axis] * len(a)], offset[:, axis], SEPARATION_SOFTNESS, verts, weights)
+        # Regions: each frame inside is pinned where it is pushed to.
+        for h in run.hits:
+            if h is None or len(h[0]) == 0:
+                continue
+            verts_r, agents_r, push = h
+            target = push["target"] + push["normal"] * (s.overshoot * p.radius[agents_r])[:, None]
+            for axis in (0, 1):
+                rows.add(np.eye(2)[[axis] * len(verts_r)], target[:, axis], SEPARATION_SOFTNESS,
+                         verts_r[:, None], np.ones((len(verts_r), 1)))
+        out = rows.solve(solver)
+        run.solved(rows, out)
+        flat = out["positions"]
+        angles = angles + out["rigid_angles"]
+    return flat, angles
+
+
+def _still(settings: Settings) -> float:
+    return 1e-5 / settings.meters_per_unit
+
+
+class _Candidates:
+    """Separation constraints of relinearize, one per (agent a, agent b, sample), kept
+    sorted by key (sample-major, so Gauss-Seidel sweeps them in time order)."""
+
+    def __init__(self, agents: int):
+        self.n = np.int64(max(agents, 1))
+        self.keys = np.zeros(0, np.int64)
+        self.force = np.zeros(0)          # last solve's step-2 force (warm start)
+        self.force1 = np.zeros(0)         # and its step-1 force
+        self.blocked = np.zeros(0, bool)  # hard constraints hold this pair together
+        self.normal = np.zeros((0, 2))    # direction of the last solve's row (NaN: not solved yet)
+        self.pair_keys = np.zeros(0, np.int64)   # pairs that resisted (a * n + b), sorted
+        self.pair_count = np.zeros(0, np.int64)  # how many times each did
+
+    def split(self):
+        n = self.n
+        return (self.keys // n) % n, self.keys % n, self.keys // (n * n)
+
+    def prune(self, state: _State, reach: float) -> None:
+        """Forgets watched samples that do not push and whose agents are now far apart."""
+        a, b, k = self.split()
+        gap = np.linalg.norm(state.sampling.positions[k, a] - state.sampling.positions[k, b], axis=1) \
+            - _clearance(state, a, b)
+        keep = (self.force > 0.0) | (self.force1 > 0.0) | self.blocked | (gap < reach)
+        self.keys, self.force, self.force1, self.blocked, self.normal = (
+            self.keys[keep], self.force[keep], self.force1[keep], self.blocked[keep], self.normal[keep])
+
+    def resist(self, found: collisions.Collisions) -> None:
+        """Counts, per pair, the detections that still found it overlapping although it had
+        rows already (``found``: the collisions at the latest result)."""
+        if len(found) == 0:
+            return
+        pairs = np.unique(found.agent_a.astype(np.int64) * self.n + found.agent_b)
+        ca, cb, _ = self.split()
+        held = pairs[np.isin(pairs, ca * self.n + cb)]
+        self.pair_keys, self.pair_count = _count_into(self.pair_keys, self.pair_count, held)
+
+    def resistance(self, a, b) -> np.ndarray:
+        """(N,) how many times the pairs (a, b) resisted."""
+        keys = np.asarray(a, np.int64) * self.n + np.asarray(b, np.int64)
+        if len(self.pair_keys) == 0:
+            return np.zeros(len(keys), np.int64)
+        at = np.minimum(np.searchsorted(self.pair_keys, keys), len(self.pair_keys) - 1)
+        return np.where(self.pair_keys[at] == keys, self.pair_count[at], 0)
+
+    def resisting(self, found: collisions.Collisions) -> np.ndarray:
+        """(M,) True for the intervals of pairs that resisted."""
+        return self.resistance(found.agent_a, found.agent_b) > 0
+
+    def add(self, a, b, k) -> None:
+        keys = np.unique((k * self.n + a) * self.n + b)
+        new = keys[~np.isin(keys, self.keys)]
+        if len(new) == 0:
+            return
+        merged = np.concatenate([self.keys, new])
+        order = np.argsort(merged, kind="stable")
+        self.keys = merged[order]
+        self.force = np.concatenate([self.force, np.zeros(len(new))])[order]
+        self.force1 = np.concatenate([self.force1, np.zeros(len(new))])[order]
+        self.blocked = np.concatenate([self.blocked, np.zeros(len(new), bool)])[order]
+        self.normal = np.concatenate([self.normal, np.full((len(new), 2), np.nan)])[order]
+
+    def linearise(self, fresh: np.ndarray, keep_cos: float) -> np.ndarray:
+        """The rows' directions for the next solve, given the directions at the latest result.
+
+        Any unit direction makes a conservative separation row (the distance is at least
+        its projection), so a row keeps the direction it was solved with while that is
+        within the angle whose cosine is ``keep_cos`` of the fresh one: rows sent again
+        unchanged cost the solver nothing to set up, and their forces are warm starts as
+        they are. A row whose direction turns past a right angle starts again from zero force.
+        """
+        cos = np.sum(self.normal * fresh, axis=1)
+        turn = ~(cos >= keep_cos)
+        flip = turn & ~(cos > 0.0)
+        self.force[flip] = 0.0
+        self.force1[flip] = 0.0
+        self.normal[turn] = fresh[turn]
+        return self.normal
+
+
+def _count_into(keys: np.ndarray, counts: np.ndarray, new: np.ndarray):
+    """Sorted keys and counts, with one more for each of the unique keys ``new``."""
+    merged = np.concatenate([keys, new])
+    uniq, inverse = np.unique(merged, return_inverse=True)
+    total = np.bincount(inverse, weights=np.concatenate([counts, np.ones(len(new))]), minlength=len(uniq))
+    return uniq, total.astype(np.int64)
+
+
+class _RegionCandidates:
+    """Frames watched near each avoid region: one-sided rows, re-linearised each iteration."""
+
+    def __init__(self):
+        self.region = np.zeros(0, np.int64)
+        self.vertex = np.zeros(0, np.int64)
+        self.clearance = np.zeros(0)
+        self.force = np.zeros(0)
+        self.force1 = np.zeros(0)
+
+    def add(self, region: int, vertices: np.ndarray, clearance: np.ndarray) -> None:
+        known = self.vertex[self.region == region]
+        new = ~np.isin(vertices, known)
+        self.region = np.concatenate([self.region, np.full(int(new.sum()), region)])
+        self.vertex = np.concatenate([self.vertex, vertices[new]])
+        self.clearance = np.concatenate([self.clearance, clearance[new]])
+        self.force = np.concatenate([self.force, np.zeros(int(new.sum()))])
+        self.force1 = np.concatenate([self.force1, np.zeros(int(new.sum()))])
+
+    def linearise(self, state: _State, flat: np.ndarray):
+        """(normal (N,2), rhs (N,)) of one-sided rows n . x >= rhs keeping frames out.
+
+        A frame outside the region grown by its clearance keeps to the tangent line at its
+        nearest point. A frame inside goes round the region: sideways to the agent's
+        motion, on the side of the region's centre its path already passes, to where that
+        sideways line leaves the grown region (the tangent line there). Pushing each frame
+        to its nearest boundary point would instead hold a walker back before the middle
+        of the region and throw it forward after it.
+        """
+        normal = np.zeros((len(self.vertex), 2))
+        rhs = np.zeros(len(self.vertex))
+        owner = np.searchsorted(state.starts, self.vertex, side="right") - 1
+        for r, region in enumerate(state.p.regions):
+            sel = np.flatnonzero(self.region == r)
+            if len(sel) == 0:
+                continue
+            v, c = self.vertex[sel], self.clearance[sel]
+            pts = flat[v]
+            near = _solver.nearest_on_region(region.footprint, np.ascontiguousarray(pts))
+            nrm = near["normal"].copy()
+            target = near["boundary"] + nrm * c[:, None]
+            inside = near["distance"] < c
+            if inside.any():
+                t = _path_tangents(state, flat, v[inside])
+                moving = np.linalg.norm(t, axis=1) > 1e-12
+                left = np.stack([-t[:, 1], t[:, 0]], axis=1)
+                centre = _centre(region.footprint)
+                cross = np.sum(left * (centre - pts[inside]), axis=1)   # > 0: centre on the left
+                agents = owner[sel][inside]
+                uniq, inv = np.unique(agents, return_inverse=True)
+                side = np.where(np.bincount(inv, weights=cross, minlength=len(uniq)) > 0, -1.0, 1.0)[inv]
+                way = side[:, None] * left
+                exit_pt = _exit(region.footprint, pts[inside], way, c[inside])
+                exit_near = _solver.nearest_on_region(region.footprint, np.ascontiguousarray(exit_pt))
+                go = moving & (np.sum(exit_near["normal"] * way, axis=1) > 0)
+                idx = np.flatnonzero(inside)[go]
+                nrm[idx] = exit_near["normal"][go]
+                target[idx] = exit_near["boundary"][go] + nrm[idx] * c[inside][go, None]
+            normal[sel] = nrm
+            rhs[sel] = np.sum(nrm * target, axis=1)
+        return normal, rhs
+
+
+def _path_tangents(state: _State, flat: np.ndarray, vertices: np.ndarray) -> np.ndarray:
+    """(N,2) central-difference tangents of the paths at global vertices (one-sided at ends)."""
+    owner = np.searchsorted(state.starts, vertices, side="right") - 1
+    lo, hi = state.starts[owner], state.starts[owner + 1] - 1
+    return flat[np.minimum(vertices + 1, hi)] - flat[np.maximum(vertices - 1, lo)]
+
+
+def _centre(footprint) -> np.ndarray:
+    return np.asarray(footprint.center) if footprint.is_circle else np.asarray(footprint.polygon).mean(axis=0)
+
+
+def _exit(footprint, points: np.ndarray, way: np.ndarray, clearance: np.ndarray) -> np.ndarray:
+    """Where rays from points along unit directions leave a convex footprint grown by clearance."""
+    if footprint.is_circle:
+        d = points - np.asarray(footprint.center)
+        reach = footprint.radius + clearance
+        b = np.sum(d * way, axis=1)
+        s = -b + np.sqrt(np.maximum(b * b - np.sum(d * d, axis=1) + reach * reach, 0.0))
+        return points + s[:, None] * way
+    poly = np.asarray(footprint.polygon)
+    hi = np.full(len(points), 2.0 * np.ptp(poly, axis=0).max() + 2.0 * clearance.max(initial=0.0)
+                 + np.linalg.norm(points - poly.mean(axis=0), axis=1).max(initial=0.0))
+    lo = np.zeros(len(points))
+    for _ in range(48):   # the distance grows monotonically along a ray leaving a convex region
+        mid = 0.5 * (lo + hi)
+        d = _solver.region_signed_distance(footprint, np.ascontiguousarray(points + mid[:, None] * way))
+        out = d >= clearance
+        hi = np.where(out, mid, hi)
+        lo = np.where(out, lo, mid)
+    return points + hi[:, None] * way
+
+
+class _Forward:
+    """One-sided rows that keep walkers going their way: for a chord of ``chord_s`` seconds
+    of an agent's path where the source moves faster than ``moving_m_s``, the edited chord's
+    projection on the source chord's direction stays at least ``keep`` times the source
+    chord's length (a push never sends a walker back the way it came, nor across its way).
+    Only the chords an iterate broke are rows, kept from then on."""
+
+    def __init__(self, state: _State, keep: float = 0.5, chord_s: float = 0.25, moving_m_s: float = 0.2):
+        s, p = state.s, state.p
+        self.keep = keep
+        firsts, seconds, dirs, lengths = [], [], [], []
+        for a in range(len(p.names)):
+            lo, hi = int(state.starts[a]), int(state.starts[a + 1])
+            if hi - lo < 2:
+                continue
+            dt = float(np.median(np.diff(p.frame_times[a]))) / s.time_codes_per_second   # seconds per frame
+            h = max(1, int(round(chord_s / max(dt, 1e-9))))
+            if hi - lo <= h:
+                continue
+            v = np.arange(lo, hi - h)
+            c = state.rest[v + h] - state.rest[v]
+            n = np.linalg.norm(c, axis=1)
+            moving = n > moving_m_s / s.meters_per_unit * h * dt
+            firsts.append(v[moving])
+            seconds.append(v[moving] + h)
+            dirs.append(c[moving] / n[moving, None])
+            lengths.append(n[moving])
+        cat = lambda parts, shape: np.concatenate(parts) if parts else np.zeros(shape)  # noqa: E731
+        self.v, self.u = cat(firsts, 0).astype(np.int64), cat(seconds, 0).astype(np.int64)
+        self.d, self.length = cat(dirs, (0, 2)), cat(lengths, 0)
+        self.on = np.zeros(len(self.v), bool)
+        self.force = np.zeros(len(self.v))
+        self.force1 = np.zeros(len(self.v))
+
+    def watch(self, flat: np.ndarray) -> int:
+        """Turns on the rows of the chords ``flat`` breaks; returns how many were new."""
+        proj = np.sum((flat[self.u] - flat[self.v]) * self.d, axis=1)
+        fresh = ~self.on & (proj < self.keep * self.length)
+        self.on |= fresh
+        return int(fresh.sum())
+
+    def add(self, rows: "_Rows") -> np.ndarray:
+        on = np.flatnonzero(self.on)
+        return rows.add(self.d[on], self.keep * self.length[on], SEPARATION_SOFTNESS,
+                        np.stack([self.u[on], self.v[on]], axis=1), np.tile([1.0, -1.0], (len(on), 1)),
+                        at_least=True, force=self.force[on], force1=self.force1[on])
+
+    def solved(self, force: np.ndarray, force1: np.ndarray) -> None:
+        on = np.flatnonzero(self.on)
+        self.force[on], self.force1[on] = force, force1
+
+
+def _relinearize(state: _State, run: _Run):
+    p, s = state.p, state.s
+    solver = run.factor(state.rest, state.starts, state.rigid, s.anchor_weight, _still(s), 0)
+    flat = state.rest.copy()
+    angles = np.zeros(len(p.rigid))
+    cands = _Candidates(len(p.names))
+    watched = _RegionCandidates()
+    buffer = s.buffer_m / s.meters_per_unit
+    fixed_force, fixed_force1 = np.zeros(0), np.zeros(0)
+    forward = _Forward(state, s.forward_keep if s.forward_keep is not None else -np.inf)
+    for it in range(s.max_iterations + 1):
+        # A result that sends someone back the way it came is solved again, with the chords
+        # it broke held, even when nothing collides any more.
+        run.pending = forward.watch(flat) > 0
+        if run.observe(flat, it):
+            break
+        if it > 0 and _only_blocked(cands, run.found) and run.iterations[-1].region_samples == 0 \
+                and not run.pending:
+            break
+        if it == s.stiffen_after:
+            # Overlaps that outlast the first iterations are knots of many pushes; gentle
+            # detours that reach far make them spread. Stiffer anchors keep the last pushes
+            # local, so they converge.
+            solver = run.factor(state.rest, state.starts, state.rigid, s.anchor_weight * s.stiffen,
+                                _still(s), 0)
+        # Watch every near miss: each becomes a one-sided row that pushes only when needed.
+        if p.collide_agents:
+            # A pair still overlapping where it was already held apart resists: it is held at
+            # every sample of its intervals from now on, and a little further apart each time.
+            near = run.found.near
+            cands.resist(run.found)
+            cands.add(*_expand(near, np.where(cands.resisting(near), 1, max(1, s.spread)), buffer))
+            cands.prune(state, 2.0 * buffer)
+        for r, h in enumerate(state.region_hits(flat, buffer)):
+            if h is not None and len(h[0]):
+                watched.add(r, h[0], p.regions[r].clearance[np.searchsorted(p.regions[r].agents, h[1])])
+        # Linearise every kept constraint at the current result.
+        ca, cb, ck = cands.split()
+        cands.blocked = state.held(ca, cb, ck)
+        need = _clearance(state, ca, cb)
+        normal = cands.linearise(_separation_normals(state, ca, cb, ck), np.cos(np.radians(s.keep_degrees)))
+        va, wa = state.sample_terms(ca, ck)
+        vb, wb = state.sample_terms(cb, ck)
+        rows = _Rows()
+        state.fixed_rows(rows, fixed_force, fixed_force1)
+        fixed = rows.count
+        on = ~cands.blocked
+        aim = need * (1.0 + s.overshoot * (1.0 + cands.resistance(ca, cb)))
+        sep = rows.add(normal[on], aim[on], SEPARATION_SOFTNESS,
+                       np.concatenate([va, vb], axis=1)[on], np.concatenate([wa, -wb], axis=1)[on],
+                       at_least=True, force=cands.force[on], force1=cands.force1[on])
+        rnormal, rrhs = watched.linearise(state, flat)
+        reg = rows.add(rnormal, rrhs + watched.clearance * s.overshoot, SEPARATION_SOFTNESS,
+                       watched.vertex[:, None], np.ones((len(watched.vertex), 1)), at_least=True,
+                       force=watched.force, force1=watched.force1)
+        ahead = forward.add(rows)
+        # Small problems afford a converged Gauss-Seidel; big ones carry it on from iteration
+        # to iteration (warm start) within a budget of row updates.
+        sweeps = int(np.clip(s.sweep_budget / max(rows.count, 1), s.sweeps, 10 * s.sweeps))
+        out = rows.solve(solver, tolerance=s.tolerance * float(np.min(need, initial=1.0)), max_sweeps=sweeps)
+        run.solved(rows, out)
+        force, force1 = out["forces"], out["shape_forces"]
+        fixed_force, fixed_force1 = force[:fixed], force1[:fixed]
+        cands.force[on], cands.force1[on] = force[sep], force1[sep]
+        watched.force, watched.force1 = force[reg], force1[reg]
+        forward.solved(force[ahead], force1[ahead])
+        flat = out["positions"]
+        angles = out["rigid_angles"]
+    return flat, angles
+
+
+def _only_blocked(cands: _Candidates, found) -> bool:
+    """True when every collision left involves a pair hard constraints hold together."""
+    if len(found) == 0 or not cands.blocked.any():
+        return False
+    ca, cb, _ = cands.split()
+    held = set(zip(ca[cands.blocked].tolist(), cb[cands.blocked].tolist()))
+    return all((int(a), int(b)) in held for a, b in zip(found.agent_a, found.agent_b))
+
+
+def _blocked(state: _State, found: collisions.Collisions) -> list[tuple[int, int, float]]:
+    """Overlaps left where hard constraints hold both agents: (agent a, agent b, shot time)."""
+    a, b, k = (found.agent_a.astype(np.int64), found.agent_b.astype(np.int64), found.deepest.astype(np.int64))
+    held = state.held(a, b, k)
+    return [(int(x), int(y), float(state.sampling.times[z])) for x, y, z in zip(a[held], b[held], k[held])]
+
+
+def _link_held(state: _State) -> list[tuple[str, int, int, float, float, float]]:
+    """(link name, agent a, agent b, first and last shot time, distance the link holds)."""
+    t = state.sampling.times
+    return [(state.p.links[i].name, a, b, float(t[first]), float(t[last]), float(np.linalg.norm(state.p.links[i].offset)))
+            for i, a, b, first, last in state.link_holds]
+
+
+# ---- waiting: delays through the time maps ---------------------------------------------------
+
+#: Cosine of the angle between two walkers' directions beyond which they pass head-on or
+#: overtake: waiting cannot part them, only a step aside can.
+PASSING_COS = 0.7
+#: Slowest fraction of the source pace a walker slows to while it takes up a delay.
+SLOWEST_PACE = 0.5
+
+
+def smooth_delay(times: np.ndarray, start: float, end: float, delay: float) -> np.ndarray:
+    """(F,) the time map ``times`` with ``delay`` time codes taken up between shot times
+    ``start`` and ``end`` (a smoothstep: no interval shrinks, every one after ``end`` is
+    unchanged, the pace is continuous)."""
+    u = np.clip((np.asarray(times) - start) / max(end - start, 1e-12), 0.0, 1.0)
+    return np.asarray(times) + delay * u * u * (3.0 - 2.0 * u)
+
+
+@dataclass
+class _Boxes:
+    """Ground bounding boxes of every agent over blocks of ``size`` samples."""
+    low: np.ndarray               # (B,A,2)
+    high: np.ndarray              # (B,A,2)
+    size: int
+
+    @classmethod
+    def of(cls, positions: np.ndarray, size: int) -> "_Boxes":
+        k = len(positions)
+        blocks = -(-k // size)
+        padded = np.concatenate([positions, np.repeat(positions[-1:], blocks * size - k, axis=0)])
+        shaped = padded.reshape(blocks, size, *positions.shape[1:])
+        return cls(shaped.min(axis=1), shaped.max(axis=1), size)
+
+
+def _least_delay(problem: Problem, settings: Settings, paths, times: np.ndarray, w: int, o: int,
+                 pos: np.ndarray, st: np.ndarray, boxes: _Boxes, first: int, last: int, room: float,
+                 step: float, guess: float):
+    """(time map, delay) of the least delay of agent w, near ``guess`` (time codes), that
+    parts it from agent o over their encounter (samples first..last at the sampling
+    ``pos``, ``st``) and meets no agent it did not meet already, but for those walking its
+    way; None when no delay up to ``room`` does."""
+    fps = settings.time_codes_per_second
+    # The encounter: from a second before the overlap to a second past it, plus the room.
+    lo = max(first - int(np.ceil(fps / problem.sample_step)), 0)
+    hi = min(last + int(np.ceil((room + fps) / problem.sample_step)), len(st) - 1)
+    window = st[lo:hi + 1]
+    # Whatever the delay, w walks the part of its path it walked from `room` before the
+    # window to its end: only the agents whose blocks come near that part can meet it.
+    reach = pos[max(lo - int(np.ceil(room / problem.sample_step)), 0):hi + 1, w]
+    grow = problem.radius[w] + problem.radius + problem.margin * (1.0 + settings.overshoot)
+    b0, b1 = lo // boxes.size, hi // boxes.size + 1
+    low, high = boxes.low[b0:b1].min(axis=0), boxes.high[b0:b1].max(axis=0)     # (A,2)
+    r_lo, r_hi = reach.min(axis=0), reach.max(axis=0)
+    near = ((low[:, 0] - grow <= r_hi[0]) & (low[:, 1] - grow <= r_hi[1])
+            & (high[:, 0] + grow >= r_lo[0]) & (high[:, 1] + grow >= r_lo[1]))
+    near[w] = False
+    near[o] = True
+    cand = np.flatnonzero(near)
+    at_o = int(np.searchsorted(cand, o))
+    others = pos[lo:hi + 1][:, cand]                                 # (K,N,2)
+    need2 = grow[cand] ** 2
+    frames = np.arange(len(times), dtype=np.float64)
+
+    def overlapped(maps):
+        """(M,N) for each of M time maps of w, which candidates it overlaps in the window."""
+        at = np.stack([np.interp(window, m, frames) for m in maps])   # (M,K) fractional frames
+        pw = collisions.positions_at(paths[w], at.ravel()).reshape(*at.shape, 2)
+        d = others[None] - pw[:, :, None]
+        return (d[..., 0] ** 2 + d[..., 1] ** 2 - need2).min(axis=1) < 0.0
+
+    before = overlapped([times])[0]
+    # Walkers going the same way may be caught up with: they wait in their turn (the next
+    # round), as a queue does. A new encounter with anyone else is not worth a wait.
+    motion = others[-1] - others[0]
+    mine = pos[hi, w] - pos[lo, w]
+    cos = motion @ mine / np.maximum(np.linalg.norm(motion, axis=1) * np.linalg.norm(mine), 1e-300)
+    queue = cos >= PASSING_COS
+    # A smoothstep's steepest slope is 1.5 times its mean: the pace stays at or above
+    # SLOWEST_PACE. It starts after the clip does: a walker never stands frozen in its
+    # first pose waiting for its clip to begin.
+    t_end = st[first] - 0.1 * fps
+    # Delays from a step below the first guess (rounded to steps) up to three steps above it.
+    lowest = max(step, step * (np.ceil(guess / step) - 1.0)) if np.isfinite(guess) else step
+    delays = np.arange(lowest, min(room, lowest + 4.0 * step) + 1e-9, step)
+    t_start = t_end - np.maximum(1.5 * delays / (1.0 / SLOWEST_PACE - 1.0), fps)
+    delays, t_start = delays[t_start >= times[0]], t_start[t_start >= times[0]]
+    if len(delays) == 0:
+        return None
+    trials = [smooth_delay(times, a, t_end, d) for a, d in zip(t_start, delays)]
+    # Delays taken up over overlapping spans add their slowing: the pace stays at or above
+    # SLOWEST_PACE of the source's all the same.
+    source = np.diff(problem.frame_times[w])
+    paced = np.array([np.all(np.diff(m) * SLOWEST_PACE <= source * (1.0 + 1e-9)) for m in trials])
+    after = overlapped(trials)
+    good = np.flatnonzero(paced & ~after[:, at_o] & ~np.any(after & ~before & ~queue, axis=1))
+    if len(good) == 0:
+        return None
+    return trials[good[0]], delays[good[0]]
+
+
+@dataclass
+class _Waits:
+    """Per-agent delays found so far (time codes), and the collision intervals they left."""
+    frame_times: list[np.ndarray]
+    delay: np.ndarray
+    span: tuple[float, float] | None = None
+    rounds: int = 0
+
+
+def _velocities(positions: np.ndarray, k: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    k1 = np.minimum(k + 1, len(positions) - 1)
+    k0 = np.maximum(k - 1, 0)
+    return (positions[k1, cols] - positions[k0, cols]) / np.maximum(k1 - k0, 1)[:, None]
+
+
+def _waits(problem: Problem, settings: Settings, fixed: np.ndarray) -> _Waits:
+    """Delays the walker that arrives later at each crossing until the other has passed.
+
+    Rounds of: detect at the current time maps; for every collision interval of two
+    walkers whose directions cross take the one that reaches the crossing point of their
+    lines later (of two walking the same way, the one behind), unless its timing is
+    ``fixed``; find the least delay (in steps of ``wait_step_s`` from a step below the time
+    the other needs to clear the crossing, at most what it may still add within
+    ``max_wait_s``) after which the pair keeps its clearance over the encounter; take that delay up smoothly before the encounter, slowing to no less than
+    ``SLOWEST_PACE``. Each agent takes up at most one delay per round (its earliest), so
+    delays that create new encounters are seen by the next round. Collisions waiting
+    cannot part (head-on, standing agents, no room) are left to the lateral solve.
+    """
+    fps = settings.time_codes_per_second
+    names = list(range(len(problem.names)))
+    times = [np.asarray(t, dtype=np.float64).copy() for t in problem.frame_times]
+    delay = np.zeros(len(names))
+    budget = settings.max_wait_s * fps
+    out = _Waits(times, delay)
+    if budget <= 0 or not problem.collide_agents or not times:
+        return out
+    step = max(settings.wait_step_s * fps, problem.sample_step)
+    paths = {i: g for i, g in enumerate(problem.paths)}
+    # What plays after the last frame of the shot as it was (a delayed walker's last steps)
+    # is not compared: nobody else walks there then.
+    span = problem.span or (min(float(t[0]) for t in times), max(float(t[-1]) for t in times))
+    out.span = span
+    tried: dict[tuple[int, int], tuple[float, float]] = {}
+    sampling = collisions.sample(names, {i: t for i, t in enumerate(times)}, paths, problem.sample_step, span)
+    for rnd in range(settings.wait_rounds):
+        found = collisions.detect(sampling, problem.radius, problem.height, problem.margin,
+                                  report_distance=problem.margin)
+        out.rounds = rnd
+        if len(found) == 0:
+            break
+        pos, st = sampling.positions, sampling.times
+        a, b, k = (found.agent_a.astype(np.int64), found.agent_b.astype(np.int64), found.deepest.astype(np.int64))
+        va, vb = _velocities(pos, k, a), _velocities(pos, k, b)
+        sa, sb = np.linalg.norm(va, axis=1), np.linalg.norm(vb, axis=1)
+        walking = (sa > 1e-9) & (sb > 1e-9)
+        cos = np.sum(va * vb, axis=1) / np.maximum(sa * sb, 1e-300)
+        crossing = walking & (np.abs(cos) < PASSING_COS)
+        # Time (in samples) each needs to reach the crossing point of the two lines.
+        det = va[:, 0] * (-vb[:, 1]) - va[:, 1] * (-vb[:, 0])
+        rel = pos[k, b] - pos[k, a]
+        safe = np.where(np.abs(det) > 1e-300, det, 1.0)
+        ta = (rel[:, 0] * (-vb[:, 1]) - rel[:, 1] * (-vb[:, 0])) / safe
+        tb = (va[:, 0] * rel[:, 1] - va[:, 1] * rel[:, 0]) / safe
+        later_a = ta >= tb
+        # Walking the same way, the one behind waits for the one ahead (it would otherwise
+        # catch up with a walker that waited in front of it).
+        following = walking & (cos >= PASSING_COS)
+        behind_a = np.sum((pos[k, b] - pos[k, a]) * (va + vb), axis=1) > 0.0
+        later_a = np.where(following, behind_a, later_a)
+        who = np.where(later_a, a, b)
+        other = np.where(later_a, b, a)
+        ok = (crossing | following) & ~fixed[who]
+        # First guess of each delay (time codes): crossing, from when the other leaves the
+        # crossing point by the clearance to when the waiting one would come within it;
+        # following, the time to fall back by the clearance missing between them.
+        need = problem.radius[a] + problem.radius[b] + problem.margin
+        sw, so = np.where(later_a, sa, sb), np.where(later_a, sb, sa)
+        tw, to = np.where(later_a, ta, tb), np.where(later_a, tb, ta)
+        cross_guess = (to + need / np.maximum(so, 1e-300)) - (tw - need / np.maximum(sw, 1e-300))
+        gap = np.linalg.norm(pos[k, a] - pos[k, b], axis=1)
+        guess = np.where(following, (need - gap) / np.maximum(sw, 1e-300), cross_guess) * problem.sample_step
+        taken = set()
+        boxes = _Boxes.of(pos, max(1, int(round(fps / problem.sample_step))))
+        order = np.argsort(found.first, kind="stable")
+        for m in order[ok[order]]:
+            w, o = int(who[m]), int(other[m])
+            # A pair tried before, neither of which has waited since, fails again.
+            if w in taken or budget - delay[w] < step or tried.get((w, o)) == (delay[w], delay[o]):
+                continue
+            tried[(w, o)] = (delay[w], delay[o])
+            found_delay = _least_delay(problem, settings, paths, times[w], w, o, pos, st, boxes,
+                                       int(found.first[m]), int(found.last[m]), budget - delay[w], step,
+                                       float(guess[m]))
+            if found_delay is not None:
+                times[w], delay[w] = found_delay[0], delay[w] + found_delay[1]
+                taken.add(w)
+        if not taken:
+            break
+        for w in taken:   # only the agents that waited move in the sampling
+            sampling.frames[:, w] = collisions.frames_at(times[w], st)
+            sampling.positions[:, w] = collisions.positions_at(paths[w], sampling.frames[:, w])
+    return out

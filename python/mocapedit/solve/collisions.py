@@ -1,0 +1,289 @@
+"""Collisions between agents and with avoid regions: sampling, detection, footprints (numpy).
+
+Agents are vertical capsules standing on their ground trajectory. They are compared at
+common shot times ``t0, t0 + step, ...`` (``MocapSolveSettings.sampleStep``): each
+agent's source frame at a shot time comes from its time map when it has one (the clip
+plays warped), else from its clip's sample times, and its ground position from its
+edited path when it has one. Before its first and after its last frame an agent holds
+its end position, as UsdSkel holds the end poses.
+
+Avoid regions are convex footprints on the ground plane (:class:`mocapedit._solver.GroundRegion`)
+built from a :class:`~mocapedit.model.data.AvoidRegion`: a circle or a box in the region's
+own transform, or the ground footprint of a geometry prim's world bound.
+
+The C++ side (:mod:`mocapedit._solver`) does the detection and the geometry; this module
+gathers the arrays and turns its output into per-collision records.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mocapedit import _solver
+from mocapedit.geometry import ground
+from mocapedit.model.errors import prim_error
+from mocapedit.model.data import AvoidRegion
+
+#: Sides of the polygon standing in for a circle whose transform is not a similarity.
+ELLIPSE_SIDES = 64
+
+
+@dataclass
+class Sampling:
+    """Ground positions of a set of agents at common shot times."""
+    agents: list[str]            # (A,) agent paths, the column order
+    times: np.ndarray            # (K,) shot times
+    frames: np.ndarray           # (K,A) fractional source frame of each agent at each time
+    positions: np.ndarray        # (K,A,2) ground positions, stage units
+
+    def flat(self) -> np.ndarray:
+        """(K*A,2) positions, time-major, as :func:`mocapedit._solver.detect_collisions` takes them."""
+        return np.ascontiguousarray(self.positions.reshape(-1, 2))
+
+
+def sample_times(time_ranges: list[tuple[float, float]], step: float) -> np.ndarray:
+    """(K,) shot times from the earliest start to the latest end, ``step`` apart.
+
+    The last sample is the latest end itself when the range is not a whole number of steps.
+    """
+    if not time_ranges:
+        return np.zeros(0)
+    t0 = min(a for a, _ in time_ranges)
+    t1 = max(b for _, b in time_ranges)
+    count = int(np.floor((t1 - t0) / step + 1e-9)) + 1
+    times = t0 + step * np.arange(count, dtype=np.float64)
+    if times[-1] < t1 - 1e-9:
+        times = np.append(times, t1)
+    return times
+
+
+def frames_at(frame_times: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """Fractional source frames at shot times, for frames played at (F,) increasing times."""
+    return np.interp(times, frame_times, np.arange(len(frame_times), dtype=np.float64))
+
+
+def positions_at(ground_path: np.ndarray, frames: np.ndarray) -> np.ndarray:
+    """(T,2) positions of a (F,2) per-frame ground path at fractional frames (clamped)."""
+    f = np.clip(frames, 0.0, len(ground_path) - 1)
+    i0 = np.floor(f).astype(np.int64)
+    i1 = np.minimum(i0 + 1, len(ground_path) - 1)
+    a = (f - i0)[:, None]
+    return ground_path[i0] * (1.0 - a) + ground_path[i1] * a
+
+
+def sample(agents: list[str], frame_times: dict[str, np.ndarray], paths: dict[str, np.ndarray],
+           step: float, span: tuple[float, float] | None = None) -> Sampling:
+    """Samples agents at common shot times.
+
+    Args:
+      agents: agent paths, the column order of the result.
+      frame_times: per agent, (F,) shot time at which each source frame plays.
+      paths: per agent, (F,2) ground position at each source frame.
+      step: time codes between samples (> 0).
+      span: (first, last) shot times to sample; default: from the earliest first frame to
+        the latest last frame.
+    """
+    ranges = [(float(frame_times[a][0]), float(frame_times[a][-1])) for a in agents]
+    times = sample_times(ranges if span is None else [span], step)
+    frames = np.empty((len(times), len(agents)))
+    positions = np.empty((len(times), len(agents), 2))
+    for i, a in enumerate(agents):
+        frames[:, i] = frames_at(frame_times[a], times)
+        positions[:, i] = positions_at(paths[a], frames[:, i])
+    return Sampling(agents=list(agents), times=times, frames=frames, positions=positions)
+
+
+class Resampler:
+    """Re-reads a sampling's positions from new per-frame paths, concatenated; the frames
+    and weights are worked out once, so a re-read is two gathers.
+
+    Args:
+      sampling: the sampling to update in place (its frames stay)
+      starts: #A+1 first row of each agent (in sampling order) in the paths, then #V
+    """
+
+    def __init__(self, sampling: Sampling, starts: np.ndarray):
+        starts = np.asarray(starts, dtype=np.int64)
+        last = (starts[1:] - starts[:-1] - 1)[None, :]
+        f = np.clip(sampling.frames, 0.0, last)
+        i0 = np.floor(f).astype(np.int64)
+        base = starts[:-1][None, :]
+        w1 = (f - i0).ravel()
+        self.sampling = sampling
+        self.i0 = (base + i0).ravel()
+        # Only samples between two frames blend (none when samples fall on frames).
+        self.blend = np.flatnonzero(w1 > 0.0)
+        self.i1 = (base + np.minimum(i0 + 1, last)).ravel()[self.blend]
+        self.w1 = w1[self.blend, None]
+
+    def __call__(self, paths: np.ndarray) -> None:
+        """paths: #V by 2 ground positions, agent i's frames at rows starts[i] .. starts[i+1]-1."""
+        out = self.sampling.positions.reshape(-1, 2)
+        np.take(paths, self.i0, axis=0, out=out)
+        if len(self.blend):
+            p0 = out[self.blend]
+            out[self.blend] = p0 + (paths[self.i1] - p0) * self.w1
+
+
+def resample(sampling: Sampling, paths: np.ndarray, starts: np.ndarray) -> None:
+    """Re-reads every agent's positions from new per-frame paths, concatenated.
+
+    Args:
+      paths: #V by 2 ground positions, agent i's frames at rows starts[i] .. starts[i+1]-1
+      starts: #A+1 first row of each agent (in sampling order), then #V
+    """
+    Resampler(sampling, starts)(paths)
+
+
+@dataclass
+class Collisions:
+    """Collision intervals found at a sampling, one entry per interval (numpy columns)."""
+    agent_a: np.ndarray          # (M,) column of the first agent (agent_a < agent_b)
+    agent_b: np.ndarray          # (M,)
+    first: np.ndarray            # (M,) first colliding sample (inclusive)
+    last: np.ndarray             # (M,) last colliding sample (inclusive)
+    deepest: np.ndarray          # (M,) sample of the maximal overlap
+    depth: np.ndarray            # (M,) wanted clearance minus clearance there, > 0
+    min_clearance: np.ndarray    # (A,) each agent's smallest clearance, +inf if none within reach
+    min_clearance_sample: np.ndarray  # (A,) sample of it, -1 if +inf
+    colliding_samples: int       # (pair, sample) records below the wanted clearance
+    pair_tests: int = 0          # narrow-phase capsule tests the detection made
+    near: "Collisions | None" = None  # intervals below the watch distance, when one was asked for
+
+    def __len__(self) -> int:
+        return int(self.agent_a.shape[0])
+
+
+def detect(sampling: Sampling, radius: np.ndarray, height: np.ndarray, margin: float,
+           report_distance: float = 0.0, active: np.ndarray | None = None,
+           brute_force: bool = False, watch: float | None = None) -> Collisions:
+    """Collision intervals of every pair at a sampling (a grid per sample, in C++).
+
+    ``watch``: a clearance above ``margin``; the intervals below it are gathered in the same
+    pass as ``near`` (their depth measured from ``watch``).
+    """
+    out = _solver.detect_collisions(
+        sampling.flat(), len(sampling.times), np.asarray(radius, dtype=np.float64),
+        np.asarray(height, dtype=np.float64), None,
+        None if active is None else [bool(x) for x in active], float(margin), float(report_distance),
+        0, brute_force, float(watch) if watch is not None and watch > margin else 0.0)
+    near = out.pop("near", None)
+    found = Collisions(**out)
+    if near is not None:
+        found.near = Collisions(**near, min_clearance=found.min_clearance,
+                                min_clearance_sample=found.min_clearance_sample,
+                                colliding_samples=int(np.sum(near["last"] - near["first"] + 1)))
+    return found
+
+
+def clearances(sampling: Sampling, radius: np.ndarray, a: np.ndarray, b: np.ndarray,
+               k: np.ndarray) -> np.ndarray:
+    """(M,) capsule clearances of agent columns a and b at samples k (agents on one ground)."""
+    d = sampling.positions[k, a] - sampling.positions[k, b]
+    return np.linalg.norm(d, axis=-1) - radius[a] - radius[b]
+
+
+# ---- avoid regions -----------------------------------------------------------------------
+
+def _ground_axes(up_axis: str) -> tuple[int, int]:
+    """The two local axes that span a region's own ground plane."""
+    return (0, 1) if up_axis == "Z" else (0, 2)
+
+
+def _to_world_ground(points: np.ndarray, local_to_world: np.ndarray, up_axis: str) -> np.ndarray:
+    homo = np.concatenate([points, np.ones((len(points), 1))], axis=1)
+    return ground.to_ground((homo @ local_to_world)[:, :3], up_axis)
+
+
+def region_footprint(region: AvoidRegion, up_axis: str):
+    """The region's ground footprint as a :class:`mocapedit._solver.GroundRegion`.
+
+    Raises MocapEditError naming the region for a non-positive radius or size, a negative
+    margin, or a transform or geometry that leaves the footprint without area.
+    """
+    if not np.isfinite(region.margin) or region.margin < 0:
+        raise prim_error(region.path, f"margin must not be negative, got {region.margin:g}", "margin")
+    if region.geometry is not None:
+        lo, hi = region.geometry_bounds
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        pts = ground.to_ground(corners, up_axis)
+        try:
+            return _solver.GroundRegion.hull(np.ascontiguousarray(pts))
+        except ValueError:
+            raise prim_error(region.path, f"the ground footprint of geometry <{region.geometry}> has no "
+                             "area", "geometry") from None
+    m = np.asarray(region.local_to_world, dtype=np.float64)
+    if region.shape == "circle":
+        if not (np.isfinite(region.radius) and region.radius > 0):
+            raise prim_error(region.path, f"radius must be positive, got {region.radius:g}", "radius")
+        i, j = _ground_axes(up_axis)
+        local = np.zeros((3, 3))
+        local[1, i] = 1.0
+        local[2, j] = 1.0
+        g = _to_world_ground(local, m, up_axis)
+        centre, axes = g[0], g[1:] - g[0]     # images of the local ground axes
+        gram = axes @ axes.T
+        scale2 = 0.5 * np.trace(gram)
+        if not scale2 > 0 or abs(np.linalg.det(axes)) <= 1e-12 * scale2:
+            raise prim_error(region.path, "its transform flattens the circle to no area on the ground",
+                             "radius")
+        if np.allclose(gram, scale2 * np.eye(2), rtol=1e-9, atol=1e-12 * scale2):
+            return _solver.GroundRegion.circle(centre, region.radius * np.sqrt(scale2))
+        # An ellipse on the ground: a polygon circumscribed about it (it contains the ellipse).
+        theta = 2 * np.pi * np.arange(ELLIPSE_SIDES) / ELLIPSE_SIDES
+        r = region.radius / np.cos(np.pi / ELLIPSE_SIDES)
+        ring = np.stack([np.cos(theta), np.sin(theta)], axis=1) * r
+        return _solver.GroundRegion.hull(np.ascontiguousarray(centre + ring @ axes))
+    size = np.asarray(region.size, dtype=np.float64)
+    if not (np.all(np.isfinite(size)) and np.all(size > 0)):
+        raise prim_error(region.path, f"size must be positive along every axis, got "
+                         f"({', '.join(f'{s:g}' for s in size)})", "size")
+    half = 0.5 * size
+    corners = np.array([[x, y, z] for x in (-half[0], half[0]) for y in (-half[1], half[1])
+                        for z in (-half[2], half[2])])
+    try:
+        return _solver.GroundRegion.hull(np.ascontiguousarray(_to_world_ground(corners, m, up_axis)))
+    except ValueError:
+        raise prim_error(region.path, "its transform flattens the box to no area on the ground", "size") from None
+
+
+def region_agents(region: AvoidRegion, agents: list[str]) -> list[str]:
+    """The agents a region applies to, among ``agents`` (all of them when it lists none)."""
+    if not region.agents:
+        return list(agents)
+    listed = set(region.agents)
+    return [a for a in agents if a in listed]
+
+
+def push_out(footprint, points: np.ndarray, clearance) -> dict:
+    """Points of (N,2) closer to a footprint than their clearance ((N,) or scalar); see
+    :func:`mocapedit._solver.push_out_of_region`."""
+    c = np.atleast_1d(np.asarray(clearance, dtype=np.float64))
+    return _solver.push_out_of_region(footprint, np.ascontiguousarray(points, dtype=np.float64), c)
+
+
+def signed_distance(footprint, points: np.ndarray) -> np.ndarray:
+    """(N,) signed distances of (N,2) ground points to a footprint's boundary (negative inside)."""
+    return _solver.region_signed_distance(footprint, np.ascontiguousarray(points, dtype=np.float64))
+
+
+def outline(footprint, grow: float = 0.0, sides: int = 64) -> np.ndarray:
+    """(K,2) counter-clockwise outline of a footprint grown by ``grow`` (rounded corners)."""
+    if footprint.is_circle:
+        a = 2 * np.pi * np.arange(sides) / sides
+        return np.asarray(footprint.center) + (footprint.radius + grow) * np.stack([np.cos(a), np.sin(a)], 1)
+    poly = np.asarray(footprint.polygon)
+    if grow <= 0:
+        return poly.copy()
+    edges = np.roll(poly, -1, axis=0) - poly
+    normals = np.stack([edges[:, 1], -edges[:, 0]], 1) / np.linalg.norm(edges, axis=1)[:, None]
+    points = []
+    steps = max(2, sides // len(poly))
+    for i in range(len(poly)):
+        a0 = np.arctan2(*normals[i - 1][::-1])
+        a1 = np.arctan2(*normals[i][::-1])
+        a1 = a0 + (a1 - a0) % (2 * np.pi)
+        for t in np.linspace(a0, a1, steps):
+            points.append(poly[i] + grow * np.array([np.cos(t), np.sin(t)]))
+    return np.array(points)

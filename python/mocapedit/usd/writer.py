@@ -1,0 +1,391 @@
+"""Authors the edits layer. Write-only; no linear algebra.
+
+The layer holds only ``over`` opinions on edited agents and new prims under
+``/MocapEdit``; placed over the input stage it plays the edited motion through plain
+UsdSkel and UsdGeom. Layout:
+
+- an edited agent gets ``xformOp:transform:mocapEdit`` (time-sampled) prepended to its
+  ``xformOpOrder``: the rigid ground motion of its path edit;
+- an agent whose joints changed only in timing (time warp, time and sync constraints,
+  speed matching) gets a SkelAnimation under ``/MocapEdit/Animations`` that references its
+  source clip and re-times it with USD value clips (``clips:times`` maps shot time to the
+  clip's own time, ``clips:active`` plays the one clip): nothing is baked, the layer grows
+  by one time pair per source frame (an edit op of such an agent is sampled at the same
+  shot times);
+- an agent whose poses changed (layering) gets a baked SkelAnimation there instead;
+  either is bound to its skeleton with ``skel:animationSource``, and agents whose
+  animations are identical share one;
+- guide geometry goes under ``/MocapEdit/Guides`` with purpose ``guide``;
+- ``customLayerData["mocapedit"]`` records the version, the input layers, a content hash,
+  the solve statistics and the whole solve report (``report``: compact JSON text, sorted
+  keys, no timings, so the same input still gives the same bytes); ``mocapedit report``
+  reads it back.
+
+Prims and samples are authored in sorted order so the same input gives the same bytes.
+Files are written to a temporary name beside the target and renamed into place.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import re
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from pxr import Sdf, UsdGeom, Vt
+
+from mocapedit import __version__
+from mocapedit.usd import outputs
+from mocapedit.model.data import Agent, StageInfo
+from mocapedit.model.names import unique_identifier
+
+EDIT_OP = "xformOp:transform:mocapEdit"
+ROOT = Sdf.Path("/MocapEdit")
+GUIDES = ROOT.AppendChild("Guides")
+ANIMATIONS = ROOT.AppendChild("Animations")
+
+
+@dataclass
+class BakedAnimation:
+    joints: list[str]
+    times: np.ndarray            # (T,) stage times
+    translations: np.ndarray     # (T,J,3)
+    rotations: np.ndarray        # (T,J,4) (x,y,z,w)
+    scales: np.ndarray | None    # (T,J,3)
+
+
+@dataclass
+class RetimedClip:
+    """A source clip played on a new timing by USD value clips: nothing is baked."""
+    layer: str                   # identifier of the layer whose spec holds the clip's samples
+    prim_path: str               # that SkelAnimation spec's path in the layer
+    joints: list[str]
+    stage_times: np.ndarray      # (F,) shot time at which each clip sample plays, increasing
+    clip_times: np.ndarray       # (F,) the samples' own times in the clip layer
+
+
+@dataclass
+class AgentEdit:
+    """What the writer authors for one agent; every part optional (at most one animation)."""
+    times: np.ndarray | None = None          # (T,) stage times of the xform op samples
+    xform_op: np.ndarray | None = None       # (T,4,4) prepended op values
+    animation: BakedAnimation | None = None
+    retimed: RetimedClip | None = None
+
+
+@dataclass
+class GuideCurves:
+    name: str                    # prim name under /MocapEdit/Guides
+    curves: list[np.ndarray]     # each (K,3) world points
+    color: tuple[float, float, float]
+    width: float                 # stage units
+    doc: str = ""
+    colors: np.ndarray | None = None  # (C,3) one colour per curve, overrides color
+
+
+@dataclass
+class GuidePoints:
+    name: str
+    points: np.ndarray           # (K,3) world
+    colors: np.ndarray           # (K,3)
+    width: float
+    doc: str = ""
+
+
+@dataclass
+class LayerContent:
+    info: StageInfo
+    agents: dict[str, Agent]
+    edits: dict[str, AgentEdit]
+    guides: list = field(default_factory=list)
+    provenance: dict = field(default_factory=dict)
+    stats: dict = field(default_factory=dict)
+    report: dict | None = None   # JSON-ready solve report, stored as compact JSON text
+    # Folder the layer will be saved in: asset paths (value clips) are written relative to
+    # it; None writes them absolute.
+    anchor: str | None = None
+
+
+def _safe_name(path: str, taken: set[str]) -> str:
+    return unique_identifier(path.strip("/"), taken, "agent")
+
+
+def _over_chain(layer: Sdf.Layer, path: Sdf.Path) -> Sdf.PrimSpec:
+    spec = layer.GetPrimAtPath(path)
+    if spec:
+        return spec
+    parent = layer.pseudoRoot if path.GetParentPath() == Sdf.Path.absoluteRootPath else \
+        _over_chain(layer, path.GetParentPath())
+    return Sdf.PrimSpec(parent, path.name, Sdf.SpecifierOver)
+
+
+def _def(layer: Sdf.Layer, path: Sdf.Path, type_name: str) -> Sdf.PrimSpec:
+    parent = layer.GetPrimAtPath(path.GetParentPath())
+    return Sdf.PrimSpec(parent, path.name, Sdf.SpecifierDef, type_name)
+
+
+def _attr(spec: Sdf.PrimSpec, name: str, type_name, value=None, uniform=False) -> Sdf.AttributeSpec:
+    attr = Sdf.AttributeSpec(spec, name, type_name,
+                             Sdf.VariabilityUniform if uniform else Sdf.VariabilityVarying)
+    if value is not None:
+        attr.default = value
+    return attr
+
+
+def _author_xform_op(layer: Sdf.Layer, agent: Agent, edit: AgentEdit) -> None:
+    spec = _over_chain(layer, Sdf.Path(agent.path))
+    order = list(agent.xform_op_order)
+    if EDIT_OP in order:
+        order.remove(EDIT_OP)
+    at = 1 if order and order[0] == "!resetXformStack!" else 0
+    order.insert(at, EDIT_OP)
+    _attr(spec, "xformOpOrder", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(order), uniform=True)
+    attr = _attr(spec, EDIT_OP, Sdf.ValueTypeNames.Matrix4d)
+    # One conversion of the whole (T,4,4) array: per-sample Gf.Matrix4d(list) took half the time.
+    values = Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(edit.xform_op, dtype=np.float64))
+    for t, m in zip(np.asarray(edit.times, dtype=np.float64).tolist(), values):
+        layer.SetTimeSample(attr.path, t, m)
+
+
+def _animation_key(anim: BakedAnimation, digests: dict[int, bytes]) -> tuple:
+    """Identity of a baked animation's content; arrays shared by several agents (the same
+    objects) are hashed once."""
+    def digest(array) -> bytes:
+        if array is None:
+            return b""
+        d = digests.get(id(array))
+        if d is None:
+            data = np.ascontiguousarray(array, dtype=np.float32)
+            d = hashlib.blake2b(data.tobytes(), digest_size=20).digest() + repr(data.shape).encode()
+            digests[id(array)] = d
+        return d
+    return (tuple(anim.joints), np.asarray(anim.times, dtype=np.float64).tobytes(),
+            digest(anim.translations), digest(anim.rotations), digest(anim.scales))
+
+
+def _bind_animation(layer: Sdf.Layer, agent: Agent, path: Sdf.Path) -> None:
+    skel = _over_chain(layer, Sdf.Path(agent.skeleton_path))
+    skel.SetInfo("apiSchemas", Sdf.TokenListOp.Create(prependedItems=["SkelBindingAPI"]))
+    rel = Sdf.RelationshipSpec(skel, "skel:animationSource", custom=False)
+    rel.targetPathList.explicitItems = [path]
+
+
+def _author_animation(layer: Sdf.Layer, anim: BakedAnimation, name: str) -> Sdf.Path:
+    path = ANIMATIONS.AppendChild(name)
+    spec = _def(layer, path, "SkelAnimation")
+    _attr(spec, "joints", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(anim.joints), uniform=True)
+    values = [("translations", Sdf.ValueTypeNames.Float3Array, Vt.Vec3fArray, anim.translations),
+              ("rotations", Sdf.ValueTypeNames.QuatfArray, Vt.QuatfArray, anim.rotations)]
+    if anim.scales is not None:
+        values.append(("scales", Sdf.ValueTypeNames.Half3Array, Vt.Vec3hArray, anim.scales))
+    for attr_name, type_name, array_type, data in values:
+        attr = _attr(spec, attr_name, type_name)
+        data = np.ascontiguousarray(data, dtype=np.float32)
+        for t, frame in zip(anim.times, data):
+            layer.SetTimeSample(attr.path, float(t), array_type.FromNumpy(frame))
+    return path
+
+
+def asset_path(identifier: str, anchor: str | None) -> str:
+    """The asset path to write for a layer: relative to ``anchor`` ("./" or "../" first, so
+    it resolves beside the layer that holds it), absolute without an anchor."""
+    layer = Sdf.Layer.Find(identifier)
+    real = os.path.abspath(layer.realPath if layer and layer.realPath else identifier)
+    if anchor is None:
+        return real.replace(os.sep, "/")
+    rel = os.path.relpath(real, os.path.abspath(anchor)).replace(os.sep, "/")
+    return rel if rel.startswith("../") else "./" + rel
+
+
+def _retimed_key(clip: RetimedClip) -> tuple:
+    return ("retimed", clip.layer, clip.prim_path, tuple(clip.joints),
+            np.asarray(clip.stage_times, dtype=np.float64).tobytes(),
+            np.asarray(clip.clip_times, dtype=np.float64).tobytes())
+
+
+def _author_retimed(layer: Sdf.Layer, clip: RetimedClip, name: str, anchor: str | None) -> Sdf.Path:
+    """A SkelAnimation that references the source clip (its joints, defaults and any other
+    property) and plays its samples on the new timing through one value clip."""
+    path = ANIMATIONS.AppendChild(name)
+    spec = _def(layer, path, "SkelAnimation")
+    asset = asset_path(clip.layer, anchor)
+    spec.referenceList.Prepend(Sdf.Reference(asset, Sdf.Path(clip.prim_path)))
+    _attr(spec, "joints", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(clip.joints), uniform=True)
+    pairs = np.stack([np.asarray(clip.stage_times, dtype=np.float64),
+                      np.asarray(clip.clip_times, dtype=np.float64)], axis=1)
+    spec.SetInfo("clips", {"default": {
+        "assetPaths": Sdf.AssetPathArray([Sdf.AssetPath(asset)]),
+        "primPath": clip.prim_path,
+        "active": Vt.Vec2dArray([(float(pairs[0, 0]), 0.0)]),
+        "times": Vt.Vec2dArray.FromNumpy(np.ascontiguousarray(pairs)),
+    }})
+    return path
+
+
+def _colors(spec: Sdf.PrimSpec, colors: np.ndarray, interpolation: str) -> None:
+    _attr(spec, "primvars:displayColor", Sdf.ValueTypeNames.Color3fArray,
+          Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(colors, dtype=np.float32).reshape(-1, 3)))
+    spec.attributes["primvars:displayColor"].SetInfo("interpolation", interpolation)
+
+
+def _author_guides(layer: Sdf.Layer, guides: list) -> None:
+    taken: set[str] = set()
+    for guide in guides:
+        is_curves = isinstance(guide, GuideCurves)
+        if len(guide.curves if is_curves else guide.points) == 0:
+            continue
+        path = GUIDES.AppendChild(_safe_name(guide.name, taken))
+        spec = _def(layer, path, "BasisCurves" if is_curves else "Points")
+        if is_curves:
+            # A curve needs two vertices: a single point becomes a zero-length segment.
+            curves = [np.repeat(c, 2, axis=0) if len(c) == 1 else c for c in guide.curves]
+            pts = np.concatenate(curves).astype(np.float32)
+            _attr(spec, "type", Sdf.ValueTypeNames.Token, "linear", uniform=True)
+            _attr(spec, "curveVertexCounts", Sdf.ValueTypeNames.IntArray,
+                  Vt.IntArray([int(len(c)) for c in curves]))
+            if guide.colors is not None:
+                _colors(spec, guide.colors, "uniform")
+            else:
+                _colors(spec, np.array([guide.color]), "constant")
+        else:
+            pts = np.asarray(guide.points, dtype=np.float32).reshape(-1, 3)
+            _colors(spec, guide.colors, "vertex")
+        points = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(pts))
+        _attr(spec, "points", Sdf.ValueTypeNames.Point3fArray, points)
+        _attr(spec, "widths", Sdf.ValueTypeNames.FloatArray, Vt.FloatArray([float(guide.width)]))
+        spec.attributes["widths"].SetInfo("interpolation", "constant")
+        # Boundables carry their extent so every USD tool frames them without computing it.
+        compute = UsdGeom.Curves.ComputeExtent if is_curves else UsdGeom.Points.ComputeExtent
+        extent = compute(points, Vt.FloatArray([float(guide.width)] * len(pts)))
+        _attr(spec, "extent", Sdf.ValueTypeNames.Float3Array, extent)
+        _attr(spec, "purpose", Sdf.ValueTypeNames.Token, "guide", uniform=True)
+        if guide.doc:
+            spec.documentation = guide.doc
+
+
+def report_text(report: dict) -> str:
+    """The report as stored in the layer: compact JSON, sorted keys, non-finite numbers as null."""
+    return json.dumps(_finite(report), sort_keys=True, separators=(",", ":"), allow_nan=False)
+
+
+def _layer_data(value):
+    """A value made fit for customLayerData: lists of numbers or strings become Vt arrays."""
+    if isinstance(value, dict):
+        return {str(k): _layer_data(v) for k, v in value.items()}
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if isinstance(value, (list, tuple)):
+        if all(isinstance(v, str) for v in value):
+            return Vt.StringArray(list(value))
+        if all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in value):
+            return Vt.IntArray([int(v) for v in value])
+        return Vt.DoubleArray([float(v) for v in value])
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def _finite(value):
+    if isinstance(value, dict):
+        return {str(k): _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _finite(value.tolist())
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def _set_time_metadata(layer: Sdf.Layer, info: StageInfo) -> None:
+    """The input's time codes per second and range: a layer whose rate differs from the
+    stage's would be rescaled when sub-layered."""
+    layer.timeCodesPerSecond = info.time_codes_per_second
+    layer.framesPerSecond = info.time_codes_per_second
+    if info.start_time is not None:
+        layer.startTimeCode = info.start_time
+    if info.end_time is not None:
+        layer.endTimeCode = info.end_time
+
+
+def build_layer(content: LayerContent) -> Sdf.Layer:
+    """An anonymous layer holding the edits; save it with :func:`save_layer`."""
+    layer = Sdf.Layer.CreateAnonymous(".usda")
+    info = content.info
+    _set_time_metadata(layer, info)
+    layer.documentation = "mocapedit edits: place over the input stage (sublayer above it)."
+    # Opened on its own the layer still says what it is, in which units and up axis.
+    layer.defaultPrim = ROOT.name
+    layer.pseudoRoot.SetInfo("upAxis", info.up_axis)
+    layer.pseudoRoot.SetInfo("metersPerUnit", info.meters_per_unit)
+    data = {"version": __version__}
+    data.update(content.provenance)
+    if content.stats:
+        data["stats"] = _layer_data(content.stats)
+    if content.report is not None:
+        data["report"] = report_text(content.report)
+    layer.customLayerData = {"mocapedit": data}
+    with Sdf.ChangeBlock():
+        root = Sdf.PrimSpec(layer.pseudoRoot, ROOT.name, Sdf.SpecifierDef, "Scope")
+        Sdf.PrimSpec(root, GUIDES.name, Sdf.SpecifierDef, "Scope")
+        taken: set[str] = set()
+        if any(e.animation is not None or e.retimed is not None for e in content.edits.values()):
+            Sdf.PrimSpec(root, ANIMATIONS.name, Sdf.SpecifierDef, "Scope")
+        # Agents whose baked animations are identical share one prim, named after the first.
+        authored: dict[tuple, Sdf.Path] = {}
+        digests: dict[int, bytes] = {}
+        for agent_path in sorted(content.edits):
+            edit, agent = content.edits[agent_path], content.agents[agent_path]
+            if edit.xform_op is not None:
+                _author_xform_op(layer, agent, edit)
+            if edit.animation is not None or edit.retimed is not None:
+                retimed = edit.retimed
+                key = _retimed_key(retimed) if retimed else _animation_key(edit.animation, digests)
+                path = authored.get(key)
+                if path is None:
+                    name = _safe_name(agent_path, taken)
+                    path = authored[key] = (_author_retimed(layer, retimed, name, content.anchor) if retimed
+                                            else _author_animation(layer, edit.animation, name))
+                _bind_animation(layer, agent, path)
+        _author_guides(layer, content.guides)
+    return layer
+
+
+def export_layer(layer: Sdf.Layer) -> Callable[[str], None]:
+    """A writer for :class:`~mocapedit.usd.outputs.Writes` that exports ``layer`` to a file."""
+    def write(tmp: str) -> None:
+        if not layer.Export(tmp):
+            raise OSError(f"USD could not write the layer to {tmp}")
+    return write
+
+
+def save_layer(layer: Sdf.Layer, path: str) -> None:
+    """Writes the layer to ``path`` through a temporary file and a rename."""
+    outputs.save_with(path, export_layer(layer))
+
+
+def composed_layer(path: str, edits_path: str, input_path: str, info: StageInfo,
+                   default_prim: str | None = None) -> Sdf.Layer:
+    """A stage layer, to be saved at ``path``, that sub-layers the edits over the input (relative paths)."""
+    here = os.path.dirname(os.path.abspath(path))
+    layer = Sdf.Layer.CreateAnonymous(os.path.splitext(path)[1] or ".usda")
+    layer.subLayerPaths = [os.path.relpath(os.path.abspath(edits_path), here),
+                           os.path.relpath(os.path.abspath(input_path), here)]
+    # A root layer that only sub-layers others still sets the stage's time and units.
+    _set_time_metadata(layer, info)
+    layer.pseudoRoot.SetInfo("upAxis", info.up_axis)
+    layer.pseudoRoot.SetInfo("metersPerUnit", info.meters_per_unit)
+    if default_prim:
+        layer.defaultPrim = default_prim
+    return layer
+
+
+def save_composed(path: str, edits_path: str, input_path: str, info: StageInfo,
+                  default_prim: str | None = None) -> None:
+    """Writes a stage that sub-layers the edits over the input (relative paths)."""
+    save_layer(composed_layer(path, edits_path, input_path, info, default_prim), path)

@@ -1,0 +1,736 @@
+"""Tests for mocapedit.inspect.metrics: analytic cases and brute-force references."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
+
+from mocapedit.inspect import metrics as M
+
+JOINTS = ["Root", "Root/Hips", "Root/Hips/LeftFoot", "Root/Hips/RightFoot"]
+
+
+# ---------------------------------------------------------------------------------------------
+# Stage builders
+# ---------------------------------------------------------------------------------------------
+
+
+def _new_stage(tmp_path, name, up="Y", tcps=24.0, mpu=1.0):
+    stage = Usd.Stage.CreateNew(str(tmp_path / name))
+    UsdGeom.SetStageUpAxis(stage, up)
+    UsdGeom.SetStageMetersPerUnit(stage, mpu)
+    stage.SetTimeCodesPerSecond(tcps)
+    return stage
+
+
+def _define_animation(stage, path, world, rotations=None, start=0.0):
+    """A SkelAnimation of the 4-joint skeleton whose joints reach ``world`` (T, 4, 3).
+
+    Without rotations every joint's world position is the sum of the translations down its chain,
+    so the local translations follow by subtraction from the parent.
+    """
+    world = np.asarray(world, dtype=np.float64)
+    anim = UsdSkel.Animation.Define(stage, path)
+    anim.CreateJointsAttr(JOINTS)
+    tr_attr, rot_attr, sc_attr = (anim.CreateTranslationsAttr(), anim.CreateRotationsAttr(),
+                                  anim.CreateScalesAttr())
+    parent = [None, 0, 1, 1]
+    for k in range(len(world)):
+        local = np.array([world[k, j] - (world[k, parent[j]] if parent[j] is not None else 0.0)
+                          for j in range(4)])
+        if rotations is not None:
+            local = rotations[k]["local"]
+        tr_attr.Set(Vt.Vec3fArray.FromNumpy(local.astype(np.float32)), start + k)
+        quats = [Gf.Quatf(1.0)] * 4 if rotations is None else rotations[k]["quats"]
+        rot_attr.Set(Vt.QuatfArray(quats), start + k)
+        sc_attr.Set(Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)] * 4), start + k)
+    return anim
+
+
+def _define_skeleton(stage, path, anim_path):
+    skel = UsdSkel.Skeleton.Define(stage, path)
+    skel.CreateJointsAttr(JOINTS)
+    ident = [Gf.Matrix4d(1.0)] * 4
+    skel.CreateRestTransformsAttr(ident)
+    skel.CreateBindTransformsAttr(ident)
+    UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim_path])
+    return skel
+
+
+def _build_agent(stage, root_path, world, bind_on_root=False):
+    """SkelRoot ``root_path`` holding Skeleton ``Skel`` bound to SkelAnimation ``Anim``."""
+    root = UsdSkel.Root.Define(stage, root_path)
+    anim = _define_animation(stage, f"{root_path}/Anim", world)
+    skel = _define_skeleton(stage, f"{root_path}/Skel", anim.GetPath())
+    if bind_on_root:
+        UsdSkel.BindingAPI.Apply(root.GetPrim()).CreateSkeletonRel().SetTargets([skel.GetPath()])
+    return root, skel
+
+
+def _walk(n, up, left, right, root_speed=0.0, hip_height=1.0):
+    """World joint positions (n, 4, 3) from ground paths and heights of the two feet.
+
+    ``left``/``right``: (n, 3) arrays of (ground u, ground v, height).
+    """
+    def place(g):
+        g = np.asarray(g, dtype=np.float64)
+        return M.from_ground(g[:, :2], g[:, 2], up)
+
+    k = np.arange(n, dtype=np.float64)
+    root = M.from_ground(np.stack((root_speed * k, np.zeros(n)), axis=1), 0.0, up)
+    hips = root + M.from_ground(np.zeros((n, 2)), hip_height, up)
+    return np.stack((root, hips, place(left), place(right)), axis=1)
+
+
+def _foot(n, u, v, h):
+    return np.stack([np.broadcast_to(np.asarray(c, float), (n,)) for c in (u, v, h)], axis=1)
+
+
+# ---------------------------------------------------------------------------------------------
+# Ground plane
+# ---------------------------------------------------------------------------------------------
+
+
+def test_ground_axes_and_round_trip():
+    assert M.ground_axes("Y") == (1, (0, 1.0), (2, -1.0))
+    assert M.ground_axes("z") == (2, (0, 1.0), (1, 1.0))
+    np.testing.assert_allclose(M.to_ground([1.0, 2.0, 3.0], "Y"), [1.0, -3.0])
+    np.testing.assert_allclose(M.to_ground([1.0, 2.0, 3.0], "Z"), [1.0, 2.0])
+    rng = np.random.default_rng(1)
+    pts = rng.normal(size=(7, 3))
+    for up, iup in (("Y", 1), ("Z", 2)):
+        back = M.from_ground(M.to_ground(pts, up), pts[:, iup], up)
+        np.testing.assert_allclose(back, pts, atol=1e-15)
+    # ground_axes describes the same mapping as mocapedit.geometry.ground.
+    from mocapedit.geometry import ground
+    for up in ("Y", "Z"):
+        iup, (iu, su), (iv, sv) = M.ground_axes(up)
+        np.testing.assert_allclose(ground.to_ground(pts, up), np.stack((su * pts[:, iu],
+                                                                         sv * pts[:, iv]), 1))
+        np.testing.assert_allclose(ground.height(pts, up), pts[:, iup])
+    with pytest.raises(ValueError, match="up axis"):
+        M.ground_axes("X")
+    with pytest.raises(ValueError, match="up axis"):
+        M.from_ground([0.0, 0.0], 0.0, "X")
+    with pytest.raises(ValueError, match=r"\(\.\.\., 3\)"):
+        M.to_ground(np.zeros((4, 2)), "Y")
+
+
+@pytest.mark.parametrize("up,axis", [("Y", (0, 1, 0)), ("Z", (0, 0, 1))])
+def test_ground_headings_are_counter_clockwise_about_up(up, axis):
+    # A positive rotation about up turns ground u into ground v.
+    rot = Gf.Rotation(Gf.Vec3d(*axis), 90.0)
+    turned = rot.TransformDir(Gf.Vec3d(1, 0, 0))
+    np.testing.assert_allclose(M.to_ground(np.array(turned), up), [0.0, 1.0], atol=1e-12)
+
+
+# ---------------------------------------------------------------------------------------------
+# Trajectory measures
+# ---------------------------------------------------------------------------------------------
+
+
+def test_path_length_and_ratio():
+    assert M.path_length([[0, 0], [3, 4], [3, 0]]) == pytest.approx(9.0)
+    assert M.path_length([[0, 0, 0], [1, 2, 2]]) == pytest.approx(3.0)
+    assert M.path_length([[5.0, 5.0]]) == 0.0
+    assert M.length_ratio([[0, 0], [0, 6]], [[0, 0], [3, 4]]) == pytest.approx(1.2)
+    assert M.length_ratio([[1, 1], [1, 1]], [[0, 0], [0, 0]]) == 1.0
+    assert M.length_ratio([[1, 1], [1, 2]], [[0, 0], [0, 0]]) == math.inf
+    with pytest.raises(ValueError):
+        M.path_length(np.zeros((3, 4)))
+
+
+def test_position_residuals():
+    r = M.position_residuals([[0, 0], [1, 1], [2, 2]], [[0, 0], [1, 2], [5, 6]])
+    np.testing.assert_allclose(r, [0.0, 1.0, 5.0])
+    with pytest.raises(ValueError):
+        M.position_residuals(np.zeros((3, 2)), np.zeros((2, 2)))
+
+
+def test_local_coordinates_hand_case():
+    xy = M.local_coordinates([[0, 0], [1, 1], [2, 0]])
+    # d = (2, 0), R90 d = (0, -2): P1 = P0 + 0.5 d - 0.5 R90 d.
+    np.testing.assert_allclose(xy, [[0.5, -0.5]])
+
+
+def _curve(n=40):
+    s = np.linspace(0.0, 3.0, n)
+    return np.stack((3.0 * s, np.sin(2.0 * s) + 0.3 * s * s), axis=1)
+
+
+def test_shape_change_is_zero_under_similarity_transforms():
+    src = _curve()
+    a, scale = 0.7, 2.5
+    rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    edited = scale * src @ rot.T + np.array([10.0, -4.0])
+    assert M.shape_change(src, edited) == pytest.approx(0.0, abs=1e-12)
+    assert M.shape_change(src, src) == 0.0
+
+
+def test_shape_change_detects_non_similar_edits():
+    src = _curve(12)
+    stretched = src * np.array([2.0, 1.0])
+    mirrored = src * np.array([1.0, -1.0])
+    assert M.shape_change(src, stretched) > 0.01
+    assert M.shape_change(src, mirrored) > 0.01
+
+
+def test_shape_change_bend_hand_value():
+    src = np.array([[0, 0], [1, 0], [2, 0], [3, 0], [4, 0]], dtype=float)
+    bent = src.copy()
+    bent[2] = (2.0, 1.0)
+    # Changes of (x, y): (-0.1, 0.2), (0, -0.5), (0.1, 0.2).
+    assert M.shape_change(src, bent) == pytest.approx(math.sqrt(0.35 / 3.0), rel=1e-12)
+
+
+def test_shape_change_degenerate_triangles():
+    # A pause (repeated points) has no local frame: skipped, so a rigid move still measures 0.
+    src = np.array([[0, 0], [1, 0], [2, 0], [2, 0], [2, 0], [3, 1], [4, 1]], dtype=float)
+    moved = src @ np.array([[0.0, -1.0], [1.0, 0.0]]).T + 3.0
+    assert M.shape_change(src, moved) == pytest.approx(0.0, abs=1e-12)
+    # A triangle that exists in the source but collapses in the edit has lost its shape.
+    collapsed = src.copy()
+    collapsed[2] = collapsed[0]
+    assert M.shape_change(src, collapsed) == math.inf
+
+
+def test_rigidity_error_zero_for_rigid_motion_of_the_range():
+    src = _curve(30)
+    a = -1.1
+    rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    edited = src.copy()
+    edited[5:16] = src[5:16] @ rot.T + np.array([2.0, 7.0])
+    edited[20:] *= 1.7  # outside the ranges: does not count
+    err = M.rigidity_error(src, edited, [(5, 15), (0, 0), (7, 9)])
+    assert err.shape == (3,)
+    np.testing.assert_allclose(err, 0.0, atol=1e-12)
+
+
+def test_rigidity_error_positive_for_bend_and_scale():
+    src = np.array([[-1.0, 0.0], [1.0, 0.0], [3.0, 0.0]])
+    scaled = src * 2.0
+    # Best rigid fit of (-1,0),(1,0) onto (-2,0),(2,0) is the identity about the centroid.
+    np.testing.assert_allclose(M.rigidity_error(src, scaled, [(0, 1)]), [1.0], atol=1e-12)
+    bent = src.copy()
+    bent[2] = (1.0, 2.0)
+    assert M.rigidity_error(src, bent, [(0, 2)])[0] > 0.1
+    assert M.rigidity_error(src, bent, [(0, 1)])[0] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_rigidity_error_rejects_bad_ranges():
+    src = np.zeros((5, 2))
+    for bad in ([(0, 5)], [(-1, 2)], [(3, 2)]):
+        with pytest.raises(ValueError, match="frame range"):
+            M.rigidity_error(src, src, bad)
+
+
+def test_time_intervals_positive():
+    assert M.time_intervals_positive([0.0, 1.0, 1.5, 4.0])
+    assert not M.time_intervals_positive([0.0, 1.0, 1.0, 4.0])
+    assert not M.time_intervals_positive([0.0, 2.0, 1.0])
+    assert not M.time_intervals_positive([0.0, math.nan, 2.0])
+    assert M.time_intervals_positive([[0, 1, 2], [5, 6, 9]])
+    assert not M.time_intervals_positive([[0, 1, 2], [5, 4, 9]])
+    assert M.time_intervals_positive([3.0])
+    assert not M.time_intervals_positive([0.0, 0.5, 1.0], min_interval=0.5)
+
+
+# ---------------------------------------------------------------------------------------------
+# Separation
+# ---------------------------------------------------------------------------------------------
+
+
+def _brute_separation(positions, radius, height, up):
+    """All pairs at every sample, written independently of the module."""
+    iup = M.ground_axes(up)[0]
+    p = np.asarray(positions, float)
+    n_agents, n_times = p.shape[:2]
+    rad = np.broadcast_to(radius, (n_agents,)).astype(float)
+    hgt = np.broadcast_to(height, (n_agents,)).astype(float)
+    horiz_idx = [k for k in range(3) if k != iup]
+    best, where, overlaps = math.inf, None, 0
+    iu = np.triu_indices(n_agents, 1)
+    for t in range(n_times):
+        q = p[:, t]
+        ok = np.isfinite(q).all(axis=1)
+        flat = q[:, horiz_idx]
+        dh = np.sqrt(((flat[:, None, :] - flat[None, :, :]) ** 2).sum(-1))
+        bottom = q[:, iup] + rad
+        top = q[:, iup] + np.maximum(hgt, 2 * rad) - rad
+        gap = np.clip(np.maximum(bottom[None, :] - top[:, None], bottom[:, None] - top[None, :]),
+                      0.0, None)
+        clear = np.sqrt(dh ** 2 + gap ** 2) - rad[:, None] - rad[None, :]
+        c = clear[iu]
+        valid = ok[iu[0]] & ok[iu[1]]
+        c = np.where(valid, c, np.inf)
+        overlaps += int(np.count_nonzero(c < 0))
+        k = int(np.argmin(c))
+        if c[k] < best:
+            best, where = float(c[k]), ((int(iu[0][k]), int(iu[1][k])), t)
+    return best, where, overlaps
+
+
+def test_min_separation_two_capsules_by_hand():
+    pos = np.zeros((2, 3, 3))
+    pos[1, :, 0] = 0.5
+    pos[1, 1, 0] = 0.55
+    sep = M.min_separation(pos, 0.3, 1.8, "Y")
+    assert sep.clearance == pytest.approx(-0.1, abs=1e-12)
+    assert sep.agents == (0, 1)
+    assert sep.time_index in (0, 2)
+    assert sep.overlaps == 3
+
+
+@pytest.mark.parametrize("up", ["Y", "Z"])
+def test_min_separation_stacked_capsules_use_vertical_gap(up):
+    # B stands 3 units above A, straight over it: the axis segments are 1.8 apart.
+    pos = np.zeros((2, 1, 3))
+    pos[1, 0] = M.from_ground([[0.0, 0.0]], 3.0, up)[0]
+    sep = M.min_separation(pos, [0.3, 0.3], [1.8, 1.8], up)
+    assert sep.clearance == pytest.approx(1.2, abs=1e-12)
+    assert sep.overlaps == 0
+
+
+def test_min_separation_far_apart_and_degenerate_inputs():
+    pos = np.zeros((3, 2, 3))
+    pos[1, :, 0] = 100.0
+    pos[2, :, 2] = -300.0
+    sep = M.min_separation(pos, 0.3, 1.8, "Y")
+    assert sep.clearance == pytest.approx(99.4, abs=1e-9)
+    assert sep.agents == (0, 1)
+    assert M.min_separation(np.zeros((1, 5, 3)), 0.3, 1.8, "Y").agents is None
+    lonely = np.full((2, 2, 3), np.nan)
+    lonely[0, 0] = 0.0
+    lonely[1, 1] = 0.0  # never present at the same sample
+    assert M.min_separation(lonely, 0.3, 1.8, "Z").clearance == math.inf
+    with pytest.raises(ValueError):
+        M.min_separation(np.zeros((2, 3)), 0.3, 1.8, "Y")
+    with pytest.raises(ValueError):
+        M.min_separation(np.zeros((2, 3, 3)), -0.3, 1.8, "Y")
+
+
+def test_min_separation_is_exact_when_the_first_grid_is_too_fine():
+    # Agents on one line: the spacing estimate is tiny, so the search starts with small cells.
+    # Pair (0, 1) sits in neighbouring cells of a fine grid; the closer pair (2, 3) may not.
+    x = np.array([0.0, 1.3, 50.35, 51.35, 400.0])
+    pos = np.zeros((5, 3, 3))
+    pos[:, :, 0] = x[:, None]
+    sep = M.min_separation(pos, 0.3, 1.8, "Z")
+    assert sep.clearance == pytest.approx(0.4, abs=1e-9)
+    assert sep.agents == (2, 3)
+    assert sep.overlaps == 0
+
+
+@pytest.mark.parametrize("up,seed", [("Y", 0), ("Z", 1), ("Y", 2)])
+def test_min_separation_matches_brute_force(up, seed):
+    rng = np.random.default_rng(seed)
+    n_agents, n_times = 400, 12
+    ground = rng.uniform(-20.0, 20.0, size=(n_agents, 1, 2)) + rng.normal(
+        scale=0.3, size=(n_times, n_agents, 2)).cumsum(axis=0).transpose(1, 0, 2)
+    raised = rng.random((n_agents, n_times)) < 0.1  # some agents stand on something
+    base = np.where(raised, rng.uniform(0, 3, (n_agents, n_times)), 0.0)
+    pos = M.from_ground(ground, base, up)
+    pos[rng.random((n_agents, n_times)) < 0.05] = np.nan
+    radius = rng.uniform(0.2, 0.45, n_agents)
+    height = rng.uniform(0.5, 2.0, n_agents)
+    sep = M.min_separation(pos, radius, height, up)
+    best, (pair, t), overlaps = _brute_separation(pos, radius, height, up)
+    assert overlaps > 0
+    assert sep.clearance == pytest.approx(best, abs=1e-12)
+    assert sep.overlaps == overlaps
+    assert (sep.agents, sep.time_index) == (pair, t)
+
+
+def test_min_separation_in_small_chunks_matches_brute_force(monkeypatch):
+    # Dense crowds are evaluated in chunks of candidate pairs; tiny chunks must agree too.
+    rng = np.random.default_rng(3)
+    pos = M.from_ground(rng.uniform(0.0, 6.0, size=(80, 5, 2)), 0.0, "Y")
+    monkeypatch.setattr(M, "_PAIR_BUDGET", 7)
+    sep = M.min_separation(pos, 0.3, 1.8, "Y")
+    best, (pair, t), overlaps = _brute_separation(pos, 0.3, 1.8, "Y")
+    assert sep.clearance == pytest.approx(best, abs=1e-12)
+    assert sep.overlaps == overlaps > 0
+    assert (sep.agents, sep.time_index) == (pair, t)
+
+
+def test_capsule_clearance_broadcasts():
+    ground_b = np.array([[0.5, 0.0], [0.0, 0.0], [3.0, 4.0]])
+    clear = M.capsule_clearance([0.0, 0.0], 0.0, 0.3, 1.8, ground_b, [0.0, 3.0, 0.0], 0.3, 1.8)
+    np.testing.assert_allclose(clear, [-0.1, 1.2, 4.4], atol=1e-12)
+    # Capsules shorter than their diameter are spheres resting on their base: centres at 0.5, 2.5.
+    assert M.capsule_clearance([0, 0], 0.0, 0.5, 0.2, [0, 0], 2.0, 0.5, 0.2) == pytest.approx(1.0)
+
+
+def test_min_separation_sparse_crowd_matches_brute_force():
+    # Clustered agents plus stragglers far away: the first grid is too fine and must coarsen.
+    rng = np.random.default_rng(5)
+    pos = np.zeros((60, 4, 3))
+    pos[:, :, 0] = rng.uniform(0, 1000, (60, 1))
+    pos[:, :, 2] = rng.uniform(0, 1000, (60, 1))
+    pos[:, :, 0] += np.arange(4) * 2.0
+    sep = M.min_separation(pos, 0.3, 1.8, "Y")
+    best, (pair, t), overlaps = _brute_separation(pos, 0.3, 1.8, "Y")
+    assert overlaps == 0 and sep.overlaps == 0
+    assert sep.clearance == pytest.approx(best, abs=1e-9)
+    assert sep.agents == pair
+
+
+def test_min_separation_many_agents_matches_brute_force():
+    rng = np.random.default_rng(11)
+    n_agents, n_times = 1000, 8
+    start = rng.uniform(0.0, 40.0, size=(n_agents, 2))
+    heading = rng.uniform(0, 2 * np.pi, n_agents)
+    vel = 1.4 / 24.0 * np.stack((np.cos(heading), np.sin(heading)), axis=1)
+    ground = start[:, None, :] + np.arange(n_times)[None, :, None] * vel[:, None, :]
+    pos = M.from_ground(ground, 0.0, "Z")
+    sep = M.min_separation(pos, 0.3, 1.8, "Z")
+    best, (pair, t), overlaps = _brute_separation(pos, 0.3, 1.8, "Z")
+    assert sep.clearance == pytest.approx(best, abs=1e-12)
+    assert sep.overlaps == overlaps > 0
+    assert (sep.agents, sep.time_index) == (pair, t)
+
+
+# ---------------------------------------------------------------------------------------------
+# Forward kinematics and foot skate on composed stages
+# ---------------------------------------------------------------------------------------------
+
+
+def test_default_foot_joints():
+    names = ["Root", "Root/Hips", "Root/Hips/LeftFoot", "Root/Hips/LeftFoot/LeftToeBase",
+             "Root/Hips/LeftFoot/LeftToe_End", "Root/Hips/RightAnkle", "Root/Hips/End Site",
+             "Root/Football/Spine", "Root/Hips/RIGHTFOOT"]
+    assert M.default_foot_joints(names) == [2, 3, 5, 8]
+
+
+def test_joint_world_positions_forward_kinematics(tmp_path):
+    stage = _new_stage(tmp_path, "fk.usda", up="Y")
+    root = UsdSkel.Root.Define(stage, "/Agent")
+    UsdGeom.XformCommonAPI(root).SetTranslate(Gf.Vec3d(10.0, 0.0, 5.0))
+    q90 = Gf.Quatf(math.cos(math.pi / 4), 0.0, math.sin(math.pi / 4), 0.0)  # +90 deg about Y
+    frames = []
+    for k in range(3):
+        local = np.array([[k, 0, 0], [1, 1, 0], [0, -1, 0.2], [0, -1, -0.2]], dtype=float)
+        frames.append({"local": local, "quats": [q90, Gf.Quatf(1), Gf.Quatf(1), Gf.Quatf(1)]})
+    anim = _define_animation(stage, "/Agent/Anim", np.zeros((3, 4, 3)), rotations=frames)
+    _define_skeleton(stage, "/Agent/Skel", anim.GetPath())
+    pos = M.joint_world_positions(stage, "/Agent/Skel", [0, 1, 2])
+    assert pos.shape == (3, 4, 3)
+    for k in range(3):
+        root_w = np.array([10.0 + k, 0.0, 5.0])
+        hips = root_w + [0.0, 1.0, -1.0]  # (1, 1, 0) turned +90 deg about Y
+        np.testing.assert_allclose(pos[k, 0], root_w, atol=1e-5)
+        np.testing.assert_allclose(pos[k, 1], hips, atol=1e-5)
+        np.testing.assert_allclose(pos[k, 2], hips + [0.2, -1.0, 0.0], atol=1e-5)
+        np.testing.assert_allclose(pos[k, 3], hips + [-0.2, -1.0, 0.0], atol=1e-5)
+    # The SkelRoot resolves to the same skeleton; default times are the authored samples.
+    np.testing.assert_allclose(M.joint_world_positions(stage, "/Agent"), pos, atol=0)
+
+
+def test_agent_root_positions_single_and_batch(tmp_path):
+    stage = _new_stage(tmp_path, "roots.usda", up="Z")
+    n = 5
+    feet = _foot(n, 0.0, 0.1, 0.0)
+    for a in range(3):
+        _build_agent(stage, f"/Crowd/A{a}", _walk(n, "Z", feet, feet, root_speed=0.1 * (a + 1)))
+    paths = [f"/Crowd/A{a}" for a in range(3)]
+    batch = M.agent_root_positions(stage, paths, range(n))
+    assert batch.shape == (3, n, 3)
+    for a in range(3):
+        expect = np.stack((0.1 * (a + 1) * np.arange(n), np.zeros(n), np.zeros(n)), axis=1)
+        np.testing.assert_allclose(batch[a], expect, atol=1e-6)
+    one = M.agent_root_positions(stage, Sdf.Path("/Crowd/A2"), range(n), root_joint="Hips")
+    assert one.shape == (n, 3)
+    np.testing.assert_allclose(one[:, 2], 1.0, atol=1e-6)
+    with pytest.raises(ValueError, match="no joint named 'Neck'"):
+        M.agent_root_positions(stage, paths, range(n), root_joint="Neck")
+
+
+@pytest.mark.parametrize("up", ["Y", "Z"])
+def test_foot_skate_planted_feet_is_zero(tmp_path, up):
+    n = 20
+    stage = _new_stage(tmp_path, f"planted_{up}.usda", up=up, tcps=24.0)
+    # Left foot planted for 10 frames, then swings forward fast in the air; right foot planted.
+    u = np.where(np.arange(n) < 10, 0.2, 0.2 + 0.4 * (np.arange(n) - 9))
+    h = np.where(np.arange(n) < 10, 0.0, 0.5)
+    # Each foot has its own lowest height: the right one stays on a 0.3 high step.
+    left, right = _foot(n, u, 0.1, h), _foot(n, 0.5, -0.1, 0.3)
+    _build_agent(stage, "/Agent", _walk(n, up, left, right, root_speed=0.05))
+    skate = M.foot_skate(stage, "/Agent")
+    assert skate.joints == ("Root/Hips/LeftFoot", "Root/Hips/RightFoot")
+    np.testing.assert_allclose(skate.speeds, [0.0, 0.0], atol=1e-4)
+    assert skate.mean == pytest.approx(0.0, abs=1e-4)
+    np.testing.assert_array_equal(skate.contact[:, 0], np.arange(n) < 10)
+    assert skate.contact[:, 1].all()
+    np.testing.assert_allclose(skate.contact_seconds, [9 / 24.0, 19 / 24.0], rtol=1e-12)
+
+
+@pytest.mark.parametrize("up,tcps", [("Y", 30.0), ("Z", 24.0)])
+def test_foot_skate_sliding_foot_known_speed(tmp_path, up, tcps):
+    n, v = 24, 0.3  # slides at v units per second during contact
+    stage = _new_stage(tmp_path, f"slide_{up}.usda", up=up, tcps=tcps)
+    k = np.arange(n)
+    contact = k < 12
+    # Slides along ground v (so Y-up exercises the -z mapping), then flies off fast.
+    gv = np.where(contact, v * k / tcps, v * 11 / tcps + 5.0 * (k - 11) / tcps)
+    left = _foot(n, 0.1, gv, np.where(contact, 0.0, 0.4))
+    right = _foot(n, -0.1, 0.0, 0.0)
+    root, _ = _build_agent(stage, "/Agent", _walk(n, up, left, right))
+    # The agent stands on a floor 2 units up: contact is measured from the feet's lowest point.
+    UsdGeom.XformCommonAPI(root).SetTranslate(Gf.Vec3d(*M.from_ground([3.0, -1.0], 2.0, up)))
+    skate = M.foot_skate(stage, "/Agent/Skel")
+    np.testing.assert_allclose(skate.speeds, [v, 0.0], atol=1e-4)
+    assert skate.mean == pytest.approx(v * 11 / (11 + 23), abs=1e-4)
+    only_left = M.foot_skate(stage, "/Agent", foot_joints=["LeftFoot"])
+    assert only_left.mean == pytest.approx(v, abs=1e-4)
+
+
+def test_foot_skate_meters_per_unit_scales_default_threshold(tmp_path):
+    # Centimetre stage: the foot bobs 0..1.5 cm while sliding at 30 cm/s, then lifts to 8 cm and
+    # moves at 100 cm/s. The default 2 cm threshold must become 2 units.
+    n, tcps = 20, 25.0
+    stage = _new_stage(tmp_path, "cm.usda", up="Y", tcps=tcps, mpu=0.01)
+    k = np.arange(n)
+    contact = k < 10
+    h = np.where(contact, np.where(k % 2 == 0, 0.0, 1.5), 8.0)
+    gu = np.where(contact, 30.0 * k / tcps, 30.0 * 9 / tcps + 100.0 * (k - 9) / tcps)
+    left = _foot(n, gu, 10.0, h)
+    right = _foot(n, 0.0, -10.0, 0.0)
+    _build_agent(stage, "/Agent", _walk(n, "Y", left, right, hip_height=100.0))
+    skate = M.foot_skate(stage, "/Agent")
+    np.testing.assert_allclose(skate.speeds, [30.0, 0.0], atol=1e-3)
+    np.testing.assert_array_equal(skate.contact[:, 0], contact)
+    # An explicit threshold overrides the default: 1 unit keeps only the frames on the floor.
+    strict = M.foot_skate(stage, "/Agent", contact_height=1.0)
+    assert math.isnan(strict.speeds[0])
+    assert strict.mean == pytest.approx(0.0, abs=1e-3)
+    # A contact mask from elsewhere (the source stage) replaces the height test.
+    mask = np.zeros_like(skate.contact)
+    mask[12:, 0] = True
+    given = M.foot_skate(stage, "/Agent", contact=mask)
+    assert given.speeds[0] == pytest.approx(100.0, abs=1e-3)
+    with pytest.raises(ValueError, match="contact mask"):
+        M.foot_skate(stage, "/Agent", contact=mask[1:])
+
+
+def test_foot_skate_ignores_times_outside_the_clip(tmp_path):
+    # The clip (frames 0..9) plants both feet; after it the animation holds while the SkelRoot's
+    # own transform keeps moving: that is not a foot in contact within the clip.
+    n = 10
+    stage = _new_stage(tmp_path, "outside.usda", up="Y")
+    feet = _foot(n, 0.0, 0.1, 0.0)
+    root, _ = _build_agent(stage, "/Agent", _walk(n, "Y", feet, _foot(n, 0.3, 0.0, 0.0)))
+    op = UsdGeom.Xformable(root).AddTranslateOp()
+    for t in range(n, n + 6):
+        op.Set(Gf.Vec3d(0.5 * (t - n + 1), 0.0, 0.0), float(t))
+    op.Set(Gf.Vec3d(0.0, 0.0, 0.0), float(n - 1))
+    skate = M.foot_skate(stage, "/Agent", times=range(n + 6))
+    assert not skate.contact[n:].any()
+    np.testing.assert_allclose(skate.speeds, [0.0, 0.0], atol=1e-4)
+
+
+def test_foot_skate_composed_times_with_layer_offset_and_bound_skeleton(tmp_path):
+    n, tcps, v = 16, 24.0, 0.25
+    clip = Usd.Stage.CreateNew(str(tmp_path / "clip.usda"))
+    k = np.arange(n)
+    left = _foot(n, v * k / tcps, 0.0, 0.0)
+    world = _walk(n, "Y", left, _foot(n, 0.0, 0.3, 0.0))
+    _define_animation(clip, "/Anim", world)
+    clip.SetDefaultPrim(clip.GetPrimAtPath("/Anim"))
+    clip.Save()
+
+    stage = _new_stage(tmp_path, "shot.usda", up="Y", tcps=tcps)
+    root = UsdSkel.Root.Define(stage, "/Agent")
+    anim = stage.DefinePrim("/Agent/Anim")
+    anim.GetReferences().AddReference(
+        Sdf.Reference("./clip.usda", layerOffset=Sdf.LayerOffset(100.0)))
+    skel = _define_skeleton(stage, "/Agent/Skel", anim.GetPath())
+    # A second, unused skeleton: the agent's own binding picks the right one.
+    other = _define_skeleton(stage, "/Agent/Other", anim.GetPath())
+    other.CreateJointsAttr(["A"])
+    with pytest.raises(ValueError, match="several skeletons"):
+        M.foot_skate(stage, "/Agent")
+    UsdSkel.BindingAPI.Apply(root.GetPrim()).CreateSkeletonRel().SetTargets([skel.GetPath()])
+    skate = M.foot_skate(stage, "/Agent")
+    np.testing.assert_allclose(skate.times, 100.0 + k)
+    np.testing.assert_allclose(skate.speeds, [v, 0.0], atol=1e-4)
+
+
+def test_usd_errors_name_the_prim(tmp_path):
+    stage = _new_stage(tmp_path, "errors.usda")
+    with pytest.raises(ValueError, match="/Nope"):
+        M.foot_skate(stage, "/Nope")
+    stage.DefinePrim("/Empty", "Xform")
+    with pytest.raises(ValueError, match="/Empty: no Skeleton"):
+        M.joint_world_positions(stage, "/Empty", [0])
+    n = 4
+    world = _walk(n, "Y", _foot(n, 0, 0, 0), _foot(n, 0, 0, 0))
+    UsdSkel.Root.Define(stage, "/Agent")
+    anim = _define_animation(stage, "/Agent/Anim", world)
+    skel = _define_skeleton(stage, "/Agent/Skel", anim.GetPath())
+    skel.CreateJointsAttr(["Root", "Root/Hips", "Root/Hips/L", "Root/Hips/R"])
+    anim.CreateJointsAttr(["Root", "Root/Hips", "Root/Hips/L", "Root/Hips/R"])
+    with pytest.raises(ValueError, match="/Agent/Skel: no joint is named like a foot"):
+        M.foot_skate(stage, "/Agent")
+    static = UsdSkel.Root.Define(stage, "/Static")
+    sanim = UsdSkel.Animation.Define(stage, "/Static/Anim")
+    sanim.CreateJointsAttr(JOINTS)
+    _define_skeleton(stage, "/Static/Skel", sanim.GetPath())
+    with pytest.raises(ValueError, match="no time samples"):
+        M.foot_skate(stage, static.GetPath())
+
+
+# ---------------------------------------------------------------------------------------------
+# Plausibility: facing and walking direction against the source
+# ---------------------------------------------------------------------------------------------
+
+
+def test_facing_change_per_second_and_spin_threshold_scale_with_frame_rate():
+    for fps in (24.0, 60.0, 120.0):
+        seconds = np.arange(5) / fps
+        facing = np.radians([0.0, 1.0, 1.0, -20.0, 340.0 - 360.0])
+        rate = M.facing_change_per_second(facing, seconds)
+        np.testing.assert_allclose(rate, np.array([1.0, 0.0, 21.0, 0.0]) * fps, atol=1e-9)
+        # 15 degrees per frame at 60 fps is the same rate at every frame rate.
+        assert math.isclose(M.spin_threshold(), 15.0 * 60.0)
+        per_frame = np.degrees(np.abs(np.diff(facing))) * fps
+        source = np.zeros(4)
+        spun = M.spins(source, rate)
+        np.testing.assert_array_equal(spun, per_frame > 900.0)
+        assert not M.spins(rate, rate).any()        # the source turning as fast is no spin
+    with pytest.raises(ValueError):
+        M.facing_change_per_second([0.0, 1.0], [0.0, 0.0])
+
+
+def test_facing_change_unwraps_across_pi():
+    facing = np.radians([170.0, -170.0])            # 20 degrees counter-clockwise, not 340
+    np.testing.assert_allclose(M.facing_change_per_second(facing, [0.0, 1.0]), [20.0], atol=1e-9)
+
+
+def test_direction_deviation_by_hand():
+    t = np.arange(41) / 20.0                         # 2 s at 20 fps, chords of 5 frames
+    source = np.stack((t, np.zeros_like(t)), axis=1)  # 1 unit per second along +u
+    same = M.direction_deviation(source, source + 3.0, t, min_speed=0.5)
+    assert np.nanmax(same) < 1e-9 and np.isnan(same[-5:]).all() and np.isfinite(same[:-5]).all()
+    back = source.copy()
+    back[20:] = source[20] - (source[20:] - source[20])   # walks back after 1 s
+    dev = M.direction_deviation(source, back, t, min_speed=0.5)
+    assert math.isclose(np.nanmax(dev), 180.0, abs_tol=1e-9)
+    assert np.nanmax(dev[:15]) < 1e-9
+    side = np.stack((t, t), axis=1)                    # 45 degrees off
+    assert math.isclose(np.nanmax(M.direction_deviation(source, side, t, 0.5)), 45.0, abs_tol=1e-9)
+    # Where the source stands, nothing is measured however the edit moves.
+    stand = np.zeros_like(source)
+    assert np.isnan(M.direction_deviation(stand, back, t, min_speed=0.5)).all()
+
+
+def _walk_along(points, speed=1.0, fps=24.0):
+    """Ground samples walking the polyline ``points`` at ``speed`` units per second, and their
+    times (s)."""
+    pts = np.asarray(points, dtype=np.float64)
+    arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))]
+    t = np.arange(0.0, arc[-1] / speed + 1e-9, 1.0 / fps)
+    d = t * speed
+    return np.stack((np.interp(d, arc, pts[:, 0]), np.interp(d, arc, pts[:, 1])), axis=1), t
+
+
+def _straight(n, fps=24.0, speed=1.0):
+    t = np.arange(n) / fps
+    return np.stack((t * speed, np.zeros(n)), axis=1), t
+
+
+def test_a_turn_the_edit_asks_for_is_no_reversal():
+    # A 5 m walk turned 90 degrees left after 5 m by a rounded corner that overshoots to about
+    # 120 degrees before it settles: against the unturned source it deviates more than 90
+    # degrees, against the turn the edit makes it stays well within.
+    a = np.radians(np.linspace(0.0, 120.0, 30))
+    bend = np.stack((5.0 + 0.8 * np.sin(a), 0.8 * (1.0 - np.cos(a))), axis=1)
+    edited, t = _walk_along(np.vstack(([0.0, 0.0], bend, bend[-1] + [-0.5, 4.0])))
+    source, _ = _straight(len(t))
+    speed = M.WALKING_SPEED_M
+    assert np.nanmax(M.direction_deviation(source, edited, t, speed)) > 100.0
+    turn = M.edit_turn(source, edited, t, speed)
+    assert abs(turn[0]) < 1e-9 and np.degrees(turn[-1]) == pytest.approx(97.1, abs=1.0)
+    assert np.nanmax(M.direction_deviation(source, edited, t, speed, turn=turn)) < 60.0
+    # An unedited path turns by exactly 0; a whole path turned by 30 degrees by exactly that.
+    np.testing.assert_allclose(M.edit_turn(source, source + 2.0, t, speed), 0.0, atol=1e-12)
+    c, s = np.cos(np.radians(30.0)), np.sin(np.radians(30.0))
+    np.testing.assert_allclose(M.edit_turn(source, source @ np.array([[c, s], [-s, c]]), t, speed),
+                               np.radians(30.0), atol=1e-12)
+    with pytest.raises(ValueError):
+        M.direction_deviation(source, edited, t, speed, turn=turn[:-1])
+
+
+def test_a_walk_back_or_a_loop_is_still_a_reversal():
+    source, t = _straight(97)
+    speed = M.WALKING_SPEED_M
+    # Walks 2 s, back 1 s along itself, on again: the short chords go against the edit's turn.
+    d = np.interp(t, [0.0, 2.0, 3.0, 4.0], [0.0, 2.0, 1.0, 2.0])
+    back = np.stack((d, np.zeros_like(d)), axis=1)
+    turn = M.edit_turn(source, back, t, speed)
+    assert np.nanmax(M.direction_deviation(source, back, t, speed, turn=turn)) > 170.0
+    # A full loop of 1 m radius in the middle of a straight walk: the edit turns it round past 180.
+    a = np.linspace(0.0, 2.0 * np.pi, 60)
+    loop = np.stack((1.5 + np.sin(a), 1.0 - np.cos(a)), axis=1)
+    edited, t = _walk_along(np.vstack(([0.0, 0.0], loop, [4.0, 0.0])))
+    source, _ = _straight(len(t))
+    assert np.degrees(np.abs(M.edit_turn(source, edited, t, speed)).max()) > 180.0
+
+
+def test_default_facing_joint():
+    assert M.default_facing_joint(["Root", "Root/Hips", "Root/Hips/LeftUpLeg"]) == 1
+    assert M.default_facing_joint(["pelvis", "pelvis/spine"]) == 0
+    assert M.default_facing_joint(["Root", "Root/LeftHip", "Root/mixamorig_Hips"]) == 2
+    assert M.default_facing_joint(["Root", "Root/Spine"]) == 0
+
+
+@pytest.fixture(scope="module")
+def walker_stage(tmp_path_factory):
+    from mocapedit.data import examples, walker
+    tmp = tmp_path_factory.mktemp("plausible")
+    clip = walker.walk(frames=96, fps=24.0, speed=1.3, name="straight")
+    stage = examples.build_crowd_stage(tmp / "shot.usda", [examples.AgentSpec("a", clip)], fps=24.0,
+                                       clips_dir=tmp / "clips")
+    stage.GetRootLayer().Save()
+    return stage.GetRootLayer().realPath
+
+
+def _turned(path, yaw_of_time):
+    """The stage at ``path`` with agent a turned about its origin by yaw_of_time(t) degrees."""
+    stage = Usd.Stage.Open(path)
+    stage.SetEditTarget(stage.GetSessionLayer())
+    op = UsdGeom.Xformable(stage.GetPrimAtPath("/World/Crowd/a")).AddRotateYOp(opSuffix="edit")
+    for t in range(96):
+        op.Set(float(yaw_of_time(t)), float(t))
+    return stage
+
+
+def test_plausibility_of_an_unedited_agent(walker_stage):
+    src = Usd.Stage.Open(walker_stage)
+    p = M.plausibility(src, _turned(walker_stage, lambda t: 0.0), "/World/Crowd/a")
+    assert abs(p.max_extra_facing_rate) < 1e-6 and p.spin_frames == 0 and not p.spins
+    assert p.max_direction_deviation < 1e-6 and not p.reverses
+    assert math.isclose(p.length_ratio, 1.0, rel_tol=1e-9)
+    assert p.time_warp == pytest.approx((1.0, 1.0))
+    assert math.isclose(p.foot_skate_ratio, 1.0, rel_tol=1e-6)
+    assert p.source_max_facing_rate < M.spin_threshold()
+
+
+def test_plausibility_catches_a_spin_and_a_reversal(walker_stage):
+    src = Usd.Stage.Open(walker_stage)
+    # One frame turns the body by 100 degrees (2,400 degrees per second at 24 fps): a spin, and the
+    # walk after it (turned about the start) goes off by 100 degrees.
+    p = M.plausibility(src, _turned(walker_stage, lambda t: 100.0 if t >= 50 else 0.0), "/World/Crowd/a")
+    assert p.spin_frames == 1 and p.spins
+    assert p.max_extra_facing_rate == pytest.approx(100.0 * 24.0, rel=0.05)
+    assert p.reverses and 95.0 < p.max_direction_deviation <= 180.0
+    # A constant turn of the whole agent is no spin, and its direction is off by that turn.
+    q = M.plausibility(src, _turned(walker_stage, lambda t: 30.0), "/World/Crowd/a")
+    assert q.spin_frames == 0 and abs(q.max_extra_facing_rate) < 1e-3
+    assert q.max_direction_deviation == pytest.approx(30.0, abs=1e-3)
+    assert q.length_ratio == pytest.approx(1.0, abs=1e-6)
+    worst = M.worst_plausibility([p, q])
+    assert worst["spinningAgents"] == 1 and worst["reversingAgents"] == 1
+    assert worst["maxExtraTurnPerFrameAt60fps"] == pytest.approx(p.max_extra_facing_rate / 60.0)
+    assert M.worst_plausibility([]) == {"agents": 0}

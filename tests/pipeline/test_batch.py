@@ -1,0 +1,173 @@
+"""`mocapedit batch`: many shots on dask.distributed, byte for byte what single solves write.
+
+The cluster tests start a real `dask scheduler` and two `dask worker` processes on the
+loopback address; each stops by itself (the scheduler after an idle minute, the workers
+when their scheduler is gone) and is stopped at the end of the test.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from mocapedit.pipeline import batch
+from mocapedit.data import examples, walker
+from mocapedit.model.errors import MocapEditError
+from mocapedit.pipeline.processor import solve
+
+from conftest import run_cli
+
+CROWD = "/World/Crowd"
+BIN = Path(sys.executable).parent
+
+
+def _shot(folder: Path, name: str, late: float, broken: bool = False) -> Path:
+    """Three walkers; one frame of the first plays ``late`` time codes late, the second is pinned
+    and moved. ``broken`` adds a constraint on a missing agent."""
+    clip = walker.walk(frames=48, name="walk")
+    specs = [examples.AgentSpec(f"a{i}", clip, (3.0 * i, 0, 0), 0.0, 2.0 * i) for i in range(3)]
+    path = folder / f"{name}.usda"
+    stage = examples.build_crowd_stage(path, specs, clips_dir=folder / "clips")
+    examples.add_time_constraint(stage, "/Edits/late", f"{CROWD}/a0", 24, 24.0 + late)
+    examples.add_position_constraint(stage, "/Edits/start", f"{CROWD}/a1", 0, (3.0, 0.0, 0.0))
+    examples.add_position_constraint(stage, "/Edits/end", f"{CROWD}/a1", 47, (4.0, 0.0, 3.0))
+    if broken:
+        examples.add_time_constraint(stage, "/Edits/nobody", f"{CROWD}/nobody", 3, 5.0)
+    stage.GetRootLayer().Save()
+    return path
+
+
+@pytest.fixture
+def shots(tmp_path):
+    folder = tmp_path / "shots"
+    folder.mkdir()
+    return [_shot(folder, "s1", 3.5), _shot(folder, "s2", -2.0), _shot(folder, "bad", 1.0, broken=True)]
+
+
+def _single(shot: Path, outdir: Path) -> bytes:
+    out = outdir / batch.output_name(str(shot), ".edits.usdc")
+    solve(str(shot), output=str(out))
+    return out.read_bytes()
+
+
+def test_the_plan_is_checked_before_any_work(tmp_path, shots):
+    with pytest.raises(MocapEditError, match=r"nowhere\.usda: no such shot file"):
+        batch.plan([str(shots[0]), str(tmp_path / "nowhere.usda")], str(tmp_path / "out"))
+    other = tmp_path / "other"
+    other.mkdir()
+    twin = _shot(other, "s1", 1.0)
+    with pytest.raises(MocapEditError, match=r"would both write .*s1\.edits\.usdc"):
+        batch.plan([str(shots[0]), str(twin)], str(tmp_path / "out"))
+    with pytest.raises(MocapEditError, match="would overwrite an input shot"):
+        batch.plan([str(shots[0])], str(shots[0].parent), suffix=".usda")
+    with pytest.raises(MocapEditError, match=r"s1\.edits\.txt"):   # not a layer USD can write
+        batch.plan([str(shots[0])], str(tmp_path / "out"), suffix=".edits.txt")
+    # From the command line: exit 1, a message, nothing written, no cluster started.
+    out = tmp_path / "out"
+    started = time.perf_counter()
+    proc = run_cli("batch", shots[0], tmp_path / "nowhere.usda", "-o", out)
+    assert proc.returncode == 1 and "no such shot file" in proc.stderr and "Traceback" not in proc.stderr
+    proc = run_cli("batch", shots[0], twin, "-o", out)
+    assert proc.returncode == 1 and "would both write" in proc.stderr
+    assert not out.exists() and time.perf_counter() - started < 10
+
+
+def test_an_unreachable_scheduler_is_a_clear_error_within_ten_seconds(tmp_path, shots):
+    with socket.socket() as s:   # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    started = time.perf_counter()
+    proc = run_cli("batch", shots[0], "-o", tmp_path / "out", "--scheduler", f"tcp://127.0.0.1:{port}")
+    assert time.perf_counter() - started < 10
+    assert proc.returncode == 1, proc.stderr
+    assert f"cannot reach a Dask scheduler" in proc.stderr and "Traceback" not in proc.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_solve_shot_reports_failures_and_skips_up_to_date_outputs(tmp_path, shots):
+    jobs = batch.plan([str(s) for s in shots], str(tmp_path / "out"))
+    options = {"guides": True, "collisions": None}
+    results = [batch.solve_shot(job, options) for job in jobs]
+    assert [r.status for r in results] == ["solved", "solved", "failed"]
+    assert "</Edits/nobody>" in results[2].error and not os.path.exists(jobs[2].output)
+    assert results[0].figures["editedAgents"] == 2 and results[0].figures["worstHardResidual"] < 1e-6
+    again = [batch.solve_shot(job, options) for job in jobs[:2]]
+    assert [r.status for r in again] == ["skipped", "skipped"]
+    # Other options, or another input, solve again.
+    assert batch.solve_shot(jobs[0], {"guides": False, "collisions": None}).status == "solved"
+    _shot(shots[1].parent, "s2", -1.0)
+    assert batch.solve_shot(jobs[1], options).status == "solved"
+
+
+@pytest.fixture
+def cluster(tmp_path):
+    """A `dask scheduler` and two `dask worker` processes on 127.0.0.1."""
+    info = tmp_path / "scheduler.json"
+    env = {**os.environ, "DASK_DISTRIBUTED__WORKER__DAEMON": "False"}
+    procs = [subprocess.Popen([str(BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port", "0",
+                               "--no-dashboard", "--scheduler-file", str(info), "--idle-timeout", "120"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
+                              start_new_session=True)]
+    deadline = time.time() + 60
+    while not info.exists() and time.time() < deadline:
+        time.sleep(0.2)
+    address = json.loads(info.read_text())["address"]
+    for i in range(2):
+        procs.append(subprocess.Popen(
+            [str(BIN / "dask"), "worker", address, "--nthreads", "1", "--nworkers", "1", "--no-dashboard",
+             "--death-timeout", "30", "--name", f"w{i}", "--local-directory", str(tmp_path / f"w{i}")],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, start_new_session=True))
+    from distributed import Client
+    with Client(address, timeout=30) as client:
+        client.wait_for_workers(2, timeout=60)
+    yield address
+    for p in reversed(procs):
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGTERM)
+    for p in procs:
+        try:
+            p.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+
+
+@pytest.mark.slow
+def test_a_batch_on_a_running_cluster_writes_what_single_solves_write(tmp_path, shots, cluster):
+    single, out = tmp_path / "single", tmp_path / "out"
+    expected = {s.name: _single(s, single) for s in shots[:2]}
+    proc = run_cli("batch", *shots, "-o", out, "--scheduler", cluster)
+    assert proc.returncode == 1, proc.stderr          # one shot failed
+    assert "Traceback" not in proc.stderr
+    assert "3 remaining" not in proc.stderr and "0 remaining" in proc.stderr
+    for shot in shots[:2]:
+        assert (out / batch.output_name(str(shot), ".edits.usdc")).read_bytes() == expected[shot.name]
+    summary = json.loads((out / batch.SUMMARY).read_text())
+    assert (summary["solved"], summary["skipped"], summary["failed"]) == (2, 0, 1)
+    by_shot = {Path(r["shot"]).name: r for r in summary["shots"]}
+    assert "</Edits/nobody>" in by_shot["bad.usda"]["error"]
+    assert by_shot["s1.usda"]["figures"]["worstHardResidual"] < 1e-6
+    # Nothing half-written: no temporary files are left beside the outputs.
+    assert sorted(p.name for p in out.iterdir()) == sorted(["s1.edits.usdc", "s2.edits.usdc", batch.SUMMARY])
+    # A re-run skips what is up to date.
+    proc = run_cli("batch", *shots[:2], "-o", out, "--scheduler", cluster)
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads((out / batch.SUMMARY).read_text())
+    assert (summary["solved"], summary["skipped"]) == (0, 2)
+
+
+@pytest.mark.slow
+def test_a_batch_on_a_local_cluster(tmp_path, shots):
+    single, out = tmp_path / "single", tmp_path / "out"
+    expected = _single(shots[0], single)
+    proc = run_cli("batch", *shots[:2], "-o", out, "--workers", "2")
+    assert proc.returncode == 0, proc.stderr
+    assert (out / "s1.edits.usdc").read_bytes() == expected
+    assert "2 done, 0 failed, 0 remaining" in proc.stderr

@@ -1,0 +1,180 @@
+"""Foundation end to end: read a stage, write an edits layer, compose, compare with UsdSkel."""
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+import pytest
+from pxr import Sdf, Usd, UsdGeom
+
+import mocapedit
+from mocapedit.usd import reader
+from mocapedit.geometry import trajectory
+from mocapedit.model.errors import MocapEditError
+from mocapedit.pipeline.processor import solve
+
+from conftest import TOY_JOINTS, run_cli, world_joints, write_toy_stage
+
+
+def test_solve_without_edits_writes_a_layer_that_plays_the_source(tmp_path, toy_stage):
+    edits, composed = tmp_path / "shot.edits.usda", tmp_path / "shot.composed.usda"
+    result = solve(str(toy_stage), output=str(edits), composed=str(composed))
+    assert result.report.stats["agents"] == 3
+    assert result.report.stats["editedAgents"] == 0
+
+    layer = Sdf.Layer.FindOrOpen(str(edits))
+    assert layer.GetPrimAtPath("/MocapEdit/Guides/SourcePaths")
+    assert not layer.GetPrimAtPath("/World"), "agents without edits must not be written"
+    meta = layer.customLayerData["mocapedit"]
+    assert meta["inputs"][0].endswith("shot.usda")
+    assert len(meta["contentHash"]) == 64
+
+    src = Usd.Stage.Open(str(toy_stage))
+    out = Usd.Stage.Open(str(composed))
+    assert out.GetTimeCodesPerSecond() == src.GetTimeCodesPerSecond()
+    assert UsdGeom.GetStageUpAxis(out) == UsdGeom.GetStageUpAxis(src)
+    times = np.arange(48)
+    for k in range(3):
+        a = world_joints(src, f"/World/agent{k}/Skel", times)
+        b = world_joints(out, f"/World/agent{k}/Skel", times)
+        np.testing.assert_allclose(b, a, atol=1e-6)
+    assert out.GetPrimAtPath("/MocapEdit/Guides/SourcePaths").GetAttribute("purpose").Get() == "guide"
+
+
+def test_same_input_gives_the_same_bytes(tmp_path, toy_stage):
+    a, b = tmp_path / "a.usda", tmp_path / "b.usda"
+    solve(str(toy_stage), output=str(a))
+    solve(str(toy_stage), output=str(b))
+    assert hashlib.sha256(a.read_bytes()).digest() == hashlib.sha256(b.read_bytes()).digest()
+
+
+def test_the_input_is_never_modified(tmp_path, toy_stage):
+    before = toy_stage.read_bytes()
+    solve(str(toy_stage), output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"))
+    assert toy_stage.read_bytes() == before
+
+
+@pytest.mark.parametrize("up_axis,mpu", [("Z", 0.01), ("Y", 1.0)])
+def test_reader_trajectory_matches_usdskel_root_positions(tmp_path, up_axis, mpu):
+    path = write_toy_stage(tmp_path / "s.usda", up_axis=up_axis, meters_per_unit=mpu)
+    stage = Usd.Stage.Open(str(path))
+    data = reader.read_stage(stage)
+    assert data.info.up_axis == up_axis and data.info.meters_per_unit == mpu
+    for k in range(3):
+        agent = data.agents[f"/World/agent{k}"]
+        traj = trajectory.extract(agent, data.clip_of(agent), up_axis, mpu)
+        world = world_joints(stage, agent.skeleton_path, agent.sample_times)[:, 0]
+        expect_uv = np.stack([world[:, 0], world[:, 1]] if up_axis == "Z" else [world[:, 0], -world[:, 2]], -1)
+        np.testing.assert_allclose(traj.ground, expect_uv, atol=1e-4)
+        # The agent prim's yaw turns the whole path: the first heading follows it.
+        uv = traj.ground
+        expect = np.arctan2(uv[1, 1] - uv[0, 1], uv[1, 0] - uv[0, 0])
+        assert traj.heading[0] == pytest.approx(expect, abs=1e-9)
+    assert data.agents["/World/agent0"].collision_radius == pytest.approx(0.3 / mpu)
+
+
+def test_clip_referenced_with_a_layer_offset_keeps_its_frames(tmp_path):
+    clip = write_toy_stage(tmp_path / "clip.usda", agents=1)
+    shot = Usd.Stage.CreateNew(str(tmp_path / "shot.usda"))
+    UsdGeom.SetStageUpAxis(shot, "Z")
+    UsdGeom.SetStageMetersPerUnit(shot, 0.01)
+    shot.SetTimeCodesPerSecond(24)
+    for k, offset in enumerate([0.0, 10.0, 25.5]):
+        prim = shot.DefinePrim(f"/Shot/a{k}")
+        prim.GetReferences().AddReference(str(clip), "/World/agent0", Sdf.LayerOffset(offset))
+    shot.GetRootLayer().Save()
+    data = reader.read_stage(Usd.Stage.Open(str(tmp_path / "shot.usda")))
+    assert len(data.agents) == 3
+    assert len(data.clips) == 1, "a clip shared by many agents is read once"
+    for k, offset in enumerate([0.0, 10.0, 25.5]):
+        np.testing.assert_allclose(data.agents[f"/Shot/a{k}"].sample_times, np.arange(48) + offset)
+
+
+def test_named_root_joint_and_hip_projection(tmp_path):
+    path = write_toy_stage(tmp_path / "s.usda", agents=1)
+    stage = Usd.Stage.Open(str(path))
+    prim = stage.GetPrimAtPath("/World/agent0")
+    prim.CreateAttribute("mocap:rootJoint", Sdf.ValueTypeNames.Token).Set("Hips")
+    data = reader.read_stage(stage)
+    assert data.agents["/World/agent0"].root_joint == TOY_JOINTS.index("Root/Hips")
+    prim.GetAttribute("mocap:rootJoint").Set("Nope")
+    with pytest.raises(MocapEditError, match=r"</World/agent0>\.mocap:rootJoint: joint 'Nope'"):
+        reader.read_stage(stage)
+
+
+def test_root_without_motion_falls_back_to_the_projected_hip(tmp_path):
+    path = write_toy_stage(tmp_path / "s.usda", agents=1)
+    stage = Usd.Stage.Open(str(path))
+    anim = stage.GetPrimAtPath("/World/agent0/Skel/Anim")
+    attr = anim.GetAttribute("translations")
+    for t in attr.GetTimeSamples():
+        v = np.array(attr.Get(t))
+        v[1, :2] += v[0, :2]  # move the travel from the root onto the hips
+        v[0] = 0
+        attr.Set(type(attr.Get(t)).FromNumpy(v.astype(np.float32)), t)
+    data = reader.read_stage(stage)
+    agent = data.agents["/World/agent0"]
+    traj = trajectory.extract(agent, data.clip_of(agent), "Z", 0.01)
+    assert traj.projected_hip and traj.joint == TOY_JOINTS.index("Root/Hips")
+    assert np.ptp(traj.ground[:, 0]) == pytest.approx(47 * 5.0, rel=1e-6)
+
+
+@pytest.mark.parametrize("skip,needle", [
+    ("skeleton", r"</World/agent0>.*no skeleton"),
+    ("animation", r"</World/agent0>.*no animation"),
+    ("samples", r"</World/agent0/Skel/Anim>\.translations: clip has no samples"),
+])
+def test_broken_agents_fail_clearly_and_write_nothing(tmp_path, skip, needle):
+    path = write_toy_stage(tmp_path / "bad.usda", agents=1, skip=skip)
+    out = tmp_path / "out.usda"
+    proc = run_cli("solve", path, "-o", out)
+    assert proc.returncode == 1, proc.stderr
+    import re
+    assert re.search(needle, proc.stderr), proc.stderr
+    assert not out.exists()
+    assert not list(tmp_path.glob(".out.*")), "no temporary file may be left behind"
+
+
+def test_unreadable_input_fails_clearly(tmp_path):
+    bad = tmp_path / "garbage.usda"
+    bad.write_text("#usda 1.0\n( this is not usd\n")
+    proc = run_cli("solve", bad, "-o", tmp_path / "o.usda")
+    assert proc.returncode == 1
+    assert "garbage.usda" in proc.stderr and "cannot be read" in proc.stderr
+    proc = run_cli("solve", tmp_path / "missing.usda", "-o", tmp_path / "o.usda")
+    assert proc.returncode == 1 and "no such file" in proc.stderr
+
+
+def test_cli_help_and_plugin_path():
+    proc = run_cli("--help")
+    assert proc.returncode == 0 and "solve" in proc.stdout and "plugin-path" in proc.stdout
+    proc = run_cli("solve", "--help")
+    assert proc.returncode == 0 and "--composed" in proc.stdout
+    proc = run_cli("plugin-path")
+    assert proc.returncode == 0
+    assert proc.stdout.strip() == mocapedit.plugin_path()
+
+
+def test_python_api_accepts_an_open_stage(toy_stage):
+    stage = Usd.Stage.Open(str(toy_stage))
+    result = solve(stage)
+    assert result.layer.GetPrimAtPath("/MocapEdit")
+    assert result.report.stats["agents"] == 3
+
+
+def test_walker_crowd_round_trip_keeps_foot_skate(tmp_path):
+    """The generated walker crowd, solved without edits: the composed stage skates no more."""
+    from mocapedit.data import examples, walker
+    from mocapedit.inspect import metrics
+
+    clip = walker.walk(frames=72, up="Z", meters_per_unit=0.01)
+    stage_path = tmp_path / "crowd.usda"
+    examples.build_crowd_stage(stage_path, [examples.AgentSpec("a", clip, (0, 0, 0), 30.0, time_offset=5.0)],
+                               up_axis="Z", meters_per_unit=0.01, fps=24.0, clips_dir=tmp_path / "clips")
+    solve(str(stage_path), output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"))
+    src = metrics.foot_skate(Usd.Stage.Open(str(stage_path)), "/World/Crowd/a")
+    out = metrics.foot_skate(Usd.Stage.Open(str(tmp_path / "c.usda")), "/World/Crowd/a",
+                             contact=src.contact, times=src.times)
+    assert src.mean < 5.0, "the procedural walker plants its feet (cm/s)"
+    assert out.mean == pytest.approx(src.mean, abs=1e-6)
+    assert out.contact_seconds.sum() > 0.5

@@ -1,0 +1,452 @@
+"""Foot contacts and foot locking: legs by name, detection, the solver's job against numpy,
+and the locked feet measured on the composed stage by UsdSkel forward kinematics."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
+
+from mocapedit.geometry import contacts
+from mocapedit.data import examples, walker
+from mocapedit.solve import footlock
+from mocapedit.inspect import metrics
+from mocapedit.model.errors import MocapEditError
+from mocapedit.solve.layering import trs_from_matrices
+from mocapedit.pipeline.processor import solve
+
+from conftest import run_cli
+
+CROWD = "/World/Crowd"
+FPS = 24.0
+MOCAP = Path(__file__).resolve().parents[2] / ".." / "shared" / "mocap"
+
+
+@pytest.fixture(scope="module")
+def walk_clip():
+    return walker.walk(frames=193, fps=FPS, speed=1.25, name="ten_metres")
+
+
+def _bent_path_stage(tmp_path, clip, **kw):
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)], up_axis="Y",
+                                       fps=FPS, clips_dir=tmp_path / "clips", **kw)
+    a = f"{CROWD}/a"
+    examples.add_position_constraint(stage, "/Edits/start", a, 0, (0.0, 0.0, 0.0))
+    examples.add_position_constraint(stage, "/Edits/middle", a, 96, (1.5, 0.0, 5.0))
+    examples.add_position_constraint(stage, "/Edits/end", a, 192, (0.0, 0.0, 10.0))
+    stage.GetRootLayer().Save()
+    return stage, a
+
+
+def _solve(tmp_path, name="out", **kw):
+    edits, composed = tmp_path / f"{name}.edits.usda", tmp_path / f"{name}.usda"
+    result = solve(str(tmp_path / "shot.usda"), output=str(edits), composed=str(composed), **kw)
+    return result, Usd.Stage.Open(str(composed))
+
+
+def _fk(stage, agent, times):
+    """(world matrices (T,J,4,4), local matrices (T,J,4,4), joint names) by UsdSkel."""
+    cache = UsdSkel.Cache()
+    skel = metrics._Skel(stage, agent, cache)
+    world, local = [], []
+    xfc = UsdGeom.XformCache()
+    for t in times:
+        xfc.SetTime(Usd.TimeCode(float(t)))
+        world.append(np.array(skel.query.ComputeJointWorldTransforms(xfc)))
+        local.append(np.array(skel.query.ComputeJointLocalTransforms(Usd.TimeCode(float(t)))))
+    return np.array(world), np.array(local), skel.joints
+
+
+def _leg_quality(src, out, agent, times, leg_names, fps, unlocked=None):
+    """(largest bone length change, knee flips, largest joint angular speed over the source's) of
+    the legs on a composed stage. Knee sides are compared with ``unlocked`` (the same edit without
+    foot locking, whose turns of the whole body are not flips), by default the source."""
+    w0, l0, joints = _fk(src, agent, times)
+    w1, l1, _ = _fk(out, agent, times)
+    wr = w0 if unlocked is None else _fk(unlocked, agent, times)[0]
+    index = [[next(i for i, j in enumerate(joints) if j.endswith("/" + n) or j == n) for n in leg] for leg in leg_names]
+    bones, bend_flip, speed_ratio = 0.0, 0, 0.0
+    for hip, knee, ankle in index:
+        for a, b in ((hip, knee), (knee, ankle)):
+            d0 = np.linalg.norm(w0[:, a, 3, :3] - w0[:, b, 3, :3], axis=-1)
+            d1 = np.linalg.norm(w1[:, a, 3, :3] - w1[:, b, 3, :3], axis=-1)
+            bones = max(bones, float(np.abs(d1 - d0).max()))
+        # Wherever the source knee is clearly bent (sine of the bend over 0.05), the locked knee
+        # bends to the same side: never backwards.
+        bends = [np.cross(w[:, knee, 3, :3] - w[:, hip, 3, :3], w[:, ankle, 3, :3] - w[:, knee, 3, :3]) for w in (wr, w1)]
+        lengths = np.linalg.norm(wr[:, knee, 3, :3] - wr[:, hip, 3, :3], axis=-1) * \
+            np.linalg.norm(wr[:, ankle, 3, :3] - wr[:, knee, 3, :3], axis=-1)
+        bent = np.linalg.norm(bends[0], axis=-1) > 0.05 * lengths
+        bend_flip += int(np.sum(bent & (np.einsum("ti,ti->t", bends[0], bends[1]) <= 0)))
+        for j in (hip, knee, ankle):
+            q0, q1 = trs_from_matrices(l0[:, j])[1], trs_from_matrices(l1[:, j])[1]
+            speed = [2 * np.arccos(np.clip(np.abs(np.sum(q[1:] * q[:-1], -1)), 0, 1)) * fps for q in (q0, q1)]
+            speed_ratio = max(speed_ratio, float(speed[1].max() / max(speed[0].max(), 1e-9)))
+    return bones, bend_flip, speed_ratio
+
+
+# ---- legs and contacts -------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("names, hip, toe", [
+    (list(walker.JOINTS), "LeftUpLeg", "LeftToe"),
+    (["Hips", "Hips/LHipJoint", "Hips/LHipJoint/LeftUpLeg", "Hips/LHipJoint/LeftUpLeg/LeftLeg",
+      "Hips/LHipJoint/LeftUpLeg/LeftLeg/LeftFoot", "Hips/LHipJoint/LeftUpLeg/LeftLeg/LeftFoot/LeftToeBase",
+      "Hips/RHipJoint", "Hips/RHipJoint/RightUpLeg", "Hips/RHipJoint/RightUpLeg/RightLeg",
+      "Hips/RHipJoint/RightUpLeg/RightLeg/RightFoot"], "LeftUpLeg", "LeftToeBase"),
+    (["R", "R/CC_Base_Hip", "R/CC_Base_Hip/CC_Base_Pelvis", "R/CC_Base_Hip/CC_Base_Pelvis/CC_Base_L_Thigh",
+      "R/CC_Base_Hip/CC_Base_Pelvis/CC_Base_L_Thigh/CC_Base_L_Calf",
+      "R/CC_Base_Hip/CC_Base_Pelvis/CC_Base_L_Thigh/CC_Base_L_ThighTwist01",
+      "R/CC_Base_Hip/CC_Base_Pelvis/CC_Base_L_Thigh/CC_Base_L_Calf/CC_Base_L_Foot",
+      "R/CC_Base_Hip/CC_Base_Pelvis/CC_Base_L_Thigh/CC_Base_L_Calf/CC_Base_L_Foot/CC_Base_L_ToeBase",
+      "R/CC_Base_Hip/CC_Base_Pelvis/CC_Base_R_Thigh", "R/CC_Base_Hip/CC_Base_Pelvis/CC_Base_R_Thigh/CC_Base_R_Calf",
+      "R/CC_Base_Hip/CC_Base_Pelvis/CC_Base_R_Thigh/CC_Base_R_Calf/CC_Base_R_Foot"], "CC_Base_L_Thigh",
+     "CC_Base_L_ToeBase"),
+    (["mixamorig:Hips", "mixamorig:Hips/mixamorig:LeftUpLeg", "mixamorig:Hips/mixamorig:LeftUpLeg/mixamorig:LeftLeg",
+      "mixamorig:Hips/mixamorig:LeftUpLeg/mixamorig:LeftLeg/mixamorig:LeftFoot",
+      "mixamorig:Hips/mixamorig:RightUpLeg", "mixamorig:Hips/mixamorig:RightUpLeg/mixamorig:RightLeg",
+      "mixamorig:Hips/mixamorig:RightUpLeg/mixamorig:RightLeg/mixamorig:RightFoot"], "mixamorig:LeftUpLeg", None),
+])
+def test_legs_are_found_by_name_on_common_rigs(names, hip, toe):
+    parents = np.array([-1 if "/" not in n else names.index(n.rsplit("/", 1)[0]) for n in names])
+    legs = contacts.find_legs(names, parents)
+    assert [leg.side for leg in legs] == ["left", "right"]
+    left = legs[0]
+    assert names[left.hip].rsplit("/", 1)[-1] == hip
+    assert int(parents[left.knee]) == left.hip and int(parents[left.ankle]) == left.knee
+    assert (names[left.toe].rsplit("/", 1)[-1] if left.toe is not None else None) == toe
+
+
+def test_no_legs_on_a_rig_without_leg_names():
+    names = ["Root", "Root/A", "Root/A/B", "Root/A/B/C"]
+    assert contacts.find_legs(names, np.array([-1, 0, 1, 2])) == []
+
+
+def test_walker_contacts_alternate_and_hold_still(walk_clip):
+    world = walker.joint_world_positions(walk_clip)
+    seconds = np.arange(walk_clip.num_frames) / FPS
+    found = {}
+    for side in ("Left", "Right"):
+        ankle, toe = world[:, walk_clip.joint_index(side + "Foot")], world[:, walk_clip.joint_index(side + "Toe")]
+        found[side] = contacts.detect_leg(seconds, ankle, toe, "Y", 1.0)
+        mask = contacts.mask_of(found[side], walk_clip.num_frames)
+        # Planted toes barely move during a contact; the foot is in the air between contacts.
+        speed = contacts.ground_speed(seconds, toe, "Y")
+        assert np.median(speed[mask]) < 0.05
+        assert (~mask).sum() > 0.2 * walk_clip.num_frames
+    # 10 m at 1.25 m/s: about 7 steps per foot.
+    assert all(6 <= len(r) <= 9 for r in found.values())
+    # Walking, never both feet in the air.
+    both = contacts.mask_of(found["Left"], walk_clip.num_frames) | contacts.mask_of(found["Right"], walk_clip.num_frames)
+    assert both.all()
+
+
+def test_a_run_has_contacts_on_both_feet_in_turn():
+    clip = walker.run(frames=120, fps=60.0, speed=3.5)
+    world = walker.joint_world_positions(clip)
+    seconds = np.arange(clip.num_frames) / 60.0
+    found = [contacts.detect_leg(seconds, world[:, clip.joint_index(s + "Foot")],
+                                 world[:, clip.joint_index(s + "Toe")], "Y", 1.0) for s in ("Left", "Right")]
+    assert all(len(r) >= 2 for r in found)
+    left, right = (contacts.mask_of(r, clip.num_frames) for r in found)
+    assert not np.any(left & right)                   # a run never has both feet down
+    with pytest.raises(ValueError, match="relative-speed"):
+        contacts.DetectSettings(relative_speed=-1.0).validate()
+
+
+def test_detection_thresholds_follow_meters_per_unit(walk_clip):
+    world = walker.joint_world_positions(walk_clip)
+    seconds = np.arange(walk_clip.num_frames) / FPS
+    ankle = world[:, walk_clip.joint_index("LeftFoot")]
+    in_m = contacts.detect_leg(seconds, ankle, None, "Y", 1.0)
+    in_cm = contacts.detect_leg(seconds, ankle * 100.0, None, "Y", 0.01)
+    assert in_m == in_cm and in_m
+
+
+# ---- the job -----------------------------------------------------------------------------------
+
+
+def _random_legs(rng, agents=3, poses=40):
+    weights = np.clip(rng.uniform(-0.5, 1.5, (agents * poses, 2)), 0, 1)
+    weights[5, 0] = 1.0
+    inputs = examples.leg_inputs(rng, agents, poses, 0.15, [0, 2, 4], weights)
+    inputs.target[5, 0] = inputs.hip[5, 0] + (0, -1.2, 0.1)        # out of reach: the pelvis must drop
+    return inputs
+
+
+@pytest.mark.parametrize("keep", [False, True])
+def test_the_solver_job_matches_numpy(keep):
+    inputs = _random_legs(np.random.default_rng(7))
+    if keep:  # a stationary range: no pelvis drop there, easing back in around it
+        inputs.keep = np.zeros(len(inputs.hip), np.uint8)
+        inputs.keep[50:60] = 1
+    fast, slow = footlock.lock_feet(inputs), footlock.lock_feet_numpy(inputs)
+    for name in ("hip_local", "knee_local", "ankle_local", "drop", "reached"):
+        np.testing.assert_allclose(getattr(fast, name), getattr(slow, name), atol=1e-9, err_msg=name)
+    assert fast.drop[5] > 0.2 and fast.drop[5] >= fast.drop[:40].max()
+    if keep:
+        assert np.all(fast.drop[50:60] == 0) and fast.drop[40:100].max() > 0
+
+
+def test_the_job_keeps_bones_reaches_its_targets_and_never_overstretches():
+    inputs = _random_legs(np.random.default_rng(3))
+    out = footlock.lock_feet(inputs)
+    shift = -out.drop[:, None, None] * inputs.up
+    hip = inputs.hip + shift
+    thigh = np.linalg.norm(inputs.knee - inputs.hip, axis=-1)
+    shin = np.linalg.norm(inputs.ankle - inputs.knee, axis=-1)
+    reach = np.linalg.norm(out.reached - hip, axis=-1)
+    assert np.all(reach <= footlock.MAX_REACH * (thigh + shin) + 1e-12)
+    # Targets within the soft reach are met exactly.
+    wanted = inputs.ankle + inputs.weight[..., None] * (inputs.target - inputs.ankle)
+    easy = np.linalg.norm(wanted - hip, axis=-1) < footlock.SOFT_REACH * (thigh + shin) - 1e-6
+    easy &= np.linalg.norm(wanted - hip, axis=-1) > np.abs(thigh - shin) + 1e-3
+    assert easy.sum() > 100
+    np.testing.assert_allclose(out.reached[easy], wanted[easy], atol=1e-9)
+
+
+def test_the_job_rejects_bad_arrays():
+    inputs = _random_legs(np.random.default_rng(1))
+    inputs.weight[0, 0] = 2.0
+    with pytest.raises(ValueError, match="weights"):
+        footlock.lock_feet(inputs)
+    inputs = _random_legs(np.random.default_rng(1))
+    inputs.knee = inputs.knee[:-1]
+    with pytest.raises(ValueError, match="knee"):
+        footlock.lock_feet(inputs)
+
+
+# ---- end to end --------------------------------------------------------------------------------
+
+
+LEGS = [("LeftUpLeg", "LeftLeg", "LeftFoot"), ("RightUpLeg", "RightLeg", "RightFoot")]
+
+
+def test_a_bent_path_keeps_the_planted_feet_where_they_are(tmp_path, walk_clip):
+    _, a = _bent_path_stage(tmp_path, walk_clip)
+    free, free_stage = _solve(tmp_path, "free", foot_locking=False)
+    locked, out = _solve(tmp_path, "locked")
+    src = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    feet = ["LeftFoot", "LeftToe", "RightFoot", "RightToe"]
+    source = metrics.foot_skate(src, a, foot_joints=feet)
+    before = metrics.foot_skate(free_stage, a, times=source.times, foot_joints=feet, contact=source.contact)
+    after = metrics.foot_skate(out, a, times=source.times, foot_joints=feet, contact=source.contact)
+    assert before.mean > source.mean + 0.02          # the edit alone slides the feet
+    assert after.mean <= source.mean + 0.005         # locked: the source's skate, within 0.5 cm/s
+    bones, flips, speed = _leg_quality(src, out, a, source.times, LEGS, FPS, unlocked=free_stage)
+    assert bones < 1e-6 and flips == 0 and speed < 1.5
+    # No foot goes below the ground it stood on.
+    heights = [metrics.joint_world_positions(st, a, source.times)[..., 1] for st in (src, out)]
+    ankles = [walk_clip.joint_index(n) for n in ("LeftFoot", "RightFoot", "LeftToe", "RightToe")]
+    assert np.all(heights[1][:, ankles] >= heights[0][:, ankles].min(axis=0) - 1e-6)
+    # The constraints still hold.
+    assert all(c["met"] and c["residual"] < 1e-6 for c in locked.report.constraints)
+    entry = locked.report.agents[a]
+    assert entry["footContactsLocked"] >= 12
+    assert entry["footSkateEdited"] <= entry["footSkateSource"] + 0.005 < entry["footSkateUnlocked"]
+    assert entry["footSkateEdited"] == pytest.approx(after.mean, rel=1e-4)     # as the composed stage plays
+    assert entry["footSkateUnlocked"] == pytest.approx(before.mean, rel=1e-4)
+    assert 0 < entry["maxFootCorrection"] < 0.1 and 0 <= entry["maxPelvisDrop"] < 0.05
+    assert locked.report.stats["footLockedAgents"] == 1
+    plants = locked.layer.GetPrimAtPath("/MocapEdit/Guides/FootPlants")
+    assert plants and len(plants.attributes["points"].default) == entry["footContactsLocked"]
+
+
+def test_locking_is_off_by_setting_and_by_agent(tmp_path, walk_clip):
+    stage, a = _bent_path_stage(tmp_path, walk_clip)
+    settings = stage.DefinePrim("/Settings", "MocapSolveSettings")
+    settings.CreateAttribute("footLocking", Sdf.ValueTypeNames.Bool, False, Sdf.VariabilityUniform).Set(False)
+    stage.GetRootLayer().Save()
+    result, _ = _solve(tmp_path, "off")
+    assert "footSkateUnlocked" not in result.report.agents[a]
+    settings.GetAttribute("footLocking").Set(True)
+    stage.GetPrimAtPath(a).CreateAttribute("mocap:footLocking", Sdf.ValueTypeNames.Bool, False,
+                                           Sdf.VariabilityUniform).Set(False)
+    stage.GetRootLayer().Save()
+    result, _ = _solve(tmp_path, "opt_out")
+    assert "footSkateUnlocked" not in result.report.agents[a]
+    assert any("mocap:footLocking = false" in n for n in result.report.agents[a]["notes"])
+    stage.GetPrimAtPath(a).GetAttribute("mocap:footLocking").Set(True)
+    stage.GetRootLayer().Save()
+    for flags, locked in (([], True), (["--no-foot-locking"], False)):
+        out = run_cli("solve", tmp_path / "shot.usda", "-o", tmp_path / "cli.usda", "--report", tmp_path / "cli.json", *flags)
+        assert out.returncode == 0, out.stderr
+        assert ("feet:" in out.stderr) == locked
+        assert ("footSkateUnlocked" in (tmp_path / "cli.json").read_text()) == locked
+
+
+def test_authored_contacts_replace_detection(tmp_path, walk_clip):
+    stage, a = _bent_path_stage(tmp_path, walk_clip)
+    anim = next(p for p in stage.Traverse() if p.IsA(UsdSkel.Animation))
+    anim.ApplyAPI("MocapFootContactAPI", "left1")
+    anim.CreateAttribute("footContact:left1:joint", Sdf.ValueTypeNames.Token, False,
+                         Sdf.VariabilityUniform).Set("LeftToe")
+    anim.CreateAttribute("footContact:left1:frames", Sdf.ValueTypeNames.Int2, False,
+                         Sdf.VariabilityUniform).Set(Gf.Vec2i(30, 40))
+    stage.GetRootLayer().Save()
+    result, _ = _solve(tmp_path)
+    assert result.report.agents[a]["footContactsLocked"] == 1
+
+
+def _author(stage, path, name, type_name, value):
+    stage.GetPrimAtPath(path).CreateAttribute(name, type_name, False, Sdf.VariabilityUniform).Set(value)
+    stage.GetRootLayer().Save()
+
+
+@pytest.mark.parametrize("prop, value, message", [
+    ("mocap:leftLegJoints", ["LeftUpLeg", "LeftKnee", "LeftFoot"], "'LeftKnee' is not in the skeleton"),
+    ("mocap:leftLegJoints", ["LeftUpLeg", "LeftFoot", "LeftToe"], "is not a child of"),
+    ("mocap:rightLegJoints", ["RightUpLeg", "RightLeg"], "hip, knee, ankle"),
+])
+def test_bad_legs_name_the_agent_and_property(tmp_path, walk_clip, prop, value, message):
+    stage, a = _bent_path_stage(tmp_path, walk_clip)
+    _author(stage, a, prop, Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(value))
+    with pytest.raises(MocapEditError, match=f"<{a}>.{prop}: .*{message}"):
+        solve(str(tmp_path / "shot.usda"))
+    out = run_cli("solve", tmp_path / "shot.usda", "-o", tmp_path / "never.usda")
+    assert out.returncode == 1 and prop in out.stderr and "Traceback" not in out.stderr
+    assert not (tmp_path / "never.usda").exists()
+
+
+def test_a_contact_outside_the_clip_names_the_clip_and_property(tmp_path, walk_clip):
+    stage, a = _bent_path_stage(tmp_path, walk_clip)
+    anim = next(p for p in stage.Traverse() if p.IsA(UsdSkel.Animation))
+    anim.ApplyAPI("MocapFootContactAPI", "late")
+    _author(stage, anim.GetPath(), "footContact:late:joint", Sdf.ValueTypeNames.Token, "LeftFoot")
+    _author(stage, anim.GetPath(), "footContact:late:frames", Sdf.ValueTypeNames.Int2, Gf.Vec2i(180, 200))
+    with pytest.raises(MocapEditError, match=r"footContact:late:frames: .*\[180, 200\] is outside the clip"):
+        solve(str(tmp_path / "shot.usda"))
+    _author(stage, anim.GetPath(), "footContact:late:frames", Sdf.ValueTypeNames.Int2, Gf.Vec2i(18, 20))
+    _author(stage, anim.GetPath(), "footContact:late:joint", Sdf.ValueTypeNames.Token, "Spine")
+    with pytest.raises(MocapEditError, match=r"footContact:late:joint: .*not the ankle or toe"):
+        solve(str(tmp_path / "shot.usda"))
+
+
+@pytest.mark.skipif(not MOCAP.exists(), reason="needs ../shared/mocap")
+def test_a_real_walk_edited_by_a_handle_keeps_its_feet(tmp_path):
+    clip = MOCAP / "cc_cmu07_01_walk.bvh"
+    imported = run_cli("import-bvh", clip, "-o", tmp_path / "clip.usda", "--agent")
+    assert imported.returncode == 0, imported.stderr
+    stage = Usd.Stage.Open(str(tmp_path / "clip.usda"))
+    agent = next(p for p in stage.Traverse() if "MocapAgentAPI" in p.GetAppliedSchemas())
+    a = str(agent.GetPath())
+    frames = metrics._Skel(stage, a).sample_times
+    mid = len(frames) // 2
+    root = metrics.agent_root_positions(stage, a, frames[[0, mid, -1]])
+    shot = Sdf.Layer.CreateNew(str(tmp_path / "shot.usda"))
+    shot.subLayerPaths = ["clip.usda"]
+    clip_layer = stage.GetRootLayer()   # a stage follows its root layer's time and units
+    shot.timeCodesPerSecond = clip_layer.timeCodesPerSecond
+    shot.framesPerSecond = clip_layer.framesPerSecond
+    for key in ("upAxis", "metersPerUnit"):
+        shot.pseudoRoot.SetInfo(key, clip_layer.pseudoRoot.GetInfo(key))
+    shot.Save()
+    shot_stage = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    up = UsdGeom.GetStageUpAxis(shot_stage)
+    side = np.array([40.0, 0.0, 0.0])                        # 40 cm sideways at the middle
+    for k, (f, p) in enumerate(zip((0, mid, len(frames) - 1), root)):
+        examples.add_position_constraint(shot_stage, f"/Edits/c{k}", a, int(f), p + (side if k == 1 else 0))
+    shot_stage.GetRootLayer().Save()
+    result, out = _solve(tmp_path)
+    source = metrics.foot_skate(shot_stage, a)
+    after = metrics.foot_skate(out, a, times=source.times, foot_joints=list(source.joints), contact=source.contact)
+    mpu = UsdGeom.GetStageMetersPerUnit(shot_stage)
+    assert (after.mean - source.mean) * mpu <= 0.005, (source.mean, after.mean, up)
+    assert result.report.agents[a]["footContactsLocked"] > 0
+
+
+def test_detect_contacts_writes_a_layer_that_the_solve_uses(tmp_path, walk_clip):
+    _bent_path_stage(tmp_path, walk_clip)
+    out = run_cli("detect-contacts", tmp_path / "shot.usda", "-o", tmp_path / "contacts.usda",
+                  "--composed", tmp_path / "reviewed.usda")
+    assert out.returncode == 0, out.stderr
+    assert "contacts left" in out.stderr
+    reviewed = Usd.Stage.Open(str(tmp_path / "reviewed.usda"))
+    anim = next(p for p in reviewed.Traverse() if p.IsA(UsdSkel.Animation))
+    names = [s.split(":", 1)[1] for s in anim.GetAppliedSchemas() if s.startswith("MocapFootContactAPI:")]
+    assert sum(n.startswith("left") for n in names) >= 6 and sum(n.startswith("right") for n in names) >= 6
+    first, last = anim.GetAttribute(f"footContact:{names[0]}:frames").Get()
+    assert 0 <= first <= last < walk_clip.num_frames
+    detected = solve(str(tmp_path / "shot.usda"), foot_locking=True).report
+    authored = solve(str(tmp_path / "reviewed.usda")).report
+    a = f"{CROWD}/a"
+    assert authored.agents[a]["footContactsLocked"] == detected.agents[a]["footContactsLocked"] == len(names)
+    assert authored.agents[a]["footSkateEdited"] == pytest.approx(detected.agents[a]["footSkateEdited"], abs=1e-9)
+    bad = run_cli("detect-contacts", tmp_path / "shot.usda", "-o", tmp_path / "x.usda", "--height", "-1")
+    assert bad.returncode == 1 and "height" in bad.stderr and not (tmp_path / "x.usda").exists()
+
+
+def test_a_dragged_idle_drags_the_plant_along_without_a_pop(tmp_path):
+    clip, (first, last) = walker.walk_idle_walk(frames=150, fps=FPS, stop_frame=60, idle_frames=36, name="stop_go")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)], up_axis="Y",
+                                       fps=FPS, clips_dir=tmp_path / "clips")
+    a = f"{CROWD}/a"
+    reach = float(clip.translations[first, 0, 2])
+    examples.add_position_constraint(stage, "/Edits/start", a, 0, (0.0, 0.0, 0.0))
+    # No stationary tag: the path edit slides the idle 0.5 m sideways while the feet are planted.
+    examples.add_position_constraint(stage, "/Edits/in", a, first, (0.0, 0.0, reach))
+    examples.add_position_constraint(stage, "/Edits/out", a, last, (0.5, 0.0, reach))
+    stage.GetRootLayer().Save()
+    _, free = _solve(tmp_path, "free", foot_locking=False)
+    result, out = _solve(tmp_path)
+    entry = result.report.agents[a]
+    assert entry["maxFootCorrection"] <= 0.08 + 1e-9          # the leash: legs never strained further
+    src = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    times = metrics._Skel(src, a).sample_times
+    bones, flips, speed = _leg_quality(src, out, a, times, LEGS, FPS, unlocked=free)
+    assert bones < 1e-6 and flips == 0 and speed < 1.5
+    assert entry["footSkateEdited"] < entry["footSkateUnlocked"]
+
+
+def test_a_z_up_centimetre_stage_at_60_fps_with_a_time_offset(tmp_path):
+    fps = 60.0
+    clip = walker.walk(frames=481, fps=fps, speed=1.25, up="Z", meters_per_unit=0.01, name="zwalk")
+    stage = examples.build_crowd_stage(
+        tmp_path / "shot.usda", [examples.AgentSpec("a", clip, (300.0, -200.0, 0.0), yaw=30.0, time_offset=12.0)],
+        up_axis="Z", meters_per_unit=0.01, fps=fps, clips_dir=tmp_path / "clips")
+    a = f"{CROWD}/a"
+    times = metrics._Skel(stage, a).sample_times
+    assert times[0] == 12.0
+    root = metrics.agent_root_positions(stage, a, times[[0, 240, 480]])
+    for k, (f, p) in enumerate(zip((0, 240, 480), root)):
+        examples.add_position_constraint(stage, f"/Edits/c{k}", a, f, p + (np.array([120.0, 0.0, 0.0]) if k == 1 else 0))
+    stage.GetRootLayer().Save()
+    _, free = _solve(tmp_path, "free", foot_locking=False)
+    result, out = _solve(tmp_path)
+    src = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    feet = ["LeftFoot", "LeftToe", "RightFoot", "RightToe"]
+    source = metrics.foot_skate(src, a, foot_joints=feet)
+    before = metrics.foot_skate(free, a, times=source.times, foot_joints=feet, contact=source.contact)
+    after = metrics.foot_skate(out, a, times=source.times, foot_joints=feet, contact=source.contact)
+    assert before.mean > source.mean + 2.0                       # cm/s
+    assert after.mean <= source.mean + 0.5
+    bones, flips, speed = _leg_quality(src, out, a, source.times, LEGS, fps, unlocked=free)
+    assert bones < 1e-4 and flips == 0 and speed < 1.5          # 1e-4 cm = 1e-6 m
+    entry = result.report.agents[a]
+    assert entry["maxFootCorrection"] <= 8.0 + 1e-6 and entry["footContactsLocked"] >= 12
+
+
+def test_an_edit_that_keeps_the_feet_planted_is_not_locked_nor_baked(tmp_path, walk_clip):
+    """A ten-metre walk whose middle is nudged 25 cm aside moves its feet a few millimetres from
+    where they were planted, but slides them by less than 0.5 cm/s more than its source: its legs
+    are kept and no animation is baked. The same walk bent 1.5 m aside is locked."""
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", walk_clip)], up_axis="Y",
+                                       fps=FPS, clips_dir=tmp_path / "clips")
+    a = f"{CROWD}/a"
+    start, middle, end = metrics.agent_root_positions(stage, a, [0.0, 96.0, 192.0])
+    for name, frame, where in (("start", 0, start), ("middle", 96, middle + (0.25, 0.0, 0.0)), ("end", 192, end)):
+        examples.add_position_constraint(stage, f"/Edits/{name}", a, frame, tuple(map(float, where)))
+    stage.GetRootLayer().Save()
+    result, _ = _solve(tmp_path, "nudged")
+    entry = result.report.agents[a]
+    assert entry["maxFootCorrection"] > 0.002, "the nudge must be one the job would act on"
+    assert 0 < entry["footSkateUnlocked"] - entry["footSkateSource"] < 0.005
+    assert entry["footSkateEdited"] == entry["footSkateUnlocked"]
+    assert result.report.stats["footLockedAgents"] == 0 and result.report.stats["footLockingNotNeeded"] == 1
+    assert "SkelAnimation" not in result.layer.ExportToString()
+
+    _bent_path_stage(tmp_path, walk_clip)
+    result, _ = _solve(tmp_path, "bent")
+    assert result.report.stats["footLockedAgents"] == 1
+    assert "SkelAnimation" in result.layer.ExportToString()

@@ -1,0 +1,379 @@
+"""Path edits end to end: position constraints, stationary tags, path curves, the editor.
+
+Quality is measured on the composed stage (edits over input) with UsdSkel forward
+kinematics, not on the solver's arrays.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pxr import Sdf, Usd, UsdGeom, UsdSkel, Vt
+
+from mocapedit.geometry import curves, ground
+from mocapedit.data import examples, walker
+from mocapedit.inspect import metrics
+from mocapedit.model.errors import MocapEditError
+from mocapedit.solve.path_editor import PathEditor
+from mocapedit.pipeline.processor import solve
+
+from conftest import run_cli, world_joints, write_toy_stage
+
+CROWD = "/World/Crowd"
+FPS = 24.0
+
+
+@pytest.fixture(scope="module")
+def walk_clip():
+    return walker.walk(frames=193, fps=FPS, speed=1.25, name="ten_metres")   # 10 m along +Z
+
+
+@pytest.fixture(scope="module")
+def stop_clip():
+    return walker.walk_idle_walk(frames=150, fps=FPS, stop_frame=60, idle_frames=36, name="stop_go")
+
+
+def _stage(tmp_path, agents, **kw):
+    return examples.build_crowd_stage(tmp_path / "shot.usda", agents, up_axis="Y", fps=FPS,
+                                      clips_dir=tmp_path / "clips", **kw)
+
+
+def _standing_agent(tmp_path, stop_clip):
+    """A stage with one agent "a" playing `stop_clip`, its stand tagged stationary."""
+    clip, (first, last) = stop_clip
+    stage = _stage(tmp_path, [examples.AgentSpec("a", clip)], stationary={clip.name: {"stand": (first, last)}})
+    return stage, f"{CROWD}/a", clip, (first, last)
+
+
+def _solve(tmp_path, stage, **kw):
+    """Solves the stage's saved root layer; returns (result, input stage, composed stage).
+    Each call writes new files: layers stay cached while stages that use them are alive."""
+    stage.GetRootLayer().Save()
+    src = stage.GetRootLayer().realPath
+    n = len(list(tmp_path.glob("out*.edits.usda")))
+    edits, composed = tmp_path / f"out{n}.edits.usda", tmp_path / f"out{n}.edited.usda"
+    result = solve(src, output=str(edits), composed=str(composed), **kw)
+    return result, Usd.Stage.Open(src), Usd.Stage.Open(str(composed))
+
+
+def _root_ground(stage, agent, frames, up="Y"):
+    return ground.to_ground(world_joints(stage, f"{agent}/Skel", frames)[:, 0], up)
+
+
+def _to_polyline(points, poly):
+    """Distance of each point to a polyline (its segments, not only its vertices)."""
+    a, b = poly[:-1], poly[1:]
+    d = b - a
+    t = np.clip(np.einsum("pkc,kc->pk", points[:, None] - a, d) / np.einsum("kc,kc->k", d, d), 0, 1)
+    return np.linalg.norm(points[:, None] - (a + t[..., None] * d), axis=2).min(axis=1)
+
+
+def _entry(result, prim):
+    return next(c for c in result.report.constraints if c["prim"] == prim)
+
+
+def test_hard_constraints_hold_on_the_composed_stage(tmp_path, walk_clip):
+    stage = _stage(tmp_path, [examples.AgentSpec("a", walk_clip), examples.AgentSpec("b", walk_clip, (2, 0, 0))])
+    a = f"{CROWD}/a"
+    targets = {0: (0.0, 0.0, 0.0), 70: (0.6, 0.0, 3.4), 140: (-0.4, 0.0, 7.5), 192: (0.3, 0.0, 10.2)}
+    for f, p in targets.items():
+        examples.add_position_constraint(stage, f"/Edits/c{f}", a, f, p)
+    # The path edit alone: foot locking, which then bends the legs, is tested in test_feet.py.
+    result, src, out = _solve(tmp_path, stage, foot_locking=False)
+    frames = np.arange(193)
+    before, after = world_joints(src, f"{a}/Skel", frames), world_joints(out, f"{a}/Skel", frames)
+    for f, p in targets.items():
+        np.testing.assert_allclose(after[f, 0, [0, 2]], np.array(p)[[0, 2]], atol=1e-6)
+        assert _entry(result, f"/Edits/c{f}")["residual"] < 1e-6 and _entry(result, f"/Edits/c{f}")["met"]
+    # Only the ground motion and yaw change: heights keep their source values and each
+    # frame's pose moves rigidly (joint-to-joint distances are kept).
+    np.testing.assert_allclose(after[..., 1], before[..., 1], atol=1e-6)
+    d0 = np.linalg.norm(before[:, :, None] - before[:, None], axis=-1)
+    d1 = np.linalg.norm(after[:, :, None] - after[:, None], axis=-1)
+    np.testing.assert_allclose(d1, d0, atol=1e-5)
+    # The agent nobody constrained is not written.
+    assert not result.layer.GetPrimAtPath(f"{CROWD}/b")
+    agent = result.report.agents[a]
+    assert agent["solver"] == "LDLT" and 0.9 < agent["lengthRatio"] < 1.1
+
+
+def test_a_rigid_edit_gives_exactly_that_rigid_motion(tmp_path, walk_clip):
+    stage = _stage(tmp_path, [examples.AgentSpec("a", walk_clip)])
+    a = f"{CROWD}/a"
+    angle, shift = np.radians(35.0), np.array([2.0, 0.0, -1.0])
+    c, s = np.cos(angle), np.sin(angle)
+    rot = np.array([[c, 0, -s], [0, 1, 0], [s, 0, c]])   # row vectors, about +Y
+    src_stage = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    root = world_joints(src_stage, f"{a}/Skel", [0, 120, 192])[:, 0]
+    for f, p in zip((0, 120, 192), root @ rot + shift):
+        examples.add_position_constraint(stage, f"/Edits/c{f}", a, f, p)
+    result, src, out = _solve(tmp_path, stage)
+    frames = np.arange(0, 193, 7)
+    expect = world_joints(src, f"{a}/Skel", frames) @ rot + shift
+    np.testing.assert_allclose(world_joints(out, f"{a}/Skel", frames), expect, atol=1e-5)
+    assert result.report.agents[a]["solver"] == "rigid"
+    assert abs(result.report.agents[a]["lengthRatio"] - 1.0) < 1e-12
+
+
+@pytest.mark.parametrize("pin_end, limit", [(False, 0.02), (True, 0.025)])
+def test_moving_the_middle_of_a_ten_metre_walk_sideways(tmp_path, walk_clip, pin_end, limit):
+    stage = _stage(tmp_path, [examples.AgentSpec("a", walk_clip)])
+    a = f"{CROWD}/a"
+    examples.add_position_constraint(stage, "/Edits/start", a, 0, (0.0, 0.0, 0.0))
+    examples.add_position_constraint(stage, "/Edits/middle", a, 96, (1.0, 0.0, 5.0))
+    if pin_end:
+        examples.add_position_constraint(stage, "/Edits/end", a, 192, (0.0, 0.0, 10.0))
+    result, src, out = _solve(tmp_path, stage)
+    frames = np.arange(193)
+    s, e = _root_ground(src, a, frames), _root_ground(out, a, frames)
+    ratio = metrics.length_ratio(e, s)
+    # With both ends pinned no path through the three points can be shorter than 1.98%
+    # longer (two straight 5.1 m legs); the solve stays within half a percent of that.
+    assert abs(ratio - 1.0) < limit
+    assert result.report.agents[a]["lengthRatio"] == pytest.approx(ratio, abs=1e-6)
+    np.testing.assert_allclose(e[96], [1.0, -5.0], atol=1e-6)
+
+
+def test_stationary_ranges_move_rigidly_and_keep_their_heading(tmp_path, stop_clip):
+    stage, a, clip, (first, last) = _standing_agent(tmp_path, stop_clip)
+    reach = float(clip.translations[first, 0, 2])
+    examples.add_position_constraint(stage, "/Edits/start", a, 0, (0.0, 0.0, 0.0))
+    examples.add_position_constraint(stage, "/Edits/stand", a, first + 10, (0.8, 0.0, reach + 0.3))
+    examples.add_position_constraint(stage, "/Edits/end", a, 149, (2.5, 0.0, float(clip.translations[-1, 0, 2])))
+    result, src, out = _solve(tmp_path, stage)
+    frames = np.arange(first, last + 1)
+    before, after = world_joints(src, f"{a}/Skel", frames), world_joints(out, f"{a}/Skel", frames)
+    # One rigid transform (rotation about up, then translation) takes every joint of every
+    # frame of the range from the source to the edit.
+    p, q = before.reshape(-1, 3), after.reshape(-1, 3)
+    pc, qc = p - p.mean(0), q - q.mean(0)
+    h = pc[:, [0, 2]].T @ qc[:, [0, 2]]
+    u, _, vt = np.linalg.svd(h)
+    r2 = u @ vt
+    moved = pc[:, [0, 2]] @ r2 + q.mean(0)[[0, 2]]
+    assert np.abs(moved - q[:, [0, 2]]).max() < 1e-5
+    turn = np.degrees(np.arctan2(r2[0, 1], r2[0, 0]))
+    assert abs(turn) > 2.0, "the edit should turn the stand"
+    entry = next(c for c in result.report.constraints if c["kind"] == "stationary")
+    assert entry["residual"] < 1e-6 and entry["met"] and entry["agent"] == a
+    assert _entry(result, "/Edits/stand")["residual"] < 1e-6
+
+
+def test_heading_follows_the_new_path(tmp_path, walk_clip):
+    stage = _stage(tmp_path, [examples.AgentSpec("a", walk_clip)])
+    a = f"{CROWD}/a"
+    examples.add_position_constraint(stage, "/Edits/start", a, 0, (0.0, 0.0, 0.0))
+    examples.add_position_constraint(stage, "/Edits/mid", a, 64, (0.0, 0.0, float(walk_clip.translations[64, 0, 2])))
+    examples.add_position_constraint(stage, "/Edits/end", a, 192, (4.0, 0.0, 9.0))
+    result, src, out = _solve(tmp_path, stage)
+    frames = np.arange(193)
+    # The body's yaw change at each frame is the change of the path's direction there,
+    # measured over a window of a gait cycle so the sway averages out.
+    def yaw(stage):
+        cache = UsdSkel.Cache()
+        cache.Populate(UsdSkel.Root(stage.GetPrimAtPath(a)), Usd.PrimDefaultPredicate)
+        q = cache.GetSkelQuery(UsdSkel.Skeleton(stage.GetPrimAtPath(f"{a}/Skel")))
+        out = []
+        for f in frames:
+            m = np.array(q.ComputeJointWorldTransforms(UsdGeom.XformCache(Usd.TimeCode(float(f))))[1])
+            fwd = m[2, :3]   # the hips' local +Z in world space
+            out.append(np.arctan2(-fwd[2], fwd[0]))
+        return np.unwrap(out)
+    turn_body = yaw(out) - yaw(src)
+    s, e = _root_ground(src, a, frames), _root_ground(out, a, frames)
+    w = 24
+    ds, de = s[2 * w:] - s[:-2 * w], e[2 * w:] - e[:-2 * w]
+    turn_path = np.unwrap(np.arctan2(de[:, 1], de[:, 0]) - np.arctan2(ds[:, 1], ds[:, 0]))
+    body = np.array([turn_body[i - w:i + w].mean() for i in range(w, len(frames) - w)])
+    assert np.abs(turn_path).max() > np.radians(15)
+    assert np.abs(body - turn_path).max() < np.radians(3)
+
+
+def test_hip_carried_motion(tmp_path):
+    """A clip whose root stays at the origin while the hips walk: the hips' ground
+    projection is the trajectory, and the whole body follows the edit."""
+    path = write_toy_stage(tmp_path / "hips.usda", agents=1)
+    stage = Usd.Stage.Open(str(path))
+    anim = stage.GetPrimAtPath("/World/agent0/Skel/Anim")
+    tr = anim.GetAttribute("translations")
+    for t in tr.GetTimeSamples():
+        v = np.array(tr.Get(t), dtype=np.float32)
+        v[1, :2] += v[0, :2]                        # the hips carry the walk ...
+        v[0, :2] = 0.0                              # ... and the root stays put
+        tr.Set(Vt.Vec3fArray.FromNumpy(v), t)
+    stage.GetPrimAtPath("/World/agent0").CreateAttribute("mocap:hipJoint", Sdf.ValueTypeNames.Token).Set("Hips")
+    examples.add_position_constraint(stage, "/Edits/a", "/World/agent0", 0, (0.0, 0.0, 90.0))
+    examples.add_position_constraint(stage, "/Edits/b", "/World/agent0", 30, (150.0, 40.0, 90.0))
+    stage.GetRootLayer().Save()
+    result = solve(str(path), output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"))
+    assert result.report.agents["/World/agent0"]["trajectoryJoint"] == "Root/Hips"
+    out = Usd.Stage.Open(str(tmp_path / "c.usda"))
+    hips = world_joints(out, "/World/agent0/Skel", [0, 30])[:, 1]
+    np.testing.assert_allclose(hips[:, :2], [[0.0, 0.0], [150.0, 40.0]], atol=1e-6)
+
+
+# ---- path curves ------------------------------------------------------------------------
+
+def _curve(kind, points, **kw):
+    rec = {"type": "BasisCurves", "points": np.array(points, float), "counts": np.array([len(points)]),
+           "local_to_world": np.eye(4), "basis": "bezier", "curve_type": "cubic", "wrap": "nonperiodic",
+           "order": None, "knots": None, "weights": None}
+    rec.update(kind=kind, **kw)
+    return rec
+
+
+def test_curve_evaluation_matches_closed_forms():
+    # A cubic Bezier with collinear, evenly spaced controls is a straight line.
+    line = curves.evaluate(_curve("bezier", [(0, 0, 0), (1, 0, 0), (2, 0, 0), (3, 0, 0)]))
+    np.testing.assert_allclose(line[[0, -1]], [[0, 0, 0], [3, 0, 0]])
+    assert np.all(np.diff(line[:, 0]) > 0)
+    # Catmull-Rom (pinned) passes through its points; B-spline (pinned) through its ends.
+    pts = [(0, 0, 0), (1, 2, 0), (3, 1, 0), (4, 4, 0)]
+    for basis in ("catmullRom", "bspline"):
+        poly = curves.evaluate(_curve(basis, pts, basis=basis, wrap="pinned"))
+        np.testing.assert_allclose(poly[[0, -1]], [pts[0], pts[-1]], atol=1e-12)
+        if basis == "catmullRom":
+            for p in pts:
+                assert np.linalg.norm(poly - p, axis=1).min() < 1e-12
+    lin = curves.evaluate(_curve("linear", pts, curve_type="linear"))
+    np.testing.assert_allclose(lin, pts)
+    # A rational quadratic NURBS with the right weight is an exact quarter circle.
+    w = np.sqrt(0.5)
+    quarter = {"type": "NurbsCurves", "points": np.array([(1, 0, 0), (1, 1, 0), (0, 1, 0)], float),
+               "counts": np.array([3]), "local_to_world": np.diag([2.0, 2.0, 2.0, 1.0]),
+               "order": np.array([3]), "knots": np.array([0, 0, 0, 1, 1, 1], float),
+               "weights": np.array([1, w, 1])}
+    arc = curves.evaluate(quarter)
+    np.testing.assert_allclose(np.linalg.norm(arc[:, :2], axis=1), 2.0, atol=1e-12)
+    with pytest.raises(MocapEditError, match=r"</Curves/bad>.*knots"):
+        curves.evaluate({**quarter, "knots": np.array([0, 0, 1, 1], float)}, "/Curves/bad")
+
+
+def test_remap_keeps_distance_per_frame_and_sway():
+    f = np.arange(240)
+    uv = np.stack([f * 0.05, 0.03 * np.sin(2 * np.pi * f / 24)], axis=1)      # 1.2 m/s with a sway
+    t = np.linspace(0, np.pi / 2, 400)
+    arc = np.stack([8 * np.sin(t), 8 - 8 * np.cos(t)], axis=1)                   # a quarter turn, r = 8
+    r = curves.remap(uv, arc, [], 24.0, 1e-6)
+    centre = curves.smooth(uv, 12.0)
+    step_src = np.linalg.norm(np.diff(centre, axis=0), axis=1)
+    # Along the curve the agent covers the same distance per frame as its centreline did;
+    # across it, it keeps its sway (measured from the circle).
+    radius = np.linalg.norm(r.ground - [0, 8], axis=1)
+    angle = np.arctan2(r.ground[:, 0], 8 - r.ground[:, 1])
+    np.testing.assert_allclose(np.diff(angle)[24:-24] * 8, step_src[24:-24], rtol=0.02)
+    np.testing.assert_allclose(8 - radius, uv[:, 1] - centre[:, 1], atol=2e-3)
+    np.testing.assert_allclose(r.ground[0], [0, 0.0], atol=0.02)
+
+
+def test_spline_and_constraints_and_stationary_tags_together(tmp_path, stop_clip):
+    stage, a, clip, (first, last) = _standing_agent(tmp_path, stop_clip)
+    examples.add_path_curve(stage, "/Curves/arc", [(0, 0, 0), (0, 0, 3), (2, 0, 5), (5, 0, 5)], [a],
+                            basis="bezier", wrap="nonperiodic")
+    result, src, out = _solve(tmp_path, stage)
+    frames = np.arange(150)
+    e = _root_ground(out, a, frames)
+    poly = curves.ground_polyline(result.data.curves["/Curves/arc"], "/Curves/arc", "Y")
+    assert _to_polyline(e, poly).max() < 0.02                  # this root walks without sway
+    np.testing.assert_allclose(e[0], poly[0], atol=0.05)      # starts at the curve's start
+    assert result.report.agents[a]["solver"] == "none"
+
+    # A position constraint on top: it holds, the stand stays rigid, the rest follows the curve.
+    examples.add_position_constraint(stage, "/Edits/end", a, 149, (4.5, 0.0, 5.8))
+    result, src, out = _solve(tmp_path, stage)
+    e = _root_ground(out, a, frames)
+    np.testing.assert_allclose(e[149], [4.5, -5.8], atol=1e-6)
+    stand = next(c for c in result.report.constraints if c["kind"] == "stationary")
+    assert stand["residual"] < 1e-6
+    assert _to_polyline(e[:first - 24], poly).max() < 0.02
+
+
+# ---- bad input ------------------------------------------------------------------------
+
+def test_bad_input_names_the_prims(tmp_path, walk_clip, stop_clip):
+    stage = _stage(tmp_path, [examples.AgentSpec("a", walk_clip)])
+    a = f"{CROWD}/a"
+    examples.add_position_constraint(stage, "/Edits/one", a, 50, (0, 0, 2))
+    examples.add_position_constraint(stage, "/Edits/two", a, 50, (0.5, 0, 2))
+    stage.GetRootLayer().Save()
+    with pytest.raises(MocapEditError, match=r"</Edits/one>.*</Edits/two>.*frame 50"):
+        solve(str(tmp_path / "shot.usda"))
+    # The same place twice is fine.
+    stage.GetPrimAtPath("/Edits/two").GetAttribute("position").Set((0.0, 0.0, 2.0))
+    stage.GetRootLayer().Save()
+    solve(str(tmp_path / "shot.usda"))
+    proc = run_cli("solve", tmp_path / "shot.usda", "-o", tmp_path / "x.usda")
+    assert proc.returncode == 0
+    stage.GetPrimAtPath("/Edits/two").GetAttribute("position").Set((0.0, 0.0, 3.0))
+    stage.GetRootLayer().Save()
+    proc = run_cli("solve", tmp_path / "shot.usda", "-o", tmp_path / "y.usda")
+    assert proc.returncode == 1 and "/Edits/two" in proc.stderr and not (tmp_path / "y.usda").exists()
+    stage.RemovePrim("/Edits/two")
+
+    cases = [
+        ("agent", lambda: examples.add_position_constraint(stage, "/Edits/bad", "/World/Nobody", 3, (0, 0, 0)),
+         r"</Edits/bad>\.agent.*/World/Nobody"),
+        ("frame", lambda: examples.add_position_constraint(stage, "/Edits/bad", a, 500, (0, 0, 0)),
+         r"</Edits/bad>\.frame.*500"),
+        ("curve", lambda: stage.GetPrimAtPath(a).CreateRelationship("mocap:pathCurve").SetTargets(["/Edits/one"]),
+         r"<%s>\.mocap:pathCurve.*/Edits/one" % a),
+    ]
+    for what, author, pattern in cases:
+        author()
+        stage.GetRootLayer().Save()
+        with pytest.raises(MocapEditError, match=pattern):
+            solve(str(tmp_path / "shot.usda"))
+        stage.RemovePrim("/Edits/bad")
+        stage.GetPrimAtPath(a).RemoveProperty("mocap:pathCurve")
+
+    clip, _ = stop_clip
+    other = tmp_path / "other"
+    stage = examples.build_crowd_stage(other / "shot.usda", [examples.AgentSpec("a", clip)], up_axis="Y", fps=FPS,
+                                       stationary={clip.name: {"late": (140, 160)}})
+    examples.add_position_constraint(stage, "/Edits/one", a, 10, (0, 0, 0))
+    stage.GetRootLayer().Save()
+    with pytest.raises(MocapEditError, match=r"stationary:late:frames.*\[140, 160\]"):
+        solve(str(other / "shot.usda"))
+
+
+def test_contradicting_hard_constraints_through_a_stationary_range(tmp_path, stop_clip):
+    stage, a, clip, (first, last) = _standing_agent(tmp_path, stop_clip)
+    reach = float(clip.translations[first, 0, 2])
+    examples.add_position_constraint(stage, "/Edits/start", a, 0, (0, 0, 0))
+    examples.add_position_constraint(stage, "/Edits/in", a, first, (0, 0, reach))
+    examples.add_position_constraint(stage, "/Edits/out", a, last, (0, 0, reach + 2))   # a stand does not walk 2 m
+    stage.GetRootLayer().Save()
+    with pytest.raises(MocapEditError, match=r"</Edits/in>.*</Edits/out>.*stationary:stand:frames"):
+        solve(str(tmp_path / "shot.usda"))
+    stage.RemovePrim("/Edits/start")   # held at one place: one translation, which cannot split
+    stage.GetRootLayer().Save()
+    with pytest.raises(MocapEditError, match=r"</Edits/in>.*</Edits/out>.*single place"):
+        solve(str(tmp_path / "shot.usda"))
+
+
+# ---- the interactive editor -------------------------------------------------------------
+
+def test_path_editor_drags_without_refactoring(tmp_path, walk_clip):
+    stage = _stage(tmp_path, [examples.AgentSpec("a", walk_clip)])
+    a = f"{CROWD}/a"
+    editor = PathEditor.for_agent(stage, a, [0, 96, 192])
+    assert editor.solver == "rigid"
+    np.testing.assert_allclose(editor.ground[96], [0.0, -5.0], atol=1e-6)
+    factor = editor.problem.data
+    for step in range(1, 6):
+        g = editor.move(1, (0.2 * step, -5.0))
+        np.testing.assert_allclose(g[96], [0.2 * step, -5.0], atol=1e-9)
+    assert editor.problem.data is factor
+    assert editor.heading.shape == (193,) and "LDLT" in editor.solver
+    # The same edit through the stage gives the same path.
+    examples.add_position_constraint(stage, "/Edits/s", a, 0, (0, 0, 0))
+    examples.add_position_constraint(stage, "/Edits/m", a, 96, (1.0, 0.0, 5.0))
+    examples.add_position_constraint(stage, "/Edits/e", a, 192, (0, 0, 10))
+    _, _, out = _solve(tmp_path, stage)
+    np.testing.assert_allclose(editor.ground, _root_ground(out, a, np.arange(193)), atol=1e-6)
+    w = editor.to_world()
+    assert w.shape == (193, 3) and abs(w[96, 0] - 1.0) < 1e-9
+    with pytest.raises(ValueError, match="frame 300"):
+        PathEditor(editor.ground, [0, 300])
+    one = PathEditor(editor.ground, [10])
+    moved = one.move(0, one.ground[10] + [1.0, 2.0])
+    np.testing.assert_allclose(moved - editor.ground, np.tile([1.0, 2.0], (193, 1)), atol=1e-12)
