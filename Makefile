@@ -6,7 +6,7 @@ PY := $(VENV)/bin/python
 CPP_BUILD := build/cpp
 DEMO_OUT := build/demo
 
-.PHONY: all deps build cpp test test-cpp test-py demo bench schema schema-check stages clean
+.PHONY: all deps build cpp test test-cpp test-py demo bench schema schema-check stages stubs clean
 
 all: build
 
@@ -50,6 +50,10 @@ schema: deps
 
 schema-check: deps
 	$(PY) schema/generate.py --check
+
+# Regenerate python/mocapedit/_solver.pyi from the built extension (commit it).
+stubs: build
+	$(PY) tools/solver_stubs.py
 
 stages: build
 	$(PY) example_stages/make_stages.py

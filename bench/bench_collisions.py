@@ -108,7 +108,8 @@ def _peer_solve(problem: avoidance.Problem, outcome: avoidance.Outcome, settings
     rows.add(normal, avoidance._clearance(state, a, b) * (1 + settings.overshoot), 0.0,
              np.concatenate([va, vb], 1), np.concatenate([wa, -wb], 1))
     from mocapedit import _solver
-    solver = _solver.SeparationSolver(state.rest, state.starts, [], settings.anchor_weight, 1e-5, 1)
+    solver = _solver.SeparationSolver(rest=state.rest, starts=state.starts, rigid=[],
+                                      anchor_weight=settings.anchor_weight, still_extent=1e-5, threads=1)
     t = time.perf_counter()
     ours = rows.solve(solver, tolerance=1e-9, max_sweeps=1)
     ours_s = time.perf_counter() - t
@@ -117,7 +118,7 @@ def _peer_solve(problem: avoidance.Problem, outcome: avoidance.Outcome, settings
     peer_s = time.perf_counter() - t
     return {"rows": rows.count, "solveSeconds": round(ours_s, 4), "peerSeconds": round(peer_s, 4),
             "speedupVsPeer": round(peer_s / ours_s, 1),
-            "maxDifferenceVsPeer": float(np.abs(peer - ours["positions"]).max())}
+            "maxDifferenceVsPeer": float(np.abs(peer - ours.positions).max())}
 
 
 def _kkt_two_step(rest, starts, anchor, rows) -> np.ndarray:

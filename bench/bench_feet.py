@@ -57,9 +57,9 @@ def run(ctx) -> dict:
     inputs = _inputs(agents, frames)
     job_s = ctx.best_of(lambda: footlock.lock_feet(inputs), repeat=5)
     one_thread = footlock.LegInputs(**vars(inputs))
-    arrays = [np.ascontiguousarray(a) for a in one_thread.arrays()]
+    arrays = one_thread.arrays()
     from mocapedit import _solver
-    single_s = ctx.best_of(lambda: _solver.lock_feet(*arrays, threads=1), repeat=3)
+    single_s = ctx.best_of(lambda: _solver.lock_feet(**arrays, threads=1), repeat=3)
     peer_s = ctx.best_of(lambda: footlock.lock_feet_numpy(inputs), repeat=2)
     fast, slow = footlock.lock_feet(inputs), footlock.lock_feet_numpy(inputs)
     err = max(float(np.abs(getattr(fast, k) - getattr(slow, k)).max())

@@ -143,7 +143,7 @@ def _single(ctx, frames=1000):
 
     def cpp_only():
         tri, edg = _solver.chain_terms(rest, 0, frames, 0.01)
-        d = _solver.path_edit_precompute(rest, tri, edges=edg, handles=np.array(handles),
+        d = _solver.path_edit_precompute(rest=rest, triangles=tri, edges=edg, handles=np.array(handles),
                                          handle_weights=np.full(3, np.inf))
         return _solver.path_edit_solve(d, pos, np.zeros((0, 2)))
 
@@ -202,14 +202,14 @@ def _long(ctx, frames=20000):
         data = {}
 
         def run():
-            data["d"] = _solver.path_edit_precompute(rest, tri, edges=edg, handles=handles,
+            data["d"] = _solver.path_edit_precompute(rest=rest, triangles=tri, edges=edg, handles=handles,
                                                      handle_weights=np.full(3, np.inf), force_qr=force_qr)
             data["sim"] = _solver.path_edit_solve(data["d"], similar, np.zeros((0, 2)))
         seconds = ctx.best_of(run, repeat=2)
         shape = np.asarray(data["sim"].shape)
         data["bent"] = _solver.path_edit_solve(data["d"], bent, np.zeros((0, 2)))
-        out[name] = {"seconds": seconds, "solver": data["sim"].step1["solver"],
-                     "refinements": data["bent"].step1["refinements"],
+        out[name] = {"seconds": seconds, "solver": data["sim"].step1.solver,
+                     "refinements": data["bent"].step1.refinements,
                      "similarityError": float(np.abs(shape[:, 0] + 1j * shape[:, 1] - exact).max()),
                      "bent": np.asarray(data["bent"].positions)}
         if name == "ldlt":
@@ -232,7 +232,7 @@ def _long(ctx, frames=20000):
     zs = short[:, 0] + 1j * short[:, 1]
     hs = np.array([0, 66, 199])
     ex = sim * zs + (3.0 - 2.0j)
-    d = _solver.path_edit_precompute(short, st, edges=se, handles=hs, handle_weights=np.full(3, np.inf))
+    d = _solver.path_edit_precompute(rest=short, triangles=st, edges=se, handles=hs, handle_weights=np.full(3, np.inf))
     r = _solver.path_edit_solve(d, np.stack([ex[hs].real, ex[hs].imag], axis=1), np.zeros((0, 2)))
     sh = np.asarray(r.shape)
     out["similarityErrorRelative200"] = float(np.abs(sh[:, 0] + 1j * sh[:, 1] - ex).max() / np.ptp(short, axis=0).max())

@@ -67,9 +67,10 @@ def _problem(agents: int, frames: int = FRAMES):
 
 def _warp(p):
     t = len(p["times"])
-    return _solver.time_warp(p["rest"], p["time_frames"], np.ones(t, bool), np.ones(t), p["times"],
-                             p["sync_frames"], np.ones(len(p["offsets"]), bool), np.ones(len(p["offsets"])),
-                             p["offsets"])
+    s = len(p["offsets"])
+    return _solver.time_warp(rest_times=p["rest"], time_frames=p["time_frames"], time_hard=np.ones(t, bool),
+                             time_weights=np.ones(t), times=p["times"], sync_frames=p["sync_frames"],
+                             sync_hard=np.ones(s, bool), sync_weights=np.ones(s), offsets=p["offsets"])
 
 
 def _peer_warp(p):
@@ -147,15 +148,18 @@ def _one_agent(ctx):
     none4, nb, nf = np.zeros((0, 4), np.int32), np.zeros(0, bool), np.zeros(0)
 
     def full():
-        return _solver.time_warp(rest, tf, np.ones(3, bool), np.ones(3), times, none4, nb, nf, nf)
+        return _solver.time_warp(rest_times=rest, time_frames=tf, time_hard=np.ones(3, bool), time_weights=np.ones(3),
+                                 times=times, sync_frames=none4, sync_hard=nb, sync_weights=nf, offsets=nf)
 
     # Prepared for dragging: the solution's response to each constraint value is kept.
-    data = _solver.time_warp_precompute(rest, tf, np.ones(3, bool), np.ones(3), none4, nb, nf, responses=True)
+    data = _solver.time_warp_precompute(rest_times=rest, time_frames=tf, time_hard=np.ones(3, bool),
+                                        time_weights=np.ones(3), sync_frames=none4, sync_hard=nb, sync_weights=nf,
+                                        responses=True)
     dragged = times.copy()
 
     def drag():
         dragged[1] += 0.01
-        return data.solve(dragged, nf)
+        return data.solve(times=dragged, offsets=nf)
 
     p = dict(rest=rest, time_frames=tf, times=times, sync_frames=none4, offsets=nf)
     # Many rounds: the shared machine this was measured on has spells of a slower speed mode
@@ -175,7 +179,7 @@ def run(ctx):
 
     warp_s = ctx.best_of(lambda: _warp(p), repeat=3)
     result = _warp(p)
-    maps = result["time_maps"]
+    maps = result.time_maps
     peer_warp_s = ctx.best_of(lambda: _peer_warp(p), repeat=1)
     peer_maps = _peer_warp(p)
     diff = max(float(np.abs(a - b).max()) for a, b in zip(maps, peer_maps))
@@ -195,12 +199,12 @@ def run(ctx):
 
     total, peer_total = warp_s + resample_s, peer_warp_s + peer_resample_s
     return {
-        "agents": agents, "frames": FRAMES, "joints": JOINTS, "components": int(result["component"].max()) + 1,
+        "agents": agents, "frames": FRAMES, "joints": JOINTS, "components": int(result.component.max()) + 1,
         "timeConstraints": len(p["times"]), "syncConstraints": len(p["offsets"]),
         "warpSeconds": round(warp_s, 4), "peerWarpSeconds": round(peer_warp_s, 4),
         "warpSpeedupVsPeer": round(peer_warp_s / warp_s, 2),
         "warpMaxDifferenceVsPeer": diff,
-        "maxResidual": float(max(result["time_residuals"].max(), result["sync_residuals"].max())),
+        "maxResidual": float(max(result.time_residuals.max(), result.sync_residuals.max())),
         "resampleSeconds": round(resample_s, 4), "peerResampleSeconds": round(peer_resample_s, 4),
         "resampleSpeedupVsPeer": round(peer_resample_s / resample_s, 2),
         "jointSamples": samples, "jointSamplesPerSecond": round(samples / resample_s),

@@ -55,7 +55,7 @@ def main() -> int:
 
     from mocapedit import _solver
     results = {"machine": {"python": sys.version.split()[0], "platform": platform.platform(),
-                           "cpus": os.cpu_count(), "blas": _solver.blas()}, "benchmarks": {}}
+                           "cpus": os.cpu_count(), "blas": _blas(_solver.blas())}, "benchmarks": {}}
     modules = sorted(HERE.glob("bench_*.py"))
     names = [p.stem[len("bench_"):] for p in modules if not args.only or p.stem[len("bench_"):] in args.only]
     if not args.in_process:
@@ -83,6 +83,10 @@ def main() -> int:
             results["benchmarks"][name] = figures
             print(json.dumps({name: figures}, indent=2, sort_keys=True), file=sys.stderr, flush=True)
     return _write(results, args.out)
+
+
+def _blas(info) -> dict:
+    return {"name": info.name, "concurrent": info.concurrent}
 
 
 def _write(results: dict, out: str) -> int:

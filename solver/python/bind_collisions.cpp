@@ -14,47 +14,73 @@ namespace {
 
 using mocapedit::Trajectory2;
 
-template <typename T>
-py::array_t<T> ToArray(const std::vector<T>& v) {
-  py::array_t<T> out(static_cast<py::ssize_t>(v.size()));
-  std::copy(v.begin(), v.end(), out.mutable_data());
-  return out;
-}
+// Collision intervals as arrays, one entry per interval (the Python view of
+// std::vector<Collision>).
+struct CollisionIntervals {
+  Eigen::VectorXi agent_a, agent_b, first, last, deepest;
+  Eigen::VectorXd depth;
 
-py::dict IntervalsToDict(const std::vector<mocapedit::Collision>& intervals) {
-  std::vector<int> a, b, first, last, deepest;
-  std::vector<double> depth;
-  for (const auto& c : intervals) {
-    a.push_back(c.agent_a);
-    b.push_back(c.agent_b);
-    first.push_back(c.first);
-    last.push_back(c.last);
-    deepest.push_back(c.deepest);
-    depth.push_back(c.depth);
+  explicit CollisionIntervals(const std::vector<mocapedit::Collision>& intervals) {
+    const Eigen::Index n = static_cast<Eigen::Index>(intervals.size());
+    agent_a.resize(n), agent_b.resize(n), first.resize(n), last.resize(n), deepest.resize(n), depth.resize(n);
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const mocapedit::Collision& c = intervals[static_cast<size_t>(i)];
+      agent_a[i] = c.agent_a, agent_b[i] = c.agent_b, first[i] = c.first, last[i] = c.last;
+      deepest[i] = c.deepest, depth[i] = c.depth;
+    }
   }
-  py::dict d;
-  d["agent_a"] = ToArray(a);
-  d["agent_b"] = ToArray(b);
-  d["first"] = ToArray(first);
-  d["last"] = ToArray(last);
-  d["deepest"] = ToArray(deepest);
-  d["depth"] = ToArray(depth);
-  return d;
-}
+};
 
-py::dict CollisionsToDict(const mocapedit::CollisionResult& r, bool near) {
-  py::dict d = IntervalsToDict(r.collisions);
-  if (near) d["near"] = IntervalsToDict(r.near);
-  d["min_clearance"] = r.min_clearance;
-  d["min_clearance_sample"] = r.min_clearance_sample;
-  d["colliding_samples"] = r.colliding_samples;
-  d["pair_tests"] = r.pair_tests;
-  return d;
-}
+// detect_collisions' result: the collision intervals, those below the watch distance, and
+// each agent's smallest clearance.
+struct Detection {
+  CollisionIntervals collisions;
+  std::optional<CollisionIntervals> near;
+  Eigen::VectorXd min_clearance;
+  Eigen::VectorXi min_clearance_sample;
+  int64_t colliding_samples = 0;
+  int64_t pair_tests = 0;
+
+  Detection(const mocapedit::CollisionResult& r, bool with_near)
+      : collisions(r.collisions),
+        min_clearance(r.min_clearance),
+        min_clearance_sample(r.min_clearance_sample),
+        colliding_samples(r.colliding_samples),
+        pair_tests(r.pair_tests) {
+    if (with_near) near.emplace(r.near);
+  }
+};
 
 }  // namespace
 
 MOCAPEDIT_BINDINGS(BindCollisions) {
+  py::class_<CollisionIntervals>(m, "CollisionIntervals",
+                                 "Collision intervals, one entry per interval, sorted by (agent_a, agent_b, first).")
+      .def_readonly("agent_a", &CollisionIntervals::agent_a, py::return_value_policy::copy, "(N,) first agent, agent_a < agent_b")
+      .def_readonly("agent_b", &CollisionIntervals::agent_b, py::return_value_policy::copy, "(N,) second agent")
+      .def_readonly("first", &CollisionIntervals::first, py::return_value_policy::copy, "(N,) first sample (inclusive)")
+      .def_readonly("last", &CollisionIntervals::last, py::return_value_policy::copy, "(N,) last sample (inclusive)")
+      .def_readonly("deepest", &CollisionIntervals::deepest, py::return_value_policy::copy, "(N,) sample of the maximal overlap")
+      .def_readonly("depth", &CollisionIntervals::depth, py::return_value_policy::copy, "(N,) margin (or watch distance) minus the clearance there")
+      .def("__len__", [](const CollisionIntervals& c) { return c.agent_a.size(); });
+  py::class_<Detection>(m, "CollisionResult", "Result of detect_collisions.")
+      .def_readonly("collisions", &Detection::collisions, py::return_value_policy::copy, "intervals below the margin")
+      .def_readonly("near", &Detection::near, py::return_value_policy::copy, "intervals below watch_distance, or None when none was asked for")
+      .def_readonly("min_clearance", &Detection::min_clearance, py::return_value_policy::copy,
+                    "(A,) smallest clearance of each agent, +inf beyond report_distance")
+      .def_readonly("min_clearance_sample", &Detection::min_clearance_sample, py::return_value_policy::copy, "(A,) its sample, -1 when +inf")
+      .def_readonly("colliding_samples", &Detection::colliding_samples, py::return_value_policy::copy, "(pair, sample) records below the margin")
+      .def_readonly("pair_tests", &Detection::pair_tests, py::return_value_policy::copy, "narrow-phase capsule tests done");
+  py::class_<mocapedit::RegionNearest>(m, "RegionNearest", "Nearest boundary points of a region (nearest_on_region).")
+      .def_readonly("boundary", &mocapedit::RegionNearest::boundary, py::return_value_policy::copy, "(N, 2) nearest points on the boundary")
+      .def_readonly("normal", &mocapedit::RegionNearest::normal, py::return_value_policy::copy, "(N, 2) unit outward normals there")
+      .def_readonly("distance", &mocapedit::RegionNearest::distance, py::return_value_policy::copy, "(N,) signed distances, negative inside");
+  py::class_<mocapedit::RegionPush>(m, "RegionPush", "Points closer to a region than their clearance (push_out_of_region).")
+      .def_readonly("index", &mocapedit::RegionPush::index, py::return_value_policy::copy, "(P,) indices into the points, ascending")
+      .def_readonly("target", &mocapedit::RegionPush::target, py::return_value_policy::copy, "(P, 2) nearest positions at exactly the clearance")
+      .def_readonly("normal", &mocapedit::RegionPush::normal, py::return_value_policy::copy, "(P, 2) unit outward directions")
+      .def_readonly("depth", &mocapedit::RegionPush::depth, py::return_value_policy::copy, "(P,) clearance minus signed distance, > 0");
+
   m.def(
       "detect_collisions",
       [](const Eigen::Ref<const Trajectory2>& positions, int samples, const Eigen::VectorXd& radius,
@@ -77,9 +103,9 @@ MOCAPEDIT_BINDINGS(BindCollisions) {
           result = brute_force ? mocapedit::DetectCollisionsBruteForce(positions, samples, capsules, settings)
                                : mocapedit::DetectCollisions(positions, samples, capsules, settings);
         }
-        return CollisionsToDict(result, watch_distance > margin);
+        return Detection(result, watch_distance > margin);
       },
-      py::arg("positions"), py::arg("samples"), py::arg("radius"), py::arg("height"),
+      py::kw_only(), py::arg("positions"), py::arg("samples"), py::arg("radius"), py::arg("height"),
       py::arg("base") = py::none(), py::arg("active") = py::none(), py::arg("margin") = 0.0,
       py::arg("report_distance") = 0.0, py::arg("threads") = 0, py::arg("brute_force") = false,
       py::arg("watch_distance") = 0.0,
@@ -90,13 +116,8 @@ MOCAPEDIT_BINDINGS(BindCollisions) {
       "report_distance: min_clearance is exact up to this clearance, +inf beyond;\n"
       "brute_force: test all pairs at every sample instead of using the grid (the reference);\n"
       "watch_distance: when above margin, intervals below this clearance are also returned as 'near'.\n\n"
-      "Returns a dict of arrays, one entry per collision interval sorted by (agent_a, agent_b, first):\n"
-      "agent_a < agent_b, first, last (inclusive samples), deepest (sample of the maximal overlap),\n"
-      "depth (margin minus clearance there); and per agent min_clearance (A,) and\n"
-      "min_clearance_sample (A,) (-1 when +inf); colliding_samples and pair_tests (counts); with a\n"
-      "watch_distance above margin, near: a dict of the same interval arrays below watch_distance\n"
-      "(depth = watch_distance minus clearance).");
-  m.def("capsule_clearance", &mocapedit::CapsuleClearance, py::arg("dx"), py::arg("dy"), py::arg("radius_a"),
+      "Returns a CollisionResult. Keyword arguments only.");
+  m.def("capsule_clearance", &mocapedit::CapsuleClearance, py::kw_only(), py::arg("dx"), py::arg("dy"), py::arg("radius_a"),
         py::arg("height_a"), py::arg("base_a"), py::arg("radius_b"), py::arg("height_b"), py::arg("base_b"),
         "Clearance between two vertical capsules whose ground positions differ by (dx, dy); "
         "negative when they overlap.");
@@ -124,38 +145,20 @@ MOCAPEDIT_BINDINGS(BindCollisions) {
   m.def(
       "nearest_on_region",
       [](const mocapedit::GroundRegion& region, const Eigen::Ref<const Trajectory2>& points) {
-        mocapedit::RegionNearest nearest;
-        {
-          py::gil_scoped_release release;
-          nearest = mocapedit::NearestOnRegion(region, points);
-        }
-        py::dict d;
-        d["boundary"] = nearest.boundary;
-        d["normal"] = nearest.normal;
-        d["distance"] = nearest.distance;
-        return d;
+        py::gil_scoped_release release;
+        return mocapedit::NearestOnRegion(region, points);
       },
       py::arg("region"), py::arg("points"),
-      "For (N, 2) ground points, a dict: boundary (N, 2) nearest boundary points, normal (N, 2) unit\n"
-      "outward normals there, distance (N,) signed distances (negative inside).");
+      "RegionNearest of (N, 2) ground points: the nearest boundary points, outward normals there and\n"
+      "signed distances.");
   m.def(
       "push_out_of_region",
       [](const mocapedit::GroundRegion& region, const Eigen::Ref<const Trajectory2>& points,
          const Eigen::VectorXd& clearance) {
-        mocapedit::RegionPush push;
-        {
-          py::gil_scoped_release release;
-          push = mocapedit::PushOutOfRegion(region, points, clearance);
-        }
-        py::dict d;
-        d["index"] = push.index;
-        d["target"] = push.target;
-        d["normal"] = push.normal;
-        d["depth"] = push.depth;
-        return d;
+        py::gil_scoped_release release;
+        return mocapedit::PushOutOfRegion(region, points, clearance);
       },
       py::arg("region"), py::arg("points"), py::arg("clearance"),
-      "Points of (N, 2) closer to the region than their clearance ((N,) or (1,)), as a dict:\n"
-      "index (P,), target (P, 2) the nearest position at exactly the clearance, normal (P, 2)\n"
-      "outward unit directions, depth (P,) how far inside the clearance each point was.");
+      "RegionPush: the points of (N, 2) closer to the region than their clearance ((N,) or (1,)),\n"
+      "where they go (at exactly the clearance), the outward directions and how deep they were.");
 }

@@ -33,9 +33,22 @@ DoubleArray Legs(const py::handle& value, py::ssize_t n, py::ssize_t width, cons
   return a;
 }
 
+// lock_feet's outputs.
+struct FootLockResult {
+  DoubleArray hip_local, knee_local, ankle_local;  // (N, 2, 4) joint-local quaternions xyzw
+  DoubleArray drop;                                // (N,) pelvis drop along -up
+  DoubleArray reached;                             // (N, 2, 3) ankle positions after locking
+};
+
 }  // namespace
 
 MOCAPEDIT_BINDINGS(BindFootLock) {
+  py::class_<FootLockResult>(m, "FootLockResult", "Result of lock_feet.")
+      .def_readonly("hip_local", &FootLockResult::hip_local, py::return_value_policy::copy, "(N, 2, 4) hip joint-local quaternions (x, y, z, w)")
+      .def_readonly("knee_local", &FootLockResult::knee_local, py::return_value_policy::copy, "(N, 2, 4) knee joint-local quaternions")
+      .def_readonly("ankle_local", &FootLockResult::ankle_local, py::return_value_policy::copy, "(N, 2, 4) ankle joint-local quaternions")
+      .def_readonly("drop", &FootLockResult::drop, py::return_value_policy::copy, "(N,) how far the pelvis is lowered along -up, world units")
+      .def_readonly("reached", &FootLockResult::reached, py::return_value_policy::copy, "(N, 2, 3) world ankle positions after locking");
   m.def(
       "lock_feet",
       [](const py::handle& offsets_in, const py::handle& smooth_in, const py::handle& up_in, const py::handle& hip_in,
@@ -81,9 +94,9 @@ MOCAPEDIT_BINDINGS(BindFootLock) {
           py::gil_scoped_release release;
           job.Run();
         }
-        return py::make_tuple(hip_local, knee_local, ankle_local, drop, reached);
+        return FootLockResult{hip_local, knee_local, ankle_local, drop, reached};
       },
-      py::arg("offsets"), py::arg("smooth"), py::arg("up"), py::arg("hip"), py::arg("knee"), py::arg("ankle"),
+      py::kw_only(), py::arg("offsets"), py::arg("smooth"), py::arg("up"), py::arg("hip"), py::arg("knee"), py::arg("ankle"),
       py::arg("parent_rot"), py::arg("hip_rot"), py::arg("knee_rot"), py::arg("ankle_rot"), py::arg("target"),
       py::arg("target_rot"), py::arg("weight"), py::arg("hinge"), py::arg("keep"), py::arg("threads") = 0,
       "Holds planted feet in place by two-bone leg IK (the C++ FootLockJob), for many agents.\n\n"
@@ -91,6 +104,5 @@ MOCAPEDIT_BINDINGS(BindFootLock) {
       "unit world up; hip, knee, ankle (N,2,3) world positions; parent_rot, hip_rot, knee_rot,\n"
       "ankle_rot (N,2,4) world quaternions xyzw; target (N,2,3), target_rot (N,2,4) planted ankle;\n"
       "weight (N,2) in [0,1]; hinge (N,2,3) knee hinge axes, world; keep (N,) uint8 poses the pelvis drop must not touch, or (0,).\n"
-      "Returns (hip_local, knee_local, ankle_local (N,2,4) joint-local\n"
-      "quaternions, drop (N,) pelvis drop along -up, reached (N,2,3) ankle positions).");
+      "Returns a FootLockResult. Keyword arguments only.");
 }

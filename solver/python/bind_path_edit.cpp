@@ -1,7 +1,6 @@
 #include <pybind11/eigen.h>
 #include <pybind11/stl.h>
 
-#include <limits>
 #include <optional>
 
 #include "mocapedit/path_edit.h"
@@ -10,30 +9,19 @@
 namespace py = pybind11;
 using mocapedit::Trajectory2;
 
-namespace {
-
-// PathEditData is opaque in the header; Python holds it through this handle.
-struct PathEditHandle {
-  std::shared_ptr<mocapedit::PathEditData> data;
-  int handles = 0, links = 0;
-};
-
-py::dict StepDict(const mocapedit::StepInfo& s) {
-  py::dict d;
-  d["solver"] = s.solver;
-  d["unknowns"] = s.unknowns;
-  d["refinements"] = s.refinements;
-  d["correction"] = s.correction;
-  return d;
-}
-
-}  // namespace
-
 MOCAPEDIT_BINDINGS(BindPathEdit) {
-  py::class_<PathEditHandle>(m, "PathEditData",
-                             "Factored path-editing problem from path_edit_precompute; pass it to path_edit_solve.")
-      .def_readonly("handle_count", &PathEditHandle::handles)
-      .def_readonly("link_count", &PathEditHandle::links);
+  py::class_<mocapedit::PathEditData>(
+      m, "PathEditData", "Factored path-editing problem from path_edit_precompute; pass it to path_edit_solve.")
+      .def_readonly("handle_count", &mocapedit::PathEditData::handle_count, "#H handles of the problem")
+      .def_readonly("link_count", &mocapedit::PathEditData::link_count, "#L links of the problem");
+
+  py::class_<mocapedit::StepInfo>(m, "StepInfo", "How one step of a path edit was solved, for the report.")
+      .def_readonly("solver", &mocapedit::StepInfo::solver,
+                    "'LDLT', 'LDLT (AMD)', 'CHOLMOD supernodal', 'SPQR', ... , 'rigid' or 'none'")
+      .def_readonly("unknowns", &mocapedit::StepInfo::unknowns, "free vertices after elimination")
+      .def_readonly("refinements", &mocapedit::StepInfo::refinements, "refinement passes of the last solve")
+      .def_readonly("correction", &mocapedit::StepInfo::correction,
+                    "size of the last refinement correction (stage units)");
 
   py::class_<mocapedit::PathEditResult>(m, "PathEditResult", "Result of path_edit_solve.")
       .def_readonly("positions", &mocapedit::PathEditResult::positions, "(V, 2) edited positions (step 2)")
@@ -43,8 +31,8 @@ MOCAPEDIT_BINDINGS(BindPathEdit) {
       .def_readonly("rigid_motion", &mocapedit::PathEditResult::rigid_motion,
                     "True when one rigid motion met every constraint")
       .def_readonly("rigid_angle", &mocapedit::PathEditResult::rigid_angle, "that motion's rotation (radians)")
-      .def_property_readonly("step1", [](const mocapedit::PathEditResult& r) { return StepDict(r.step1); })
-      .def_property_readonly("step2", [](const mocapedit::PathEditResult& r) { return StepDict(r.step2); });
+      .def_readonly("step1", &mocapedit::PathEditResult::step1, "how step 1 (shape) was solved")
+      .def_readonly("step2", &mocapedit::PathEditResult::step2, "how step 2 (scale) was solved");
 
   m.def(
       "path_edit_precompute",
@@ -62,7 +50,7 @@ MOCAPEDIT_BINDINGS(BindPathEdit) {
         p.edge_weights = edge_weights;
         for (const auto& r : rigid) {
           if (r.second != "rotate" && r.second != "translate")
-            throw std::invalid_argument("PathEdit: rigid mode must be 'rotate' or 'translate', got '" + r.second + "'");
+            throw mocapedit::InvalidInput("PathEdit", "rigid mode must be 'rotate' or 'translate', got '" + r.second + "'");
           p.rigid.push_back({r.first, r.second == "rotate" ? mocapedit::RigidMode::kRotate
                                                            : mocapedit::RigidMode::kTranslate});
         }
@@ -74,15 +62,14 @@ MOCAPEDIT_BINDINGS(BindPathEdit) {
         p.precompute_responses = precompute_responses;
         p.force_qr = force_qr;
         if (vertex_times) p.vertex_times = *vertex_times;
-        PathEditHandle h;
-        h.data = std::make_shared<mocapedit::PathEditData>();
-        h.handles = static_cast<int>(handles.size());
-        h.links = static_cast<int>(links.rows());
-        py::gil_scoped_release release;
-        mocapedit::PathEditPrecompute(p, *h.data);
-        return h;
+        mocapedit::PathEditData data;
+        {
+          py::gil_scoped_release release;
+          mocapedit::PathEditPrecompute(p, data);
+        }
+        return data;
       },
-      py::arg("rest"), py::arg("triangles") = mocapedit::IndexTriples(0, 3),
+      py::kw_only(), py::arg("rest"), py::arg("triangles") = mocapedit::IndexTriples(0, 3),
       py::arg("triangle_weights") = Eigen::VectorXd(), py::arg("edges") = mocapedit::IndexPairs(0, 2),
       py::arg("edge_weights") = Eigen::VectorXd(),
       py::arg("rigid") = std::vector<std::pair<std::vector<int>, std::string>>{},
@@ -99,25 +86,25 @@ MOCAPEDIT_BINDINGS(BindPathEdit) {
       "step 1 once per handle and link so each path_edit_solve only solves step 2 (dragging).\n"
       "force_qr: use sparse QR for both steps. vertex_times (V,) float or None: the time of each\n"
       "vertex (shot times for group members); large group meshes use them to order their\n"
-      "factorization by nested dissection. The GIL is released.");
+      "factorization by nested dissection. Keyword arguments only; the GIL is released.");
   m.def(
       "path_edit_solve",
-      [](const PathEditHandle& h, const Trajectory2& handle_positions, const Trajectory2& link_offsets) {
+      [](const mocapedit::PathEditData& data, const Trajectory2& handle_positions, const Trajectory2& link_offsets) {
         mocapedit::PathEditResult r;
         {
           py::gil_scoped_release release;
-          mocapedit::PathEditSolve(*h.data, handle_positions, link_offsets, r);
+          mocapedit::PathEditSolve(data, handle_positions, link_offsets, r);
         }
         return r;
       },
       py::arg("data"), py::arg("handle_positions"), py::arg("link_offsets"),
       "Solves both steps for (H,2) handle positions and (L,2) link offsets (P_a - P_b). Raises\n"
-      "ContradictionError (a ValueError) when hard constraints disagree. The GIL is released.");
+      "ContradictionError (an InvalidInput) when hard constraints disagree. The GIL is released.");
   m.def(
       "path_edit_condition",
-      [](const PathEditHandle& h) {
+      [](const mocapedit::PathEditData& data) {
         py::gil_scoped_release release;
-        return mocapedit::PathEditConditionEstimate(*h.data);
+        return mocapedit::PathEditConditionEstimate(data);
       },
       py::arg("data"), "(step 1, step 2) estimated condition numbers of the factored normal matrices.");
   m.def(

@@ -35,7 +35,7 @@ MOCAPEDIT_BINDINGS(BindPathTerms) {
         mocapedit::KeyFrames(rest, offsets, keyed, forced, min_baseline, keys, before);
         return std::make_tuple(keys, before);
       },
-      kReleaseGil, py::arg("rest"), py::arg("offsets"), py::arg("keyed"), py::arg("forced"), py::arg("min_baseline"),
+      kReleaseGil, py::kw_only(), py::arg("rest"), py::arg("offsets"), py::arg("keyed"), py::arg("forced"), py::arg("min_baseline"),
       "(keys (K,), before (V,)) int32: key frames of agents solved on keys (keyed (A,) int32 flags),\n"
       "forced (N,) int32 frames that must be keys, and per frame how many keys precede it.");
   m.def(
@@ -92,7 +92,7 @@ MOCAPEDIT_BINDINGS(BindPathTerms) {
         mocapedit::BlockDeformationTurns(source, edited, blocks, fixed, fixed_turn, window, min_travel, out);
         return out;
       },
-      kReleaseGil, py::arg("source"), py::arg("edited"), py::arg("blocks"), py::arg("fixed"), py::arg("fixed_turn"),
+      kReleaseGil, py::kw_only(), py::arg("source"), py::arg("edited"), py::arg("blocks"), py::arg("fixed"), py::arg("fixed_turn"),
       py::arg("window"), py::arg("min_travel"),
       "(V,) turn of each frame's heading from source to edited paths (V,2), block by block: blocks (B,2)\n"
       "int32 [begin, end), fixed (R,3) int32 (block, first, last) grouped by block, fixed_turn (R,),\n"
@@ -106,7 +106,7 @@ MOCAPEDIT_BINDINGS(BindPathTerms) {
         for (size_t c = 0; c < used.size(); ++c) out[static_cast<Eigen::Index>(c)] = used[c] != 0;
         return out;
       },
-      py::arg("rows"), py::arg("cols"), py::arg("values"), py::arg("num_rows"), py::arg("num_cols"),
+      py::kw_only(), py::arg("rows"), py::arg("cols"), py::arg("values"), py::arg("num_rows"), py::arg("num_cols"),
       py::arg("tolerance") = 1e-9,
       "(C,) bool: columns of the sparse complex (R,C) matrix given by (rows, cols, values) entries\n"
       "(int32, int32, complex128; repeats summed) that some null vector uses.");

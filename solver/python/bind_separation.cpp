@@ -29,7 +29,7 @@ class SeparationSolver {
     cache_ = mocapedit::SeparationNewCache();
   }
 
-  py::dict Solve(const Eigen::Ref<const Trajectory2>& direction, const Eigen::VectorXd& rhs,
+  mocapedit::SeparationResult Solve(const Eigen::Ref<const Trajectory2>& direction, const Eigen::VectorXd& rhs,
                  const Eigen::VectorXd& softness, const Eigen::VectorXi& term_row, const Eigen::VectorXi& term_vertex,
                  const Eigen::VectorXd& term_weight, const Eigen::VectorXi& kind,
                  const Eigen::VectorXd& initial_forces, double tolerance, int max_sweeps,
@@ -52,21 +52,7 @@ class SeparationSolver {
       py::gil_scoped_release release;
       mocapedit::SeparationSolve(data_, rows, settings, *cache_, result);
     }
-    py::dict d;
-    d["positions"] = result.positions;
-    d["shape"] = result.shape;
-    d["forces"] = result.forces;
-    d["shape_forces"] = result.shape_forces;
-    d["residuals"] = result.residuals;
-    d["rigid_angles"] = result.rigid_angles;
-    d["moved_agents"] = result.moved_agents;
-    d["sweeps"] = result.sweeps;
-    d["updates"] = result.updates;
-    d["inverse_columns"] = result.inverse_columns;
-    d["converged"] = result.converged;
-    d["regularized"] = result.regularized;
-    d["seconds"] = result.seconds;
-    return d;
+    return result;
   }
 
   int agents() const { return mocapedit::SeparationAgentCount(data_); }
@@ -80,6 +66,25 @@ class SeparationSolver {
 }  // namespace
 
 MOCAPEDIT_BINDINGS(BindSeparation) {
+  using mocapedit::SeparationResult;
+  py::class_<SeparationResult>(m, "SeparationResult", "Result of SeparationSolver.solve.")
+      .def_readonly("positions", &SeparationResult::positions, py::return_value_policy::copy, "(V, 2) after step 2 (untouched agents keep rest)")
+      .def_readonly("shape", &SeparationResult::shape, py::return_value_policy::copy, "(V, 2) after step 1")
+      .def_readonly("forces", &SeparationResult::forces, py::return_value_policy::copy, "(R,) step-2 row forces: > 0 pushes the row value up")
+      .def_readonly("shape_forces", &SeparationResult::shape_forces, py::return_value_policy::copy, "(R,) step-1 row forces")
+      .def_readonly("residuals", &SeparationResult::residuals, py::return_value_policy::copy, "(R,) row value minus rhs after step 2")
+      .def_readonly("rigid_angles", &SeparationResult::rigid_angles, py::return_value_policy::copy,
+                    "rotation of each rigid range in step 2 (radians, CCW)")
+      .def_readonly("moved_agents", &SeparationResult::moved_agents, py::return_value_policy::copy, "agents some row touched")
+      .def_readonly("sweeps", &SeparationResult::sweeps, py::return_value_policy::copy, "Gauss-Seidel sweeps, both steps")
+      .def_readonly("updates", &SeparationResult::updates, py::return_value_policy::copy, "row force changes the sweeps passed on")
+      .def_readonly("inverse_columns", &SeparationResult::inverse_columns, py::return_value_policy::copy,
+                    "back-substitutions for the agents' blocks (the rest were cached)")
+      .def_readonly("converged", &SeparationResult::converged, py::return_value_policy::copy, "both steps met the tolerance")
+      .def_readonly("regularized", &SeparationResult::regularized, py::return_value_policy::copy,
+                    "the hard equality rows were dependent: a tiny softness was added")
+      .def_readonly("seconds", &SeparationResult::seconds, py::return_value_policy::copy,
+                    "(4,) wall seconds in the blocks, the sweeps, the responses and gathering the rows");
   py::class_<SeparationSolver>(
       m, "SeparationSolver",
       "Agents' paths kept by the two-step Laplacian energy (factored once), coupled by linear\n"
@@ -90,9 +95,9 @@ MOCAPEDIT_BINDINGS(BindSeparation) {
       "still_extent: ranges whose rest positions lie this close (stage units) only translate.")
       .def(py::init<const Eigen::Ref<const Trajectory2>&, const Eigen::VectorXi&,
                     const std::vector<mocapedit::FrameRange>&, double, double, int>(),
-           py::arg("rest"), py::arg("starts"), py::arg("rigid") = std::vector<mocapedit::FrameRange>{},
+           py::kw_only(), py::arg("rest"), py::arg("starts"), py::arg("rigid") = std::vector<mocapedit::FrameRange>{},
            py::arg("anchor_weight") = 1e-3, py::arg("still_extent") = 1e-9, py::arg("threads") = 0)
-      .def("solve", &SeparationSolver::Solve, py::arg("direction"), py::arg("rhs"), py::arg("softness"),
+      .def("solve", &SeparationSolver::Solve, py::kw_only(), py::arg("direction"), py::arg("rhs"), py::arg("softness"),
            py::arg("term_row"), py::arg("term_vertex"), py::arg("term_weight"),
            py::arg("kind") = Eigen::VectorXi(), py::arg("initial_forces") = Eigen::VectorXd(),
            py::arg("tolerance") = 1e-6, py::arg("max_sweeps") = 500,
@@ -103,10 +108,7 @@ MOCAPEDIT_BINDINGS(BindSeparation) {
            "solve's forces and shape_forces (warm starts of step 2 and step 1; with initial_forces alone both\n"
            "steps start from it);\n"
            "tolerance (stage units) and max_sweeps bound the Gauss-Seidel on one-sided rows.\n"
-           "Returns a dict: positions (V, 2) after step 2, shape (V, 2) after step 1, forces (R,) of step 2\n"
-           "(> 0 pushes the row value up), shape_forces (R,) of step 1, residuals (R,), rigid_angles (one per rigid range, radians CCW), moved_agents,\n"
-           "sweeps, updates (row force changes passed on), inverse_columns (back-substitutions for the blocks),\n"
-           "converged, regularized, seconds (4,) wall seconds in the blocks, the sweeps, the responses and gathering the rows.")
+           "Returns a SeparationResult. Keyword arguments only.")
       .def_property_readonly("agents", &SeparationSolver::agents)
       .def_property_readonly("vertices", &SeparationSolver::vertices);
 }

@@ -1,6 +1,8 @@
 #include <pybind11/eigen.h>
 #include <pybind11/stl.h>
 
+#include <memory>
+
 #include "mocapedit/time_warp.h"
 #include "registry.h"
 
@@ -30,22 +32,22 @@ mocapedit::TimeWarpProblem MakeProblem(std::vector<Eigen::VectorXd> rest_times, 
   return p;
 }
 
-py::dict ToDict(const mocapedit::TimeWarpResult& r) {
-  py::dict d;
-  d["time_maps"] = r.time_maps;
-  d["time_residuals"] = r.time_residuals;
-  d["sync_residuals"] = r.sync_residuals;
-  d["min_interval"] = r.min_interval;
-  d["min_enforced"] = r.min_enforced;
-  d["component"] = r.component;
-  d["solver"] = r.solver;
-  d["iterations"] = r.iterations;
-  return d;
-}
-
 }  // namespace
 
 MOCAPEDIT_BINDINGS(BindTimeWarp) {
+  using mocapedit::TimeWarpResult;
+  py::class_<TimeWarpResult>(m, "TimeWarpResult", "Warped time maps and the figures to report (time_warp).")
+      .def_readonly("time_maps", &TimeWarpResult::time_maps, py::return_value_policy::copy, "list of (F_a,) warped shot times, one per agent")
+      .def_readonly("time_residuals", &TimeWarpResult::time_residuals, py::return_value_policy::copy, "(T,) |T[frame] - time| per time constraint")
+      .def_readonly("sync_residuals", &TimeWarpResult::sync_residuals, py::return_value_policy::copy,
+                    "(S,) |T_a[frame] - T_b[targetFrame] - offset| per sync constraint")
+      .def_readonly("min_interval", &TimeWarpResult::min_interval, py::return_value_policy::copy, "(A,) smallest warped interval (inf: one frame)")
+      .def_readonly("min_enforced", &TimeWarpResult::min_enforced, py::return_value_policy::copy,
+                    "(A,) intervals the active set held at their minimum")
+      .def_readonly("component", &TimeWarpResult::component, py::return_value_policy::copy, "(A,) component of each agent, -1 if unconstrained")
+      .def_readonly("solver", &TimeWarpResult::solver, py::return_value_policy::copy, "(A,) 'rest', 'LDLT' or 'SPQR fallback'")
+      .def_readonly("iterations", &TimeWarpResult::iterations, py::return_value_policy::copy, "(C,) active-set iterations per component");
+
   py::class_<mocapedit::TimeWarpData>(m, "TimeWarpData",
                                       "Factored time-warp components; re-solve with new constraint values.")
       .def_readonly("agents", &mocapedit::TimeWarpData::agents)
@@ -54,12 +56,12 @@ MOCAPEDIT_BINDINGS(BindTimeWarp) {
       .def(
           "solve",
           [](const mocapedit::TimeWarpData& d, const Eigen::VectorXd& times, const Eigen::VectorXd& offsets) {
-            mocapedit::TimeWarpResult r;
+            TimeWarpResult r;
             {
               py::gil_scoped_release release;
               mocapedit::TimeWarpSolve(d, times, offsets, r);
             }
-            return ToDict(r);
+            return r;
           },
           py::arg("times"), py::arg("offsets"),
           "Warps the time maps to (T,) constraint times and (S,) sync offsets; see time_warp.");
@@ -91,13 +93,14 @@ MOCAPEDIT_BINDINGS(BindTimeWarp) {
         }
         return data;
       },
-      py::arg("rest_times"), py::arg("time_frames"), py::arg("time_hard"), py::arg("time_weights"),
+      py::kw_only(), py::arg("rest_times"), py::arg("time_frames"), py::arg("time_hard"), py::arg("time_weights"),
       py::arg("sync_frames"), py::arg("sync_hard"), py::arg("sync_weights"), py::arg("min_interval_fraction") = 0.1,
       py::arg("min_intervals") = std::vector<Eigen::VectorXd>{}, py::arg("stretch_weight") = 1e-6,
       py::arg("anchor_weight") = 1e-6, py::arg("max_active_set_iterations") = -1, py::arg("responses") = false,
       (std::string("Splits agents linked by sync constraints into components and factors each.\n"
                    "responses: also keep each component's response to each constraint value it reads\n"
-                   "(up to 16), for cheap re-solves as values change (see time_warp.h).\n\n") +
+                   "(up to 16), for cheap re-solves as values change (see time_warp.h). Keyword\n"
+                   "arguments only.\n\n") +
        structure_doc)
           .c_str());
   m.def(
@@ -108,7 +111,7 @@ MOCAPEDIT_BINDINGS(BindTimeWarp) {
          const Eigen::VectorXd& sync_weights, const Eigen::VectorXd& offsets, double min_interval_fraction,
          std::vector<Eigen::VectorXd> min_intervals, double stretch_weight, double anchor_weight,
          int max_active_set_iterations) {
-        mocapedit::TimeWarpResult r;
+        TimeWarpResult r;
         {
           py::gil_scoped_release release;
           mocapedit::TimeWarp(MakeProblem(std::move(rest_times), time_frames, time_hard, time_weights,
@@ -117,19 +120,17 @@ MOCAPEDIT_BINDINGS(BindTimeWarp) {
                                           max_active_set_iterations),
                               times, offsets, r);
         }
-        return ToDict(r);
+        return r;
       },
-      py::arg("rest_times"), py::arg("time_frames"), py::arg("time_hard"), py::arg("time_weights"),
+      py::kw_only(), py::arg("rest_times"), py::arg("time_frames"), py::arg("time_hard"), py::arg("time_weights"),
       py::arg("times"), py::arg("sync_frames"), py::arg("sync_hard"), py::arg("sync_weights"), py::arg("offsets"),
       py::arg("min_interval_fraction") = 0.1, py::arg("min_intervals") = std::vector<Eigen::VectorXd>{},
       py::arg("stretch_weight") = 1e-6, py::arg("anchor_weight") = 1e-6, py::arg("max_active_set_iterations") = -1,
-      (std::string("Laplacian time warp of every agent's time map (precompute and solve in one call).\n\n") +
+      (std::string("Laplacian time warp of every agent's time map (precompute and solve in one call).\n"
+                   "Keyword arguments only.\n\n") +
        structure_doc +
        "\ntimes: (T,) shot times; offsets: (S,) sync offsets.\n\n"
-       "Returns a dict: time_maps (list of (F_a,)), time_residuals (T,), sync_residuals (S,),\n"
-       "min_interval (A,), min_enforced (A,) intervals held at the minimum, component (A,),\n"
-       "solver (A,) 'rest' | 'LDLT' | 'SPQR fallback', iterations (C,) active-set iterations.\n"
-       "Raises TimeWarpConflict (a ValueError; args = (message, info dict)) when hard constraints\n"
+       "Returns a TimeWarpResult. Raises TimeWarpConflict (an InvalidInput) when hard constraints\n"
        "contradict each other or the minimum interval.")
           .c_str());
 }

@@ -32,7 +32,7 @@ MOCAPEDIT_BINDINGS(BindTrajectory) {
         py::gil_scoped_release release;
         return mocapedit::DeformationTurns(source, edited, fixed, fixed_turn, window, min_travel);
       },
-      py::arg("source"), py::arg("edited"), py::arg("fixed") = std::vector<mocapedit::FrameRange>{},
+      py::kw_only(), py::arg("source"), py::arg("edited"), py::arg("fixed") = std::vector<mocapedit::FrameRange>{},
       py::arg("fixed_turn") = Eigen::VectorXd(), py::arg("window") = 2, py::arg("min_travel") = 0.0,
       "(N,) turn (radians, CCW) of each frame's heading when the path goes from source to edited (N,2):\n"
       "the least-squares rotation of the source steps onto the edited ones within two nested windows of\n"

@@ -393,7 +393,8 @@ def test_null_space_support_matches_dense_elimination(seed):
     rng = np.random.default_rng(seed)
     m = _similarity_system(rng, int(rng.integers(1, 12)), int(rng.integers(1, 20)), coincide=seed % 3 == 0)
     r, c = np.nonzero(m)
-    got = _solver.null_space_support(r.astype(np.int32), c.astype(np.int32), m[r, c], *m.shape)
+    got = _solver.null_space_support(rows=r.astype(np.int32), cols=c.astype(np.int32), values=m[r, c],
+                                     num_rows=m.shape[0], num_cols=m.shape[1])
     np.testing.assert_array_equal(got, ref_null_columns(m))
     # And the truth: the columns the SVD's null vectors reach.
     _, sv, vh = np.linalg.svd(m)
@@ -404,14 +405,19 @@ def test_null_space_support_matches_dense_elimination(seed):
 def test_null_space_support_of_known_matrices():
     one = np.array([0], np.int32)
     # x0 = 0 leaves x1 free; x0 - x1 = 0 and x1 = 0 fix both; no rows: all free.
-    assert _solver.null_space_support(one, one, np.array([1 + 0j]), 1, 2).tolist() == [False, True]
+    support = _solver.null_space_support(rows=one, cols=one, values=np.array([1 + 0j]), num_rows=1, num_cols=2)
+    assert support.tolist() == [False, True]
     rows, cols = np.array([0, 0, 1], np.int32), np.array([0, 1, 1], np.int32)
-    assert _solver.null_space_support(rows, cols, np.array([1, -1, 1 + 0j]), 2, 2).tolist() == [False, False]
-    assert _solver.null_space_support(one[:0], one[:0], np.zeros(0, complex), 0, 3).tolist() == [True] * 3
+    support = _solver.null_space_support(rows=rows, cols=cols, values=np.array([1, -1, 1 + 0j]), num_rows=2,
+                                         num_cols=2)
+    assert support.tolist() == [False, False]
+    assert _solver.null_space_support(rows=one[:0], cols=one[:0], values=np.zeros(0, complex), num_rows=0,
+                                      num_cols=3).tolist() == [True] * 3
     # Repeated entries are summed: 1 - 1 = 0 leaves x0 free.
-    assert _solver.null_space_support(np.zeros(2, np.int32), np.zeros(2, np.int32), np.array([1, -1 + 0j]), 1, 1)[0]
+    assert _solver.null_space_support(rows=np.zeros(2, np.int32), cols=np.zeros(2, np.int32),
+                                      values=np.array([1, -1 + 0j]), num_rows=1, num_cols=1)[0]
     with pytest.raises(ValueError, match="out of range"):
-        _solver.null_space_support(one, one + 5, np.array([1 + 0j]), 1, 2)
+        _solver.null_space_support(rows=one, cols=one + 5, values=np.array([1 + 0j]), num_rows=1, num_cols=2)
 
 
 def _edited(paths):
@@ -432,15 +438,18 @@ def test_block_deformation_turns_are_each_agents():
     blocks = np.array([(offsets[i], offsets[i + 1]) for i in (0, 2, 3)], np.int32)
     fixed = np.array([(1, 1, len(paths[2]) // 2), (2, 0, 0), (2, 1, 1)], np.int32)
     turn = np.array([0.5, -1.0, 2.0])
-    got = _solver.block_deformation_turns(g, e, blocks, fixed, turn, 2, 0.01)
+    got = _solver.block_deformation_turns(source=g, edited=e, blocks=blocks, fixed=fixed, fixed_turn=turn,
+                                          window=2, min_travel=0.01)
     for b, (lo, hi) in enumerate(blocks):
         mine = fixed[:, 0] == b
-        ref = _solver.deformation_turns(g[lo:hi], e[lo:hi], [tuple(r) for r in fixed[mine, 1:].tolist()],
-                                        turn[mine], 2, 0.01)
+        ref = _solver.deformation_turns(source=g[lo:hi], edited=e[lo:hi],
+                                        fixed=[tuple(r) for r in fixed[mine, 1:].tolist()], fixed_turn=turn[mine],
+                                        window=2, min_travel=0.01)
         np.testing.assert_array_equal(got[lo:hi], ref)
     assert not got[offsets[1]:offsets[2]].any()
     with pytest.raises(ValueError, match="grouped by block"):
-        _solver.block_deformation_turns(g, e, blocks, fixed[::-1].copy(), turn, 2, 0.01)
+        _solver.block_deformation_turns(source=g, edited=e, blocks=blocks, fixed=fixed[::-1].copy(), fixed_turn=turn,
+                                        window=2, min_travel=0.01)
 
 
 def test_many_turns_split_between_threads_are_each_agents():
@@ -452,11 +461,13 @@ def test_many_turns_split_between_threads_are_each_agents():
     blocks = np.array([(offsets[i], offsets[i + 1]) for i in range(len(paths))], np.int32)
     fixed = np.array([(b, 0, 1) for b in range(0, len(paths), 3)], np.int32)
     turn = np.linspace(-1.0, 1.0, len(fixed))
-    got = _solver.block_deformation_turns(g, e, blocks, fixed, turn, 3, 0.01)
+    got = _solver.block_deformation_turns(source=g, edited=e, blocks=blocks, fixed=fixed, fixed_turn=turn,
+                                          window=3, min_travel=0.01)
     for b, (lo, hi) in enumerate(blocks):
         mine = fixed[:, 0] == b
-        ref = _solver.deformation_turns(g[lo:hi], e[lo:hi], [tuple(r) for r in fixed[mine, 1:].tolist()],
-                                        turn[mine], 3, 0.01)
+        ref = _solver.deformation_turns(source=g[lo:hi], edited=e[lo:hi],
+                                        fixed=[tuple(r) for r in fixed[mine, 1:].tolist()], fixed_turn=turn[mine],
+                                        window=3, min_travel=0.01)
         np.testing.assert_array_equal(got[lo:hi], ref)
 
 
@@ -617,10 +628,10 @@ def test_a_large_group_is_ordered_by_position_and_time_without_changing_its_answ
     times = problem._vertex_times()
     assert times is not None and len(times) == len(problem.rest) > 2000
     result = problem.solve()
-    assert result.step1["solver"] == "CHOLMOD supernodal (nested dissection)"
+    assert result.step1.solver == "CHOLMOD supernodal (nested dissection)"
     monkeypatch.setattr(path_edit.ComponentProblem, "_vertex_times", lambda self: None)
     reference = path_edit.ComponentProblem(agents, handles, [], [group], SETTINGS).solve()
-    assert reference.step1["solver"] == "CHOLMOD supernodal"
+    assert reference.step1.solver == "CHOLMOD supernodal"
     for a in agents:
         np.testing.assert_allclose(result.agents[a.path].ground, reference.agents[a.path].ground, rtol=0, atol=1e-9)
     for h in handles:
@@ -630,9 +641,9 @@ def test_a_large_group_is_ordered_by_position_and_time_without_changing_its_answ
 def test_vertex_times_must_match_the_vertices():
     rest = _walk(10)
     with pytest.raises(ValueError, match="vertex times: expected 10, got 9"):
-        _solver.path_edit_precompute(rest, vertex_times=np.zeros(9))
+        _solver.path_edit_precompute(rest=rest, vertex_times=np.zeros(9))
     with pytest.raises(ValueError, match="vertex times must be finite"):
-        _solver.path_edit_precompute(rest, vertex_times=np.full(10, np.nan))
+        _solver.path_edit_precompute(rest=rest, vertex_times=np.full(10, np.nan))
 
 
 def test_a_group_in_blocks_apart_moves_as_one():

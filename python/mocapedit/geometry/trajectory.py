@@ -148,7 +148,8 @@ def deformation_turns(source: np.ndarray, edited: np.ndarray, offsets, fixed=(),
     blocks = np.ascontiguousarray(np.stack((off[:-1], off[1:]), axis=1))
     ranges = np.ascontiguousarray(np.asarray(fixed, dtype=np.int32).reshape(-1, 3))
     turns = np.asarray(fixed_turn, dtype=np.float64).reshape(-1)
-    return _solver.block_deformation_turns(s, e, blocks, ranges, turns, int(window), float(min_travel))
+    return _solver.block_deformation_turns(source=s, edited=e, blocks=blocks, fixed=ranges, fixed_turn=turns,
+                                           window=int(window), min_travel=float(min_travel))
 
 
 def ground_motion(src_uv: np.ndarray, src_heading: np.ndarray, new_uv: np.ndarray,

@@ -218,12 +218,13 @@ class _Rows:
 
     def solve(self, solver, tolerance: float = 1e-6, max_sweeps: int = 500):
         cat = lambda parts, shape, dtype: (np.concatenate(parts) if parts else np.zeros(shape)).astype(dtype)  # noqa: E731
-        return solver.solve(cat(self.direction, (0, 2), np.float64).reshape(-1, 2),
-                            cat(self.rhs, 0, np.float64), cat(self.softness, 0, np.float64),
-                            cat(self.term_row, 0, np.int32), cat(self.term_vertex, 0, np.int32),
-                            cat(self.term_weight, 0, np.float64), cat(self.kind, 0, np.int32),
-                            cat(self.force, 0, np.float64), tolerance, max_sweeps,
-                            cat(self.force1, 0, np.float64))
+        return solver.solve(direction=cat(self.direction, (0, 2), np.float64).reshape(-1, 2),
+                            rhs=cat(self.rhs, 0, np.float64), softness=cat(self.softness, 0, np.float64),
+                            term_row=cat(self.term_row, 0, np.int32),
+                            term_vertex=cat(self.term_vertex, 0, np.int32),
+                            term_weight=cat(self.term_weight, 0, np.float64), kind=cat(self.kind, 0, np.int32),
+                            initial_forces=cat(self.force, 0, np.float64), tolerance=tolerance,
+                            max_sweeps=max_sweeps, initial_shape_forces=cat(self.force1, 0, np.float64))
 
 
 class _State:
@@ -332,7 +333,7 @@ class _State:
             verts = np.concatenate(verts)
             clearance = region.clearance[owner] + extra
             push = _solver.push_out_of_region(region.footprint, np.ascontiguousarray(flat[verts]), clearance)
-            out.append((verts[push["index"]], region.agents[owner[push["index"]]], push))
+            out.append((verts[push.index], region.agents[owner[push.index]], push))
         return out
 
 
@@ -397,7 +398,7 @@ def _iteration(state: _State, found: collisions.Collisions, hits) -> Iteration:
     return Iteration(collisions=len(found), colliding_samples=int(found.colliding_samples),
                      region_samples=int(sum(len(h[0]) for h in hits if h is not None)),
                      deepest=float(max([found.depth.max(initial=0.0)] +
-                                       [h[2]["depth"].max(initial=0.0) for h in hits if h is not None])))
+                                       [h[2].depth.max(initial=0.0) for h in hits if h is not None])))
 
 
 def _expand(found: collisions.Collisions, spread, colliding_depth: float = 0.0):
@@ -439,7 +440,7 @@ def resolve(problem: Problem, settings: Settings | None = None, progress=None) -
         if h is None:
             continue
         verts, agents, push = h
-        for v, a, d in zip(verts, agents, push["depth"]):
+        for v, a, d in zip(verts, agents, push.depth):
             region_left.append((r, int(a), int(v - state.starts[a]), float(d)))
     moved = np.array([not np.array_equal(flat[state.starts[a]:state.starts[a + 1]], problem.paths[a])
                       for a in range(len(problem.names))], dtype=bool)
@@ -501,18 +502,19 @@ class _Run:
         out["rows"] = round(total - sum(self.seconds.values()), 4)
         return out
 
-    def factor(self, *args):
-        """A SeparationSolver for (rest, starts, rigid, anchor_weight, still_extent, threads), timed."""
+    def factor(self, rest, starts, rigid, anchor_weight: float, still_extent: float):
+        """A SeparationSolver for the paths (rest, starts) and their rigid ranges, timed."""
         t = time.perf_counter()
-        solver = _solver.SeparationSolver(*args)
+        solver = _solver.SeparationSolver(rest=rest, starts=starts, rigid=rigid, anchor_weight=anchor_weight,
+                                          still_extent=still_extent, threads=0)
         self.seconds["factor"] += time.perf_counter() - t
         return solver
 
-    def solved(self, rows: "_Rows", out: dict) -> None:
-        for name, sec in zip(("blocks", "sweeps", "responses", "gather"), out["seconds"]):
+    def solved(self, rows: "_Rows", out: _solver.SeparationResult) -> None:
+        for name, sec in zip(("blocks", "sweeps", "responses", "gather"), out.seconds):
             self.seconds[name] += float(sec)
-        self.work["updates"] += int(out["updates"])
-        self.work["inverseColumns"] += int(out["inverse_columns"])
+        self.work["updates"] += int(out.updates)
+        self.work["inverseColumns"] += int(out.inverse_columns)
         self.work["rows"] += rows.count
         self.solves += 1
         self.iterations[-1].rows = rows.count
@@ -528,7 +530,7 @@ def _accumulate(state: _State, run: _Run):
         if run.observe(flat, it):
             break
         found = run.found
-        solver = run.factor(flat, state.starts, state.rigid, s.anchor_weight, _still(s), 0)
+        solver = run.factor(flat, state.starts, state.rigid, s.anchor_weight, _still(s))
         rows = _Rows()
         state.fixed_rows(rows)
         # A mesh-based constraint per maximal collision: the two colliding points joined by
@@ -548,14 +550,14 @@ def _accumulate(state: _State, run: _Run):
             if h is None or len(h[0]) == 0:
                 continue
             verts_r, agents_r, push = h
-            target = push["target"] + push["normal"] * (s.overshoot * p.radius[agents_r])[:, None]
+            target = push.target + push.normal * (s.overshoot * p.radius[agents_r])[:, None]
             for axis in (0, 1):
                 rows.add(np.eye(2)[[axis] * len(verts_r)], target[:, axis], SEPARATION_SOFTNESS,
                          verts_r[:, None], np.ones((len(verts_r), 1)))
         out = rows.solve(solver)
         run.solved(rows, out)
-        flat = out["positions"]
-        angles = angles + out["rigid_angles"]
+        flat = out.positions
+        angles = angles + out.rigid_angles
     return flat, angles
 
 
@@ -690,9 +692,9 @@ class _RegionCandidates:
             v, c = self.vertex[sel], self.clearance[sel]
             pts = flat[v]
             near = _solver.nearest_on_region(region.footprint, np.ascontiguousarray(pts))
-            nrm = near["normal"].copy()
-            target = near["boundary"] + nrm * c[:, None]
-            inside = near["distance"] < c
+            nrm = near.normal.copy()
+            target = near.boundary + nrm * c[:, None]
+            inside = near.distance < c
             if inside.any():
                 t = _path_tangents(state, flat, v[inside])
                 moving = np.linalg.norm(t, axis=1) > 1e-12
@@ -705,10 +707,10 @@ class _RegionCandidates:
                 way = side[:, None] * left
                 exit_pt = _exit(region.footprint, pts[inside], way, c[inside])
                 exit_near = _solver.nearest_on_region(region.footprint, np.ascontiguousarray(exit_pt))
-                go = moving & (np.sum(exit_near["normal"] * way, axis=1) > 0)
+                go = moving & (np.sum(exit_near.normal * way, axis=1) > 0)
                 idx = np.flatnonzero(inside)[go]
-                nrm[idx] = exit_near["normal"][go]
-                target[idx] = exit_near["boundary"][go] + nrm[idx] * c[inside][go, None]
+                nrm[idx] = exit_near.normal[go]
+                target[idx] = exit_near.boundary[go] + nrm[idx] * c[inside][go, None]
             normal[sel] = nrm
             rhs[sel] = np.sum(nrm * target, axis=1)
         return normal, rhs
@@ -800,7 +802,7 @@ class _Forward:
 
 def _relinearize(state: _State, run: _Run):
     p, s = state.p, state.s
-    solver = run.factor(state.rest, state.starts, state.rigid, s.anchor_weight, _still(s), 0)
+    solver = run.factor(state.rest, state.starts, state.rigid, s.anchor_weight, _still(s))
     flat = state.rest.copy()
     angles = np.zeros(len(p.rigid))
     cands = _Candidates(len(p.names))
@@ -821,8 +823,7 @@ def _relinearize(state: _State, run: _Run):
             # Overlaps that outlast the first iterations are knots of many pushes; gentle
             # detours that reach far make them spread. Stiffer anchors keep the last pushes
             # local, so they converge.
-            solver = run.factor(state.rest, state.starts, state.rigid, s.anchor_weight * s.stiffen,
-                                _still(s), 0)
+            solver = run.factor(state.rest, state.starts, state.rigid, s.anchor_weight * s.stiffen, _still(s))
         # Watch every near miss: each becomes a one-sided row that pushes only when needed.
         if p.collide_agents:
             # A pair still overlapping where it was already held apart resists: it is held at
@@ -859,13 +860,13 @@ def _relinearize(state: _State, run: _Run):
         sweeps = int(np.clip(s.sweep_budget / max(rows.count, 1), s.sweeps, 10 * s.sweeps))
         out = rows.solve(solver, tolerance=s.tolerance * float(np.min(need, initial=1.0)), max_sweeps=sweeps)
         run.solved(rows, out)
-        force, force1 = out["forces"], out["shape_forces"]
+        force, force1 = out.forces, out.shape_forces
         fixed_force, fixed_force1 = force[:fixed], force1[:fixed]
         cands.force[on], cands.force1[on] = force[sep], force1[sep]
         watched.force, watched.force1 = force[reg], force1[reg]
         forward.solved(force[ahead], force1[ahead])
-        flat = out["positions"]
-        angles = out["rigid_angles"]
+        flat = out.positions
+        angles = out.rigid_angles
     return flat, angles
 
 

@@ -164,17 +164,25 @@ def detect(sampling: Sampling, radius: np.ndarray, height: np.ndarray, margin: f
     pass as ``near`` (their depth measured from ``watch``).
     """
     out = _solver.detect_collisions(
-        sampling.flat(), len(sampling.times), np.asarray(radius, dtype=np.float64),
-        np.asarray(height, dtype=np.float64), None,
-        None if active is None else [bool(x) for x in active], float(margin), float(report_distance),
-        0, brute_force, float(watch) if watch is not None and watch > margin else 0.0)
-    near = out.pop("near", None)
-    found = Collisions(**out)
-    if near is not None:
-        found.near = Collisions(**near, min_clearance=found.min_clearance,
-                                min_clearance_sample=found.min_clearance_sample,
-                                colliding_samples=int(np.sum(near["last"] - near["first"] + 1)))
+        positions=sampling.flat(), samples=len(sampling.times), radius=np.asarray(radius, dtype=np.float64),
+        height=np.asarray(height, dtype=np.float64), base=None,
+        active=None if active is None else [bool(x) for x in active], margin=float(margin),
+        report_distance=float(report_distance), threads=0, brute_force=brute_force,
+        watch_distance=float(watch) if watch is not None and watch > margin else 0.0)
+    found = _intervals(out.collisions, out, colliding_samples=int(out.colliding_samples))
+    found.pair_tests = int(out.pair_tests)
+    if out.near is not None:
+        near = out.near
+        found.near = _intervals(near, out, colliding_samples=int(np.sum(near.last - near.first + 1)))
     return found
+
+
+def _intervals(intervals: _solver.CollisionIntervals, out: _solver.CollisionResult,
+               colliding_samples: int) -> Collisions:
+    return Collisions(agent_a=intervals.agent_a, agent_b=intervals.agent_b, first=intervals.first,
+                      last=intervals.last, deepest=intervals.deepest, depth=intervals.depth,
+                      min_clearance=out.min_clearance, min_clearance_sample=out.min_clearance_sample,
+                      colliding_samples=colliding_samples)
 
 
 def clearances(sampling: Sampling, radius: np.ndarray, a: np.ndarray, b: np.ndarray,
@@ -210,7 +218,7 @@ def region_footprint(region: AvoidRegion, up_axis: str):
         pts = ground.to_ground(corners, up_axis)
         try:
             return _solver.GroundRegion.hull(np.ascontiguousarray(pts))
-        except ValueError:
+        except _solver.InvalidInput:
             raise prim_error(region.path, f"the ground footprint of geometry <{region.geometry}> has no "
                              "area", "geometry") from None
     m = np.asarray(region.local_to_world, dtype=np.float64)
@@ -244,7 +252,7 @@ def region_footprint(region: AvoidRegion, up_axis: str):
                         for z in (-half[2], half[2])])
     try:
         return _solver.GroundRegion.hull(np.ascontiguousarray(_to_world_ground(corners, m, up_axis)))
-    except ValueError:
+    except _solver.InvalidInput:
         raise prim_error(region.path, "its transform flattens the box to no area on the ground", "size") from None
 
 
@@ -256,7 +264,7 @@ def region_agents(region: AvoidRegion, agents: list[str]) -> list[str]:
     return [a for a in agents if a in listed]
 
 
-def push_out(footprint, points: np.ndarray, clearance) -> dict:
+def push_out(footprint, points: np.ndarray, clearance) -> _solver.RegionPush:
     """Points of (N,2) closer to a footprint than their clearance ((N,) or scalar); see
     :func:`mocapedit._solver.push_out_of_region`."""
     c = np.atleast_1d(np.asarray(clearance, dtype=np.float64))

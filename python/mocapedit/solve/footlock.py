@@ -56,11 +56,14 @@ class LegInputs:
     hinge: np.ndarray          # (N,2,3) the knee's hinge axis in world space (the normal of its bend plane)
     keep: np.ndarray | None = None  # (N,) uint8: poses the pelvis drop must not touch (stationary ranges)
 
-    def arrays(self) -> tuple:
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The keyword arguments of ``_solver.lock_feet``, C-contiguous."""
         keep = np.zeros(len(self.hip), np.uint8) if self.keep is None else self.keep.astype(np.uint8)
-        return (self.offsets, self.smooth, self.up, self.hip, self.knee, self.ankle, self.parent_rot,
-                self.hip_rot, self.knee_rot, self.ankle_rot, self.target, self.target_rot, self.weight, self.hinge,
-                keep)
+        named = dict(offsets=self.offsets, smooth=self.smooth, up=self.up, hip=self.hip, knee=self.knee,
+                     ankle=self.ankle, parent_rot=self.parent_rot, hip_rot=self.hip_rot, knee_rot=self.knee_rot,
+                     ankle_rot=self.ankle_rot, target=self.target, target_rot=self.target_rot, weight=self.weight,
+                     hinge=self.hinge, keep=keep)
+        return {k: np.ascontiguousarray(v) for k, v in named.items()}
 
 
 @dataclass
@@ -74,8 +77,8 @@ class LegOutputs:
 
 def lock_feet(inputs: LegInputs) -> LegOutputs:
     """Runs the solver's FootLockJob (all agents, both legs)."""
-    hip, knee, ankle, drop, reached = _solver.lock_feet(*(np.ascontiguousarray(a) for a in inputs.arrays()))
-    return LegOutputs(hip, knee, ankle, drop, reached)
+    out = _solver.lock_feet(**inputs.arrays())
+    return LegOutputs(out.hip_local, out.knee_local, out.ankle_local, out.drop, out.reached)
 
 
 # ---- the job in numpy --------------------------------------------------------------------------

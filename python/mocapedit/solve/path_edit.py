@@ -156,8 +156,8 @@ class ComponentResult:
     solver: str                           # e.g. "LDLT", "SPQR (ill-conditioned)", "rigid"
     notes: list[str]
     link_offsets: np.ndarray              # (L,2) world offsets the links were solved with
-    step1: dict | None = None
-    step2: dict | None = None
+    step1: _solver.StepInfo | None = None  # how each step was solved
+    step2: _solver.StepInfo | None = None
 
 
 class ComponentProblem:
@@ -193,9 +193,10 @@ class ComponentProblem:
         self._rest_headings: dict[int, np.ndarray] = {}
         self._source_full: np.ndarray | None = None   # every agent's source path, concatenated
         self.data = _solver.path_edit_precompute(
-            self.rest, self.triangles, self.triangle_weights, self.edges, self.edge_weights, self.rigid,
-            self.handle_vertex, self.handle_weight, self.link_vertex, self.link_weight,
-            settings.rigid_min_extent, precompute_responses=precompute_responses,
+            rest=self.rest, triangles=self.triangles, triangle_weights=self.triangle_weights, edges=self.edges,
+            edge_weights=self.edge_weights, rigid=self.rigid, handles=self.handle_vertex,
+            handle_weights=self.handle_weight, links=self.link_vertex, link_weights=self.link_weight,
+            rigid_min_extent=settings.rigid_min_extent, precompute_responses=precompute_responses,
             vertex_times=self._vertex_times())
 
     # ---- key frames --------------------------------------------------------------------
@@ -256,8 +257,9 @@ class ComponentProblem:
                     if is_member[self.index[agent]]:
                         marks.append(fo[self.index[agent]] + frame)
         forced.append(np.array(marks, dtype=np.int64))
-        self._sel, self._before = _solver.key_frames(self._rest_full, np.array(fo, dtype=np.int32), is_member,
-                                                     np.concatenate(forced).astype(np.int32), s.min_baseline)
+        self._sel, self._before = _solver.key_frames(
+            rest=self._rest_full, offsets=np.array(fo, dtype=np.int32), keyed=is_member,
+            forced=np.concatenate(forced).astype(np.int32), min_baseline=s.min_baseline)
         self.rest = self._rest_full[self._sel]
         before = self._before
         ro = [int(before[f]) for f in fo[:-1]] + [len(self._sel)]
@@ -532,9 +534,9 @@ class ComponentProblem:
         d = self.rest[verts] - centre[b]
         two = similar[b]
         values = np.concatenate([sign + 0j, sign[two] * (d[two, 0] + 1j * d[two, 1])])
-        used = _solver.null_space_support(np.concatenate([rows, rows[two]]).astype(np.int32),
-                                          np.concatenate([start[b], start[b][two] + 1]).astype(np.int32),
-                                          values, nh + nl, int(start[-1]))
+        used = _solver.null_space_support(rows=np.concatenate([rows, rows[two]]).astype(np.int32),
+                                          cols=np.concatenate([start[b], start[b][two] + 1]).astype(np.int32),
+                                          values=values, num_rows=nh + nl, num_cols=int(start[-1]))
         moved = np.logical_or.reduceat(used, start[:-1]).tolist()
         return {i for body, m in zip(bodies, moved) if m for i in body}
 
@@ -587,8 +589,8 @@ class ComponentProblem:
                 self.notes.append("target-space relative constraints: the target headings did not settle")
         agents = self._agents(result)
         step1, step2 = result.step1, result.step2
-        solver = step1["solver"] if step1["solver"] == step2["solver"] or step2["solver"] == "none" \
-            else f"{step1['solver']}; {step2['solver']}"
+        solver = step1.solver if step1.solver == step2.solver or step2.solver == "none" \
+            else f"{step1.solver}; {step2.solver}"
         return ComponentResult(agents=agents, solver=solver, notes=list(self.notes),
                                link_offsets=offsets[:len(self.links)], step1=step1, step2=step2)
 

@@ -134,7 +134,7 @@ class PathEditor:
 
     @property
     def solver(self) -> str:
-        return self._result.step1["solver"]
+        return self._result.step1.solver
 
     up_axis = "Y"
     source_height = None

@@ -273,7 +273,7 @@ def _region_entries(ctx: SolveContext, problem: avoidance.Problem, outcome: avoi
         flat = np.concatenate([problem.paths[a] for a in region.agents])
         owner = np.concatenate([np.full(len(problem.paths[a]), a) for a in region.agents])
         push = collisions.push_out(region.footprint, flat, region.clearance[np.searchsorted(region.agents, owner)])
-        touched = sorted(set(owner[push["index"]].tolist()) | {a for (rr, a) in worst if rr == r})
+        touched = sorted(set(owner[push.index].tolist()) | {a for (rr, a) in worst if rr == r})
         for a in touched:
             depth, frame = worst.get((r, a), (0.0, None))
             if frame is None:

@@ -51,13 +51,12 @@ def _validate(ctx: SolveContext) -> float:
     return fraction
 
 
-def _conflict_error(exc, agents: list[str], ctx: SolveContext):
-    info = vars(exc)  # the attributes of _solver.TimeWarpConflict
-    times = [ctx.data.time_constraints[i] for i in info["time_constraints"]]
-    syncs = [ctx.data.sync_constraints[i] for i in info["sync_constraints"]]
+def _conflict_error(exc: _solver.TimeWarpConflict, agents: list[str], ctx: SolveContext):
+    times = [ctx.data.time_constraints[i] for i in exc.time_constraints]
+    syncs = [ctx.data.sync_constraints[i] for i in exc.sync_constraints]
     prims = sorted({c.path for c in times} | {c.path for c in syncs})
     named = ", ".join(f"<{p}>" for p in prims)
-    if info["kind"] == "cycle":
+    if exc.kind == "cycle":
         if not syncs:
             c = times[0]
             values = " and ".join(f"{t.time:g}" for t in times)
@@ -65,15 +64,15 @@ def _conflict_error(exc, agents: list[str], ctx: SolveContext):
                        f"times ({values}); keep one, or make the others soft")
         elif not times:
             message = (f"hard sync constraints {named} form a cycle whose offsets do not sum to zero "
-                       f"(they miss by {info['mismatch']:g} time codes)")
+                       f"(they miss by {exc.mismatch:g} time codes)")
         else:
             message = (f"hard time and sync constraints {named} fix the same frame's time twice and "
-                       f"disagree by {info['mismatch']:g} time codes")
+                       f"disagree by {exc.mismatch:g} time codes")
     else:
-        if info["agent"] >= 0:
-            agent = agents[info["agent"]]
-            a, b = info["frames"]
-            gap, least = info["gap"], info["minimum"]
+        if exc.agent >= 0:
+            agent = agents[exc.agent]
+            a, b = exc.frames
+            gap, least = exc.gap, exc.minimum
             how = "backwards" if gap <= 0 else "faster than minTimeInterval allows"
             message = (f"hard constraints {named} would make time run {how} for <{agent}>: frame {b} "
                        f"would play {gap:g} time codes after frame {a}, and the least that allows is "
@@ -123,10 +122,12 @@ def time_pass(ctx: SolveContext) -> None:
                            dtype=np.int32).reshape(-1, 4)
     try:
         result = _solver.time_warp(
-            rest, time_frames, np.array([c.hard for c in tc], dtype=bool),
-            np.array([c.weight for c in tc], dtype=np.float64), np.array([c.time for c in tc], dtype=np.float64),
-            sync_frames, np.array([c.hard for c in sc], dtype=bool),
-            np.array([c.weight for c in sc], dtype=np.float64), np.array([c.offset for c in sc], dtype=np.float64),
+            rest_times=rest, time_frames=time_frames, time_hard=np.array([c.hard for c in tc], dtype=bool),
+            time_weights=np.array([c.weight for c in tc], dtype=np.float64),
+            times=np.array([c.time for c in tc], dtype=np.float64), sync_frames=sync_frames,
+            sync_hard=np.array([c.hard for c in sc], dtype=bool),
+            sync_weights=np.array([c.weight for c in sc], dtype=np.float64),
+            offsets=np.array([c.offset for c in sc], dtype=np.float64),
             min_interval_fraction=fraction, min_intervals=minimum)
     except _solver.TimeWarpConflict as exc:
         raise _conflict_error(exc, agents, ctx) from None
@@ -138,9 +139,10 @@ def time_pass(ctx: SolveContext) -> None:
         keys[c.agent].append(c.frame)
         keys[c.target].append(c.target_frame)
     enforced = []
+    time_maps, solvers = result.time_maps, result.solver  # lists, converted once
     for i, path in enumerate(agents):
         agent = data.agents[path]
-        time_map = result["time_maps"][i]
+        time_map = time_maps[i]
         if np.array_equal(time_map, agent.sample_times):
             continue
         limits.check_time_map(path, agent.sample_times, time_map,
@@ -151,32 +153,32 @@ def time_pass(ctx: SolveContext) -> None:
             times = np.union1d(times, ctx.out_times[path])
         ctx.out_times[path] = times
         entry = ctx.report.agent(path)
-        entry["minInterval"] = float(result["min_interval"][i])
-        entry["solver"] = "matchSpeed" if result["solver"][i] == "rest" else result["solver"][i]
+        entry["minInterval"] = float(result.min_interval[i])
+        entry["solver"] = "matchSpeed" if solvers[i] == "rest" else solvers[i]
         notes = []
         if path in matched:
             notes.append("time map matches the source speed along the edited path (matchSpeed)")
-        held = int(result["min_enforced"][i])
+        held = int(result.min_enforced[i])
         if held:
             enforced.append(path)
             notes.append(f"time warp held {held} interval(s) at the minimum "
                          f"(minTimeInterval {fraction:g} of the source interval)")
         if notes:
             entry.setdefault("notes", []).extend(notes)
-        if result["solver"][i] == "SPQR fallback":
-            ctx.report.note(f"time warp: a singular system for <{path}> was solved by {result['solver'][i]}")
+        if solvers[i] == "SPQR fallback":
+            ctx.report.note(f"time warp: a singular system for <{path}> was solved by {solvers[i]}")
     if enforced:
         named = ", ".join(f"<{p}>" for p in enforced[:10]) + (", ..." if len(enforced) > 10 else "")
         ctx.report.note(f"time warp: the minimum interval (minTimeInterval {fraction:g}) was enforced for "
                         f"{len(enforced)} agent(s): {named}")
 
-    for c, residual in zip(tc, result["time_residuals"]):
+    for c, residual in zip(tc, result.time_residuals):
         residual = float(residual)
         ctx.report.constraints.append({
             "prim": c.path, "kind": "time", "agent": c.agent, "frame": c.frame, "target": None,
             "targetFrame": None, "hard": c.hard, "residual": residual, "met": residual <= MET,
             "position": _root_position(ctx, c.agent, c.frame)})
-    for c, residual in zip(sc, result["sync_residuals"]):
+    for c, residual in zip(sc, result.sync_residuals):
         residual = float(residual)
         ctx.report.constraints.append({
             "prim": c.path, "kind": "sync", "agent": c.agent, "frame": c.frame, "target": c.target,
