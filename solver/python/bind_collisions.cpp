@@ -51,9 +51,8 @@ struct Detection {
   }
 };
 
-}  // namespace
-
-MOCAPEDIT_BINDINGS(BindCollisions) {
+// The result classes first: the functions' signatures name them.
+void BindCollisionClasses(py::module_& m) {
   py::class_<CollisionIntervals>(m, "CollisionIntervals",
                                  "Collision intervals, one entry per interval, sorted by (agent_a, agent_b, first).")
       .def_readonly("agent_a", &CollisionIntervals::agent_a, py::return_value_policy::copy, "(N,) first agent, agent_a < agent_b")
@@ -80,7 +79,12 @@ MOCAPEDIT_BINDINGS(BindCollisions) {
       .def_readonly("target", &mocapedit::RegionPush::target, py::return_value_policy::copy, "(P, 2) nearest positions at exactly the clearance")
       .def_readonly("normal", &mocapedit::RegionPush::normal, py::return_value_policy::copy, "(P, 2) unit outward directions")
       .def_readonly("depth", &mocapedit::RegionPush::depth, py::return_value_policy::copy, "(P,) clearance minus signed distance, > 0");
+}
 
+}  // namespace
+
+MOCAPEDIT_BINDINGS(BindCollisions) {
+  BindCollisionClasses(m);
   m.def(
       "detect_collisions",
       [](const Eigen::Ref<const Trajectory2>& positions, int samples, const Eigen::VectorXd& radius,

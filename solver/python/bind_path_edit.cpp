@@ -9,7 +9,10 @@
 namespace py = pybind11;
 using mocapedit::Trajectory2;
 
-MOCAPEDIT_BINDINGS(BindPathEdit) {
+namespace {
+
+// The classes first: the functions' signatures name them.
+void BindPathEditClasses(py::module_& m) {
   py::class_<mocapedit::PathEditData>(
       m, "PathEditData", "Factored path-editing problem from path_edit_precompute; pass it to path_edit_solve.")
       .def_readonly("handle_count", &mocapedit::PathEditData::handle_count, "#H handles of the problem")
@@ -33,7 +36,12 @@ MOCAPEDIT_BINDINGS(BindPathEdit) {
       .def_readonly("rigid_angle", &mocapedit::PathEditResult::rigid_angle, "that motion's rotation (radians)")
       .def_readonly("step1", &mocapedit::PathEditResult::step1, "how step 1 (shape) was solved")
       .def_readonly("step2", &mocapedit::PathEditResult::step2, "how step 2 (scale) was solved");
+}
 
+}  // namespace
+
+MOCAPEDIT_BINDINGS(BindPathEdit) {
+  BindPathEditClasses(m);
   m.def(
       "path_edit_precompute",
       [](const Trajectory2& rest, const mocapedit::IndexTriples& triangles, const Eigen::VectorXd& triangle_weights,
