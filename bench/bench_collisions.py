@@ -6,7 +6,7 @@ lateral sway. Capsules are 0.3 m by 1.8 m, margin 0.05 m, one sample per frame.
 
 Figures, each beside a peer measured in the same run:
 - detection alone: the uniform grid (C++) against all pairs (C++, the same narrow phase)
-  and against the inspection's numpy grid (mocapedit.inspect.overlaps); at 10,000 agents the
+  and against a numpy grid over (time, cell) (overlaps_peer.py); at 10,000 agents the
   all-pairs peer runs on every tenth sample and is scaled up (it says so);
 - resolution per strategy: seconds to the end, iterations, overlaps left, mean and
   largest displacement, path length change, where the time went (factoring, detection,
@@ -32,8 +32,10 @@ import scipy.sparse.linalg as spla
 
 from mocapedit.solve import avoidance, collisions
 from mocapedit.data import examples
-from mocapedit.inspect import metrics, overlaps
+from mocapedit.inspect import metrics
 from mocapedit.pipeline.processor import solve
+
+import overlaps_peer
 
 FRAMES = 240
 DENSITY = 0.25          # agents per square metre
@@ -72,9 +74,9 @@ def _detection(ctx, problem: avoidance.Problem) -> dict:
         out["allPairsSeconds"] = round(brute_s * step, 4)
         out["allPairsExtrapolatedFromEvery"] = step
     out["speedupVsAllPairs"] = round(out["allPairsSeconds"] / grid_s, 1)
-    # The inspection's numpy grid finds the same overlapping (pair, sample) records.
+    # A numpy grid finds the same overlapping (pair, sample) records.
     pos = np.ascontiguousarray(s.positions.transpose(1, 0, 2))
-    numpy_s = ctx.best_of(lambda: overlaps.proximity(pos, radius + MARGIN / 2), repeat=1)
+    numpy_s = ctx.best_of(lambda: overlaps_peer.proximity(pos, radius + MARGIN / 2), repeat=1)
     out["numpyGridSeconds"] = round(numpy_s, 4)
     out["speedupVsNumpyGrid"] = round(numpy_s / grid_s, 1)
     return out

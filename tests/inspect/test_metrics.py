@@ -309,6 +309,8 @@ def test_min_separation_far_apart_and_degenerate_inputs():
         M.min_separation(np.zeros((2, 3)), 0.3, 1.8, "Y")
     with pytest.raises(ValueError):
         M.min_separation(np.zeros((2, 3, 3)), -0.3, 1.8, "Y")
+    with pytest.raises(ValueError):
+        M.min_separation(np.zeros((2, 3, 3)), 0.3, 0.0, "Y")
 
 
 def test_min_separation_is_exact_when_the_first_grid_is_too_fine():
@@ -343,11 +345,13 @@ def test_min_separation_matches_brute_force(up, seed):
     assert (sep.agents, sep.time_index) == (pair, t)
 
 
-def test_min_separation_in_small_chunks_matches_brute_force(monkeypatch):
-    # Dense crowds are evaluated in chunks of candidate pairs; tiny chunks must agree too.
+def test_min_separation_dense_crowd_in_runs_matches_brute_force():
+    # Samples are measured in runs with the same agents at the same elevations: a run of two,
+    # then one where an agent has left, then one where another stands higher.
     rng = np.random.default_rng(3)
     pos = M.from_ground(rng.uniform(0.0, 6.0, size=(80, 5, 2)), 0.0, "Y")
-    monkeypatch.setattr(M, "_PAIR_BUDGET", 7)
+    pos[7, 2:] = np.nan
+    pos[9, 3:, 1] = 0.7
     sep = M.min_separation(pos, 0.3, 1.8, "Y")
     best, (pair, t), overlaps = _brute_separation(pos, 0.3, 1.8, "Y")
     assert sep.clearance == pytest.approx(best, abs=1e-12)

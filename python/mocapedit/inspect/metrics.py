@@ -20,8 +20,10 @@ from typing import Iterable, Sequence, Union
 import numpy as np
 from pxr import Sdf, Usd, UsdGeom, UsdSkel
 
-from mocapedit.geometry import ground as _ground
+from mocapedit.geometry.ground import from_ground, ground_axes, to_ground
+from mocapedit.geometry.ground import up_token as _up_token
 from mocapedit.geometry import stationary as _stationary
+from mocapedit.solve import collisions
 
 __all__ = [
     "ground_axes", "to_ground", "from_ground",
@@ -37,47 +39,6 @@ __all__ = [
 ]
 
 PathLike = Union[str, Sdf.Path]
-
-# ---------------------------------------------------------------------------------------------
-# Ground plane
-# ---------------------------------------------------------------------------------------------
-
-
-def _up_token(up_axis) -> str:
-    token = str(up_axis).upper()
-    if token not in ("Y", "Z"):
-        raise ValueError(f"up axis must be 'Y' or 'Z', got {up_axis!r}")
-    return token
-
-
-def ground_axes(up_axis) -> tuple[int, tuple[int, float], tuple[int, float]]:
-    """Where the up axis and the two ground coordinates sit in a 3D point.
-
-    Returns ``(up_index, (u_index, u_sign), (v_index, v_sign))`` such that the ground coordinates of
-    point ``p`` are ``(u_sign * p[u_index], v_sign * p[v_index])``: ``(x, -z)`` for ``"Y"`` up and
-    ``(x, y)`` for ``"Z"`` up (the convention of :mod:`mocapedit.geometry.ground`). Both frames are
-    right-handed seen from above, so angles in the ground plane are counter-clockwise about up.
-    """
-    if _up_token(up_axis) == "Y":
-        return 1, (0, 1.0), (2, -1.0)
-    return 2, (0, 1.0), (1, 1.0)
-
-
-def to_ground(points, up_axis) -> np.ndarray:
-    """Ground-plane coordinates of 3D points: ``(..., 3)`` -> ``(..., 2)`` float64."""
-    p = np.asarray(points, dtype=np.float64)
-    if p.shape[-1:] != (3,):
-        raise ValueError(f"to_ground expects points of shape (..., 3), got {p.shape}")
-    return _ground.to_ground(p, _up_token(up_axis))
-
-
-def from_ground(ground, height, up_axis) -> np.ndarray:
-    """3D points from ground coordinates ``(..., 2)`` and heights along up (broadcast)."""
-    g = np.asarray(ground, dtype=np.float64)
-    if g.shape[-1:] != (2,):
-        raise ValueError(f"from_ground expects ground points of shape (..., 2), got {g.shape}")
-    return _ground.from_ground(g, height, _up_token(up_axis))
-
 
 # ---------------------------------------------------------------------------------------------
 # Trajectory measures
@@ -276,103 +237,22 @@ class Separation:
     overlaps: int
 
 
-def _capsule_extent(base, radius, height):
-    """Bottom and top of the axis segment of a vertical capsule standing on ``base``."""
-    lo = base + radius
-    hi = base + np.maximum(height, 2.0 * radius) - radius
-    return lo, hi
+def _resting_base(base, radius, height):
+    """Bases for the detection, whose capsules shorter than their diameter are spheres half way
+    up, so that such a capsule is a sphere resting on its base here."""
+    radius, height = np.asarray(radius, dtype=np.float64), np.asarray(height, dtype=np.float64)
+    return base + np.where(height < 2.0 * radius, radius - 0.5 * height, 0.0)
 
 
 def capsule_clearance(ground_a, base_a, radius_a, height_a, ground_b, base_b, radius_b, height_b):
     """Clearance between vertical capsules (broadcasting; stage units, negative = overlap).
 
     A capsule stands on ``base`` (its height along up), has total height ``height`` (at least
-    ``2 * radius``) and radius ``radius``; ``ground`` is its ``(..., 2)`` ground position.
+    ``2 * radius``: a shorter one is a sphere resting on its base) and radius ``radius``;
+    ``ground`` is its ``(..., 2)`` ground position.
     """
-    horiz = np.linalg.norm(np.asarray(ground_a, float) - np.asarray(ground_b, float), axis=-1)
-    lo_a, hi_a = _capsule_extent(np.asarray(base_a, float), radius_a, height_a)
-    lo_b, hi_b = _capsule_extent(np.asarray(base_b, float), radius_b, height_b)
-    gap = np.maximum(0.0, np.maximum(lo_b - hi_a, lo_a - hi_b))
-    return np.hypot(horiz, gap) - radius_a - radius_b
-
-
-_PAIR_BUDGET = 2_000_000  # candidate pairs evaluated at once; bounds memory on dense crowds
-
-
-def _grid_pairs(cell_xy: np.ndarray, tix: np.ndarray):
-    """Cell pairs of a uniform grid, per time sample, that can hold close items.
-
-    Returns the sort order of the items and, per candidate cell pair, the start and count of each
-    cell in that order; same-cell pairs come first (``n_same`` of them). Only half of the 3x3
-    neighbourhood is visited so every pair of items is produced once.
-    """
-    nx = int(cell_xy[:, 0].max()) + 2  # one empty column/row of padding: offsets never wrap
-    ny = int(cell_xy[:, 1].max()) + 2
-    key = (tix * ny + cell_xy[:, 1]) * nx + cell_xy[:, 0]
-    order = np.argsort(key, kind="stable")
-    sorted_key = key[order]
-    start = np.flatnonzero(np.r_[True, sorted_key[1:] != sorted_key[:-1]])
-    count = np.diff(np.r_[start, len(key)])
-    ukey = sorted_key[start]
-    multi = count > 1
-    s1, n1, s2, n2 = [start[multi]], [count[multi]], [start[multi]], [count[multi]]
-    last = len(ukey) - 1
-    # The next cell on the row is the next key, if it is there; the three cells of the next row
-    # are found with one search and then follow each other.
-    pos = np.minimum(np.arange(1, len(ukey) + 1), last)
-    row = np.searchsorted(ukey, ukey + (nx - 1))
-    for offset in (1, nx - 1, nx, nx + 1):
-        if offset == nx - 1:
-            pos = np.minimum(row, last)
-        elif offset > nx - 1:
-            pos = np.minimum(pos + (ukey[pos] == ukey + (offset - 1)), last)
-        hit = ukey[pos] == ukey + offset
-        s1.append(start[hit]); n1.append(count[hit])
-        s2.append(start[pos[hit]]); n2.append(count[pos[hit]])
-    cat = lambda parts: np.concatenate(parts).astype(np.int64)  # noqa: E731
-    return order, cat(s1), cat(n1), cat(s2), cat(n2), int(multi.sum())
-
-
-def _grid_pass(gx, gy, lo, hi, rad, tix, cell, origin):
-    """Minimum clearance and overlap count among pairs in neighbouring grid cells."""
-    cell_xy = np.floor((np.stack((gx, gy), axis=1) - origin) / cell).astype(np.int64)
-    order, s1, n1, s2, n2, n_same = _grid_pairs(cell_xy, tix)
-    gx, gy, lo, hi, rad = gx[order], gy[order], lo[order], hi[order], rad[order]
-    sizes = n1 * n2
-    bounds = np.cumsum(sizes)
-    # Index arithmetic in int32 when it fits: it halves the memory traffic of the pair expansion.
-    itype = np.int32 if len(order) < 2 ** 31 and (len(sizes) == 0 or bounds[-1] < 2 ** 31) \
-        else np.int64
-    best, best_i, best_j, overlaps = np.inf, -1, -1, 0
-    first = 0
-    while first < len(sizes):
-        # Take cell pairs until the chunk holds about _PAIR_BUDGET item pairs (at least one).
-        base = bounds[first] - sizes[first]
-        last = max(int(np.searchsorted(bounds, base + _PAIR_BUDGET, "right")), first + 1)
-        sz = sizes[first:last].astype(itype)
-        rep = np.repeat(np.arange(first, last, dtype=itype), sz)
-        local = np.arange(int(bounds[last - 1] - base), dtype=itype)
-        local -= np.repeat((np.cumsum(sz) - sz).astype(itype), sz)
-        width = n2.astype(itype)[rep]
-        i = s1.astype(itype)[rep] + local // width
-        j = s2.astype(itype)[rep] + local % width
-        if first < n_same:  # same-cell blocks hold every ordered pair: keep i < j
-            keep = (rep >= n_same) | (i < j)
-            i, j = i[keep], j[keep]
-        first = last
-        if len(i) == 0:
-            continue
-        gap = np.maximum(lo[j] - hi[i], lo[i] - hi[j])
-        np.maximum(gap, 0.0, out=gap)
-        clear = np.hypot(np.hypot(gx[i] - gx[j], gy[i] - gy[j]), gap)
-        clear -= rad[i]
-        clear -= rad[j]
-        overlaps += int(np.count_nonzero(clear < 0.0))
-        k = int(np.argmin(clear))
-        if clear[k] < best:
-            best, best_i, best_j = float(clear[k]), int(order[i[k]]), int(order[j[k]])
-    exhaustive = cell_xy[:, 0].max() <= 1 and cell_xy[:, 1].max() <= 1
-    return best, best_i, best_j, overlaps, exhaustive
+    return collisions.capsule_clearance(ground_a, _resting_base(base_a, radius_a, height_a), radius_a, height_a,
+                                        ground_b, _resting_base(base_b, radius_b, height_b), radius_b, height_b)
 
 
 def min_separation(positions, radius, height, up_axis) -> Separation:
@@ -380,10 +260,10 @@ def min_separation(positions, radius, height, up_axis) -> Separation:
 
     ``positions`` ``(A, T, 3)``: each agent's capsule base (its ground point) per sample, world
     space; non-finite rows mean the agent is absent at that sample. ``radius`` and ``height``:
-    ``(A,)`` or scalars, stage units; a capsule spans ``height`` along up from its base (at least
-    ``2 * radius``). A uniform grid in the ground plane finds the candidate pairs of each sample,
-    so the cost grows with the number of agents, not its square; the grid is coarsened until the
-    minimum it finds is provably the minimum over all pairs.
+    ``(A,)`` or scalars, stage units, positive; a capsule spans ``height`` along up from its base
+    (at least ``2 * radius``: a shorter one is a sphere resting on its base). The solve's detection
+    (:func:`mocapedit.solve.collisions.detect_at`, a grid per sample) measures it: the clearances
+    it finds are exact up to a reach, widened until some pair is within it.
     """
     p = np.asarray(positions, dtype=np.float64)
     if p.ndim != 3 or p.shape[2] != 3:
@@ -391,43 +271,52 @@ def min_separation(positions, radius, height, up_axis) -> Separation:
     n_agents, n_times = p.shape[:2]
     rad = np.broadcast_to(np.asarray(radius, dtype=np.float64), (n_agents,))
     hgt = np.broadcast_to(np.asarray(height, dtype=np.float64), (n_agents,))
-    if np.any(~np.isfinite(rad)) or np.any(rad < 0) or np.any(~np.isfinite(hgt)) or np.any(hgt < 0):
-        raise ValueError("capsule radius and height must be finite and not negative")
-    iup = ground_axes(up_axis)[0]
-    present = np.isfinite(p[..., 0]) & np.isfinite(p[..., 1]) & np.isfinite(p[..., 2])
-    agent, tix = np.nonzero(present)
-    if len(agent) < 2:
+    if not (np.all(np.isfinite(rad)) and np.all(rad > 0) and np.all(np.isfinite(hgt)) and np.all(hgt > 0)):
+        raise ValueError("capsule radius and height must be finite and positive")
+    present = np.all(np.isfinite(p), axis=2)
+    ground = to_ground(np.where(present[..., None], p, 0.0), up_axis)
+    base = _resting_base(p[..., ground_axes(up_axis)[0]], rad[:, None], hgt[:, None])
+    # Runs of samples with the same agents present at the same elevations: one detection each.
+    runs, start = [], 0
+    for t in range(1, n_times + 1):
+        if t == n_times or not (np.array_equal(present[:, t], present[:, start])
+                                and np.array_equal(base[:, t], base[:, start], equal_nan=True)):
+            idx = np.flatnonzero(present[:, start])
+            if len(idx) >= 2:
+                runs.append((start, t, idx))
+            start = t
+    if not runs:
         return Separation(float("inf"), None, None, 0)
-    ground = to_ground(p[agent, tix], up_axis)
-    gx, gy = np.ascontiguousarray(ground[:, 0]), np.ascontiguousarray(ground[:, 1])
-    lo, hi = _capsule_extent(p[agent, tix, iup], rad[agent], hgt[agent])
-    r_item = rad[agent]
-    r_max = float(rad.max())
 
-    origin = ground.min(axis=0)
-    extent = ground.max(axis=0) - origin
-    # Start with cells of 1.5 capsule diameters: overlaps and near misses are then found among
-    # very few candidate pairs; sparser crowds coarsen the grid from there.
-    cell = 3.0 * r_max
-    if cell <= 0.0:  # points, not capsules: start from the typical spacing at one sample
-        per_t = np.bincount(tix, minlength=n_times)
-        area = float(np.prod(np.maximum(extent, 1e-12)))
-        cell = float(np.sqrt(area / max(float(per_t.max()), 1.0)))
-    # Keep the grid keys (time, row, column) inside int64.
-    cell = max(cell, float(extent.max()) / 2.0 ** 20, 1e-300)
-    for attempt in range(64):
-        best, bi, bj, overlaps, exhaustive = _grid_pass(gx, gy, lo, hi, r_item, tix, cell, origin)
-        # Items in cells that are not neighbours are more than `cell` apart on the ground.
-        if exhaustive or best <= cell - 2.0 * r_max:
+    def detect(first, last, idx, margin, reach):
+        return collisions.detect_at(np.ascontiguousarray(ground[idx, first:last].transpose(1, 0, 2)),
+                                    rad[idx], hgt[idx], margin, report_distance=reach, base=base[idx, first])
+
+    span = np.ptp(ground[present], axis=0)
+    widest = float(np.hypot(np.hypot(*span), np.ptp(base[present]) + hgt.max()))
+    reach, overlaps = 3.0 * float(rad.max()), None
+    while True:
+        best, at, count = np.inf, None, 0
+        for first, last, idx in runs:
+            found = detect(first, last, idx, 0.0, reach)
+            count += int(found.colliding_samples)
+            k = int(np.argmin(found.min_clearance))
+            c, t = float(found.min_clearance[k]), first + int(found.min_clearance_sample[k])
+            ties = np.flatnonzero(found.min_clearance == c)
+            t = first + int(found.min_clearance_sample[ties].min()) if np.isfinite(c) else t
+            if c < best or (c == best and at is not None and t < at[0]):
+                best, at = c, (t, idx)
+        overlaps = count if overlaps is None else overlaps
+        if np.isfinite(best) or reach >= widest:
             break
-        # A pair already found: cells just wide enough to certify it (the minimum only drops).
-        cell = (best + 2.0 * r_max) * (1.0 + 1e-9) if np.isfinite(best) else 2.0 * cell
-        if attempt == 62:  # never expected; one cell per sample is exhaustive by construction
-            cell = 2.0 * float(extent.max()) + 1.0
-    if bi < 0:
+        reach = min(8.0 * reach, widest)
+    if at is None:
         return Separation(float("inf"), None, None, 0)
-    a, b = int(agent[bi]), int(agent[bj])
-    return Separation(best, (min(a, b), max(a, b)), int(tix[bi]), overlaps)
+    # The pair itself: the intervals at that sample whose clearance is not above the minimum.
+    t, idx = at
+    pairs = detect(t, t + 1, idx, 0.0 if best < 0 else float(np.nextafter(best, np.inf)), 0.0)
+    k = int(np.argmax(pairs.depth))
+    return Separation(best, (int(idx[pairs.agent_a[k]]), int(idx[pairs.agent_b[k]])), t, overlaps)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -51,6 +51,7 @@ import numpy as np
 from mocapedit import _solver
 from mocapedit.inspect import metrics
 from mocapedit.geometry import trajectory
+from mocapedit.geometry.components import UnionFind
 
 HARD = np.inf
 #: Weight of the soft terms that keep free agents' turn and scale (see ComponentProblem).
@@ -355,22 +356,13 @@ class ComponentProblem:
         time) makes them one, an agent is its own."""
         if not self._samples:
             return [[i] for i in range(len(self.order))]
-        parent = list(range(len(self.order)))
-
-        def find(i):
-            while parent[i] != i:
-                parent[i] = parent[parent[i]]
-                i = parent[i]
-            return i
+        joined = UnionFind(range(len(self.order)))
         for n, g in enumerate(self.groups):
             ids = [self.index[m] for m in g.members if m in self.index]
             if n in self._samples:
                 for k in ids[1:]:
-                    parent[find(k)] = find(ids[0])
-        out: dict[int, list[int]] = {}
-        for i in range(len(self.order)):
-            out.setdefault(find(i), []).append(i)
-        return [sorted(v) for _, v in sorted(out.items())]
+                    joined.union(ids[0], k)
+        return [sorted(v) for _, v in sorted(joined.sets(range(len(self.order))).items())]
 
     def _places(self, verts) -> int:
         """How many distinct rest positions the vertices have."""

@@ -20,6 +20,7 @@ import numpy as np
 
 from mocapedit import _solver
 from mocapedit.geometry import curves, ground
+from mocapedit.geometry.components import UnionFind
 from mocapedit.inspect import metrics
 from mocapedit.solve import path_edit
 from mocapedit.model.errors import MocapEditError, prim_error
@@ -58,28 +59,15 @@ def _validate(ctx: SolveContext) -> None:
 def _components(ctx: SolveContext) -> list[list[str]]:
     """Agents tied by relative constraints and groups, each component sorted, in order."""
     data = ctx.data
-    parent = {a: a for a in data.agents}
-
-    def find(a):
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        return a
-
-    def union(a, b):
-        ra, rb = find(a), find(b)
-        if ra != rb:
-            parent[max(ra, rb)] = min(ra, rb)
+    joined = UnionFind(data.agents)
     for c in data.relative_constraints:
-        union(c.agent, c.target)
+        joined.union_smallest(c.agent, c.target)
     for g in data.groups:
         for m in g.members[1:]:
-            union(g.members[0], m)
+            joined.union_smallest(g.members[0], m)
     active = {c.agent for c in data.position_constraints} | {c.agent for c in data.relative_constraints}
     active |= {a.path for a in data.agents.values() if a.path_curve}
-    groups: dict[str, list[str]] = {}
-    for a in sorted(data.agents):
-        groups.setdefault(find(a), []).append(a)
+    groups = joined.sets(sorted(data.agents))
     return [members for _, members in sorted(groups.items()) if active & set(members)]
 
 
