@@ -31,6 +31,7 @@ import numpy as np
 
 from mocapedit.geometry import ground, trajectory
 from mocapedit.inspect import inspection, overlaps
+from mocapedit.solve import collisions
 from mocapedit.usd import outputs, reader, writer
 from mocapedit.model.errors import MocapEditError
 from mocapedit.inspect.inspection import Crowd, Remaining
@@ -187,25 +188,10 @@ def _edited_at_frame(agent: inspection.AgentTracks, frame: int) -> np.ndarray:
 
 
 def region_footprint(region, up_axis: str, segments: int = 96) -> np.ndarray:
-    """#K by 2 ground polygon (counter-clockwise) of an avoid region, margin not included."""
-    if region.geometry_bounds is not None:
-        lo, hi = ground.to_ground(region.geometry_bounds, up_axis)
-        lo, hi = np.minimum(lo, hi), np.maximum(lo, hi)
-        return np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
-    if region.shape == "box":
-        h = 0.5 * np.asarray(region.size, dtype=np.float64)
-        ga, gb = (0, 2) if up_axis == "Y" else (0, 1)
-        local = np.zeros((4, 3))
-        local[:, ga] = [-h[ga], h[ga], h[ga], -h[ga]]
-        local[:, gb] = [-h[gb], -h[gb], h[gb], h[gb]]
-    else:
-        a = np.linspace(0.0, 2 * np.pi, segments, endpoint=False)
-        circle = region.radius * np.stack([np.cos(a), np.sin(a)], axis=-1)
-        local = ground.from_ground(circle, 0.0, up_axis)
-    world = np.c_[local, np.ones(len(local))] @ region.local_to_world
-    poly = ground.to_ground(world[:, :3], up_axis)
-    area = 0.5 * np.sum(poly[:, 0] * np.roll(poly[:, 1], -1) - np.roll(poly[:, 0], -1) * poly[:, 1])
-    return poly if area >= 0 else poly[::-1]
+    """#K by 2 ground polygon (counter-clockwise) of an avoid region, margin not included: the
+    footprint the solve avoids (:func:`mocapedit.solve.collisions.region_footprint`), a circle
+    drawn with ``segments`` sides."""
+    return collisions.outline(collisions.region_footprint(region, up_axis), sides=segments)
 
 
 def offset_polygon(poly: np.ndarray, distance: float) -> np.ndarray:
