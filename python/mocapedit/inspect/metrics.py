@@ -276,15 +276,7 @@ def min_separation(positions, radius, height, up_axis) -> Separation:
     present = np.all(np.isfinite(p), axis=2)
     ground = to_ground(np.where(present[..., None], p, 0.0), up_axis)
     base = _resting_base(p[..., ground_axes(up_axis)[0]], rad[:, None], hgt[:, None])
-    # Runs of samples with the same agents present at the same elevations: one detection each.
-    runs, start = [], 0
-    for t in range(1, n_times + 1):
-        if t == n_times or not (np.array_equal(present[:, t], present[:, start])
-                                and np.array_equal(base[:, t], base[:, start], equal_nan=True)):
-            idx = np.flatnonzero(present[:, start])
-            if len(idx) >= 2:
-                runs.append((start, t, idx))
-            start = t
+    runs = _sample_runs(present, base)
     if not runs:
         return Separation(float("inf"), None, None, 0)
 
@@ -292,31 +284,52 @@ def min_separation(positions, radius, height, up_axis) -> Separation:
         return collisions.detect_at(np.ascontiguousarray(ground[idx, first:last].transpose(1, 0, 2)),
                                     rad[idx], hgt[idx], margin, report_distance=reach, base=base[idx, first])
 
-    span = np.ptp(ground[present], axis=0)
-    widest = float(np.hypot(np.hypot(*span), np.ptp(base[present]) + hgt.max()))
+    # At this reach every pair present at a sample is within it: the search ends there at the latest.
+    widest = float(np.hypot(np.hypot(*np.ptp(ground[present], axis=0)), np.ptp(base[present]) + hgt.max()))
     reach, overlaps = 3.0 * float(rad.max()), None
     while True:
-        best, at, count = np.inf, None, 0
+        best, at, count = np.inf, None, 0       # the smallest clearance, at its earliest sample
         for first, last, idx in runs:
             found = detect(first, last, idx, 0.0, reach)
             count += int(found.colliding_samples)
-            k = int(np.argmin(found.min_clearance))
-            c, t = float(found.min_clearance[k]), first + int(found.min_clearance_sample[k])
-            ties = np.flatnonzero(found.min_clearance == c)
-            t = first + int(found.min_clearance_sample[ties].min()) if np.isfinite(c) else t
-            if c < best or (c == best and at is not None and t < at[0]):
-                best, at = c, (t, idx)
-        overlaps = count if overlaps is None else overlaps
-        if np.isfinite(best) or reach >= widest:
+            c = float(found.min_clearance.min())
+            if np.isfinite(c):
+                t = first + int(found.min_clearance_sample[found.min_clearance == c].min())
+                if c < best or (c == best and t < at[0]):
+                    best, at = c, (t, idx)
+        overlaps = count if overlaps is None else overlaps     # the same at every reach
+        if at is not None or reach >= widest:
             break
         reach = min(8.0 * reach, widest)
     if at is None:
         return Separation(float("inf"), None, None, 0)
-    # The pair itself: the intervals at that sample whose clearance is not above the minimum.
+    # The pair itself: the intervals at that sample whose clearance is not above the minimum
+    # (the first pair of the deepest when several tie).
     t, idx = at
     pairs = detect(t, t + 1, idx, 0.0 if best < 0 else float(np.nextafter(best, np.inf)), 0.0)
     k = int(np.argmax(pairs.depth))
     return Separation(best, (int(idx[pairs.agent_a[k]]), int(idx[pairs.agent_b[k]])), t, overlaps)
+
+
+def _sample_runs(present: np.ndarray, base: np.ndarray) -> list[tuple[int, int, np.ndarray]]:
+    """(first, end, agents) of each run of samples in which the same two or more agents are
+    present at the same base elevations: the detection measures a run in one call.
+
+    Args:
+      present: #A by #T bools
+      base: #A by #T base elevations (NaN where absent)
+    """
+    runs, first = [], 0
+    n_times = present.shape[1]
+    for t in range(1, n_times + 1):
+        if t < n_times and np.array_equal(present[:, t], present[:, first]) \
+                and np.array_equal(base[:, t], base[:, first], equal_nan=True):
+            continue
+        idx = np.flatnonzero(present[:, first])
+        if len(idx) >= 2:
+            runs.append((first, t, idx))
+        first = t
+    return runs
 
 
 # ---------------------------------------------------------------------------------------------

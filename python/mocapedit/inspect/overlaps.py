@@ -65,7 +65,7 @@ def proximity(positions: np.ndarray, radii: np.ndarray, reach: float = 0.0,
     # Every capsule of the same height on one ground: the clearance is the ground distance
     # minus the radii. Intervals below ``reach`` are the detection's near intervals.
     height = np.full(n_agents, 2.0 * float(radii[on].max()))
-    found = collisions.detect_at(by_sample, np.where(on, radii, 1.0), height, 0.0, active=on, watch=reach)
+    found = collisions.detect_at(by_sample, radii, height, 0.0, active=on, watch=reach)
     runs = found if reach <= 0.0 else found.near
     counts = (runs.last - runs.first + 1).astype(np.int64)
     a = np.repeat(runs.agent_a.astype(np.int64), counts)
