@@ -36,6 +36,7 @@ def _brute_force(pos, radii, reach, active):
 def test_proximity_finds_exactly_the_pairs_a_brute_force_finds(reach):
     rng = np.random.default_rng(4)
     pos = rng.uniform(-6, 6, size=(30, 9, 2))
+    pos[rng.random((30, 9)) < 0.1] = np.nan       # absent at some samples
     radii = rng.uniform(0.2, 0.9, size=30)
     active = rng.random(30) > 0.15
     found = overlaps.proximity(pos, radii, reach, active)

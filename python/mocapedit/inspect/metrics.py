@@ -276,7 +276,7 @@ def min_separation(positions, radius, height, up_axis) -> Separation:
     present = np.all(np.isfinite(p), axis=2)
     ground = to_ground(np.where(present[..., None], p, 0.0), up_axis)
     base = _resting_base(p[..., ground_axes(up_axis)[0]], rad[:, None], hgt[:, None])
-    runs = _sample_runs(present, base)
+    runs = collisions.sample_runs(present, base)
     if not runs:
         return Separation(float("inf"), None, None, 0)
 
@@ -309,27 +309,6 @@ def min_separation(positions, radius, height, up_axis) -> Separation:
     pairs = detect(t, t + 1, idx, 0.0 if best < 0 else float(np.nextafter(best, np.inf)), 0.0)
     k = int(np.argmax(pairs.depth))
     return Separation(best, (int(idx[pairs.agent_a[k]]), int(idx[pairs.agent_b[k]])), t, overlaps)
-
-
-def _sample_runs(present: np.ndarray, base: np.ndarray) -> list[tuple[int, int, np.ndarray]]:
-    """(first, end, agents) of each run of samples in which the same two or more agents are
-    present at the same base elevations: the detection measures a run in one call.
-
-    Args:
-      present: #A by #T bools
-      base: #A by #T base elevations (NaN where absent)
-    """
-    runs, first = [], 0
-    n_times = present.shape[1]
-    for t in range(1, n_times + 1):
-        if t < n_times and np.array_equal(present[:, t], present[:, first]) \
-                and np.array_equal(base[:, t], base[:, first], equal_nan=True):
-            continue
-        idx = np.flatnonzero(present[:, first])
-        if len(idx) >= 2:
-            runs.append((first, t, idx))
-        first = t
-    return runs
 
 
 # ---------------------------------------------------------------------------------------------

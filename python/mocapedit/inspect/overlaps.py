@@ -43,7 +43,7 @@ def proximity(positions: np.ndarray, radii: np.ndarray, reach: float = 0.0,
 
     Args:
       positions: #A by #T by 2 list of ground positions of each agent at each time sample
-        (finite for the active agents)
+        (non-finite: the agent is absent at that sample)
       radii: #A list of collision radii, stage units (> 0 for the active agents)
       reach: clearance (stage units, >= 0) below which a pair is reported; 0 gives the
         overlaps only
@@ -53,28 +53,37 @@ def proximity(positions: np.ndarray, radii: np.ndarray, reach: float = 0.0,
     """
     pos = np.asarray(positions, dtype=np.float64)
     radii = np.asarray(radii, dtype=np.float64)
-    n_agents, n_samples = pos.shape[0], pos.shape[1] if pos.ndim == 3 else 0
+    n_agents = pos.shape[0]
     if pos.ndim != 3 or pos.shape[2] != 2 or radii.shape != (n_agents,):
         raise ValueError(f"positions must be #A by #T by 2 and radii #A, got {pos.shape} and {radii.shape}")
     if reach < 0:
         raise ValueError(f"reach must not be negative, got {reach}")
     on = np.ones(n_agents, dtype=bool) if active is None else np.asarray(active, dtype=bool)
-    if np.count_nonzero(on) < 2 or n_samples == 0:
+    present = np.all(np.isfinite(pos), axis=2) & on[:, None]
+    by_sample = np.ascontiguousarray(np.where(present[..., None], pos, 0.0).transpose(1, 0, 2))
+    found = [_rows(by_sample, radii, reach, first, end, idx) for first, end, idx in collisions.sample_runs(present)]
+    if not found:
         return Proximity(*(np.zeros(0, np.int64),) * 3, np.zeros(0))
-    by_sample = np.ascontiguousarray(pos.transpose(1, 0, 2))
-    # Every capsule of the same height on one ground: the clearance is the ground distance
-    # minus the radii. Intervals below ``reach`` are the detection's near intervals.
-    height = np.full(n_agents, 2.0 * float(radii[on].max()))
-    found = collisions.detect_at(by_sample, radii, height, 0.0, active=on, watch=reach)
-    runs = found if reach <= 0.0 else found.near
-    counts = (runs.last - runs.first + 1).astype(np.int64)
-    a = np.repeat(runs.agent_a.astype(np.int64), counts)
-    b = np.repeat(runs.agent_b.astype(np.int64), counts)
-    sample = np.repeat(runs.first.astype(np.int64), counts) + np.arange(int(counts.sum())) \
-        - np.repeat(np.cumsum(counts) - counts, counts)
+    sample, a, b = (np.concatenate(x) for x in zip(*found))
     order = np.lexsort((b, a, sample))
     a, b, sample = a[order], b[order], sample[order]
     return Proximity(sample, a, b, collisions.ground_clearances(by_sample, radii, a, b, sample))
+
+
+def _rows(by_sample, radii, reach, first, end, idx):
+    """(sample, a, b) of the pairs of agents ``idx`` closer than ``reach`` at samples
+    ``first .. end-1`` of #T by #A by 2 positions: the detection's intervals (below the reach,
+    its near intervals), one row per sample."""
+    # Every capsule of the same height on one ground: the clearance is the ground distance
+    # minus the radii.
+    height = np.full(len(idx), 2.0 * float(radii[idx].max()))
+    found = collisions.detect_at(np.ascontiguousarray(by_sample[first:end, idx]), radii[idx], height, 0.0,
+                                 watch=reach)
+    runs = found if reach <= 0.0 else found.near
+    counts = (runs.last - runs.first + 1).astype(np.int64)
+    sample = np.repeat(runs.first.astype(np.int64), counts) + np.arange(int(counts.sum())) \
+        - np.repeat(np.cumsum(counts) - counts, counts)
+    return first + sample, idx[np.repeat(runs.agent_a, counts)], idx[np.repeat(runs.agent_b, counts)]
 
 
 def worst_per_pair(found: Proximity) -> Proximity:

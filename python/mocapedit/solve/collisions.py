@@ -214,6 +214,28 @@ def ground_clearances(positions: np.ndarray, radius: np.ndarray, a: np.ndarray, 
     return np.linalg.norm(d, axis=-1) - radius[a] - radius[b]
 
 
+def sample_runs(present: np.ndarray, base: np.ndarray | None = None) -> list[tuple[int, int, np.ndarray]]:
+    """(first, end, agents) of each run of samples ``first .. end-1`` in which the same two or
+    more agents are present (at the same base elevations): :func:`detect_at` measures a run in
+    one call, where agents come and go or change elevation.
+
+    Args:
+      present: #A by #T bools
+      base: #A by #T base elevations (NaN where absent); default: all on the ground
+    """
+    runs, first = [], 0
+    n_times = present.shape[1]
+    for t in range(1, n_times + 1):
+        if t < n_times and np.array_equal(present[:, t], present[:, first]) \
+                and (base is None or np.array_equal(base[:, t], base[:, first], equal_nan=True)):
+            continue
+        idx = np.flatnonzero(present[:, first])
+        if len(idx) >= 2:
+            runs.append((first, t, idx))
+        first = t
+    return runs
+
+
 _CAPSULE_CLEARANCE = np.vectorize(_solver.capsule_clearance, otypes=[np.float64])
 
 
