@@ -260,17 +260,18 @@ def test_stored_report_is_deterministic_and_finite(tmp_path, monkeypatch):
 @pytest.mark.parametrize("retimed", [False, True])
 def test_the_report_gives_the_foot_skate_of_moved_agents_source_and_edited(tmp_path, retimed):
     from mocapedit.data import examples, walker
-    from mocapedit.inspect import metrics
+    from mocapedit.tools import measure
+    from mocapedit.usd import evaluate
     walk = walker.walk(frames=48, name="walk")
     path = tmp_path / "shot.usda"
     examples.build_crowd_stage(path, [examples.AgentSpec("a0", walk, (0.0, 0.0, 0.0), 0.0),
                                       examples.AgentSpec("a1", walk, (3.0, 0.0, 0.0), 0.0)],
                                clips_dir=tmp_path / "clips")
     stage = Usd.Stage.Open(str(path))
-    start = metrics.agent_root_positions(stage, "/World/Crowd/a0", [0.0])[0]
+    start = evaluate.agent_root_positions(stage, "/World/Crowd/a0", [0.0])[0]
     examples.add_position_constraint(stage, "/Edits/start", "/World/Crowd/a0", 0, start)
     # The end pulled a metre sideways: the path bends and the feet slide more than the source's.
-    end = metrics.agent_root_positions(stage, "/World/Crowd/a0", [47.0])[0] + (1.0, 0.0, 0.0)
+    end = evaluate.agent_root_positions(stage, "/World/Crowd/a0", [47.0])[0] + (1.0, 0.0, 0.0)
     examples.add_position_constraint(stage, "/Edits/end", "/World/Crowd/a0", 47, end)
     if retimed:  # the pose is baked again on the shot's frames: measured by UsdSkel on both stages
         examples.add_time_constraint(stage, "/Edits/late", "/World/Crowd/a0", 47, 55.0)
@@ -280,9 +281,9 @@ def test_the_report_gives_the_foot_skate_of_moved_agents_source_and_edited(tmp_p
     result = solve(str(path), output=str(edits), composed=str(composed), foot_locking=False)
     moved, still = result.report.agents["/World/Crowd/a0"], result.report.agents["/World/Crowd/a1"]
     assert "footSkateSource" not in still and "footSkateEdited" not in still
-    source = metrics.foot_skate(Usd.Stage.Open(str(path)), "/World/Crowd/a0")
-    edited = metrics.foot_skate(Usd.Stage.Open(str(composed)), "/World/Crowd/a0") if retimed else \
-        metrics.foot_skate(Usd.Stage.Open(str(composed)), "/World/Crowd/a0", times=source.times,
+    source = measure.foot_skate(Usd.Stage.Open(str(path)), "/World/Crowd/a0")
+    edited = measure.foot_skate(Usd.Stage.Open(str(composed)), "/World/Crowd/a0") if retimed else \
+        measure.foot_skate(Usd.Stage.Open(str(composed)), "/World/Crowd/a0", times=source.times,
                            contact=source.contact)
     # The solve measures by forward kinematics in double precision, UsdSkel from float samples.
     assert moved["footSkateSource"] == pytest.approx(source.mean, rel=1e-4)

@@ -8,6 +8,8 @@ import pytest
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
 
 from mocapedit.inspect import metrics as M
+from mocapedit.tools import measure
+from mocapedit.usd import evaluate
 
 JOINTS = ["Root", "Root/Hips", "Root/Hips/LeftFoot", "Root/Hips/RightFoot"]
 
@@ -415,7 +417,7 @@ def test_joint_world_positions_forward_kinematics(tmp_path):
         frames.append({"local": local, "quats": [q90, Gf.Quatf(1), Gf.Quatf(1), Gf.Quatf(1)]})
     anim = _define_animation(stage, "/Agent/Anim", np.zeros((3, 4, 3)), rotations=frames)
     _define_skeleton(stage, "/Agent/Skel", anim.GetPath())
-    pos = M.joint_world_positions(stage, "/Agent/Skel", [0, 1, 2])
+    pos = evaluate.joint_world_positions(stage, "/Agent/Skel", [0, 1, 2])
     assert pos.shape == (3, 4, 3)
     for k in range(3):
         root_w = np.array([10.0 + k, 0.0, 5.0])
@@ -425,7 +427,7 @@ def test_joint_world_positions_forward_kinematics(tmp_path):
         np.testing.assert_allclose(pos[k, 2], hips + [0.2, -1.0, 0.0], atol=1e-5)
         np.testing.assert_allclose(pos[k, 3], hips + [-0.2, -1.0, 0.0], atol=1e-5)
     # The SkelRoot resolves to the same skeleton; default times are the authored samples.
-    np.testing.assert_allclose(M.joint_world_positions(stage, "/Agent"), pos, atol=0)
+    np.testing.assert_allclose(evaluate.joint_world_positions(stage, "/Agent"), pos, atol=0)
 
 
 def test_agent_root_positions_single_and_batch(tmp_path):
@@ -435,16 +437,16 @@ def test_agent_root_positions_single_and_batch(tmp_path):
     for a in range(3):
         _build_agent(stage, f"/Crowd/A{a}", _walk(n, "Z", feet, feet, root_speed=0.1 * (a + 1)))
     paths = [f"/Crowd/A{a}" for a in range(3)]
-    batch = M.agent_root_positions(stage, paths, range(n))
+    batch = evaluate.agent_root_positions(stage, paths, range(n))
     assert batch.shape == (3, n, 3)
     for a in range(3):
         expect = np.stack((0.1 * (a + 1) * np.arange(n), np.zeros(n), np.zeros(n)), axis=1)
         np.testing.assert_allclose(batch[a], expect, atol=1e-6)
-    one = M.agent_root_positions(stage, Sdf.Path("/Crowd/A2"), range(n), root_joint="Hips")
+    one = evaluate.agent_root_positions(stage, Sdf.Path("/Crowd/A2"), range(n), root_joint="Hips")
     assert one.shape == (n, 3)
     np.testing.assert_allclose(one[:, 2], 1.0, atol=1e-6)
     with pytest.raises(ValueError, match="no joint named 'Neck'"):
-        M.agent_root_positions(stage, paths, range(n), root_joint="Neck")
+        evaluate.agent_root_positions(stage, paths, range(n), root_joint="Neck")
 
 
 @pytest.mark.parametrize("up", ["Y", "Z"])
@@ -457,7 +459,7 @@ def test_foot_skate_planted_feet_is_zero(tmp_path, up):
     # Each foot has its own lowest height: the right one stays on a 0.3 high step.
     left, right = _foot(n, u, 0.1, h), _foot(n, 0.5, -0.1, 0.3)
     _build_agent(stage, "/Agent", _walk(n, up, left, right, root_speed=0.05))
-    skate = M.foot_skate(stage, "/Agent")
+    skate = measure.foot_skate(stage, "/Agent")
     assert skate.joints == ("Root/Hips/LeftFoot", "Root/Hips/RightFoot")
     np.testing.assert_allclose(skate.speeds, [0.0, 0.0], atol=1e-4)
     assert skate.mean == pytest.approx(0.0, abs=1e-4)
@@ -479,10 +481,10 @@ def test_foot_skate_sliding_foot_known_speed(tmp_path, up, tcps):
     root, _ = _build_agent(stage, "/Agent", _walk(n, up, left, right))
     # The agent stands on a floor 2 units up: contact is measured from the feet's lowest point.
     UsdGeom.XformCommonAPI(root).SetTranslate(Gf.Vec3d(*M.from_ground([3.0, -1.0], 2.0, up)))
-    skate = M.foot_skate(stage, "/Agent/Skel")
+    skate = measure.foot_skate(stage, "/Agent/Skel")
     np.testing.assert_allclose(skate.speeds, [v, 0.0], atol=1e-4)
     assert skate.mean == pytest.approx(v * 11 / (11 + 23), abs=1e-4)
-    only_left = M.foot_skate(stage, "/Agent", foot_joints=["LeftFoot"])
+    only_left = measure.foot_skate(stage, "/Agent", foot_joints=["LeftFoot"])
     assert only_left.mean == pytest.approx(v, abs=1e-4)
 
 
@@ -498,20 +500,20 @@ def test_foot_skate_meters_per_unit_scales_default_threshold(tmp_path):
     left = _foot(n, gu, 10.0, h)
     right = _foot(n, 0.0, -10.0, 0.0)
     _build_agent(stage, "/Agent", _walk(n, "Y", left, right, hip_height=100.0))
-    skate = M.foot_skate(stage, "/Agent")
+    skate = measure.foot_skate(stage, "/Agent")
     np.testing.assert_allclose(skate.speeds, [30.0, 0.0], atol=1e-3)
     np.testing.assert_array_equal(skate.contact[:, 0], contact)
     # An explicit threshold overrides the default: 1 unit keeps only the frames on the floor.
-    strict = M.foot_skate(stage, "/Agent", contact_height=1.0)
+    strict = measure.foot_skate(stage, "/Agent", contact_height=1.0)
     assert math.isnan(strict.speeds[0])
     assert strict.mean == pytest.approx(0.0, abs=1e-3)
     # A contact mask from elsewhere (the source stage) replaces the height test.
     mask = np.zeros_like(skate.contact)
     mask[12:, 0] = True
-    given = M.foot_skate(stage, "/Agent", contact=mask)
+    given = measure.foot_skate(stage, "/Agent", contact=mask)
     assert given.speeds[0] == pytest.approx(100.0, abs=1e-3)
     with pytest.raises(ValueError, match="contact mask"):
-        M.foot_skate(stage, "/Agent", contact=mask[1:])
+        measure.foot_skate(stage, "/Agent", contact=mask[1:])
 
 
 def test_foot_skate_ignores_times_outside_the_clip(tmp_path):
@@ -525,7 +527,7 @@ def test_foot_skate_ignores_times_outside_the_clip(tmp_path):
     for t in range(n, n + 6):
         op.Set(Gf.Vec3d(0.5 * (t - n + 1), 0.0, 0.0), float(t))
     op.Set(Gf.Vec3d(0.0, 0.0, 0.0), float(n - 1))
-    skate = M.foot_skate(stage, "/Agent", times=range(n + 6))
+    skate = measure.foot_skate(stage, "/Agent", times=range(n + 6))
     assert not skate.contact[n:].any()
     np.testing.assert_allclose(skate.speeds, [0.0, 0.0], atol=1e-4)
 
@@ -550,9 +552,9 @@ def test_foot_skate_composed_times_with_layer_offset_and_bound_skeleton(tmp_path
     other = _define_skeleton(stage, "/Agent/Other", anim.GetPath())
     other.CreateJointsAttr(["A"])
     with pytest.raises(ValueError, match="several skeletons"):
-        M.foot_skate(stage, "/Agent")
+        measure.foot_skate(stage, "/Agent")
     UsdSkel.BindingAPI.Apply(root.GetPrim()).CreateSkeletonRel().SetTargets([skel.GetPath()])
-    skate = M.foot_skate(stage, "/Agent")
+    skate = measure.foot_skate(stage, "/Agent")
     np.testing.assert_allclose(skate.times, 100.0 + k)
     np.testing.assert_allclose(skate.speeds, [v, 0.0], atol=1e-4)
 
@@ -560,10 +562,10 @@ def test_foot_skate_composed_times_with_layer_offset_and_bound_skeleton(tmp_path
 def test_usd_errors_name_the_prim(tmp_path):
     stage = _new_stage(tmp_path, "errors.usda")
     with pytest.raises(ValueError, match="/Nope"):
-        M.foot_skate(stage, "/Nope")
+        measure.foot_skate(stage, "/Nope")
     stage.DefinePrim("/Empty", "Xform")
     with pytest.raises(ValueError, match="/Empty: no Skeleton"):
-        M.joint_world_positions(stage, "/Empty", [0])
+        evaluate.joint_world_positions(stage, "/Empty", [0])
     n = 4
     world = _walk(n, "Y", _foot(n, 0, 0, 0), _foot(n, 0, 0, 0))
     UsdSkel.Root.Define(stage, "/Agent")
@@ -572,13 +574,13 @@ def test_usd_errors_name_the_prim(tmp_path):
     skel.CreateJointsAttr(["Root", "Root/Hips", "Root/Hips/L", "Root/Hips/R"])
     anim.CreateJointsAttr(["Root", "Root/Hips", "Root/Hips/L", "Root/Hips/R"])
     with pytest.raises(ValueError, match="/Agent/Skel: no joint is named like a foot"):
-        M.foot_skate(stage, "/Agent")
+        measure.foot_skate(stage, "/Agent")
     static = UsdSkel.Root.Define(stage, "/Static")
     sanim = UsdSkel.Animation.Define(stage, "/Static/Anim")
     sanim.CreateJointsAttr(JOINTS)
     _define_skeleton(stage, "/Static/Skel", sanim.GetPath())
     with pytest.raises(ValueError, match="no time samples"):
-        M.foot_skate(stage, static.GetPath())
+        measure.foot_skate(stage, static.GetPath())
 
 
 # ---------------------------------------------------------------------------------------------
@@ -708,7 +710,7 @@ def _turned(path, yaw_of_time):
 
 def test_plausibility_of_an_unedited_agent(walker_stage):
     src = Usd.Stage.Open(walker_stage)
-    p = M.plausibility(src, _turned(walker_stage, lambda t: 0.0), "/World/Crowd/a")
+    p = measure.plausibility(src, _turned(walker_stage, lambda t: 0.0), "/World/Crowd/a")
     assert abs(p.max_extra_facing_rate) < 1e-6 and p.spin_frames == 0 and not p.spins
     assert p.max_direction_deviation < 1e-6 and not p.reverses
     assert math.isclose(p.length_ratio, 1.0, rel_tol=1e-9)
@@ -721,12 +723,12 @@ def test_plausibility_catches_a_spin_and_a_reversal(walker_stage):
     src = Usd.Stage.Open(walker_stage)
     # One frame turns the body by 100 degrees (2,400 degrees per second at 24 fps): a spin, and the
     # walk after it (turned about the start) goes off by 100 degrees.
-    p = M.plausibility(src, _turned(walker_stage, lambda t: 100.0 if t >= 50 else 0.0), "/World/Crowd/a")
+    p = measure.plausibility(src, _turned(walker_stage, lambda t: 100.0 if t >= 50 else 0.0), "/World/Crowd/a")
     assert p.spin_frames == 1 and p.spins
     assert p.max_extra_facing_rate == pytest.approx(100.0 * 24.0, rel=0.05)
     assert p.reverses and 95.0 < p.max_direction_deviation <= 180.0
     # A constant turn of the whole agent is no spin, and its direction is off by that turn.
-    q = M.plausibility(src, _turned(walker_stage, lambda t: 30.0), "/World/Crowd/a")
+    q = measure.plausibility(src, _turned(walker_stage, lambda t: 30.0), "/World/Crowd/a")
     assert q.spin_frames == 0 and abs(q.max_extra_facing_rate) < 1e-3
     assert q.max_direction_deviation == pytest.approx(30.0, abs=1e-3)
     assert q.length_ratio == pytest.approx(1.0, abs=1e-6)
