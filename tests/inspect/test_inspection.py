@@ -10,7 +10,7 @@ from pxr import Sdf, Usd, UsdGeom, UsdValidation
 from mocapedit.pipeline import guides
 from mocapedit.inspect import overlaps
 from mocapedit.model import report
-from mocapedit.usd import writer
+from mocapedit.usd import edits_format, writer
 from mocapedit.pipeline.processor import solve
 
 from conftest import run_cli, write_toy_stage
@@ -254,7 +254,7 @@ def test_stored_report_is_deterministic_and_finite(tmp_path, monkeypatch):
     solve(str(stage), output=str(tmp_path / "a.usda"))
     solve(str(stage), output=str(tmp_path / "b.usda"))
     assert (tmp_path / "a.usda").read_bytes() == (tmp_path / "b.usda").read_bytes()
-    assert writer.report_text({"x": float("inf"), "y": [np.float32(1.5), float("nan")]}) == '{"x":null,"y":[1.5,null]}'
+    assert edits_format.report_text({"x": float("inf"), "y": [np.float32(1.5), float("nan")]}) == '{"x":null,"y":[1.5,null]}'
 
 
 @pytest.mark.parametrize("retimed", [False, True])

@@ -273,7 +273,7 @@ class _AgentLock:
             np.maximum.at(self.weight[:, k], rows, w[valid])
         some = w_sum > 0
         self.target[some] = pos_sum[some] / w_sum[some][:, None]
-        self.target_rot[some] = footlock._normalize(rot_sum[some])
+        self.target_rot[some] = footlock.normalize(rot_sum[some])
 
     def inputs(self) -> dict:
         return {"hip": self.hip, "knee": self.knee, "ankle": self.ankle, "parent_rot": self.parent_rot,
