@@ -16,8 +16,8 @@ Figures, each beside a peer measured in the same run:
   the rows the last solve pushed with, as hard equalities, both steps as one KKT system
   each (100 agents);
 - quality on a composed stage: the 128-walker crossing example solved with each strategy
-  and with steering alone (maxWait 0), measured with mocapedit.inspect.metrics by UsdSkel forward
-  kinematics (overlaps in the shot; root displacement, path length and foot skate against
+  and with steering alone (maxWait 0), measured with mocapedit.usd.evaluate and
+  mocapedit.tools.measure by UsdSkel forward kinematics (overlaps in the shot; root displacement, path length and foot skate against
   the source, over the shot and the 3 s after it in which walkers that waited finish).
 """
 from __future__ import annotations

@@ -17,7 +17,7 @@ normal equations), measured in the same run on the same terms:
   agents x 500 frames tied by hard relative constraints (under 50 ms), each split as the
   single path is;
 - the example stages of ``example_stages/stages_path.py``, solved through ``solve``: the
-  path pass's time and, per edited agent, the foot skate (``metrics.foot_skate``, m/s,
+  path pass's time and, per edited agent, the foot skate (``measure.foot_skate``, m/s,
   measured over the source's contact frames) before and after, and the length ratio.
 
 Times are the best of many runs (solves: 500 or 2,000 runs; groups and relays: 41, whose
