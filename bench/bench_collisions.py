@@ -16,8 +16,8 @@ Figures, each beside a peer measured in the same run:
   the rows the last solve pushed with, as hard equalities, both steps as one KKT system
   each (100 agents);
 - quality on a composed stage: the 128-walker crossing example solved with each strategy
-  and with steering alone (maxWait 0), measured with mocapedit.inspect.metrics by UsdSkel forward
-  kinematics (overlaps in the shot; root displacement, path length and foot skate against
+  and with steering alone (maxWait 0), measured with mocapedit.usd.evaluate and
+  mocapedit.tools.measure by UsdSkel forward kinematics (overlaps in the shot; root displacement, path length and foot skate against
   the source, over the shot and the 3 s after it in which walkers that waited finish).
 """
 from __future__ import annotations
@@ -33,6 +33,8 @@ import scipy.sparse.linalg as spla
 from mocapedit.solve import avoidance, collisions
 from mocapedit.data import examples
 from mocapedit.inspect import metrics
+from mocapedit.tools import measure
+from mocapedit.usd import evaluate
 from mocapedit.pipeline.processor import solve
 
 import overlaps_peer
@@ -181,7 +183,7 @@ def _stage_quality(ctx) -> dict:
     # Beyond the shot's end by the longest wait: a walker that waited finishes its clip later.
     times = np.arange(src.GetStartTimeCode(), src.GetEndTimeCode() + 1.0 + 3.0 * src.GetTimeCodesPerSecond())
     shot = times <= src.GetEndTimeCode()
-    src_roots = metrics.agent_root_positions(src, agents, times)
+    src_roots = evaluate.agent_root_positions(src, agents, times)
     out = {}
     # The default (wait, then steer), each strategy, and steering alone (maxWait 0).
     steer_only = ctx.workdir / "collisions_crossing_steer_only.usda"
@@ -201,7 +203,7 @@ def _stage_quality(ctx) -> dict:
                        foot_locking=False)
         seconds = time.perf_counter() - t
         edited = Usd.Stage.Open(str(composed))
-        roots = metrics.agent_root_positions(edited, agents, times)
+        roots = evaluate.agent_root_positions(edited, agents, times)
         bases = roots[:, shot].copy()
         bases[..., 1] = 0.0
         sep = metrics.min_separation(bases, RADIUS, HEIGHT, "Y")
@@ -211,8 +213,8 @@ def _stage_quality(ctx) -> dict:
         moved = [a for a, d in zip(agents, disp.max(axis=1)) if d > 1e-6][:24]
         skate_src, skate_out = [], []
         for a in moved:
-            before = metrics.foot_skate(src, a)
-            after = metrics.foot_skate(edited, a)   # its own contacts: a wait moves them in time
+            before = measure.foot_skate(src, a)
+            after = measure.foot_skate(edited, a)   # its own contacts: a wait moves them in time
             skate_src.append(before.mean)
             skate_out.append(after.mean)
         out[label] = {

@@ -10,7 +10,7 @@ from pxr import Sdf, Usd, UsdGeom, UsdValidation
 from mocapedit.pipeline import guides
 from mocapedit.inspect import overlaps
 from mocapedit.model import report
-from mocapedit.usd import writer
+from mocapedit.usd import edits_format, writer
 from mocapedit.pipeline.processor import solve
 
 from conftest import run_cli, write_toy_stage
@@ -254,23 +254,24 @@ def test_stored_report_is_deterministic_and_finite(tmp_path, monkeypatch):
     solve(str(stage), output=str(tmp_path / "a.usda"))
     solve(str(stage), output=str(tmp_path / "b.usda"))
     assert (tmp_path / "a.usda").read_bytes() == (tmp_path / "b.usda").read_bytes()
-    assert writer.report_text({"x": float("inf"), "y": [np.float32(1.5), float("nan")]}) == '{"x":null,"y":[1.5,null]}'
+    assert edits_format.report_text({"x": float("inf"), "y": [np.float32(1.5), float("nan")]}) == '{"x":null,"y":[1.5,null]}'
 
 
 @pytest.mark.parametrize("retimed", [False, True])
 def test_the_report_gives_the_foot_skate_of_moved_agents_source_and_edited(tmp_path, retimed):
     from mocapedit.data import examples, walker
-    from mocapedit.inspect import metrics
+    from mocapedit.tools import measure
+    from mocapedit.usd import evaluate
     walk = walker.walk(frames=48, name="walk")
     path = tmp_path / "shot.usda"
     examples.build_crowd_stage(path, [examples.AgentSpec("a0", walk, (0.0, 0.0, 0.0), 0.0),
                                       examples.AgentSpec("a1", walk, (3.0, 0.0, 0.0), 0.0)],
                                clips_dir=tmp_path / "clips")
     stage = Usd.Stage.Open(str(path))
-    start = metrics.agent_root_positions(stage, "/World/Crowd/a0", [0.0])[0]
+    start = evaluate.agent_root_positions(stage, "/World/Crowd/a0", [0.0])[0]
     examples.add_position_constraint(stage, "/Edits/start", "/World/Crowd/a0", 0, start)
     # The end pulled a metre sideways: the path bends and the feet slide more than the source's.
-    end = metrics.agent_root_positions(stage, "/World/Crowd/a0", [47.0])[0] + (1.0, 0.0, 0.0)
+    end = evaluate.agent_root_positions(stage, "/World/Crowd/a0", [47.0])[0] + (1.0, 0.0, 0.0)
     examples.add_position_constraint(stage, "/Edits/end", "/World/Crowd/a0", 47, end)
     if retimed:  # the pose is baked again on the shot's frames: measured by UsdSkel on both stages
         examples.add_time_constraint(stage, "/Edits/late", "/World/Crowd/a0", 47, 55.0)
@@ -280,9 +281,9 @@ def test_the_report_gives_the_foot_skate_of_moved_agents_source_and_edited(tmp_p
     result = solve(str(path), output=str(edits), composed=str(composed), foot_locking=False)
     moved, still = result.report.agents["/World/Crowd/a0"], result.report.agents["/World/Crowd/a1"]
     assert "footSkateSource" not in still and "footSkateEdited" not in still
-    source = metrics.foot_skate(Usd.Stage.Open(str(path)), "/World/Crowd/a0")
-    edited = metrics.foot_skate(Usd.Stage.Open(str(composed)), "/World/Crowd/a0") if retimed else \
-        metrics.foot_skate(Usd.Stage.Open(str(composed)), "/World/Crowd/a0", times=source.times,
+    source = measure.foot_skate(Usd.Stage.Open(str(path)), "/World/Crowd/a0")
+    edited = measure.foot_skate(Usd.Stage.Open(str(composed)), "/World/Crowd/a0") if retimed else \
+        measure.foot_skate(Usd.Stage.Open(str(composed)), "/World/Crowd/a0", times=source.times,
                            contact=source.contact)
     # The solve measures by forward kinematics in double precision, UsdSkel from float samples.
     assert moved["footSkateSource"] == pytest.approx(source.mean, rel=1e-4)

@@ -4,8 +4,10 @@ Two families of functions live here:
 
 * plain numpy measures of trajectories and time maps (path length, constraint residuals, shape
   change, rigidity of stationary ranges, capsule separation, positive time intervals);
-* measures read from a composed ``Usd.Stage`` by forward kinematics through UsdSkel (joint world
-  positions, root positions, foot skate), so an edited stage is judged by what plain UsdSkel plays.
+* measures of joints' world positions and matrices (foot skate, plausibility of the body's
+  turning and walking direction), which :mod:`mocapedit.usd.evaluate` computes from a composed
+  stage by UsdSkel forward kinematics; :mod:`mocapedit.tools.measure` measures a stage in one call,
+  so an edited stage is judged by what plain UsdSkel plays.
 
 Conventions: positions are world space in stage units; quaternions, where they appear, are
 ``(x, y, z, w)``. The ground plane follows the stage's ``upAxis``: for Y-up the ground coordinates
@@ -15,15 +17,17 @@ counter-clockwise about the up axis.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Iterable, Sequence, Union
+from typing import Sequence
 
 import numpy as np
-from pxr import Sdf, Usd, UsdGeom, UsdSkel
 
 from mocapedit.geometry.ground import from_ground, ground_axes, to_ground
 from mocapedit.geometry.ground import up_token as _up_token
 from mocapedit.geometry import stationary as _stationary
 from mocapedit.solve import collisions
+from mocapedit.geometry.shape import as_points as _points
+from mocapedit.geometry.shape import length_ratio, local_coordinates, path_length, shape_change
+from mocapedit.model.names import default_facing_joint, default_foot_joints
 
 __all__ = [
     "ground_axes", "to_ground", "from_ground",
@@ -31,46 +35,15 @@ __all__ = [
     "local_coordinates", "shape_change", "rigidity_error", "neighbour_distance_change",
     "Separation", "capsule_clearance", "min_separation",
     "time_intervals_positive",
-    "joint_world_positions", "agent_root_positions", "default_foot_joints",
-    "FootSkate", "foot_skate",
-    "SPIN_DEGREES_AT_60FPS", "CHORD_SECONDS", "default_facing_joint", "joint_world_matrices",
+    "default_foot_joints", "FootSkate",
+    "SPIN_DEGREES_AT_60FPS", "CHORD_SECONDS", "default_facing_joint",
     "body_facing", "facing_change_per_second", "spin_threshold", "spins", "direction_deviation",
-    "Plausibility", "plausibility_of", "plausibility", "shot_plausibility", "foot_skate_of_positions", "worst_plausibility",
+    "Plausibility", "plausibility_of", "foot_skate_of_positions", "worst_plausibility",
 ]
-
-PathLike = Union[str, Sdf.Path]
 
 # ---------------------------------------------------------------------------------------------
 # Trajectory measures
 # ---------------------------------------------------------------------------------------------
-
-
-def _points(points, name: str, dims=(2, 3)) -> np.ndarray:
-    p = np.asarray(points, dtype=np.float64)
-    if p.ndim != 2 or p.shape[1] not in dims:
-        want = " or ".join(f"(N, {d})" for d in dims)
-        raise ValueError(f"{name} must have shape {want}, got {p.shape}")
-    return p
-
-
-def path_length(points) -> float:
-    """Length of the polyline through ``points`` ``(N, 2)`` or ``(N, 3)``; 0 for fewer than 2."""
-    p = _points(points, "points")
-    if len(p) < 2:
-        return 0.0
-    return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
-
-
-def length_ratio(edited, source) -> float:
-    """Distance travelled on the edited path over that of the source path.
-
-    1 means the edit kept the distance travelled. A source that does not move gives 1.0 when the
-    edited path does not move either and ``inf`` when it does.
-    """
-    le, ls = path_length(edited), path_length(source)
-    if ls == 0.0:
-        return 1.0 if le == 0.0 else float("inf")
-    return le / ls
 
 
 def position_residuals(points, targets) -> np.ndarray:
@@ -80,58 +53,6 @@ def position_residuals(points, targets) -> np.ndarray:
     if p.shape != t.shape or p.ndim != 2:
         raise ValueError(f"points {p.shape} and targets {t.shape} must both be (N, d)")
     return np.linalg.norm(p - t, axis=1)
-
-
-def local_coordinates(points, min_base: float = 0.0) -> np.ndarray:
-    """Local coordinates ``(x, y)`` of each interior path point in its neighbour triangle.
-
-    ``points`` is ``(N, 2)``; the result is ``(N - 2, 2)``, row ``k`` for point ``i = k + 1``:
-    ``P_i = P_{i-1} + x (P_{i+1} - P_{i-1}) + y R90 (P_{i+1} - P_{i-1})`` with
-    ``R90 = [[0, 1], [-1, 0]]``. These coordinates do not change under translation, rotation and
-    uniform scale of the whole path. A triangle whose base ``|P_{i+1} - P_{i-1}|`` is not longer
-    than ``min_base`` has no local frame: its row is NaN.
-    """
-    p = _points(points, "points", dims=(2,))
-    if len(p) < 3:
-        return np.zeros((0, 2))
-    d = p[2:] - p[:-2]
-    e = p[1:-1] - p[:-2]
-    rd = np.stack((d[:, 1], -d[:, 0]), axis=1)
-    dd = np.einsum("ij,ij->i", d, d)
-    ok = dd > float(min_base) ** 2
-    safe = np.where(ok, dd, 1.0)
-    along = np.einsum("ij,ij->i", e, d)
-    across = np.einsum("ij,ij->i", e, rd)
-    xy = np.stack((along, across), axis=1) / safe[:, None]
-    xy[~ok] = np.nan
-    return xy
-
-
-def shape_change(source, edited, min_base: float | None = None) -> float:
-    """RMS change of the interior points' local coordinates between two paths ``(N, 2)``.
-
-    Zero for any similarity transform of the source (translation, rotation, uniform scale); a
-    reflection or a bend is not. Points whose source triangle is degenerate (base not longer than
-    ``min_base``; default 1e-9 of the source's bounding-box diagonal) carry no shape and are
-    skipped. A point whose source triangle is fine but whose edited triangle collapsed has lost its
-    shape entirely: the result is ``inf``. Returns 0 when no point is measurable.
-    """
-    s = _points(source, "source", dims=(2,))
-    e = _points(edited, "edited", dims=(2,))
-    if s.shape != e.shape:
-        raise ValueError(f"source {s.shape} and edited {e.shape} must have the same shape")
-    if min_base is None:
-        diag = float(np.linalg.norm(np.ptp(s, axis=0))) if len(s) else 0.0
-        min_base = 1e-9 * diag
-    ls = local_coordinates(s, min_base)
-    measured = np.isfinite(ls).all(axis=1)
-    if not measured.any():
-        return 0.0
-    le = local_coordinates(e, 0.0)[measured]
-    if not np.isfinite(le).all():
-        return float("inf")
-    diff = le - ls[measured]
-    return float(np.sqrt(np.mean(np.einsum("ij,ij->i", diff, diff))))
 
 
 def _range_array(ranges, n: int) -> np.ndarray:
@@ -316,158 +237,9 @@ def min_separation(positions, radius, height, up_axis) -> Separation:
 # ---------------------------------------------------------------------------------------------
 
 
-class _Skel:
-    """A skeleton of an agent, resolved once: its query, joints and composed sample times."""
-
-    def __init__(self, stage: Usd.Stage, path: PathLike, cache: UsdSkel.Cache | None = None):
-        prim = stage.GetPrimAtPath(Sdf.Path(str(path)))
-        if not prim or not prim.IsValid():
-            raise ValueError(f"{path}: no prim at this path")
-        skel = _find_skeleton(prim)
-        self.path = str(path)
-        self.skeleton = skel
-        cache = cache or UsdSkel.Cache()
-        # Populate so animation sources bound (and inherited) under the SkelRoot resolve.
-        roots = []
-        for p in (prim, skel.GetPrim()):
-            root = UsdSkel.Root(p) if p.IsA(UsdSkel.Root) else UsdSkel.Root.Find(p)
-            if root and root.GetPath() not in [r.GetPath() for r in roots]:
-                roots.append(root)
-        for root in roots:
-            cache.Populate(root, Usd.PrimDefaultPredicate)
-        self.query = cache.GetSkelQuery(skel)
-        if not self.query:
-            raise ValueError(f"{skel.GetPath()}: skeleton is not valid "
-                             "(check its joints and rest pose)")
-        self.joints = [str(j) for j in self.query.GetJointOrder()]
-        anim = self.query.GetAnimQuery()
-        samples = anim.GetJointTransformTimeSamples() if anim else []
-        self.sample_times = np.asarray(sorted(samples), dtype=np.float64)
-
-    def joint_index(self, joint) -> int:
-        if isinstance(joint, (int, np.integer)):
-            if not 0 <= int(joint) < len(self.joints):
-                raise ValueError(f"{self.skeleton.GetPath()}: joint index {joint} out of range "
-                                 f"0..{len(self.joints) - 1}")
-            return int(joint)
-        name = str(joint)
-        if name in self.joints:
-            return self.joints.index(name)
-        hits = [k for k, j in enumerate(self.joints) if j.rsplit("/", 1)[-1] == name]
-        if len(hits) != 1:
-            why = "no joint" if not hits else "several joints"
-            raise ValueError(f"{self.skeleton.GetPath()}: {why} named {name!r}")
-        return hits[0]
-
-    def default_times(self) -> np.ndarray:
-        if len(self.sample_times) == 0:
-            raise ValueError(f"{self.path}: the animation of {self.skeleton.GetPath()} has no time "
-                             "samples; pass times explicitly")
-        return self.sample_times
-
-    def world_translations(self, xform_cache: UsdGeom.XformCache) -> np.ndarray:
-        return self.world_matrices(xform_cache)[:, 3, :3]  # row-vector: translation is the last row
-
-    def world_matrices(self, xform_cache: UsdGeom.XformCache) -> np.ndarray:
-        return np.asarray(self.query.ComputeJointWorldTransforms(xform_cache))
-
-
-def _find_skeleton(prim: Usd.Prim) -> UsdSkel.Skeleton:
-    if prim.IsA(UsdSkel.Skeleton):
-        return UsdSkel.Skeleton(prim)
-    inherited = UsdSkel.BindingAPI(prim).GetInheritedSkeleton()
-    if inherited:
-        return inherited
-    bound, found = [], []
-    for p in Usd.PrimRange(prim):
-        if p.IsA(UsdSkel.Skeleton):
-            found.append(p.GetPath())
-        rel = p.GetRelationship("skel:skeleton")
-        if rel:
-            for target in rel.GetForwardedTargets():
-                if target not in bound:
-                    bound.append(target)
-    for candidates in (bound, found):
-        if len(candidates) == 1:
-            skel = UsdSkel.Skeleton.Get(prim.GetStage(), candidates[0])
-            if skel:
-                return skel
-    if not bound and not found:
-        raise ValueError(f"{prim.GetPath()}: no Skeleton at or below this prim")
-    names = ", ".join(str(c) for c in (bound or found))
-    raise ValueError(f"{prim.GetPath()}: several skeletons ({names}); name the Skeleton prim")
-
-
-def _times(times) -> np.ndarray:
-    out = []
-    for t in times:
-        if isinstance(t, Usd.TimeCode):
-            if t.IsDefault():
-                raise ValueError("the default time code has no place among sample times")
-            t = t.GetValue()
-        out.append(float(t))
-    return np.asarray(out, dtype=np.float64)
-
-
-def joint_world_positions(stage: Usd.Stage, skel_or_root_path: PathLike,
-                          times: Iterable | None = None) -> np.ndarray:
-    """World positions of every joint by UsdSkel forward kinematics: ``(T, J, 3)`` stage units.
-
-    ``skel_or_root_path`` names a Skeleton, or a SkelRoot / agent prim from which the skeleton is
-    found (its ``skel:skeleton`` binding, else the one skeleton below it). ``times`` are time codes
-    (default: the animation's authored joint-transform samples as composed). Joints are in the
-    skeleton's joint order.
-    """
-    skel = _Skel(stage, skel_or_root_path)
-    t = skel.default_times() if times is None else _times(times)
-    out = np.empty((len(t), len(skel.joints), 3))
-    xfc = UsdGeom.XformCache()
-    for k, tc in enumerate(t):
-        xfc.SetTime(Usd.TimeCode(tc))
-        out[k] = skel.world_translations(xfc)
-    return out
-
-
-def agent_root_positions(stage: Usd.Stage, agent_path, times: Iterable,
-                         root_joint: Union[int, str] = 0) -> np.ndarray:
-    """World position of one joint (default: the skeleton's root) for one or many agents.
-
-    ``agent_path``: one path -> ``(T, 3)``; a sequence of paths -> ``(A, T, 3)``, all evaluated
-    through one UsdSkel cache and one transform cache per time. ``root_joint``: index into the
-    joint order, a full joint path or a unique joint name.
-    """
-    single = isinstance(agent_path, (str, Sdf.Path))
-    paths = [agent_path] if single else list(agent_path)
-    t = _times(times)
-    cache = UsdSkel.Cache()
-    skels = [_Skel(stage, p, cache) for p in paths]
-    index = [s.joint_index(root_joint) for s in skels]
-    out = np.empty((len(skels), len(t), 3))
-    xfc = UsdGeom.XformCache()
-    for k, tc in enumerate(t):
-        xfc.SetTime(Usd.TimeCode(tc))
-        for a, (s, j) in enumerate(zip(skels, index)):
-            out[a, k] = s.world_translations(xfc)[j]
-    return out[0] if single else out
-
-
-_FOOT_WORDS = ("foot", "toe", "ankle")
-_NOT_FOOT_WORDS = ("end", "site")
-
-
-def default_foot_joints(joints: Sequence[str]) -> list[int]:
-    """Indices of the joints whose own name says foot, toe or ankle (not an end site)."""
-    out = []
-    for k, j in enumerate(joints):
-        leaf = str(j).rsplit("/", 1)[-1].lower()
-        if any(w in leaf for w in _FOOT_WORDS) and not any(w in leaf for w in _NOT_FOOT_WORDS):
-            out.append(k)
-    return out
-
-
 @dataclass(frozen=True)
 class FootSkate:
-    """Result of :func:`foot_skate`.
+    """Result of :func:`foot_skate_of_positions` (and :func:`mocapedit.tools.measure.foot_skate`).
 
     ``joints``: the measured foot joints (paths in the skeleton). ``speeds``: per foot, mean
     horizontal speed while in contact, stage units per second (NaN without contact).
@@ -484,55 +256,13 @@ class FootSkate:
     mean: float
 
 
-def foot_skate(stage: Usd.Stage, agent_path: PathLike, times: Iterable | None = None,
-               foot_joints: Sequence[Union[int, str]] | None = None,
-               contact_height: float | None = None,
-               contact: np.ndarray | None = None) -> FootSkate:
-    """Foot skate: mean horizontal foot speed while the foot is in contact with the ground.
-
-    Evaluated by forward kinematics on the composed stage. A foot is in contact at a sample when it
-    is within ``contact_height`` (default 2 cm in stage units, from ``metersPerUnit``) above its
-    lowest height over the clip and the sample lies within the clip's sample range. The speed of a
-    foot over an interval between consecutive samples that are both in contact is its horizontal
-    (ground-plane) displacement over the interval's duration in seconds (``timeCodesPerSecond``).
-
-    ``times``: time codes (default: the animation's authored samples as composed). ``foot_joints``:
-    joint indices, full joint paths or unique joint names (default: joints named like a foot, toe
-    or ankle, but not an end site). ``contact``: a (T, feet) boolean mask to use instead of the
-    height test, typically ``source.contact`` from the source stage, so that an edited stage is
-    measured over the frames where the source feet were planted (pass ``times=source.times``).
-    """
-    skel = _Skel(stage, agent_path)
-    t = np.unique(skel.default_times() if times is None else _times(times))
-    if foot_joints is None:
-        feet = default_foot_joints(skel.joints)
-        if not feet:
-            raise ValueError(f"{skel.skeleton.GetPath()}: no joint is named like a foot, toe or "
-                             "ankle; pass foot_joints")
-    else:
-        feet = [skel.joint_index(j) for j in foot_joints]
-    pos = np.empty((len(t), len(feet), 3))
-    xfc = UsdGeom.XformCache()
-    for k, tc in enumerate(t):
-        xfc.SetTime(Usd.TimeCode(tc))
-        pos[k] = skel.world_translations(xfc)[feet]
-    if len(skel.sample_times):
-        first, last = skel.sample_times[0], skel.sample_times[-1]
-        in_clip = (t >= first - 1e-9) & (t <= last + 1e-9)
-    else:
-        in_clip = np.ones(len(t), dtype=bool)
-    return foot_skate_of_positions(pos, t, UsdGeom.GetStageUpAxis(stage), UsdGeom.GetStageMetersPerUnit(stage),
-                                   stage.GetTimeCodesPerSecond(), tuple(skel.joints[f] for f in feet),
-                                   in_clip, contact_height, contact)
-
-
 def foot_skate_of_positions(pos: np.ndarray, t: np.ndarray, up, meters_per_unit: float,
                             time_codes_per_second: float, joints: tuple[str, ...] = (),
                             in_clip: np.ndarray | None = None, contact_height: float | None = None,
                             contact: np.ndarray | None = None) -> FootSkate:
-    """:func:`foot_skate` of feet whose world positions are known: ``pos`` (T, F, 3) stage
-    units at increasing time codes ``t`` (T,); ``in_clip`` (T,) marks the samples inside
-    the clip (default: all). The other arguments are :func:`foot_skate`'s."""
+    """Foot skate (:func:`mocapedit.tools.measure.foot_skate`) of feet whose world positions are
+    known: ``pos`` (T, F, 3) stage units at increasing time codes ``t`` (T,); ``in_clip`` (T,) marks the samples inside
+    the clip (default: all). The other arguments are :func:`mocapedit.tools.measure.foot_skate`'s."""
     t = np.asarray(t, dtype=np.float64)
     if contact_height is None:
         contact_height = 0.02 / meters_per_unit
@@ -581,42 +311,6 @@ EDIT_TURN_SECONDS = 2.0
 #: An edit that turns a walk by more than this (degrees) sends it back the way it came: half
 #: way between a right-angle turn and a full reversal.
 REVERSE_TURN_DEGREES = 135.0
-
-_FACING_NAMES = ("hips", "hip", "pelvis")
-
-
-def default_facing_joint(joints: Sequence[str]) -> int:
-    """Index of the joint whose frame stands for the body's facing: the one named hips, hip or
-    pelvis (leaf name, any case), else the first joint whose leaf name contains one of those
-    words without naming a leg, else the skeleton's root (0)."""
-    leaves = [str(j).rsplit("/", 1)[-1].lower() for j in joints]
-    for k, leaf in enumerate(leaves):
-        if leaf in _FACING_NAMES:
-            return k
-    for k, leaf in enumerate(leaves):
-        if any(w in leaf for w in ("hip", "pelvis")) and not any(w in leaf for w in ("leg", "thigh", "up", "left", "right")):
-            return k
-    return 0
-
-
-def joint_world_matrices(stage: Usd.Stage, agent_path: PathLike, times: Iterable | None = None,
-                         joint: Union[int, str, None] = None) -> tuple[np.ndarray, np.ndarray]:
-    """World matrices of one joint by UsdSkel FK: ``(times (T,), matrices (T, 4, 4))``.
-
-    ``joint``: index, full path or unique name (default :func:`default_facing_joint`). ``times``:
-    time codes (default: the animation's authored samples as composed). Matrices are USD's
-    row-vector convention: row k is the joint's local axis k in world space, row 3 its position.
-    """
-    skel = _Skel(stage, agent_path)
-    t = skel.default_times() if times is None else _times(times)
-    j = default_facing_joint(skel.joints) if joint is None else skel.joint_index(joint)
-    out = np.empty((len(t), 4, 4))
-    xfc = UsdGeom.XformCache()
-    for k, tc in enumerate(t):
-        xfc.SetTime(Usd.TimeCode(tc))
-        out[k] = skel.world_matrices(xfc)[j]
-    return t, out
-
 
 def body_facing(matrices, up_axis) -> np.ndarray:
     """(T,) facing of a body from its hip (or root) joint's world matrices ``(T, 4, 4)``:
@@ -724,7 +418,7 @@ def edit_turn(source_ground, edited_ground, seconds, min_speed: float,
 
 @dataclass(frozen=True)
 class Plausibility:
-    """Plausibility figures of one agent, edited against its source (:func:`plausibility`).
+    """Plausibility figures of one agent, edited against its source (:func:`plausibility_of`).
 
     Turning rates are degrees per second of the body's facing (:func:`body_facing`):
     ``max_facing_rate`` of the edited body, ``source_max_facing_rate`` of the source,
@@ -807,8 +501,8 @@ def plausibility_of(agent: str, source_seconds, source_hip, edited_seconds, edit
     (fractional) source frame each edited sample plays, as a time warp knows it; the source is
     then compared at those frames and the time warp is shot time per source time. Without it,
     edited samples pair with source samples by frame (resampled by frame fraction when T'
-    differs) and the time warp is the ratio of their intervals. :func:`plausibility` measures
-    these on stages by FK."""
+    differs) and the time warp is the ratio of their intervals.
+    :func:`mocapedit.tools.measure.plausibility` measures these on stages by FK."""
     ss, se = np.asarray(source_seconds, np.float64), np.asarray(edited_seconds, np.float64)
     ms, me = np.asarray(source_hip, np.float64), np.asarray(edited_hip, np.float64)
     fs, fe = body_facing(ms, up_axis), body_facing(me, up_axis)
@@ -859,28 +553,6 @@ def plausibility_of(agent: str, source_seconds, source_hip, edited_seconds, edit
                         foot_skate_ratio=_ratio(float(foot_skate_edited), float(foot_skate_source)),
                         worst_turn_frame=turn_frame, worst_direction_frame=dev_frame,
                         max_turned_deviation=max_turned, max_edit_turn=max_turn)
-
-
-def plausibility(source_stage: Usd.Stage, edited_stage: Usd.Stage, agent_path: PathLike,
-                 joint: Union[int, str, None] = None, foot_joints=None) -> Plausibility:
-    """Plausibility of one agent: its edited motion on ``edited_stage`` (the input with the edits
-    layer on top) against its source on ``source_stage``, both by UsdSkel FK at their own composed
-    samples, paired by frame. ``joint``: the facing joint (default :func:`default_facing_joint`)."""
-    ts, ms = joint_world_matrices(source_stage, agent_path, None, joint)
-    te, me = joint_world_matrices(edited_stage, agent_path, None, joint)
-    skate_s = foot_skate(source_stage, agent_path, foot_joints=foot_joints)
-    contact = skate_s.contact if len(skate_s.times) == len(te) else None
-    skate_e = foot_skate(edited_stage, agent_path, times=te if contact is not None else None,
-                         foot_joints=foot_joints, contact=contact)
-    return plausibility_of(str(agent_path), ts / source_stage.GetTimeCodesPerSecond(), ms,
-                           te / edited_stage.GetTimeCodesPerSecond(), me, UsdGeom.GetStageUpAxis(source_stage),
-                           UsdGeom.GetStageMetersPerUnit(source_stage), skate_s.mean, skate_e.mean)
-
-
-def shot_plausibility(source_stage: Usd.Stage, edited_stage: Usd.Stage,
-                      agent_paths: Iterable[PathLike], joint=None, foot_joints=None) -> list[Plausibility]:
-    """:func:`plausibility` of each agent, in the order given."""
-    return [plausibility(source_stage, edited_stage, p, joint, foot_joints) for p in agent_paths]
 
 
 def worst_plausibility(figures: Sequence[Plausibility]) -> dict:

@@ -49,8 +49,7 @@ from itertools import chain
 import numpy as np
 
 from mocapedit import _solver
-from mocapedit.inspect import metrics
-from mocapedit.geometry import trajectory
+from mocapedit.geometry import shape, trajectory
 from mocapedit.geometry.components import UnionFind
 
 HARD = np.inf
@@ -673,5 +672,5 @@ def shape_figures(a: AgentInput, g: np.ndarray, min_base: float) -> dict:
     """Report figures of an edited path: its length over the source's, and the RMS change of
     its local shape against the rest path (frames framed by less than ``min_base``, such
     as a stand, carry no shape)."""
-    return {"lengthRatio": metrics.length_ratio(g, a.source),
-            "shapeChange": metrics.shape_change(a.rest, g, min_base=min_base)}
+    return {"lengthRatio": shape.length_ratio(g, a.source),
+            "shapeChange": shape.shape_change(a.rest, g, min_base=min_base)}

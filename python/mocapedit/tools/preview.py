@@ -32,7 +32,7 @@ import numpy as np
 from mocapedit.geometry import ground, trajectory
 from mocapedit.inspect import inspection, overlaps
 from mocapedit.solve import collisions
-from mocapedit.usd import outputs, reader, writer
+from mocapedit.usd import edits_format, outputs, reader
 from mocapedit.model.errors import MocapEditError
 from mocapedit.inspect.inspection import Crowd, Remaining
 from mocapedit.model.progress import Progress, Silent
@@ -66,15 +66,6 @@ class Scene:
 # ---- loading -------------------------------------------------------------------------------
 
 
-def _edits_layer(stage):
-    """The edits layer a stage uses (customLayerData mocapedit with a contentHash), or None."""
-    for layer in sorted(stage.GetUsedLayers(), key=lambda l: l.identifier):
-        data = dict(layer.customLayerData or {}).get("mocapedit")
-        if isinstance(data, dict) and "contentHash" in data:
-            return layer
-    return None
-
-
 def _trajectories(data, progress: Progress, name: str) -> dict:
     task = progress.task(name, len(data.agents), "agents")
     out = {}
@@ -106,12 +97,12 @@ def load(stage_path: str, edits_path: str | None = None, progress: Progress | No
             raise MocapEditError(f"{edits_path}: no such file")
         edited_stage = reader.open_stage(stage_path)
         edited_stage.GetSessionLayer().subLayerPaths.append(os.path.abspath(edits_path))
-        edits_layer = _edits_layer(edited_stage)
+        edits_layer = edits_format.edits_layer(edited_stage)
         if edits_layer is None:
             raise MocapEditError(f"{edits_path}: not an edits layer written by `mocapedit solve` "
                                  "(no customLayerData mocapedit)")
     else:
-        edits_layer = _edits_layer(source_stage)
+        edits_layer = edits_format.edits_layer(source_stage)
         if edits_layer is not None:
             edited_stage = source_stage
             source_stage = Usd.Stage.Open(source_stage.GetRootLayer())
@@ -130,9 +121,9 @@ def load(stage_path: str, edits_path: str | None = None, progress: Progress | No
 
     report = None
     if edits_layer is not None:
-        data = dict(edits_layer.customLayerData or {}).get("mocapedit", {})
-        if "report" in data:
-            report = Report.from_dict(json.loads(data["report"]))
+        stored = edits_format.stored_report(edits_layer)
+        if stored is not None:
+            report = Report.from_dict(stored)
     entries = report.constraints if report else []
     up = source.info.up_axis
     scene = Scene(title=os.path.basename(stage_path), crowd=crowd, report=report, edited=edited is not None)

@@ -10,7 +10,7 @@ solver's foot-locking job (:mod:`mocapedit.solve.footlock`) moves the legs of al
 rotations (and the skeleton root's translation where the pelvis is lowered), so the writer
 bakes their animation.
 
-The report gets, per agent, the foot skate (as :func:`mocapedit.inspect.metrics.foot_skate` measures
+The report gets, per agent, the foot skate (as :func:`mocapedit.tools.measure.foot_skate` measures
 it, stage units per second) of the source (``footSkateSource``), after the edits alone
 (``footSkateUnlocked``) and as the edits layer plays it, locked (``footSkateEdited``); the
 contacts locked, the largest pelvis drop and the largest IK correction (stage units).
@@ -273,7 +273,7 @@ class _AgentLock:
             np.maximum.at(self.weight[:, k], rows, w[valid])
         some = w_sum > 0
         self.target[some] = pos_sum[some] / w_sum[some][:, None]
-        self.target_rot[some] = footlock._normalize(rot_sum[some])
+        self.target_rot[some] = footlock.normalize(rot_sum[some])
 
     def inputs(self) -> dict:
         return {"hip": self.hip, "knee": self.knee, "ankle": self.ankle, "parent_rot": self.parent_rot,
@@ -344,7 +344,7 @@ def _source(ctx, agent: Agent, cache: dict) -> tuple[list[list[tuple[int, int]]]
 
 def _report_skate(ctx, lock: "_AgentLock", locked_pose, chains: dict) -> tuple[float, float, float] | None:
     """(source, after the edits, after locking) foot skate of a locked agent, stage units per
-    second, as :func:`mocapedit.inspect.metrics.foot_skate` measures it on the input and on the composed
+    second, as :func:`mocapedit.tools.measure.foot_skate` measures it on the input and on the composed
     stage: joints named like feet, over the source's planted frames (a retimed agent: over its own).
     None for a skeleton without such joints."""
     agent, info = lock.agent, ctx.data.info
