@@ -45,10 +45,12 @@ def test_a_report_reads_back_the_same_json_unknown_keys_included():
     d["agents"]["/a"]["futureFigure"] = [1, 2]
     d["stats"]["futureCount"] = 3
     d["constraints"][0]["futureFlag"] = True
+    d["agents"]["/b"]["footSkateSource"] = None        # a figure that was not finite is stored as null
     back = Report.from_dict(d)
     assert isinstance(back.agents["/a"], AgentEntry) and isinstance(back.agents["/a"].plausibility, AgentPlausibility)
     assert isinstance(back.stats, Stats) and isinstance(back.stats.plausibility, ShotPlausibility)
     assert back.agents["/a"].extra == {"futureFigure": [1, 2]}
+    assert back.agents["/b"].foot_skate_source is None and "footSkateSource" not in back.agents["/b"]
     assert json.loads(json.dumps(back.to_dict())) == d
 
 

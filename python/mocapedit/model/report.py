@@ -39,21 +39,28 @@ class Entry:
         return cached
 
     def to_dict(self) -> dict:
-        out = {}
+        out = dict(self.extra)
         for name, (attr, always) in self._keys().items():
             value = getattr(self, attr)
             if value is None and not always:
                 continue
             out[name] = value.to_dict() if isinstance(value, Entry) else value
-        out.update(self.extra)
         return out
 
     @classmethod
     def from_dict(cls, data: dict):
+        """The entry of a stored dict. A key stored as null (a figure that was not finite) stays
+        null when written back, though the field reads None like an absent one."""
         keys = cls._keys()
-        known = {keys[k][0]: (cls._NESTED[k].from_dict(v) if k in cls._NESTED and isinstance(v, dict) else v)
-                 for k, v in data.items() if k in keys}
-        return cls(**known, extra={k: v for k, v in data.items() if k not in keys})
+        known, extra = {}, {}
+        for name, value in data.items():
+            if name not in keys or (value is None and not keys[name][1]):
+                extra[name] = value
+            elif name in cls._NESTED and isinstance(value, dict):
+                known[keys[name][0]] = cls._NESTED[name].from_dict(value)
+            else:
+                known[keys[name][0]] = value
+        return cls(**known, extra=extra)
 
     # Access by the stored key, for readers that go by the names of the JSON.
     def get(self, name: str, default=None):
