@@ -179,15 +179,15 @@ def reported_collisions(entries: list[ConstraintEntry]) -> np.ndarray:
     return np.array(pts, dtype=np.float64).reshape(-1, 3)
 
 
-def path_figures(source: np.ndarray, edited: np.ndarray) -> dict:
-    """Length ratio and displacement of an edited path against its source, frame by frame.
+def path_figures(source: np.ndarray, edited: np.ndarray) -> tuple[float, float, float]:
+    """(length ratio, largest and mean displacement) of an edited path against its source,
+    frame by frame.
 
     Args:
       source, edited: #F by 2 ground paths, one row per source frame
     """
     d = np.linalg.norm(np.asarray(edited) - np.asarray(source), axis=1)
-    return {"lengthRatio": metrics.length_ratio(edited, source),
-            "maxDisplacement": float(d.max(initial=0.0)), "meanDisplacement": float(d.mean()) if len(d) else 0.0}
+    return metrics.length_ratio(edited, source), float(d.max(initial=0.0)), float(d.mean()) if len(d) else 0.0
 
 
 def collision_pass_reported(report) -> bool:
@@ -224,9 +224,13 @@ def complete_report(ctx, crowd: Crowd) -> Remaining | None:
     """
     for path in sorted(ctx.paths):
         entry = ctx.report.agent(path)
-        for key, value in path_figures(ctx.trajectories[path].ground, ctx.paths[path].ground).items():
-            if key not in entry:
-                entry[key] = value
+        ratio, largest, mean = path_figures(ctx.trajectories[path].ground, ctx.paths[path].ground)
+        if entry.length_ratio is None:   # the path pass measured it on its own terms
+            entry.length_ratio = ratio
+        if entry.max_displacement is None:
+            entry.max_displacement = largest
+        if entry.mean_displacement is None:
+            entry.mean_displacement = mean
     if collision_pass_reported(ctx.report):
         return None
     remaining, clearance = remaining_overlaps(crowd, progress=ctx.progress,
