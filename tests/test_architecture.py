@@ -85,15 +85,9 @@ def _violations() -> list[str]:
     return found
 
 
-# Crossings that remain from before the layers; each is being removed, none may be added.
-KNOWN_CROSSINGS = {
-    "model/report.py", "pipeline/passes/path.py", "pipeline/passes/time.py", "pipeline/processor.py",
-}
-
-
 def test_every_sub_package_keeps_to_its_layer():
     found = sorted(set(_violations()))
-    assert [v for v in found if v.split(":")[0] not in KNOWN_CROSSINGS] == []
+    assert found == []
 
 
 def test_every_sub_package_says_what_it_holds_and_may_import():

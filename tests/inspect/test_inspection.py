@@ -10,6 +10,8 @@ from pxr import Sdf, Usd, UsdGeom, UsdValidation
 from mocapedit.pipeline import guides
 from mocapedit.inspect import overlaps
 from mocapedit.model import report
+from mocapedit.model.report import ConstraintEntry
+from mocapedit.usd.report_io import read_report
 from mocapedit.usd import edits_format, writer
 from mocapedit.pipeline.processor import solve
 
@@ -157,7 +159,7 @@ def test_no_guides_writes_no_guide_geometry_but_keeps_the_report(tmp_path, monke
     result = solve(str(stage), output=str(tmp_path / "e.usda"), guides=False)
     layer = Sdf.Layer.FindOrOpen(str(tmp_path / "e.usda"))
     assert not layer.GetPrimAtPath("/MocapEdit/Guides").nameChildren
-    stored = report.load(str(tmp_path / "e.usda"))
+    stored = read_report(str(tmp_path / "e.usda"))
     assert stored.report.stats["remainingOverlaps"] == result.report.stats["remainingOverlaps"] >= 1
 
 
@@ -178,10 +180,10 @@ def test_collisions_reported_by_a_pass_are_shown_as_reported(tmp_path, monkeypat
     stage = write_toy_stage(tmp_path / "shot.usda", agents=2)
 
     def collisions(ctx):
-        ctx.report.stats["remainingOverlaps"] = 1
-        ctx.report.constraints.append({"prim": "/World/agent0", "kind": "collision", "agent": "/World/agent0",
-                                       "frame": 3, "target": "/World/agent1", "targetFrame": 3, "hard": False,
-                                       "residual": 0.2, "met": False, "position": [1.0, 2.0, 0.0]})
+        ctx.report.stats.remaining_overlaps = 1
+        ctx.report.constraints.append(ConstraintEntry(
+            prim="/World/agent0", kind="collision", agent="/World/agent0", frame=3, target="/World/agent1",
+            target_frame=3, hard=False, residual=0.2, met=False, position=[1.0, 2.0, 0.0]))
     install_pass(monkeypatch, collisions)
     result = solve(str(stage))
     pts = result.layer.GetAttributeAtPath("/MocapEdit/Guides/Collisions.points").default
@@ -204,7 +206,7 @@ def test_the_report_is_stored_in_the_layer_without_timings(scene):
 
 def test_report_reads_back_the_same_from_the_edits_and_the_composed_stage(scene):
     _, _, edits, composed = scene
-    a, b = report.load(str(edits)), report.load(str(composed))
+    a, b = read_report(str(edits)), read_report(str(composed))
     assert a.report.to_layer_dict() == b.report.to_layer_dict()
     assert a.meters_per_unit == 0.01 and a.up_axis == "Z"
 
@@ -289,7 +291,7 @@ def test_the_report_gives_the_foot_skate_of_moved_agents_source_and_edited(tmp_p
     assert moved["footSkateSource"] == pytest.approx(source.mean, rel=1e-4)
     assert moved["footSkateEdited"] == pytest.approx(edited.mean, rel=1e-4)
     assert moved["footSkateEdited"] > moved["footSkateSource"]
-    text = report.format_text(report.load(str(edits)))
+    text = report.format_text(read_report(str(edits)))
     assert f"foot skate {report._num(moved['footSkateSource'])} -> {report._num(moved['footSkateEdited'])}" in text
 
 

@@ -19,6 +19,7 @@ from mocapedit.inspect import metrics
 from mocapedit.tools import measure
 from mocapedit.usd import evaluate
 from mocapedit.model import report
+from mocapedit.usd.report_io import read_report
 from mocapedit.model.errors import MocapEditError
 from mocapedit.pipeline.processor import solve
 from mocapedit.model.progress import Progress
@@ -479,7 +480,7 @@ def test_progress_notes_summary_and_report_give_the_same_figures(tmp_path):
     summary = result.report.summary()
     shared = report.overview(stats, result.report.constraints)
     assert f"collision avoidance: {left} after 1 iteration" in shared
-    text = report.format_text(report.load(str(edits)))
+    text = report.format_text(read_report(str(edits)))
     for line in shared:
         assert line in summary.splitlines() and line in text.splitlines()
     # The worst residual printed is that of the hard constraints, never a soft collision row.

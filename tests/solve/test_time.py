@@ -19,7 +19,7 @@ from mocapedit.tools import measure
 from mocapedit.usd import evaluate
 from mocapedit.pipeline import processor
 from mocapedit.model.errors import MocapEditError
-from mocapedit.pipeline.passes import time as time_pass
+from mocapedit.pipeline.passes import Pass, time as time_pass
 from mocapedit.pipeline.processor import EditedPath, solve
 
 from conftest import run_cli
@@ -175,8 +175,7 @@ def test_space_and_time_edits_combine(tmp_path, monkeypatch):
         traj = ctx.trajectories[f"{CROWD}/walker"]
         ctx.paths[f"{CROWD}/walker"] = EditedPath(ground=traj.ground @ rot + shift, heading=traj.heading + angle)
 
-    monkeypatch.setattr(processor, "load_passes", lambda: None)
-    monkeypatch.setattr(processor, "PASSES", [(100, "move", move), (200, "time", time_pass.time_pass)])
+    monkeypatch.setattr(processor, "PASSES", (Pass("move", move), Pass("time", time_pass.run)))
     result, out, src = _solve(tmp_path, stage)
 
     # Y-up: ground (x, -z). The edit turns the ground by `rot` and shifts it.
@@ -201,8 +200,7 @@ def _stretch_path(ctx):
 def test_match_speed_lowers_foot_skate_on_a_stretched_path(tmp_path, monkeypatch):
     stage = _stage(tmp_path, [("walker", (0, 0, 0), 0.0, 0.0)])
     stage.GetRootLayer().Save()
-    monkeypatch.setattr(processor, "load_passes", lambda: None)
-    monkeypatch.setattr(processor, "PASSES", [(100, "stretch", _stretch_path), (200, "time", time_pass.time_pass)])
+    monkeypatch.setattr(processor, "PASSES", (Pass("stretch", _stretch_path), Pass("time", time_pass.run)))
     src = Usd.Stage.Open(stage.GetRootLayer().realPath)
     skate, speed = {}, {}
     for match in (False, True):
@@ -383,8 +381,7 @@ def test_match_speed_from_the_settings_prim_and_the_command_line(tmp_path, monke
     examples.define_mocap_prim(stage, "/Settings", "MocapSolveSettings")
     stage.GetPrimAtPath("/Settings").GetAttribute("matchSpeed").Set(True)
     stage.GetRootLayer().Save()
-    monkeypatch.setattr(processor, "load_passes", lambda: None)
-    monkeypatch.setattr(processor, "PASSES", [(100, "stretch", _stretch_path), (200, "time", time_pass.time_pass)])
+    monkeypatch.setattr(processor, "PASSES", (Pass("stretch", _stretch_path), Pass("time", time_pass.run)))
     matched = {}
     for flag in (None, "--no-match-speed", "--match-speed"):
         report = tmp_path / f"{flag}.json"

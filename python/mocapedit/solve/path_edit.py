@@ -53,6 +53,9 @@ from mocapedit.geometry import shape, trajectory
 from mocapedit.geometry.components import UnionFind
 
 HARD = np.inf
+#: Raised by a solve whose hard constraints cannot all hold; ``constraints`` names them, as
+#: (kind, index) pairs ('handle', 'link', 'rigid'), and ``mismatch`` says by how much they miss.
+ContradictionError = _solver.ContradictionError
 #: Weight of the soft terms that keep free agents' turn and scale (see ComponentProblem).
 GAUGE_WEIGHT = 0.01
 #: Target-space links: re-solve until the target headings change less than this (radians).
