@@ -6,7 +6,7 @@ lateral sway. Capsules are 0.3 m by 1.8 m, margin 0.05 m, one sample per frame.
 
 Figures, each beside a peer measured in the same run:
 - detection alone: the uniform grid (C++) against all pairs (C++, the same narrow phase)
-  and against the inspection's numpy grid (mocapedit.inspect.overlaps); at 10,000 agents the
+  and against a numpy grid over (time, cell) (overlaps_peer.py); at 10,000 agents the
   all-pairs peer runs on every tenth sample and is scaled up (it says so);
 - resolution per strategy: seconds to the end, iterations, overlaps left, mean and
   largest displacement, path length change, where the time went (factoring, detection,
@@ -16,8 +16,8 @@ Figures, each beside a peer measured in the same run:
   the rows the last solve pushed with, as hard equalities, both steps as one KKT system
   each (100 agents);
 - quality on a composed stage: the 128-walker crossing example solved with each strategy
-  and with steering alone (maxWait 0), measured with mocapedit.inspect.metrics by UsdSkel forward
-  kinematics (overlaps in the shot; root displacement, path length and foot skate against
+  and with steering alone (maxWait 0), measured with mocapedit.usd.evaluate and
+  mocapedit.tools.measure by UsdSkel forward kinematics (overlaps in the shot; root displacement, path length and foot skate against
   the source, over the shot and the 3 s after it in which walkers that waited finish).
 """
 from __future__ import annotations
@@ -32,8 +32,12 @@ import scipy.sparse.linalg as spla
 
 from mocapedit.solve import avoidance, collisions
 from mocapedit.data import examples
-from mocapedit.inspect import metrics, overlaps
+from mocapedit.inspect import metrics
+from mocapedit.tools import measure
+from mocapedit.usd import evaluate
 from mocapedit.pipeline.processor import solve
+
+import overlaps_peer
 
 FRAMES = 240
 DENSITY = 0.25          # agents per square metre
@@ -72,9 +76,9 @@ def _detection(ctx, problem: avoidance.Problem) -> dict:
         out["allPairsSeconds"] = round(brute_s * step, 4)
         out["allPairsExtrapolatedFromEvery"] = step
     out["speedupVsAllPairs"] = round(out["allPairsSeconds"] / grid_s, 1)
-    # The inspection's numpy grid finds the same overlapping (pair, sample) records.
+    # A numpy grid finds the same overlapping (pair, sample) records.
     pos = np.ascontiguousarray(s.positions.transpose(1, 0, 2))
-    numpy_s = ctx.best_of(lambda: overlaps.proximity(pos, radius + MARGIN / 2), repeat=1)
+    numpy_s = ctx.best_of(lambda: overlaps_peer.proximity(pos, radius + MARGIN / 2), repeat=1)
     out["numpyGridSeconds"] = round(numpy_s, 4)
     out["speedupVsNumpyGrid"] = round(numpy_s / grid_s, 1)
     return out
@@ -180,7 +184,7 @@ def _stage_quality(ctx) -> dict:
     # Beyond the shot's end by the longest wait: a walker that waited finishes its clip later.
     times = np.arange(src.GetStartTimeCode(), src.GetEndTimeCode() + 1.0 + 3.0 * src.GetTimeCodesPerSecond())
     shot = times <= src.GetEndTimeCode()
-    src_roots = metrics.agent_root_positions(src, agents, times)
+    src_roots = evaluate.agent_root_positions(src, agents, times)
     out = {}
     # The default (wait, then steer), each strategy, and steering alone (maxWait 0).
     steer_only = ctx.workdir / "collisions_crossing_steer_only.usda"
@@ -200,7 +204,7 @@ def _stage_quality(ctx) -> dict:
                        foot_locking=False)
         seconds = time.perf_counter() - t
         edited = Usd.Stage.Open(str(composed))
-        roots = metrics.agent_root_positions(edited, agents, times)
+        roots = evaluate.agent_root_positions(edited, agents, times)
         bases = roots[:, shot].copy()
         bases[..., 1] = 0.0
         sep = metrics.min_separation(bases, RADIUS, HEIGHT, "Y")
@@ -210,8 +214,8 @@ def _stage_quality(ctx) -> dict:
         moved = [a for a, d in zip(agents, disp.max(axis=1)) if d > 1e-6][:24]
         skate_src, skate_out = [], []
         for a in moved:
-            before = metrics.foot_skate(src, a)
-            after = metrics.foot_skate(edited, a)   # its own contacts: a wait moves them in time
+            before = measure.foot_skate(src, a)
+            after = measure.foot_skate(edited, a)   # its own contacts: a wait moves them in time
             skate_src.append(before.mean)
             skate_out.append(after.mean)
         out[label] = {

@@ -17,7 +17,7 @@ normal equations), measured in the same run on the same terms:
   agents x 500 frames tied by hard relative constraints (under 50 ms), each split as the
   single path is;
 - the example stages of ``example_stages/stages_path.py``, solved through ``solve``: the
-  path pass's time and, per edited agent, the foot skate (``metrics.foot_skate``, m/s,
+  path pass's time and, per edited agent, the foot skate (``measure.foot_skate``, m/s,
   measured over the source's contact frames) before and after, and the length ratio.
 
 Times are the best of many runs (solves: 500 or 2,000 runs; groups and relays: 41, whose
@@ -304,7 +304,7 @@ def _examples(ctx):
 
     from pxr import Usd
 
-    from mocapedit.inspect import metrics
+    from mocapedit.tools import measure
     from mocapedit.pipeline.processor import solve
     here = Path(__file__).resolve().parents[1] / "example_stages" / "stages_path.py"
     spec = importlib.util.spec_from_file_location("stages_path", here)
@@ -321,8 +321,8 @@ def _examples(ctx):
         for path, fig in sorted(result.report.agents.items()):
             if not fig.get("edited"):
                 continue
-            before = metrics.foot_skate(src, path)
-            after = metrics.foot_skate(edited, path, times=before.times, contact=before.contact)
+            before = measure.foot_skate(src, path)
+            after = measure.foot_skate(edited, path, times=before.times, contact=before.contact)
             agents[path] = {"footSkateSource": round(before.mean, 4), "footSkateEdited": round(after.mean, 4),
                             "lengthRatio": round(fig["lengthRatio"], 4)}
         skate = [a["footSkateEdited"] - a["footSkateSource"] for a in agents.values()]

@@ -51,12 +51,12 @@ def _build(ctx, agents: int, with_edits: bool) -> Path:
     stage = examples.build_crowd_stage(path, specs, up_axis="Y", meters_per_unit=1.0, fps=24.0,
                                        clips_dir=ctx.workdir / "clips31", clip_format="usdc")
     if with_edits:
-        from mocapedit.inspect import metrics
+        from mocapedit.usd import evaluate
         crowd = "/World/Crowd"
         for i in range(0, agents, agents // 100):
             a = f"{crowd}/agent_{i:04d}"
             t0 = specs[i].time_offset  # frame 0 plays at the agent's clip offset
-            p = metrics.agent_root_positions(stage, a, [t0, t0 + 239])
+            p = evaluate.agent_root_positions(stage, a, [t0, t0 + 239])
             examples.add_position_constraint(stage, f"/Edits/start_{i:04d}", a, 0, tuple(map(float, p[0])))
             end = p[1] + np.array([1.5, 0.0, -1.0])
             examples.add_position_constraint(stage, f"/Edits/end_{i:04d}", a, 239, tuple(map(float, end)))

@@ -14,7 +14,7 @@ import numpy as np
 from pxr import Sdf, Usd
 
 from mocapedit.data import examples
-from mocapedit.inspect import metrics
+from mocapedit.usd import evaluate
 
 CROWD = "/World/Crowd"
 
@@ -28,9 +28,9 @@ def demo_shot(out: Path) -> None:
         spec.loader.exec_module(module)
         module._zup_cm_stage(out, "usda")
     source = Usd.Stage.Open(str(crowd))
-    start = metrics.agent_root_positions(source, f"{CROWD}/agent_0000", [0.0])[0]
-    end = metrics.agent_root_positions(source, f"{CROWD}/agent_0000", [119.0])[0]
-    other = metrics.agent_root_positions(source, f"{CROWD}/agent_0001", [0.0])[0]
+    start = evaluate.agent_root_positions(source, f"{CROWD}/agent_0000", [0.0])[0]
+    end = evaluate.agent_root_positions(source, f"{CROWD}/agent_0000", [119.0])[0]
+    other = evaluate.agent_root_positions(source, f"{CROWD}/agent_0001", [0.0])[0]
     a = np.radians(30.0)
     turn = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
     bent = start[:2] + turn @ (end[:2] - start[:2])

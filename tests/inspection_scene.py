@@ -13,7 +13,9 @@ import numpy as np
 from pxr import Gf, Usd, UsdGeom
 
 from mocapedit.geometry import ground
+from mocapedit.model.report import ConstraintEntry
 from mocapedit.pipeline import processor
+from mocapedit.pipeline.passes import Pass
 from mocapedit.usd import schema
 from mocapedit.pipeline.processor import EditedPath
 
@@ -60,19 +62,17 @@ def drag_pass(ctx):
     g[:, 1] -= np.linspace(0.0, DRIFT, len(g))
     ctx.paths[MOVED] = EditedPath(ground=g, heading=traj.heading)
     up = ctx.data.info.up_axis
-    ctx.report.constraints.append({
-        "prim": "/Edits/here", "kind": "position", "agent": MOVED, "frame": 40, "target": None,
-        "targetFrame": None, "hard": True, "residual": 0.0, "met": True,
-        "position": ground.from_ground(g[40], 0.0, up).tolist()})
-    ctx.report.constraints.append({
-        "prim": "/Edits/rel", "kind": "relative", "agent": "/World/agent2", "frame": 20,
-        "target": "/World/agent3", "targetFrame": 20, "hard": False, "residual": 3.5, "met": False})
+    ctx.report.constraints.append(ConstraintEntry(
+        prim="/Edits/here", kind="position", agent=MOVED, frame=40, hard=True, residual=0.0, met=True,
+        position=ground.from_ground(g[40], 0.0, up).tolist()))
+    ctx.report.constraints.append(ConstraintEntry(
+        prim="/Edits/rel", kind="relative", agent="/World/agent2", frame=20,
+        target="/World/agent3", target_frame=20, hard=False, residual=3.5, met=False))
     entry = ctx.report.agent(MOVED)
-    entry["solver"] = "LDLT"
-    entry["notes"] = ["fell back to nothing: a test note"]
+    entry.solver = "LDLT"
+    entry.notes = ["fell back to nothing: a test note"]
     ctx.report.note("a run-wide note")
 
 
 def install_pass(monkeypatch, fn=drag_pass):
-    monkeypatch.setattr(processor, "load_passes", lambda: None)
-    monkeypatch.setattr(processor, "PASSES", [(100, "test-drag", fn)])
+    monkeypatch.setattr(processor, "PASSES", (Pass("test-drag", fn),))

@@ -35,23 +35,23 @@ def _modules():
         yield rel, path
 
 
+def _from_module(node: ast.ImportFrom, package: list[str]) -> str:
+    """The absolute module of a ``from ... import``, relative ones resolved against ``package``."""
+    if node.level:
+        base = package[:len(package) - (node.level - 1)]
+        return ".".join(base + ([node.module] if node.module else []))
+    return node.module or ""
+
+
 def _imports(path: Path) -> list[tuple[int, str]]:
     """(line, absolute dotted name) of every import in a module, relative ones resolved."""
-    rel = path.relative_to(PACKAGE.parent).with_suffix("")
-    parts = list(rel.parts)
-    package = parts[:-1] if parts[-1] != "__init__" else parts[:-1]
-    if parts[-1] == "__init__":
-        package = parts[:-1]
+    package = list(path.relative_to(PACKAGE.parent).with_suffix("").parts)[:-1]
     out = []
     for node in ast.walk(ast.parse(path.read_text(), str(path))):
         if isinstance(node, ast.Import):
             out += [(node.lineno, a.name) for a in node.names]
         elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package[:len(package) - (node.level - 1)]
-                module = ".".join(base + ([node.module] if node.module else []))
-            else:
-                module = node.module or ""
+            module = _from_module(node, package)
             names = [f"{module}.{a.name}" for a in node.names]
             # `from mocapedit import x` names a sub-package; `from pxr import Usd` names pxr.
             out += [(node.lineno, n) for n in names] if module in ("mocapedit", "") else [(node.lineno, module)]
@@ -85,18 +85,9 @@ def _violations() -> list[str]:
     return found
 
 
-# Crossings that remain from before the layers; each is being removed, none may be added.
-KNOWN_CROSSINGS = {
-    "cli/main.py", "inspect/metrics.py", "model/report.py", "pipeline/batch.py",
-    "pipeline/passes/path.py", "pipeline/passes/time.py", "pipeline/processor.py",
-    "solve/layering.py", "solve/path_edit.py", "solve/path_editor.py", "tools/tags.py",
-    "usd/bvh_usd.py",
-}
-
-
 def test_every_sub_package_keeps_to_its_layer():
     found = sorted(set(_violations()))
-    assert [v for v in found if v.split(":")[0] not in KNOWN_CROSSINGS] == []
+    assert found == []
 
 
 def test_every_sub_package_says_what_it_holds_and_may_import():
@@ -120,3 +111,58 @@ def test_the_rules_catch_a_crossing(tmp_path, monkeypatch):
     assert any("model/bad.py:2: imports mocapedit.solve" in f for f in found)
     assert any("loose.py" in f for f in found)
     assert not any("solve/ok.py" in f for f in found)
+
+
+def _private_uses(path: Path) -> list[str]:
+    """``from x import _name`` and ``x._name`` where ``x`` is another mocapedit module (the
+    compiled ``_solver`` and dunder names excepted)."""
+    rel = path.relative_to(PACKAGE.parent).with_suffix("")
+    parts = list(rel.parts)
+    package = parts[:-1]
+    this = ".".join(parts if parts[-1] != "__init__" else parts[:-1])
+    tree = ast.parse(path.read_text(), str(path))
+    modules: dict[str, str] = {}   # local name -> mocapedit module it is bound to
+    found = []
+
+    def private(name: str) -> bool:
+        return name.startswith("_") and not name.startswith("__") and name != "_solver"
+
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            module = _from_module(node, package)
+            if not module.startswith("mocapedit"):
+                continue
+            for a in node.names:
+                if private(a.name) and module != this:
+                    found.append(f"{path.relative_to(PACKAGE)}:{node.lineno}: imports {module}.{a.name}")
+                modules[a.asname or a.name] = f"{module}.{a.name}"
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.startswith("mocapedit") and a.asname:
+                    modules[a.asname] = a.name
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) \
+                and node.value.id in modules and private(node.attr) and modules[node.value.id] != this:
+            found.append(f"{path.relative_to(PACKAGE)}:{node.lineno}: uses {modules[node.value.id]}.{node.attr}")
+    return found
+
+
+def test_no_module_uses_another_modules_private_names():
+    found = [f for _, path in _modules() for f in _private_uses(path)]
+    assert found == []
+
+
+def test_the_private_check_catches_a_private_use(tmp_path, monkeypatch):
+    fake = tmp_path / "mocapedit"
+    (fake / "usd").mkdir(parents=True)
+    (fake / "tools").mkdir()
+    (fake / "usd" / "writer.py").write_text("def _over(): pass\nx = _over()\n")
+    (fake / "tools" / "bad.py").write_text("from mocapedit.usd import writer\nfrom mocapedit.usd.writer import _over\n"
+                                           "writer._over()\n")
+    (fake / "tools" / "ok.py").write_text("from mocapedit import _solver, __version__\n_solver.solve()\n")
+    monkeypatch.setattr(__import__(__name__), "PACKAGE", fake)
+    bad = _private_uses(fake / "tools" / "bad.py")
+    assert any("bad.py:2: imports mocapedit.usd.writer._over" in f for f in bad)
+    assert any("bad.py:3: uses mocapedit.usd.writer._over" in f for f in bad)
+    assert _private_uses(fake / "tools" / "ok.py") == []
+    assert _private_uses(fake / "usd" / "writer.py") == []

@@ -542,7 +542,7 @@ def build_additive_clip(reference: tuple, clip: tuple) -> tuple:
     Returns (F,J,3), (F,J,4), (F,J,3) float32: clip - reference, clip * inverse(reference)
     (normalised, w >= 0), clip / reference.
     """
-def capsule_clearance(*, dx: typing.SupportsFloat | typing.SupportsIndex, dy: typing.SupportsFloat | typing.SupportsIndex, radius_a: typing.SupportsFloat | typing.SupportsIndex, height_a: typing.SupportsFloat | typing.SupportsIndex, base_a: typing.SupportsFloat | typing.SupportsIndex, radius_b: typing.SupportsFloat | typing.SupportsIndex, height_b: typing.SupportsFloat | typing.SupportsIndex, base_b: typing.SupportsFloat | typing.SupportsIndex) -> float:
+def capsule_clearance(dx: typing.SupportsFloat | typing.SupportsIndex, dy: typing.SupportsFloat | typing.SupportsIndex, radius_a: typing.SupportsFloat | typing.SupportsIndex, height_a: typing.SupportsFloat | typing.SupportsIndex, base_a: typing.SupportsFloat | typing.SupportsIndex, radius_b: typing.SupportsFloat | typing.SupportsIndex, height_b: typing.SupportsFloat | typing.SupportsIndex, base_b: typing.SupportsFloat | typing.SupportsIndex) -> float:
     """
     Clearance between two vertical capsules whose ground positions differ by (dx, dy); negative when they overlap.
     """

@@ -121,7 +121,7 @@ MOCAPEDIT_BINDINGS(BindCollisions) {
       "brute_force: test all pairs at every sample instead of using the grid (the reference);\n"
       "watch_distance: when above margin, intervals below this clearance are also returned as 'near'.\n\n"
       "Returns a CollisionResult. Keyword arguments only.");
-  m.def("capsule_clearance", &mocapedit::CapsuleClearance, py::kw_only(), py::arg("dx"), py::arg("dy"), py::arg("radius_a"),
+  m.def("capsule_clearance", &mocapedit::CapsuleClearance, py::arg("dx"), py::arg("dy"), py::arg("radius_a"),
         py::arg("height_a"), py::arg("base_a"), py::arg("radius_b"), py::arg("height_b"), py::arg("base_b"),
         "Clearance between two vertical capsules whose ground positions differ by (dx, dy); "
         "negative when they overlap.");

@@ -11,6 +11,8 @@ from mocapedit.formats import bvh
 from mocapedit.usd import bvh_usd
 from mocapedit.data import examples
 from mocapedit.inspect import metrics
+from mocapedit.tools import measure
+from mocapedit.usd import evaluate
 from mocapedit.pipeline.processor import solve
 
 from conftest import SHARED_MOCAP
@@ -37,7 +39,7 @@ def _bent(tmp_path, name, unit, up, scale):
     stage.SetStartTimeCode(clip.GetStartTimeCode())
     stage.SetEndTimeCode(clip.GetEndTimeCode())
     stage.GetRootLayer().subLayerPaths.append("./clip.usda")
-    times, hips = metrics.joint_world_matrices(clip, agent)
+    times, hips = evaluate.joint_world_matrices(clip, agent)
     n = len(times)
     for k, (f, move) in enumerate({n // 4: (0.6, 0.4), n // 2: (-1.0, 0.8), 3 * n // 4: (0.7, -0.5)}.items()):
         at = metrics.to_ground(hips[f, 3, :3], up) + scale * np.array(move) / 0.01
@@ -53,7 +55,7 @@ def test_real_clips_bent_by_three_handles_never_spin(tmp_path, name, scale):
     shot, agent = _bent(tmp_path, name, *CLIPS[name], scale)
     result = solve(shot, output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"))
     assert all(c["residual"] < 1e-6 for c in result.report.constraints)
-    p = metrics.plausibility(Usd.Stage.Open(shot), Usd.Stage.Open(str(tmp_path / "c.usda")), agent)
+    p = measure.plausibility(Usd.Stage.Open(shot), Usd.Stage.Open(str(tmp_path / "c.usda")), agent)
     assert p.spin_frames == 0, p
     # At most 7 degrees per frame at 60 fps more than the source turns (tangent headings: 88 to 160).
     assert p.max_extra_facing_rate < 7.0 * 60.0, p
@@ -80,7 +82,7 @@ def test_a_group_of_real_walkers_turned_90_degrees_walks_round_the_corner(tmp_pa
     names = [f"/World/Crowd/m{r}{c}" for r in range(3) for c in range(2)]
     for p in names:
         stage.DefinePrim(p).GetReferences().AddReference("./walk.usda")
-    t, hips = metrics.joint_world_matrices(stage, names[0])
+    t, hips = evaluate.joint_world_matrices(stage, names[0])
     g = metrics.to_ground(hips[:, 3, :3], "Z")
     forward = (g[-1] - g[0]) / np.linalg.norm(g[-1] - g[0])
     side = np.array([-forward[1], forward[0]])
@@ -95,7 +97,7 @@ def test_a_group_of_real_walkers_turned_90_degrees_walks_round_the_corner(tmp_pa
     stage.GetRootLayer().Save()
     result = solve(str(tmp_path / "shot.usda"), output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"))
     assert max(c["residual"] for c in result.report.constraints) < 1e-6
-    figures = metrics.shot_plausibility(Usd.Stage.Open(str(tmp_path / "shot.usda")),
+    figures = measure.shot_plausibility(Usd.Stage.Open(str(tmp_path / "shot.usda")),
                                         Usd.Stage.Open(str(tmp_path / "c.usda")), names)
     assert figures[0].max_edit_turn == pytest.approx(90.0, abs=5.0)   # the leader turned the corner
     for f in figures:   # the rows behind follow, the last ones reaching the corner as the clip ends

@@ -13,7 +13,8 @@ from pxr import Usd, UsdValidation
 
 from mocapedit.tools import preview
 from mocapedit.model import report
-from mocapedit.usd import writer
+from mocapedit.usd import edits_format
+from mocapedit.usd.report_io import read_report
 from mocapedit.pipeline.processor import solve
 
 from conftest import REPO, run_cli
@@ -59,8 +60,8 @@ def test_guides_validate_and_show_every_agent(solved_examples):
 
 def test_report_reads_back_on_every_example(solved_examples):
     for stage_path, edits, _, result in solved_examples:
-        stored = report.load(str(edits))
-        assert stored.report.to_layer_dict() == json.loads(writer.report_text(result.report.to_layer_dict())), \
+        stored = read_report(str(edits))
+        assert stored.report.to_layer_dict() == json.loads(edits_format.report_text(result.report.to_layer_dict())), \
             stage_path.name
         text = report.format_text(stored, show_all=True)
         for agent in result.data.agents:

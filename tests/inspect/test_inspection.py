@@ -10,7 +10,9 @@ from pxr import Sdf, Usd, UsdGeom, UsdValidation
 from mocapedit.pipeline import guides
 from mocapedit.inspect import overlaps
 from mocapedit.model import report
-from mocapedit.usd import writer
+from mocapedit.model.report import ConstraintEntry
+from mocapedit.usd.report_io import read_report
+from mocapedit.usd import edits_format, writer
 from mocapedit.pipeline.processor import solve
 
 from conftest import run_cli, write_toy_stage
@@ -32,11 +34,11 @@ def _brute_force(pos, radii, reach, active):
     return rows
 
 
-@pytest.mark.parametrize("reach,chunk", [(0.0, 2_000_000), (1.5, 2_000_000), (0.5, 7)])
-def test_proximity_finds_exactly_the_pairs_a_brute_force_finds(monkeypatch, reach, chunk):
-    monkeypatch.setattr(overlaps, "CHUNK_SAMPLES", chunk)
+@pytest.mark.parametrize("reach", [0.0, 1.5, 0.5])
+def test_proximity_finds_exactly_the_pairs_a_brute_force_finds(reach):
     rng = np.random.default_rng(4)
     pos = rng.uniform(-6, 6, size=(30, 9, 2))
+    pos[rng.random((30, 9)) < 0.1] = np.nan       # absent at some samples
     radii = rng.uniform(0.2, 0.9, size=30)
     active = rng.random(30) > 0.15
     found = overlaps.proximity(pos, radii, reach, active)
@@ -157,7 +159,7 @@ def test_no_guides_writes_no_guide_geometry_but_keeps_the_report(tmp_path, monke
     result = solve(str(stage), output=str(tmp_path / "e.usda"), guides=False)
     layer = Sdf.Layer.FindOrOpen(str(tmp_path / "e.usda"))
     assert not layer.GetPrimAtPath("/MocapEdit/Guides").nameChildren
-    stored = report.load(str(tmp_path / "e.usda"))
+    stored = read_report(str(tmp_path / "e.usda"))
     assert stored.report.stats["remainingOverlaps"] == result.report.stats["remainingOverlaps"] >= 1
 
 
@@ -178,10 +180,10 @@ def test_collisions_reported_by_a_pass_are_shown_as_reported(tmp_path, monkeypat
     stage = write_toy_stage(tmp_path / "shot.usda", agents=2)
 
     def collisions(ctx):
-        ctx.report.stats["remainingOverlaps"] = 1
-        ctx.report.constraints.append({"prim": "/World/agent0", "kind": "collision", "agent": "/World/agent0",
-                                       "frame": 3, "target": "/World/agent1", "targetFrame": 3, "hard": False,
-                                       "residual": 0.2, "met": False, "position": [1.0, 2.0, 0.0]})
+        ctx.report.stats.remaining_overlaps = 1
+        ctx.report.constraints.append(ConstraintEntry(
+            prim="/World/agent0", kind="collision", agent="/World/agent0", frame=3, target="/World/agent1",
+            target_frame=3, hard=False, residual=0.2, met=False, position=[1.0, 2.0, 0.0]))
     install_pass(monkeypatch, collisions)
     result = solve(str(stage))
     pts = result.layer.GetAttributeAtPath("/MocapEdit/Guides/Collisions.points").default
@@ -204,7 +206,7 @@ def test_the_report_is_stored_in_the_layer_without_timings(scene):
 
 def test_report_reads_back_the_same_from_the_edits_and_the_composed_stage(scene):
     _, _, edits, composed = scene
-    a, b = report.load(str(edits)), report.load(str(composed))
+    a, b = read_report(str(edits)), read_report(str(composed))
     assert a.report.to_layer_dict() == b.report.to_layer_dict()
     assert a.meters_per_unit == 0.01 and a.up_axis == "Z"
 
@@ -254,23 +256,24 @@ def test_stored_report_is_deterministic_and_finite(tmp_path, monkeypatch):
     solve(str(stage), output=str(tmp_path / "a.usda"))
     solve(str(stage), output=str(tmp_path / "b.usda"))
     assert (tmp_path / "a.usda").read_bytes() == (tmp_path / "b.usda").read_bytes()
-    assert writer.report_text({"x": float("inf"), "y": [np.float32(1.5), float("nan")]}) == '{"x":null,"y":[1.5,null]}'
+    assert edits_format.report_text({"x": float("inf"), "y": [np.float32(1.5), float("nan")]}) == '{"x":null,"y":[1.5,null]}'
 
 
 @pytest.mark.parametrize("retimed", [False, True])
 def test_the_report_gives_the_foot_skate_of_moved_agents_source_and_edited(tmp_path, retimed):
     from mocapedit.data import examples, walker
-    from mocapedit.inspect import metrics
+    from mocapedit.tools import measure
+    from mocapedit.usd import evaluate
     walk = walker.walk(frames=48, name="walk")
     path = tmp_path / "shot.usda"
     examples.build_crowd_stage(path, [examples.AgentSpec("a0", walk, (0.0, 0.0, 0.0), 0.0),
                                       examples.AgentSpec("a1", walk, (3.0, 0.0, 0.0), 0.0)],
                                clips_dir=tmp_path / "clips")
     stage = Usd.Stage.Open(str(path))
-    start = metrics.agent_root_positions(stage, "/World/Crowd/a0", [0.0])[0]
+    start = evaluate.agent_root_positions(stage, "/World/Crowd/a0", [0.0])[0]
     examples.add_position_constraint(stage, "/Edits/start", "/World/Crowd/a0", 0, start)
     # The end pulled a metre sideways: the path bends and the feet slide more than the source's.
-    end = metrics.agent_root_positions(stage, "/World/Crowd/a0", [47.0])[0] + (1.0, 0.0, 0.0)
+    end = evaluate.agent_root_positions(stage, "/World/Crowd/a0", [47.0])[0] + (1.0, 0.0, 0.0)
     examples.add_position_constraint(stage, "/Edits/end", "/World/Crowd/a0", 47, end)
     if retimed:  # the pose is baked again on the shot's frames: measured by UsdSkel on both stages
         examples.add_time_constraint(stage, "/Edits/late", "/World/Crowd/a0", 47, 55.0)
@@ -280,15 +283,15 @@ def test_the_report_gives_the_foot_skate_of_moved_agents_source_and_edited(tmp_p
     result = solve(str(path), output=str(edits), composed=str(composed), foot_locking=False)
     moved, still = result.report.agents["/World/Crowd/a0"], result.report.agents["/World/Crowd/a1"]
     assert "footSkateSource" not in still and "footSkateEdited" not in still
-    source = metrics.foot_skate(Usd.Stage.Open(str(path)), "/World/Crowd/a0")
-    edited = metrics.foot_skate(Usd.Stage.Open(str(composed)), "/World/Crowd/a0") if retimed else \
-        metrics.foot_skate(Usd.Stage.Open(str(composed)), "/World/Crowd/a0", times=source.times,
+    source = measure.foot_skate(Usd.Stage.Open(str(path)), "/World/Crowd/a0")
+    edited = measure.foot_skate(Usd.Stage.Open(str(composed)), "/World/Crowd/a0") if retimed else \
+        measure.foot_skate(Usd.Stage.Open(str(composed)), "/World/Crowd/a0", times=source.times,
                            contact=source.contact)
     # The solve measures by forward kinematics in double precision, UsdSkel from float samples.
     assert moved["footSkateSource"] == pytest.approx(source.mean, rel=1e-4)
     assert moved["footSkateEdited"] == pytest.approx(edited.mean, rel=1e-4)
     assert moved["footSkateEdited"] > moved["footSkateSource"]
-    text = report.format_text(report.load(str(edits)))
+    text = report.format_text(read_report(str(edits)))
     assert f"foot skate {report._num(moved['footSkateSource'])} -> {report._num(moved['footSkateEdited'])}" in text
 
 

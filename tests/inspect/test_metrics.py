@@ -5,87 +5,9 @@ import math
 
 import numpy as np
 import pytest
-from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
+from pxr import Gf
 
 from mocapedit.inspect import metrics as M
-
-JOINTS = ["Root", "Root/Hips", "Root/Hips/LeftFoot", "Root/Hips/RightFoot"]
-
-
-# ---------------------------------------------------------------------------------------------
-# Stage builders
-# ---------------------------------------------------------------------------------------------
-
-
-def _new_stage(tmp_path, name, up="Y", tcps=24.0, mpu=1.0):
-    stage = Usd.Stage.CreateNew(str(tmp_path / name))
-    UsdGeom.SetStageUpAxis(stage, up)
-    UsdGeom.SetStageMetersPerUnit(stage, mpu)
-    stage.SetTimeCodesPerSecond(tcps)
-    return stage
-
-
-def _define_animation(stage, path, world, rotations=None, start=0.0):
-    """A SkelAnimation of the 4-joint skeleton whose joints reach ``world`` (T, 4, 3).
-
-    Without rotations every joint's world position is the sum of the translations down its chain,
-    so the local translations follow by subtraction from the parent.
-    """
-    world = np.asarray(world, dtype=np.float64)
-    anim = UsdSkel.Animation.Define(stage, path)
-    anim.CreateJointsAttr(JOINTS)
-    tr_attr, rot_attr, sc_attr = (anim.CreateTranslationsAttr(), anim.CreateRotationsAttr(),
-                                  anim.CreateScalesAttr())
-    parent = [None, 0, 1, 1]
-    for k in range(len(world)):
-        local = np.array([world[k, j] - (world[k, parent[j]] if parent[j] is not None else 0.0)
-                          for j in range(4)])
-        if rotations is not None:
-            local = rotations[k]["local"]
-        tr_attr.Set(Vt.Vec3fArray.FromNumpy(local.astype(np.float32)), start + k)
-        quats = [Gf.Quatf(1.0)] * 4 if rotations is None else rotations[k]["quats"]
-        rot_attr.Set(Vt.QuatfArray(quats), start + k)
-        sc_attr.Set(Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)] * 4), start + k)
-    return anim
-
-
-def _define_skeleton(stage, path, anim_path):
-    skel = UsdSkel.Skeleton.Define(stage, path)
-    skel.CreateJointsAttr(JOINTS)
-    ident = [Gf.Matrix4d(1.0)] * 4
-    skel.CreateRestTransformsAttr(ident)
-    skel.CreateBindTransformsAttr(ident)
-    UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim_path])
-    return skel
-
-
-def _build_agent(stage, root_path, world, bind_on_root=False):
-    """SkelRoot ``root_path`` holding Skeleton ``Skel`` bound to SkelAnimation ``Anim``."""
-    root = UsdSkel.Root.Define(stage, root_path)
-    anim = _define_animation(stage, f"{root_path}/Anim", world)
-    skel = _define_skeleton(stage, f"{root_path}/Skel", anim.GetPath())
-    if bind_on_root:
-        UsdSkel.BindingAPI.Apply(root.GetPrim()).CreateSkeletonRel().SetTargets([skel.GetPath()])
-    return root, skel
-
-
-def _walk(n, up, left, right, root_speed=0.0, hip_height=1.0):
-    """World joint positions (n, 4, 3) from ground paths and heights of the two feet.
-
-    ``left``/``right``: (n, 3) arrays of (ground u, ground v, height).
-    """
-    def place(g):
-        g = np.asarray(g, dtype=np.float64)
-        return M.from_ground(g[:, :2], g[:, 2], up)
-
-    k = np.arange(n, dtype=np.float64)
-    root = M.from_ground(np.stack((root_speed * k, np.zeros(n)), axis=1), 0.0, up)
-    hips = root + M.from_ground(np.zeros((n, 2)), hip_height, up)
-    return np.stack((root, hips, place(left), place(right)), axis=1)
-
-
-def _foot(n, u, v, h):
-    return np.stack([np.broadcast_to(np.asarray(c, float), (n,)) for c in (u, v, h)], axis=1)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -309,6 +231,8 @@ def test_min_separation_far_apart_and_degenerate_inputs():
         M.min_separation(np.zeros((2, 3)), 0.3, 1.8, "Y")
     with pytest.raises(ValueError):
         M.min_separation(np.zeros((2, 3, 3)), -0.3, 1.8, "Y")
+    with pytest.raises(ValueError):
+        M.min_separation(np.zeros((2, 3, 3)), 0.3, 0.0, "Y")
 
 
 def test_min_separation_is_exact_when_the_first_grid_is_too_fine():
@@ -343,11 +267,13 @@ def test_min_separation_matches_brute_force(up, seed):
     assert (sep.agents, sep.time_index) == (pair, t)
 
 
-def test_min_separation_in_small_chunks_matches_brute_force(monkeypatch):
-    # Dense crowds are evaluated in chunks of candidate pairs; tiny chunks must agree too.
+def test_min_separation_dense_crowd_in_runs_matches_brute_force():
+    # Samples are measured in runs with the same agents at the same elevations: a run of two,
+    # then one where an agent has left, then one where another stands higher.
     rng = np.random.default_rng(3)
     pos = M.from_ground(rng.uniform(0.0, 6.0, size=(80, 5, 2)), 0.0, "Y")
-    monkeypatch.setattr(M, "_PAIR_BUDGET", 7)
+    pos[7, 2:] = np.nan
+    pos[9, 3:, 1] = 0.7
     sep = M.min_separation(pos, 0.3, 1.8, "Y")
     best, (pair, t), overlaps = _brute_separation(pos, 0.3, 1.8, "Y")
     assert sep.clearance == pytest.approx(best, abs=1e-12)
@@ -393,7 +319,7 @@ def test_min_separation_many_agents_matches_brute_force():
 
 
 # ---------------------------------------------------------------------------------------------
-# Forward kinematics and foot skate on composed stages
+# Joint names (foot skate on stages: tests/tools/test_measure.py)
 # ---------------------------------------------------------------------------------------------
 
 
@@ -402,183 +328,6 @@ def test_default_foot_joints():
              "Root/Hips/LeftFoot/LeftToe_End", "Root/Hips/RightAnkle", "Root/Hips/End Site",
              "Root/Football/Spine", "Root/Hips/RIGHTFOOT"]
     assert M.default_foot_joints(names) == [2, 3, 5, 8]
-
-
-def test_joint_world_positions_forward_kinematics(tmp_path):
-    stage = _new_stage(tmp_path, "fk.usda", up="Y")
-    root = UsdSkel.Root.Define(stage, "/Agent")
-    UsdGeom.XformCommonAPI(root).SetTranslate(Gf.Vec3d(10.0, 0.0, 5.0))
-    q90 = Gf.Quatf(math.cos(math.pi / 4), 0.0, math.sin(math.pi / 4), 0.0)  # +90 deg about Y
-    frames = []
-    for k in range(3):
-        local = np.array([[k, 0, 0], [1, 1, 0], [0, -1, 0.2], [0, -1, -0.2]], dtype=float)
-        frames.append({"local": local, "quats": [q90, Gf.Quatf(1), Gf.Quatf(1), Gf.Quatf(1)]})
-    anim = _define_animation(stage, "/Agent/Anim", np.zeros((3, 4, 3)), rotations=frames)
-    _define_skeleton(stage, "/Agent/Skel", anim.GetPath())
-    pos = M.joint_world_positions(stage, "/Agent/Skel", [0, 1, 2])
-    assert pos.shape == (3, 4, 3)
-    for k in range(3):
-        root_w = np.array([10.0 + k, 0.0, 5.0])
-        hips = root_w + [0.0, 1.0, -1.0]  # (1, 1, 0) turned +90 deg about Y
-        np.testing.assert_allclose(pos[k, 0], root_w, atol=1e-5)
-        np.testing.assert_allclose(pos[k, 1], hips, atol=1e-5)
-        np.testing.assert_allclose(pos[k, 2], hips + [0.2, -1.0, 0.0], atol=1e-5)
-        np.testing.assert_allclose(pos[k, 3], hips + [-0.2, -1.0, 0.0], atol=1e-5)
-    # The SkelRoot resolves to the same skeleton; default times are the authored samples.
-    np.testing.assert_allclose(M.joint_world_positions(stage, "/Agent"), pos, atol=0)
-
-
-def test_agent_root_positions_single_and_batch(tmp_path):
-    stage = _new_stage(tmp_path, "roots.usda", up="Z")
-    n = 5
-    feet = _foot(n, 0.0, 0.1, 0.0)
-    for a in range(3):
-        _build_agent(stage, f"/Crowd/A{a}", _walk(n, "Z", feet, feet, root_speed=0.1 * (a + 1)))
-    paths = [f"/Crowd/A{a}" for a in range(3)]
-    batch = M.agent_root_positions(stage, paths, range(n))
-    assert batch.shape == (3, n, 3)
-    for a in range(3):
-        expect = np.stack((0.1 * (a + 1) * np.arange(n), np.zeros(n), np.zeros(n)), axis=1)
-        np.testing.assert_allclose(batch[a], expect, atol=1e-6)
-    one = M.agent_root_positions(stage, Sdf.Path("/Crowd/A2"), range(n), root_joint="Hips")
-    assert one.shape == (n, 3)
-    np.testing.assert_allclose(one[:, 2], 1.0, atol=1e-6)
-    with pytest.raises(ValueError, match="no joint named 'Neck'"):
-        M.agent_root_positions(stage, paths, range(n), root_joint="Neck")
-
-
-@pytest.mark.parametrize("up", ["Y", "Z"])
-def test_foot_skate_planted_feet_is_zero(tmp_path, up):
-    n = 20
-    stage = _new_stage(tmp_path, f"planted_{up}.usda", up=up, tcps=24.0)
-    # Left foot planted for 10 frames, then swings forward fast in the air; right foot planted.
-    u = np.where(np.arange(n) < 10, 0.2, 0.2 + 0.4 * (np.arange(n) - 9))
-    h = np.where(np.arange(n) < 10, 0.0, 0.5)
-    # Each foot has its own lowest height: the right one stays on a 0.3 high step.
-    left, right = _foot(n, u, 0.1, h), _foot(n, 0.5, -0.1, 0.3)
-    _build_agent(stage, "/Agent", _walk(n, up, left, right, root_speed=0.05))
-    skate = M.foot_skate(stage, "/Agent")
-    assert skate.joints == ("Root/Hips/LeftFoot", "Root/Hips/RightFoot")
-    np.testing.assert_allclose(skate.speeds, [0.0, 0.0], atol=1e-4)
-    assert skate.mean == pytest.approx(0.0, abs=1e-4)
-    np.testing.assert_array_equal(skate.contact[:, 0], np.arange(n) < 10)
-    assert skate.contact[:, 1].all()
-    np.testing.assert_allclose(skate.contact_seconds, [9 / 24.0, 19 / 24.0], rtol=1e-12)
-
-
-@pytest.mark.parametrize("up,tcps", [("Y", 30.0), ("Z", 24.0)])
-def test_foot_skate_sliding_foot_known_speed(tmp_path, up, tcps):
-    n, v = 24, 0.3  # slides at v units per second during contact
-    stage = _new_stage(tmp_path, f"slide_{up}.usda", up=up, tcps=tcps)
-    k = np.arange(n)
-    contact = k < 12
-    # Slides along ground v (so Y-up exercises the -z mapping), then flies off fast.
-    gv = np.where(contact, v * k / tcps, v * 11 / tcps + 5.0 * (k - 11) / tcps)
-    left = _foot(n, 0.1, gv, np.where(contact, 0.0, 0.4))
-    right = _foot(n, -0.1, 0.0, 0.0)
-    root, _ = _build_agent(stage, "/Agent", _walk(n, up, left, right))
-    # The agent stands on a floor 2 units up: contact is measured from the feet's lowest point.
-    UsdGeom.XformCommonAPI(root).SetTranslate(Gf.Vec3d(*M.from_ground([3.0, -1.0], 2.0, up)))
-    skate = M.foot_skate(stage, "/Agent/Skel")
-    np.testing.assert_allclose(skate.speeds, [v, 0.0], atol=1e-4)
-    assert skate.mean == pytest.approx(v * 11 / (11 + 23), abs=1e-4)
-    only_left = M.foot_skate(stage, "/Agent", foot_joints=["LeftFoot"])
-    assert only_left.mean == pytest.approx(v, abs=1e-4)
-
-
-def test_foot_skate_meters_per_unit_scales_default_threshold(tmp_path):
-    # Centimetre stage: the foot bobs 0..1.5 cm while sliding at 30 cm/s, then lifts to 8 cm and
-    # moves at 100 cm/s. The default 2 cm threshold must become 2 units.
-    n, tcps = 20, 25.0
-    stage = _new_stage(tmp_path, "cm.usda", up="Y", tcps=tcps, mpu=0.01)
-    k = np.arange(n)
-    contact = k < 10
-    h = np.where(contact, np.where(k % 2 == 0, 0.0, 1.5), 8.0)
-    gu = np.where(contact, 30.0 * k / tcps, 30.0 * 9 / tcps + 100.0 * (k - 9) / tcps)
-    left = _foot(n, gu, 10.0, h)
-    right = _foot(n, 0.0, -10.0, 0.0)
-    _build_agent(stage, "/Agent", _walk(n, "Y", left, right, hip_height=100.0))
-    skate = M.foot_skate(stage, "/Agent")
-    np.testing.assert_allclose(skate.speeds, [30.0, 0.0], atol=1e-3)
-    np.testing.assert_array_equal(skate.contact[:, 0], contact)
-    # An explicit threshold overrides the default: 1 unit keeps only the frames on the floor.
-    strict = M.foot_skate(stage, "/Agent", contact_height=1.0)
-    assert math.isnan(strict.speeds[0])
-    assert strict.mean == pytest.approx(0.0, abs=1e-3)
-    # A contact mask from elsewhere (the source stage) replaces the height test.
-    mask = np.zeros_like(skate.contact)
-    mask[12:, 0] = True
-    given = M.foot_skate(stage, "/Agent", contact=mask)
-    assert given.speeds[0] == pytest.approx(100.0, abs=1e-3)
-    with pytest.raises(ValueError, match="contact mask"):
-        M.foot_skate(stage, "/Agent", contact=mask[1:])
-
-
-def test_foot_skate_ignores_times_outside_the_clip(tmp_path):
-    # The clip (frames 0..9) plants both feet; after it the animation holds while the SkelRoot's
-    # own transform keeps moving: that is not a foot in contact within the clip.
-    n = 10
-    stage = _new_stage(tmp_path, "outside.usda", up="Y")
-    feet = _foot(n, 0.0, 0.1, 0.0)
-    root, _ = _build_agent(stage, "/Agent", _walk(n, "Y", feet, _foot(n, 0.3, 0.0, 0.0)))
-    op = UsdGeom.Xformable(root).AddTranslateOp()
-    for t in range(n, n + 6):
-        op.Set(Gf.Vec3d(0.5 * (t - n + 1), 0.0, 0.0), float(t))
-    op.Set(Gf.Vec3d(0.0, 0.0, 0.0), float(n - 1))
-    skate = M.foot_skate(stage, "/Agent", times=range(n + 6))
-    assert not skate.contact[n:].any()
-    np.testing.assert_allclose(skate.speeds, [0.0, 0.0], atol=1e-4)
-
-
-def test_foot_skate_composed_times_with_layer_offset_and_bound_skeleton(tmp_path):
-    n, tcps, v = 16, 24.0, 0.25
-    clip = Usd.Stage.CreateNew(str(tmp_path / "clip.usda"))
-    k = np.arange(n)
-    left = _foot(n, v * k / tcps, 0.0, 0.0)
-    world = _walk(n, "Y", left, _foot(n, 0.0, 0.3, 0.0))
-    _define_animation(clip, "/Anim", world)
-    clip.SetDefaultPrim(clip.GetPrimAtPath("/Anim"))
-    clip.Save()
-
-    stage = _new_stage(tmp_path, "shot.usda", up="Y", tcps=tcps)
-    root = UsdSkel.Root.Define(stage, "/Agent")
-    anim = stage.DefinePrim("/Agent/Anim")
-    anim.GetReferences().AddReference(
-        Sdf.Reference("./clip.usda", layerOffset=Sdf.LayerOffset(100.0)))
-    skel = _define_skeleton(stage, "/Agent/Skel", anim.GetPath())
-    # A second, unused skeleton: the agent's own binding picks the right one.
-    other = _define_skeleton(stage, "/Agent/Other", anim.GetPath())
-    other.CreateJointsAttr(["A"])
-    with pytest.raises(ValueError, match="several skeletons"):
-        M.foot_skate(stage, "/Agent")
-    UsdSkel.BindingAPI.Apply(root.GetPrim()).CreateSkeletonRel().SetTargets([skel.GetPath()])
-    skate = M.foot_skate(stage, "/Agent")
-    np.testing.assert_allclose(skate.times, 100.0 + k)
-    np.testing.assert_allclose(skate.speeds, [v, 0.0], atol=1e-4)
-
-
-def test_usd_errors_name_the_prim(tmp_path):
-    stage = _new_stage(tmp_path, "errors.usda")
-    with pytest.raises(ValueError, match="/Nope"):
-        M.foot_skate(stage, "/Nope")
-    stage.DefinePrim("/Empty", "Xform")
-    with pytest.raises(ValueError, match="/Empty: no Skeleton"):
-        M.joint_world_positions(stage, "/Empty", [0])
-    n = 4
-    world = _walk(n, "Y", _foot(n, 0, 0, 0), _foot(n, 0, 0, 0))
-    UsdSkel.Root.Define(stage, "/Agent")
-    anim = _define_animation(stage, "/Agent/Anim", world)
-    skel = _define_skeleton(stage, "/Agent/Skel", anim.GetPath())
-    skel.CreateJointsAttr(["Root", "Root/Hips", "Root/Hips/L", "Root/Hips/R"])
-    anim.CreateJointsAttr(["Root", "Root/Hips", "Root/Hips/L", "Root/Hips/R"])
-    with pytest.raises(ValueError, match="/Agent/Skel: no joint is named like a foot"):
-        M.foot_skate(stage, "/Agent")
-    static = UsdSkel.Root.Define(stage, "/Static")
-    sanim = UsdSkel.Animation.Define(stage, "/Static/Anim")
-    sanim.CreateJointsAttr(JOINTS)
-    _define_skeleton(stage, "/Static/Skel", sanim.GetPath())
-    with pytest.raises(ValueError, match="no time samples"):
-        M.foot_skate(stage, static.GetPath())
 
 
 # ---------------------------------------------------------------------------------------------
@@ -685,52 +434,3 @@ def test_default_facing_joint():
     assert M.default_facing_joint(["Root", "Root/Spine"]) == 0
 
 
-@pytest.fixture(scope="module")
-def walker_stage(tmp_path_factory):
-    from mocapedit.data import examples, walker
-    tmp = tmp_path_factory.mktemp("plausible")
-    clip = walker.walk(frames=96, fps=24.0, speed=1.3, name="straight")
-    stage = examples.build_crowd_stage(tmp / "shot.usda", [examples.AgentSpec("a", clip)], fps=24.0,
-                                       clips_dir=tmp / "clips")
-    stage.GetRootLayer().Save()
-    return stage.GetRootLayer().realPath
-
-
-def _turned(path, yaw_of_time):
-    """The stage at ``path`` with agent a turned about its origin by yaw_of_time(t) degrees."""
-    stage = Usd.Stage.Open(path)
-    stage.SetEditTarget(stage.GetSessionLayer())
-    op = UsdGeom.Xformable(stage.GetPrimAtPath("/World/Crowd/a")).AddRotateYOp(opSuffix="edit")
-    for t in range(96):
-        op.Set(float(yaw_of_time(t)), float(t))
-    return stage
-
-
-def test_plausibility_of_an_unedited_agent(walker_stage):
-    src = Usd.Stage.Open(walker_stage)
-    p = M.plausibility(src, _turned(walker_stage, lambda t: 0.0), "/World/Crowd/a")
-    assert abs(p.max_extra_facing_rate) < 1e-6 and p.spin_frames == 0 and not p.spins
-    assert p.max_direction_deviation < 1e-6 and not p.reverses
-    assert math.isclose(p.length_ratio, 1.0, rel_tol=1e-9)
-    assert p.time_warp == pytest.approx((1.0, 1.0))
-    assert math.isclose(p.foot_skate_ratio, 1.0, rel_tol=1e-6)
-    assert p.source_max_facing_rate < M.spin_threshold()
-
-
-def test_plausibility_catches_a_spin_and_a_reversal(walker_stage):
-    src = Usd.Stage.Open(walker_stage)
-    # One frame turns the body by 100 degrees (2,400 degrees per second at 24 fps): a spin, and the
-    # walk after it (turned about the start) goes off by 100 degrees.
-    p = M.plausibility(src, _turned(walker_stage, lambda t: 100.0 if t >= 50 else 0.0), "/World/Crowd/a")
-    assert p.spin_frames == 1 and p.spins
-    assert p.max_extra_facing_rate == pytest.approx(100.0 * 24.0, rel=0.05)
-    assert p.reverses and 95.0 < p.max_direction_deviation <= 180.0
-    # A constant turn of the whole agent is no spin, and its direction is off by that turn.
-    q = M.plausibility(src, _turned(walker_stage, lambda t: 30.0), "/World/Crowd/a")
-    assert q.spin_frames == 0 and abs(q.max_extra_facing_rate) < 1e-3
-    assert q.max_direction_deviation == pytest.approx(30.0, abs=1e-3)
-    assert q.length_ratio == pytest.approx(1.0, abs=1e-6)
-    worst = M.worst_plausibility([p, q])
-    assert worst["spinningAgents"] == 1 and worst["reversingAgents"] == 1
-    assert worst["maxExtraTurnPerFrameAt60fps"] == pytest.approx(p.max_extra_facing_rate / 60.0)
-    assert M.worst_plausibility([]) == {"agents": 0}

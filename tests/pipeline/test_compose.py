@@ -10,6 +10,7 @@ import pytest
 from pxr import Sdf, Usd
 
 from mocapedit.pipeline import processor
+from mocapedit.pipeline.passes import Pass
 from mocapedit.pipeline.processor import EditedPath, solve
 
 from conftest import world_joints, write_toy_stage
@@ -18,8 +19,7 @@ from conftest import world_joints, write_toy_stage
 @pytest.fixture
 def with_pass(monkeypatch):
     def install(fn):
-        monkeypatch.setattr(processor, "load_passes", lambda: None)
-        monkeypatch.setattr(processor, "PASSES", [(0, "test", fn)])
+        monkeypatch.setattr(processor, "PASSES", (Pass("test", fn),))
     return install
 
 
@@ -59,6 +59,12 @@ def test_a_turned_and_moved_path_moves_the_whole_body_rigidly(tmp_path, with_pas
                                world_joints(src, "/World/agent0/Skel", times), atol=1e-9)
 
 
+class _Lift:
+    def apply(self, pose, out_times, src_frames):
+        pose.translations[:, 1, 2] += 5.0
+        return pose
+
+
 def test_a_time_map_and_a_pose_edit_are_baked_on_shot_frames(tmp_path, with_pass):
     src_path = write_toy_stage(tmp_path / "s.usda", agents=1)
 
@@ -66,10 +72,7 @@ def test_a_time_map_and_a_pose_edit_are_baked_on_shot_frames(tmp_path, with_pass
         agent = ctx.data.agents["/World/agent0"]
         ctx.time_maps["/World/agent0"] = agent.sample_times * 2.0 + 10.0  # half speed, later
 
-        def lift(pose, times, frames):
-            pose.translations[:, 1, 2] += 5.0
-            return pose
-        ctx.pose_edits["/World/agent0"] = [lift]
+        ctx.pose_edits["/World/agent0"] = [_Lift()]
 
     with_pass(retime)
     result, out = _compose(tmp_path, src_path)
@@ -91,3 +94,15 @@ def test_a_time_map_and_a_pose_edit_are_baked_on_shot_frames(tmp_path, with_pass
     skel = layer.GetPrimAtPath("/World/agent0/Skel")
     assert skel.relationships["skel:animationSource"].targetPathList.explicitItems == \
         [Sdf.Path("/MocapEdit/Animations/World_agent0")]
+
+
+def test_the_passes_run_in_the_listed_order_and_time_each(tmp_path, monkeypatch):
+    from mocapedit.pipeline import passes
+    assert [p.name for p in processor.PASSES] == ["layering-check", "path", "time", "collisions", "layering",
+                                                  "foot locking"]
+    ran = []
+    monkeypatch.setattr(processor, "PASSES", tuple(
+        Pass(p.name, lambda ctx, p=p: (ran.append(p.name), p.run(ctx))) for p in reversed(passes.PASSES)))
+    result = solve(str(write_toy_stage(tmp_path / "s.usda", agents=2)))
+    assert ran == [p.name for p in reversed(passes.PASSES)], "the processor runs the list as it is, no sorting"
+    assert all(p.name in result.report.timings for p in passes.PASSES)

@@ -165,15 +165,15 @@ def test_python_api_accepts_an_open_stage(toy_stage):
 def test_walker_crowd_round_trip_keeps_foot_skate(tmp_path):
     """The generated walker crowd, solved without edits: the composed stage skates no more."""
     from mocapedit.data import examples, walker
-    from mocapedit.inspect import metrics
+    from mocapedit.tools import measure
 
     clip = walker.walk(frames=72, up="Z", meters_per_unit=0.01)
     stage_path = tmp_path / "crowd.usda"
     examples.build_crowd_stage(stage_path, [examples.AgentSpec("a", clip, (0, 0, 0), 30.0, time_offset=5.0)],
                                up_axis="Z", meters_per_unit=0.01, fps=24.0, clips_dir=tmp_path / "clips")
     solve(str(stage_path), output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"))
-    src = metrics.foot_skate(Usd.Stage.Open(str(stage_path)), "/World/Crowd/a")
-    out = metrics.foot_skate(Usd.Stage.Open(str(tmp_path / "c.usda")), "/World/Crowd/a",
+    src = measure.foot_skate(Usd.Stage.Open(str(stage_path)), "/World/Crowd/a")
+    out = measure.foot_skate(Usd.Stage.Open(str(tmp_path / "c.usda")), "/World/Crowd/a",
                              contact=src.contact, times=src.times)
     assert src.mean < 5.0, "the procedural walker plants its feet (cm/s)"
     assert out.mean == pytest.approx(src.mean, abs=1e-6)

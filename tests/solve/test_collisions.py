@@ -16,7 +16,10 @@ from mocapedit import _solver
 from mocapedit.solve import avoidance, collisions
 from mocapedit.data import examples, walker
 from mocapedit.inspect import metrics
+from mocapedit.tools import measure
+from mocapedit.usd import evaluate
 from mocapedit.model import report
+from mocapedit.usd.report_io import read_report
 from mocapedit.model.errors import MocapEditError
 from mocapedit.pipeline.processor import solve
 from mocapedit.model.progress import Progress
@@ -49,7 +52,7 @@ def _agents(stage):
 
 def _ground_roots(stage, agents, times):
     """(A, T, 3) world root positions with the up coordinate set to the ground (capsule bases)."""
-    pos = metrics.agent_root_positions(stage, agents, times)
+    pos = evaluate.agent_root_positions(stage, agents, times)
     pos[..., metrics.ground_axes(UsdGeom.GetStageUpAxis(stage))[0]] = 0.0
     return pos
 
@@ -123,8 +126,8 @@ def test_dense_crossing_of_128_walkers_ends_apart_and_keeps_the_marks(tmp_path):
         agent = str(mark.GetRelationship("agent").GetTargets()[0])
         frame = mark.GetAttribute("frame").Get()
         want = np.array(mark.GetAttribute("position").Get())
-        got = metrics.agent_root_positions(out, agent, [float(frame)])[0]
-        was = metrics.agent_root_positions(src, agent, [float(frame)])[0]
+        got = evaluate.agent_root_positions(out, agent, [float(frame)])[0]
+        was = evaluate.agent_root_positions(src, agent, [float(frame)])[0]
         assert np.linalg.norm((got - was)[[0, 2]]) < 1e-6, mark.GetPath()
         assert np.linalg.norm((got - want)[[0, 2]]) < 1e-6, mark.GetPath()
     assert result.report.stats["editedAgents"] > 50
@@ -139,9 +142,9 @@ def test_avoid_regions_end_with_no_agent_inside(tmp_path):
     agents = _agents(src)
     times = _shot_times(out)
     roots = {}
-    for a, pos in zip(agents, metrics.agent_root_positions(out, agents, times)):
+    for a, pos in zip(agents, evaluate.agent_root_positions(out, agents, times)):
         roots[a] = metrics.to_ground(pos, "Y")
-    src_roots = dict(zip(agents, (metrics.to_ground(p, "Y") for p in metrics.agent_root_positions(src, agents, times))))
+    src_roots = dict(zip(agents, (metrics.to_ground(p, "Y") for p in evaluate.agent_root_positions(src, agents, times))))
     entered = 0
     for region in data.avoid_regions:
         footprint = collisions.region_footprint(region, "Y")
@@ -198,8 +201,8 @@ def test_scene_ends_apart_without_loops_or_detours(tmp_path, scene, length_chang
     assert result.report.stats["regionFramesLeft"] == 0
     wait = result.report.stats.get("largestDelay", 0.0)
     times = np.arange(src.GetStartTimeCode(), src.GetEndTimeCode() + np.ceil(wait * FPS) + 1.0)
-    g0 = metrics.to_ground(metrics.agent_root_positions(src, agents, times), "Y")
-    g1 = metrics.to_ground(metrics.agent_root_positions(out, agents, times), "Y")
+    g0 = metrics.to_ground(evaluate.agent_root_positions(src, agents, times), "Y")
+    g1 = metrics.to_ground(evaluate.agent_root_positions(out, agents, times), "Y")
     deviation = _walking_deviation(g0, g1, FPS)
     assert deviation.max() < 90.0, agents[int(np.argmax(deviation))]
     ratio = np.array([metrics.length_ratio(b, a) for a, b in zip(g0, g1)])
@@ -242,7 +245,7 @@ def _crossing_pair(tmp_path, settings=None):
 
 
 def _foot_skate_ratio(src, out, agent):
-    return metrics.foot_skate(out, agent).mean / metrics.foot_skate(src, agent).mean
+    return measure.foot_skate(out, agent).mean / measure.foot_skate(src, agent).mean
 
 
 def test_the_later_walker_waits_instead_of_stepping_aside(tmp_path):
@@ -261,8 +264,8 @@ def test_the_later_walker_waits_instead_of_stepping_aside(tmp_path):
     # point it passes lies on the source path, and it reaches the end of it after the shot.
     times = np.arange(0.0, 120.0 + 24.0 * 3)
     for agent in agents:
-        g0 = metrics.to_ground(metrics.agent_root_positions(src, agent, times), "Y")
-        g1 = metrics.to_ground(metrics.agent_root_positions(out, agent, times), "Y")
+        g0 = metrics.to_ground(evaluate.agent_root_positions(src, agent, times), "Y")
+        g1 = metrics.to_ground(evaluate.agent_root_positions(out, agent, times), "Y")
         off_path = np.min(np.linalg.norm(g1[:, None] - g0[None], axis=2), axis=1)
         assert off_path.max() < 0.03, agent
         assert abs(metrics.length_ratio(g1, g0) - 1.0) < 1e-3, agent
@@ -331,15 +334,15 @@ def test_stationary_range_moves_rigidly_and_pins_hold(tmp_path):
     assert result.report.stats["remainingOverlaps"] == 0
     src = Usd.Stage.Open(str(tmp_path / "s.usda"))
     frames = np.arange(160.0)
-    a_src = metrics.to_ground(metrics.agent_root_positions(src, "/World/Crowd/agent_0000", frames), "Y")
-    a_out = metrics.to_ground(metrics.agent_root_positions(out, "/World/Crowd/agent_0000", frames), "Y")
+    a_src = metrics.to_ground(evaluate.agent_root_positions(src, "/World/Crowd/agent_0000", frames), "Y")
+    a_out = metrics.to_ground(evaluate.agent_root_positions(out, "/World/Crowd/agent_0000", frames), "Y")
     assert metrics.rigidity_error(a_src, a_out, [pause])[0] < 1e-6
     for c in result.data.position_constraints:
-        root = metrics.agent_root_positions(out, c.agent, [float(c.frame)])[0]
+        root = evaluate.agent_root_positions(out, c.agent, [float(c.frame)])[0]
         assert np.linalg.norm((root - c.position)[[0, 2]]) < 1e-6, c.path
     moved = np.abs(a_out - a_src).max() + np.abs(
-        metrics.agent_root_positions(out, "/World/Crowd/agent_0001", frames) -
-        metrics.agent_root_positions(src, "/World/Crowd/agent_0001", frames)).max()
+        evaluate.agent_root_positions(out, "/World/Crowd/agent_0001", frames) -
+        evaluate.agent_root_positions(src, "/World/Crowd/agent_0001", frames)).max()
     assert moved > 0.1
 
 
@@ -379,8 +382,8 @@ def test_a_pair_a_link_holds_closer_than_their_clearance_is_left_there_and_named
              ("agent_0002", walk, (-3.3, 0.0, 3.9), 90.0, 40.0)]
     stage = _walker_stage(tmp_path / "s.usda", specs, frames=140)
     meet = 68
-    a0 = metrics.agent_root_positions(stage, "/World/Crowd/agent_0000", [float(meet)])[0]
-    a1 = metrics.agent_root_positions(stage, "/World/Crowd/agent_0001", [float(meet)])[0]
+    a0 = evaluate.agent_root_positions(stage, "/World/Crowd/agent_0000", [float(meet)])[0]
+    a1 = evaluate.agent_root_positions(stage, "/World/Crowd/agent_0001", [float(meet)])[0]
     examples.add_relative_constraint(stage, "/World/Handshake", "/World/Crowd/agent_0000", meet,
                                      "/World/Crowd/agent_0001", meet, tuple(float(v) for v in a0 - a1))
     stage.GetRootLayer().Save()
@@ -402,8 +405,8 @@ def test_a_pair_a_link_holds_closer_than_their_clearance_is_left_there_and_named
     assert sep.clearance >= 0.05 - 1e-4
     # The held pair is not pushed around the hold: the handshake stays where it was and
     # neither walker turns off its way.
-    g0 = metrics.to_ground(metrics.agent_root_positions(src, agents, times), "Y")
-    g1 = metrics.to_ground(metrics.agent_root_positions(out, agents, times), "Y")
+    g0 = metrics.to_ground(evaluate.agent_root_positions(src, agents, times), "Y")
+    g1 = metrics.to_ground(evaluate.agent_root_positions(out, agents, times), "Y")
     assert _walking_deviation(g0[:2], g1[:2], FPS).max() < 45.0
     k = int(np.searchsorted(times, meet))
     assert np.abs(g1[:2, k - 12:k + 13] - g0[:2, k - 12:k + 13]).max() < 0.05
@@ -477,7 +480,7 @@ def test_progress_notes_summary_and_report_give_the_same_figures(tmp_path):
     summary = result.report.summary()
     shared = report.overview(stats, result.report.constraints)
     assert f"collision avoidance: {left} after 1 iteration" in shared
-    text = report.format_text(report.load(str(edits)))
+    text = report.format_text(read_report(str(edits)))
     for line in shared:
         assert line in summary.splitlines() and line in text.splitlines()
     # The worst residual printed is that of the hard constraints, never a soft collision row.
@@ -550,7 +553,7 @@ def _pin_in_fountain(tmp_path, strength="hard"):
     vt = Sdf.ValueTypeNames
     examples.define_mocap_prim(stage, "/World/Regions/fountain", "MocapAvoidRegion", attributes={
         "shape": (vt.Token, "circle"), "radius": (vt.Double, 1.0), "margin": (vt.Double, 0.1)})
-    where = metrics.agent_root_positions(stage, "/World/Crowd/agent_0000", [60.0])[0]
+    where = evaluate.agent_root_positions(stage, "/World/Crowd/agent_0000", [60.0])[0]
     examples.add_position_constraint(stage, "/World/Marks/in_fountain", "/World/Crowd/agent_0000", 60,
                                      (float(where[0]), 0.0, float(where[2])), strength=strength)
     stage.GetRootLayer().Save()
@@ -708,6 +711,6 @@ def test_a_standing_agent_pushed_aside_does_not_spin(tmp_path):
     assert result.report.stats["remainingOverlaps"] == 0
     stander = "/World/Crowd/stander"
     assert result.report.agents[stander]["edited"]
-    measured = metrics.plausibility(Usd.Stage.Open(str(tmp_path / "shot.usda")), out, stander)
+    measured = measure.plausibility(Usd.Stage.Open(str(tmp_path / "shot.usda")), out, stander)
     assert measured.spin_frames == 0
     assert measured.max_extra_facing_rate < 5.0 * 60.0     # under 5 degrees per frame at 60 fps

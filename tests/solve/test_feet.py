@@ -11,7 +11,8 @@ from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
 from mocapedit.geometry import contacts
 from mocapedit.data import examples, walker
 from mocapedit.solve import footlock
-from mocapedit.inspect import metrics
+from mocapedit.tools import measure
+from mocapedit.usd import evaluate
 from mocapedit.model.errors import MocapEditError
 from mocapedit.solve.layering import trs_from_matrices
 from mocapedit.pipeline.processor import solve
@@ -47,15 +48,7 @@ def _solve(tmp_path, name="out", **kw):
 
 def _fk(stage, agent, times):
     """(world matrices (T,J,4,4), local matrices (T,J,4,4), joint names) by UsdSkel."""
-    cache = UsdSkel.Cache()
-    skel = metrics._Skel(stage, agent, cache)
-    world, local = [], []
-    xfc = UsdGeom.XformCache()
-    for t in times:
-        xfc.SetTime(Usd.TimeCode(float(t)))
-        world.append(np.array(skel.query.ComputeJointWorldTransforms(xfc)))
-        local.append(np.array(skel.query.ComputeJointLocalTransforms(Usd.TimeCode(float(t)))))
-    return np.array(world), np.array(local), skel.joints
+    return evaluate.joint_transforms(stage, agent, times)
 
 
 def _leg_quality(src, out, agent, times, leg_names, fps, unlocked=None):
@@ -229,15 +222,15 @@ def test_a_bent_path_keeps_the_planted_feet_where_they_are(tmp_path, walk_clip):
     locked, out = _solve(tmp_path, "locked")
     src = Usd.Stage.Open(str(tmp_path / "shot.usda"))
     feet = ["LeftFoot", "LeftToe", "RightFoot", "RightToe"]
-    source = metrics.foot_skate(src, a, foot_joints=feet)
-    before = metrics.foot_skate(free_stage, a, times=source.times, foot_joints=feet, contact=source.contact)
-    after = metrics.foot_skate(out, a, times=source.times, foot_joints=feet, contact=source.contact)
+    source = measure.foot_skate(src, a, foot_joints=feet)
+    before = measure.foot_skate(free_stage, a, times=source.times, foot_joints=feet, contact=source.contact)
+    after = measure.foot_skate(out, a, times=source.times, foot_joints=feet, contact=source.contact)
     assert before.mean > source.mean + 0.02          # the edit alone slides the feet
     assert after.mean <= source.mean + 0.005         # locked: the source's skate, within 0.5 cm/s
     bones, flips, speed = _leg_quality(src, out, a, source.times, LEGS, FPS, unlocked=free_stage)
     assert bones < 1e-6 and flips == 0 and speed < 1.5
     # No foot goes below the ground it stood on.
-    heights = [metrics.joint_world_positions(st, a, source.times)[..., 1] for st in (src, out)]
+    heights = [evaluate.joint_world_positions(st, a, source.times)[..., 1] for st in (src, out)]
     ankles = [walk_clip.joint_index(n) for n in ("LeftFoot", "RightFoot", "LeftToe", "RightToe")]
     assert np.all(heights[1][:, ankles] >= heights[0][:, ankles].min(axis=0) - 1e-6)
     # The constraints still hold.
@@ -331,9 +324,9 @@ def test_a_real_walk_edited_by_a_handle_keeps_its_feet(tmp_path):
     stage = Usd.Stage.Open(str(tmp_path / "clip.usda"))
     agent = next(p for p in stage.Traverse() if "MocapAgentAPI" in p.GetAppliedSchemas())
     a = str(agent.GetPath())
-    frames = metrics._Skel(stage, a).sample_times
+    frames = evaluate.sample_times(stage, a)
     mid = len(frames) // 2
-    root = metrics.agent_root_positions(stage, a, frames[[0, mid, -1]])
+    root = evaluate.agent_root_positions(stage, a, frames[[0, mid, -1]])
     shot = Sdf.Layer.CreateNew(str(tmp_path / "shot.usda"))
     shot.subLayerPaths = ["clip.usda"]
     clip_layer = stage.GetRootLayer()   # a stage follows its root layer's time and units
@@ -349,8 +342,8 @@ def test_a_real_walk_edited_by_a_handle_keeps_its_feet(tmp_path):
         examples.add_position_constraint(shot_stage, f"/Edits/c{k}", a, int(f), p + (side if k == 1 else 0))
     shot_stage.GetRootLayer().Save()
     result, out = _solve(tmp_path)
-    source = metrics.foot_skate(shot_stage, a)
-    after = metrics.foot_skate(out, a, times=source.times, foot_joints=list(source.joints), contact=source.contact)
+    source = measure.foot_skate(shot_stage, a)
+    after = measure.foot_skate(out, a, times=source.times, foot_joints=list(source.joints), contact=source.contact)
     mpu = UsdGeom.GetStageMetersPerUnit(shot_stage)
     assert (after.mean - source.mean) * mpu <= 0.005, (source.mean, after.mean, up)
     assert result.report.agents[a]["footContactsLocked"] > 0
@@ -393,7 +386,7 @@ def test_a_dragged_idle_drags_the_plant_along_without_a_pop(tmp_path):
     entry = result.report.agents[a]
     assert entry["maxFootCorrection"] <= 0.08 + 1e-9          # the leash: legs never strained further
     src = Usd.Stage.Open(str(tmp_path / "shot.usda"))
-    times = metrics._Skel(src, a).sample_times
+    times = evaluate.sample_times(src, a)
     bones, flips, speed = _leg_quality(src, out, a, times, LEGS, FPS, unlocked=free)
     assert bones < 1e-6 and flips == 0 and speed < 1.5
     assert entry["footSkateEdited"] < entry["footSkateUnlocked"]
@@ -406,9 +399,9 @@ def test_a_z_up_centimetre_stage_at_60_fps_with_a_time_offset(tmp_path):
         tmp_path / "shot.usda", [examples.AgentSpec("a", clip, (300.0, -200.0, 0.0), yaw=30.0, time_offset=12.0)],
         up_axis="Z", meters_per_unit=0.01, fps=fps, clips_dir=tmp_path / "clips")
     a = f"{CROWD}/a"
-    times = metrics._Skel(stage, a).sample_times
+    times = evaluate.sample_times(stage, a)
     assert times[0] == 12.0
-    root = metrics.agent_root_positions(stage, a, times[[0, 240, 480]])
+    root = evaluate.agent_root_positions(stage, a, times[[0, 240, 480]])
     for k, (f, p) in enumerate(zip((0, 240, 480), root)):
         examples.add_position_constraint(stage, f"/Edits/c{k}", a, f, p + (np.array([120.0, 0.0, 0.0]) if k == 1 else 0))
     stage.GetRootLayer().Save()
@@ -416,9 +409,9 @@ def test_a_z_up_centimetre_stage_at_60_fps_with_a_time_offset(tmp_path):
     result, out = _solve(tmp_path)
     src = Usd.Stage.Open(str(tmp_path / "shot.usda"))
     feet = ["LeftFoot", "LeftToe", "RightFoot", "RightToe"]
-    source = metrics.foot_skate(src, a, foot_joints=feet)
-    before = metrics.foot_skate(free, a, times=source.times, foot_joints=feet, contact=source.contact)
-    after = metrics.foot_skate(out, a, times=source.times, foot_joints=feet, contact=source.contact)
+    source = measure.foot_skate(src, a, foot_joints=feet)
+    before = measure.foot_skate(free, a, times=source.times, foot_joints=feet, contact=source.contact)
+    after = measure.foot_skate(out, a, times=source.times, foot_joints=feet, contact=source.contact)
     assert before.mean > source.mean + 2.0                       # cm/s
     assert after.mean <= source.mean + 0.5
     bones, flips, speed = _leg_quality(src, out, a, source.times, LEGS, fps, unlocked=free)
@@ -434,7 +427,7 @@ def test_an_edit_that_keeps_the_feet_planted_is_not_locked_nor_baked(tmp_path, w
     stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", walk_clip)], up_axis="Y",
                                        fps=FPS, clips_dir=tmp_path / "clips")
     a = f"{CROWD}/a"
-    start, middle, end = metrics.agent_root_positions(stage, a, [0.0, 96.0, 192.0])
+    start, middle, end = evaluate.agent_root_positions(stage, a, [0.0, 96.0, 192.0])
     for name, frame, where in (("start", 0, start), ("middle", 96, middle + (0.25, 0.0, 0.0)), ("end", 192, end)):
         examples.add_position_constraint(stage, f"/Edits/{name}", a, frame, tuple(map(float, where)))
     stage.GetRootLayer().Save()

@@ -15,7 +15,8 @@ from mocapedit.solve import layering
 from mocapedit.pipeline import processor
 from mocapedit.usd import schema
 from mocapedit.model.errors import MocapEditError
-from mocapedit.pipeline.passes.layering import layering_pass
+from mocapedit.pipeline.passes import Pass
+from mocapedit.pipeline.passes.layering import run as run_layering
 from mocapedit.pipeline.processor import EditedPath, solve
 
 from conftest import REPO, run_cli, world_joints
@@ -355,8 +356,7 @@ def test_layers_on_many_agents_share_data_and_unchanged_agents_are_not_written(t
 @pytest.fixture
 def passes(monkeypatch):
     def install(*fns):
-        monkeypatch.setattr(processor, "load_passes", lambda: None)
-        monkeypatch.setattr(processor, "PASSES", list(fns))
+        monkeypatch.setattr(processor, "PASSES", tuple(Pass(*p) for p in fns))
     return install
 
 
@@ -381,12 +381,10 @@ def test_layering_with_path_and_time_edits_equals_the_steps_by_hand(tmp_path, pa
     def retime(ctx):
         ctx.time_maps[agent_path] = ctx.data.agents[agent_path].sample_times * 1.5 + 4.0
 
-    chosen = [(400, "layering", layering_pass)]
-    if path_edit:
-        chosen.insert(0, (100, "path", move))
+    chosen = [("path", move)] if path_edit else []
     if time_edit:
-        chosen.insert(0, (200, "time", retime))
-    passes(*chosen)
+        chosen.append(("time", retime))
+    passes(*chosen, ("layering", run_layering))
     result, out = compose(tmp_path, stage)
 
     # By hand: 1. the shot times and the source frame played at each.
@@ -635,9 +633,8 @@ def test_a_layer_clip_from_another_rig_stops_the_solve_before_any_other_pass(tmp
     add_layer(stage, "/Layers/L", ["/World/Crowd/a0"], "/Layers/Alien")
     stage.GetRootLayer().Save()
     ran = []
-    processor.load_passes()
-    monkeypatch.setattr(processor, "PASSES", [
-        (order, name, lambda ctx, fn=fn, name=name: (ran.append(name), fn(ctx))) for order, name, fn in processor.PASSES])
+    monkeypatch.setattr(processor, "PASSES", tuple(
+        Pass(p.name, lambda ctx, p=p: (ran.append(p.name), p.run(ctx))) for p in processor.PASSES))
     with pytest.raises(MocapEditError, match=r"</Layers/L>\.animation: layer clip </Layers/Alien> shares no joint"):
         solve(str(path), output=str(tmp_path / "e.usda"), collisions=True)
     assert ran == ["layering-check"], "path edits, time warp and collision avoidance must not run first"

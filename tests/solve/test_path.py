@@ -15,6 +15,7 @@ from mocapedit.inspect import metrics
 from mocapedit.model.errors import MocapEditError
 from mocapedit.solve.path_editor import PathEditor
 from mocapedit.pipeline.processor import solve
+from mocapedit.usd import reader
 
 from conftest import run_cli, world_joints, write_toy_stage
 
@@ -355,7 +356,7 @@ def test_contradicting_hard_constraints_through_a_stationary_range(tmp_path, sto
 def test_path_editor_drags_without_refactoring(tmp_path, walk_clip):
     stage = _stage(tmp_path, [examples.AgentSpec("a", walk_clip)])
     a = f"{CROWD}/a"
-    editor = PathEditor.for_agent(stage, a, [0, 96, 192])
+    editor = PathEditor.for_agent(reader.read_stage(stage), a, [0, 96, 192])
     assert editor.solver == "rigid"
     np.testing.assert_allclose(editor.ground[96], [0.0, -5.0], atol=1e-6)
     factor = editor.problem.data

@@ -10,6 +10,8 @@ from pxr import Sdf, Usd
 from mocapedit.data import examples, walker
 from mocapedit.geometry import ground, trajectory
 from mocapedit.inspect import metrics
+from mocapedit.tools import measure
+from mocapedit.usd import evaluate
 from mocapedit.solve import path_edit
 from mocapedit.model.errors import MocapEditError
 from mocapedit.pipeline.processor import solve
@@ -167,13 +169,13 @@ def test_a_formation_turned_by_one_edit_keeps_its_neighbours(tmp_path):
     # The frames between key frames turn smoothly through the keys: the feet slide by
     # 0.075 m/s more than in the source on average (one similarity per interval, turning
     # at each key: 0.094 m/s).
-    skate = [metrics.foot_skate(out, n).mean - metrics.foot_skate(src, n).mean for n in names]
+    skate = [measure.foot_skate(out, n).mean - measure.foot_skate(src, n).mean for n in names]
     assert np.mean(skate) < 0.085
     # The turn is the artist's: no member walks back against it. Handles at the corner and at
     # the end level with it make the leader's rounded corner overshoot (its walk deviates by
     # more than 90 degrees from the unturned source), but against the turn the edit makes every
     # member's walk stays within 45 degrees, and none turns round (a loop).
-    figures = metrics.shot_plausibility(src, out, names)
+    figures = measure.shot_plausibility(src, out, names)
     assert figures[lead].max_direction_deviation > 90.0
     assert max(f.max_turned_deviation for f in figures) < 45.0
     assert max(f.max_edit_turn for f in figures) < metrics.REVERSE_TURN_DEGREES
@@ -193,7 +195,7 @@ def test_an_edit_that_sends_a_walker_back_is_a_reversal(tmp_path, walk_clip):
     examples.add_position_constraint(stage, "/Edits/back", agent, 120, (0.5, 0.0, z[60] - 1.0))
     result, src, out = _solve(tmp_path, stage)
     assert max(c["residual"] for c in result.report.constraints) < 1e-6
-    p = metrics.plausibility(src, out, agent)
+    p = measure.plausibility(src, out, agent)
     assert p.reverses and p.max_direction_deviation > 150.0
     assert p.max_edit_turn > metrics.REVERSE_TURN_DEGREES   # sent back: turned by about 180 degrees
     assert result.report.stats["plausibility"]["reversingAgents"] == 1
@@ -330,8 +332,8 @@ def test_example_edits_keep_foot_skate_low(tmp_path, builder, stage):
     edited = [a for a, e in result.report.agents.items() if e.get("edited")]
     assert edited
     for agent in edited:
-        before = metrics.foot_skate(src, agent)
-        after = metrics.foot_skate(out, agent, times=before.times, contact=before.contact)
+        before = measure.foot_skate(src, agent)
+        after = measure.foot_skate(out, agent, times=before.times, contact=before.contact)
         assert after.mean - before.mean < 0.04, f"{agent}: {before.mean:.3f} -> {after.mean:.3f} m/s"
 
 
@@ -348,7 +350,7 @@ def test_a_long_stand_bent_by_handles_turns_the_body_smoothly(tmp_path):
     agent = f"{CROWD}/stander"
     for c in result.report.constraints:
         assert c["residual"] < 1e-6, c
-    p = metrics.plausibility(src, out, agent)
+    p = measure.plausibility(src, out, agent)
     # The solve reports the same figures as UsdSkel FK on the composed stage gives.
     reported = result.report.agents[agent]["plausibility"]
     assert reported["maxExtraFacingRate"] == pytest.approx(p.max_extra_facing_rate, abs=0.5)
@@ -363,8 +365,8 @@ def test_a_long_stand_bent_by_handles_turns_the_body_smoothly(tmp_path):
     assert p.foot_skate_ratio < 1.5
     # The stand turns with the handle inside it: by about the bend there, in one smooth sweep.
     _, (first, last) = stages.long_stand_clip()
-    t, ms = metrics.joint_world_matrices(src, agent)
-    _, me = metrics.joint_world_matrices(out, agent)
+    t, ms = evaluate.joint_world_matrices(src, agent)
+    _, me = evaluate.joint_world_matrices(out, agent)
     turn = np.degrees(metrics.body_facing(me, "Z") - metrics.body_facing(ms, "Z"))
     assert np.abs(np.diff(turn[first:last + 1])).max() < 0.2
     # It turns with the bend (about 11 degrees), between the turns of the walks around it.
@@ -392,10 +394,10 @@ def test_backward_walks_and_turns_on_the_spot_keep_their_facing(tmp_path):
     examples.add_position_constraint(stage, "/Edits/spot", s, 0, (x + 4.0, 0.0, z + 1.0))
     result, src, out = _solve(tmp_path, stage)
     for agent, most in ((b, 35.0), (s, 1e-6)):
-        p = metrics.plausibility(src, out, agent)
+        p = measure.plausibility(src, out, agent)
         assert p.spin_frames == 0
-        _, ms = metrics.joint_world_matrices(src, agent)
-        _, me = metrics.joint_world_matrices(out, agent)
+        _, ms = evaluate.joint_world_matrices(src, agent)
+        _, me = evaluate.joint_world_matrices(out, agent)
         turn = np.degrees(metrics.body_facing(me, "Y") - metrics.body_facing(ms, "Y"))
         assert np.abs(turn).max() < most, agent      # never turned round to face its path
         if agent == b:                               # the bend turns the two halves both ways

@@ -15,9 +15,11 @@ from pxr import Gf, Usd, UsdGeom, UsdSkel
 from mocapedit.geometry import animation
 from mocapedit.data import examples, walker
 from mocapedit.inspect import metrics
+from mocapedit.tools import measure
+from mocapedit.usd import evaluate
 from mocapedit.pipeline import processor
 from mocapedit.model.errors import MocapEditError
-from mocapedit.pipeline.passes import time as time_pass
+from mocapedit.pipeline.passes import Pass, time as time_pass
 from mocapedit.pipeline.processor import EditedPath, solve
 
 from conftest import run_cli
@@ -173,8 +175,7 @@ def test_space_and_time_edits_combine(tmp_path, monkeypatch):
         traj = ctx.trajectories[f"{CROWD}/walker"]
         ctx.paths[f"{CROWD}/walker"] = EditedPath(ground=traj.ground @ rot + shift, heading=traj.heading + angle)
 
-    monkeypatch.setattr(processor, "load_passes", lambda: None)
-    monkeypatch.setattr(processor, "PASSES", [(100, "move", move), (200, "time", time_pass.time_pass)])
+    monkeypatch.setattr(processor, "PASSES", (Pass("move", move), Pass("time", time_pass.run)))
     result, out, src = _solve(tmp_path, stage)
 
     # Y-up: ground (x, -z). The edit turns the ground by `rot` and shifts it.
@@ -199,23 +200,22 @@ def _stretch_path(ctx):
 def test_match_speed_lowers_foot_skate_on_a_stretched_path(tmp_path, monkeypatch):
     stage = _stage(tmp_path, [("walker", (0, 0, 0), 0.0, 0.0)])
     stage.GetRootLayer().Save()
-    monkeypatch.setattr(processor, "load_passes", lambda: None)
-    monkeypatch.setattr(processor, "PASSES", [(100, "stretch", _stretch_path), (200, "time", time_pass.time_pass)])
+    monkeypatch.setattr(processor, "PASSES", (Pass("stretch", _stretch_path), Pass("time", time_pass.run)))
     src = Usd.Stage.Open(stage.GetRootLayer().realPath)
     skate, speed = {}, {}
     for match in (False, True):
         sub = tmp_path / str(match)
         sub.mkdir()
         result, out, _ = _solve(sub, Usd.Stage.Open(stage.GetRootLayer().realPath), match_speed=match)
-        skate[match] = metrics.foot_skate(out, f"{CROWD}/walker").mean
+        skate[match] = measure.foot_skate(out, f"{CROWD}/walker").mean
         times = np.arange(0.0, 140.0)
-        root = metrics.agent_root_positions(out, f"{CROWD}/walker", times)
+        root = evaluate.agent_root_positions(out, f"{CROWD}/walker", times)
         steps = np.linalg.norm(np.diff(metrics.to_ground(root, "Y"), axis=0), axis=1)
         speed[match] = np.median(steps[steps > 1e-6])
         entry = result.report.agents[f"{CROWD}/walker"]
         assert ("matchSpeed" in " ".join(entry.get("notes", []))) == match
-    source_skate = metrics.foot_skate(src, f"{CROWD}/walker").mean
-    src_root = metrics.agent_root_positions(src, f"{CROWD}/walker", np.arange(0.0, FRAMES))
+    source_skate = measure.foot_skate(src, f"{CROWD}/walker").mean
+    src_root = evaluate.agent_root_positions(src, f"{CROWD}/walker", np.arange(0.0, FRAMES))
     source_speed = np.median(np.linalg.norm(np.diff(metrics.to_ground(src_root, "Y"), axis=0), axis=1))
     # Stretching the path without re-timing makes the walker hurry (figure 4.1)...
     assert speed[False] == pytest.approx(1.5 * source_speed, rel=0.03)
@@ -243,10 +243,10 @@ def test_the_minimum_interval_holds_and_is_reported(tmp_path):
     # never steps back, and where time is squeezed to the minimum it covers 4 times the ground.
     anim = out.GetPrimAtPath("/MocapEdit/Animations").GetChildren()[0]
     times = np.asarray(anim.GetAttribute("translations").GetTimeSamples())
-    src_z = metrics.agent_root_positions(src, f"{CROWD}/walker", np.arange(FRAMES))[:, 2]
+    src_z = evaluate.agent_root_positions(src, f"{CROWD}/walker", np.arange(FRAMES))[:, 2]
     ahead = np.sign(src_z[-1] - src_z[0])       # the walker walks straight along z
     src_step = np.diff(ahead * src_z)
-    step = np.diff(ahead * metrics.agent_root_positions(out, f"{CROWD}/walker", times)[:, 2]) / np.diff(times)
+    step = np.diff(ahead * evaluate.agent_root_positions(out, f"{CROWD}/walker", times)[:, 2]) / np.diff(times)
     assert step.min() > 0.5 * src_step.min()
     assert step.max() == pytest.approx(4 * src_step.max(), rel=0.02)
 
@@ -381,8 +381,7 @@ def test_match_speed_from_the_settings_prim_and_the_command_line(tmp_path, monke
     examples.define_mocap_prim(stage, "/Settings", "MocapSolveSettings")
     stage.GetPrimAtPath("/Settings").GetAttribute("matchSpeed").Set(True)
     stage.GetRootLayer().Save()
-    monkeypatch.setattr(processor, "load_passes", lambda: None)
-    monkeypatch.setattr(processor, "PASSES", [(100, "stretch", _stretch_path), (200, "time", time_pass.time_pass)])
+    monkeypatch.setattr(processor, "PASSES", (Pass("stretch", _stretch_path), Pass("time", time_pass.run)))
     matched = {}
     for flag in (None, "--no-match-speed", "--match-speed"):
         report = tmp_path / f"{flag}.json"
@@ -403,7 +402,7 @@ def test_the_report_measures_a_retimed_agent_as_forward_kinematics_does(tmp_path
     result, out, src = _solve(tmp_path, stage)
     agent = f"{CROWD}/dancer"
     reported = result.report.agents[agent]["plausibility"]
-    measured = metrics.plausibility(src, out, agent)
+    measured = measure.plausibility(src, out, agent)
     # The edited body's own turning is the same; against the source, the solve pairs each shot
     # frame with the source frame it plays, FK on the stage (which cannot know it) by fraction.
     # The solve interpolates the hip's world matrix between source frames; UsdSkel plays the

@@ -238,3 +238,27 @@ def test_preview_marks_agents_that_spin_or_walk_back(solved, tmp_path):
     figures["plausibility"] = {"spinFrames": 0, "maxDirectionDeviation": float("nan")}
     assert preview.implausible_marks(scene.report, scene.crowd) == []
     assert preview.implausible_marks(None, scene.crowd) == []
+
+
+def _region(shape, local_to_world, radius=0.0, size=(0.0, 0.0, 0.0)):
+    from mocapedit.model.data import AvoidRegion
+    return AvoidRegion("/R", shape, radius, np.array(size, dtype=float), 0.1, [], np.asarray(local_to_world, float),
+                       None, None)
+
+
+def test_region_footprint_is_the_one_the_solve_avoids():
+    # A 2 x 1.2 box turned 30 degrees about Y and moved to (-1, 0, -3) on a Y-up stage.
+    c, s = np.cos(np.radians(30)), np.sin(np.radians(30))
+    m = np.array([[c, 0, -s, 0], [0, 1, 0, 0], [s, 0, c, 0], [-1, 0, -3, 1]])
+    poly = preview.region_footprint(_region("box", m, size=(2.0, 1.0, 1.2)), "Y")
+    corners = ground.to_ground(np.array([[x, 0, z, 1] for x in (-1, 1) for z in (-0.6, 0.6)]) @ m[:, :3], "Y")
+    assert len(poly) == 4
+    assert sorted(map(tuple, np.round(poly, 9))) == sorted(map(tuple, np.round(corners, 9)))
+    area = 0.5 * np.sum(poly[:, 0] * np.roll(poly[:, 1], -1) - np.roll(poly[:, 0], -1) * poly[:, 1])
+    assert area == pytest.approx(2.4)                      # counter-clockwise
+    # A circle scaled by 2 on a Z-up stage: 96 points at twice its radius around its centre.
+    m = np.diag([2.0, 2.0, 2.0, 1.0])
+    m[3, :3] = (4.0, 5.0, 0.0)
+    ring = preview.region_footprint(_region("circle", m, radius=0.5), "Z")
+    assert len(ring) == 96
+    np.testing.assert_allclose(np.linalg.norm(ring - (4.0, 5.0), axis=1), 1.0, atol=1e-12)

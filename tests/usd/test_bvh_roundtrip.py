@@ -6,7 +6,7 @@ import pytest
 from pxr import Gf, Sdf, Usd, UsdGeom
 
 from mocapedit.usd import bvh_usd, schema
-from mocapedit.model import report
+from mocapedit.usd.report_io import read_report
 from mocapedit.usd.bvh_usd import ImportSettings
 
 from bvhgen import walk_idle_walk, write_bvh
@@ -95,7 +95,7 @@ def test_a_path_edit_moves_the_imported_walk_and_keeps_its_idle_rigid(tmp_path):
     d_new = np.linalg.norm(span_new[:, None] - span_new[None], axis=-1)
     np.testing.assert_allclose(d_new, d_src, atol=1e-3)
     # Heights change only where foot locking lowers the pelvis, by no more than it reports.
-    drop = report.load(str(tmp_path / "edits.usda")).report.agents["/walk"].get("maxPelvisDrop", 0.0)
+    drop = read_report(str(tmp_path / "edits.usda")).report.agents["/walk"].max_pelvis_drop or 0.0
     assert np.all(hips_new[:, 1] <= hips_src[:, 1] + 1e-4)
     assert np.all(hips_new[:, 1] >= hips_src[:, 1] - drop - 1e-4)
     layer = Sdf.Layer.FindOrOpen(str(tmp_path / "edits.usda"))

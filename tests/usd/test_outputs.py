@@ -156,14 +156,14 @@ def test_temporaries_of_dead_processes_are_swept_and_live_ones_kept(tmp_path):
 def slow_shot(tmp_path):
     """A shot whose edits layer takes a while to write: every agent's end is pulled aside, so
     foot locking bakes its legs."""
-    from mocapedit.inspect import metrics
+    from mocapedit.usd import evaluate
     clip = walker.walk(frames=240, name="walk")
     specs = [examples.AgentSpec(f"a{i:03d}", clip, (4.0 * (i % 20), 0.0, 40.0 * (i // 20)), 0.0)
              for i in range(120)]
     stage = examples.build_crowd_stage(tmp_path / "big.usda", specs)
     for i in range(120):
         agent = f"/World/Crowd/a{i:03d}"
-        start, end = metrics.agent_root_positions(stage, agent, [0.0, 239.0])
+        start, end = evaluate.agent_root_positions(stage, agent, [0.0, 239.0])
         examples.add_position_constraint(stage, f"/Edits/start{i:03d}", agent, 0, tuple(map(float, start)))
         examples.add_position_constraint(stage, f"/Edits/end{i:03d}", agent, 239,
                                          tuple(map(float, end + (1.0, 0.0, 0.0))))

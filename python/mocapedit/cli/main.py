@@ -69,20 +69,6 @@ def _install_signal_handlers() -> None:
             signal.signal(getattr(signal, name), _stop)
 
 
-def _usd_error_text(exc: BaseException) -> str | None:
-    """The message of a USD (Tf) error, or None when ``exc`` is not one."""
-    try:
-        from pxr import Tf
-    except ImportError:   # pragma: no cover - usd-core is a dependency
-        return None
-    if isinstance(exc, Tf.ErrorException):
-        lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
-        # Tf's text starts with a header line and lists each error with its C++ source location.
-        messages = [l.split(" -- ", 1)[-1] for l in lines if not l.startswith(("Error in", "Traceback"))]
-        return "; ".join(messages) or str(exc).strip()
-    return None
-
-
 def main(argv: list[str] | None = None) -> int:
     """Runs one command. Exit status: 0 done, 1 bad input or a file that cannot be read or
     written (the message says which), 2 bad usage, 3 internal error, 130/143 interrupted."""
@@ -117,7 +103,8 @@ def main(argv: list[str] | None = None) -> int:
     except MemoryError:
         return _error("out of memory; solve fewer agents at once or raise MocapSolveSettings.sampleStep")
     except Exception as exc:
-        usd = _usd_error_text(exc)
+        from mocapedit.usd.errors import usd_error_text
+        usd = usd_error_text(exc)
         if usd is not None:
             return _error(f"USD: {usd}")
         if getattr(args, "debug", False):

@@ -27,6 +27,8 @@ import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, Vt
 
 from mocapedit.data.walker import Clip, rest_local_matrices, rest_world_transforms
+from mocapedit.usd import clip_layer, sdf
+from mocapedit.usd.clip_layer import tag_stationary
 
 __all__ = [
     "CLIP_SKELETON_PATH",
@@ -45,62 +47,16 @@ __all__ = [
     "dense_crowd_paths",
 ]
 
-CLIP_SKELETON_PATH = Sdf.Path("/Skel")
-CLIP_ANIMATION_PATH = Sdf.Path("/Skel/Anim")
+CLIP_SKELETON_PATH = clip_layer.SKELETON_PATH
+CLIP_ANIMATION_PATH = clip_layer.ANIMATION_PATH
 AGENT_API = "MocapAgentAPI"
-STATIONARY_API = "MocapStationaryAPI"
 
 PathLike = Union[str, os.PathLike]
-
-
-def _new_layer(path: PathLike) -> Sdf.Layer:
-    """An empty layer that will be saved at path, replacing what is there.
-
-    Call inside an Sdf.ChangeBlock: a layer already open (on a stage) is
-    cleared and refilled, and stages see only the result.
-    """
-    path = os.fspath(path)
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    layer = Sdf.Layer.Find(path)
-    if layer is not None:
-        layer.Clear()
-        return layer
-    return Sdf.Layer.CreateNew(path)
-
-
-def _attr(prim: Sdf.PrimSpec, name: str, type_name: Sdf.ValueTypeName, value=None,
-          uniform: bool = False) -> Sdf.AttributeSpec:
-    spec = Sdf.AttributeSpec(prim, name, type_name,
-                             Sdf.VariabilityUniform if uniform else Sdf.VariabilityVarying)
-    if value is not None:
-        spec.default = value
-    return spec
-
-
-def _prepend_api(prim: Sdf.PrimSpec, schema: str) -> None:
-    ops = prim.GetInfo("apiSchemas") if prim.HasInfo("apiSchemas") else Sdf.TokenListOp()
-    items = list(ops.prependedItems)
-    if schema not in items:
-        items.append(schema)
-    ops.prependedItems = items
-    prim.SetInfo("apiSchemas", ops)
 
 
 def _matrices(m: np.ndarray) -> Vt.Matrix4dArray:
     # walker's matrices use column vectors; Gf's use row vectors.
     return Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(np.swapaxes(m, -1, -2)))
-
-
-def _set_time_metadata(layer: Sdf.Layer, fps: float, start: float, end: float) -> None:
-    layer.timeCodesPerSecond = fps
-    layer.framesPerSecond = fps
-    layer.startTimeCode = start
-    layer.endTimeCode = end
-
-
-def _set_stage_metadata(layer: Sdf.Layer, up_axis: str, meters_per_unit: float) -> None:
-    layer.pseudoRoot.SetInfo("upAxis", up_axis)
-    layer.pseudoRoot.SetInfo("metersPerUnit", float(meters_per_unit))
 
 
 def write_clip_layer(clip: Clip, path: PathLike,
@@ -122,27 +78,27 @@ def write_clip_layer(clip: Clip, path: PathLike,
     if frames < 1:
         raise ValueError(f"clip {clip.name!r} has no samples")
     with Sdf.ChangeBlock():
-        layer = _new_layer(path)
+        layer = clip_layer.new_layer(path)
         layer.defaultPrim = CLIP_SKELETON_PATH.name
-        _set_stage_metadata(layer, clip.up_axis, clip.meters_per_unit)
-        _set_time_metadata(layer, clip.fps, 0.0, float(frames - 1))
+        sdf.set_stage_metadata(layer, clip.up_axis, clip.meters_per_unit)
+        sdf.set_time_metadata(layer, clip.fps, 0.0, float(frames - 1))
 
         joints = Vt.TokenArray(list(clip.joints))
         skel = Sdf.PrimSpec(layer, CLIP_SKELETON_PATH.name, Sdf.SpecifierDef, "Skeleton")
-        _prepend_api(skel, "SkelBindingAPI")
-        _attr(skel, "joints", Sdf.ValueTypeNames.TokenArray, joints, uniform=True)
-        _attr(skel, "bindTransforms", Sdf.ValueTypeNames.Matrix4dArray,
-              _matrices(rest_world_transforms(clip)), uniform=True)
-        _attr(skel, "restTransforms", Sdf.ValueTypeNames.Matrix4dArray,
-              _matrices(rest_local_matrices(clip)), uniform=True)
+        sdf.prepend_api(skel, "SkelBindingAPI")
+        sdf.attr(skel, "joints", Sdf.ValueTypeNames.TokenArray, joints, uniform=True)
+        sdf.attr(skel, "bindTransforms", Sdf.ValueTypeNames.Matrix4dArray,
+                 _matrices(rest_world_transforms(clip)), uniform=True)
+        sdf.attr(skel, "restTransforms", Sdf.ValueTypeNames.Matrix4dArray,
+                 _matrices(rest_local_matrices(clip)), uniform=True)
         rel = Sdf.RelationshipSpec(skel, "skel:animationSource", custom=False)
         rel.targetPathList.explicitItems = [CLIP_ANIMATION_PATH]
 
         anim = Sdf.PrimSpec(skel, CLIP_ANIMATION_PATH.name, Sdf.SpecifierDef, "SkelAnimation")
-        _attr(anim, "joints", Sdf.ValueTypeNames.TokenArray, joints, uniform=True)
-        t_attr = _attr(anim, "translations", Sdf.ValueTypeNames.Float3Array).path
-        r_attr = _attr(anim, "rotations", Sdf.ValueTypeNames.QuatfArray).path
-        s_attr = _attr(anim, "scales", Sdf.ValueTypeNames.Half3Array).path
+        sdf.attr(anim, "joints", Sdf.ValueTypeNames.TokenArray, joints, uniform=True)
+        t_attr = sdf.attr(anim, "translations", Sdf.ValueTypeNames.Float3Array).path
+        r_attr = sdf.attr(anim, "rotations", Sdf.ValueTypeNames.QuatfArray).path
+        s_attr = sdf.attr(anim, "scales", Sdf.ValueTypeNames.Half3Array).path
         translations = np.ascontiguousarray(clip.translations, dtype=np.float32)
         rotations = np.ascontiguousarray(clip.rotations, dtype=np.float32)
         ones = Vt.Vec3hArray.FromNumpy(np.ones((clip.num_joints, 3), dtype=np.float16))
@@ -247,9 +203,9 @@ def build_crowd_stage(path: PathLike, agents: Iterable[AgentSpec], up_axis: str 
         raise ValueError(f"crowd_path must be an absolute prim path, got {crowd_path!r}")
 
     with Sdf.ChangeBlock():
-        layer = _new_layer(path)
-        _set_stage_metadata(layer, up_axis, meters_per_unit)
-        _set_time_metadata(layer, fps, start, end)
+        layer = clip_layer.new_layer(path)
+        sdf.set_stage_metadata(layer, up_axis, meters_per_unit)
+        sdf.set_time_metadata(layer, fps, start, end)
         layer.defaultPrim = crowd.GetPrefixes()[0].name
         parent = layer.pseudoRoot
         for prefix in crowd.GetPrefixes():
@@ -257,11 +213,11 @@ def build_crowd_stage(path: PathLike, agents: Iterable[AgentSpec], up_axis: str 
         op_order = Vt.TokenArray(["xformOp:translate", rotate_op])
         for agent in agents:
             root = Sdf.PrimSpec(parent, agent.name, Sdf.SpecifierDef, "SkelRoot")
-            _prepend_api(root, AGENT_API)
-            _attr(root, "xformOp:translate", Sdf.ValueTypeNames.Double3,
-                  Gf.Vec3d(*(float(v) for v in agent.position)))
-            _attr(root, rotate_op, Sdf.ValueTypeNames.Float, float(agent.yaw))
-            _attr(root, "xformOpOrder", Sdf.ValueTypeNames.TokenArray, op_order, uniform=True)
+            sdf.prepend_api(root, AGENT_API)
+            sdf.attr(root, "xformOp:translate", Sdf.ValueTypeNames.Double3,
+                     Gf.Vec3d(*(float(v) for v in agent.position)))
+            sdf.attr(root, rotate_op, Sdf.ValueTypeNames.Float, float(agent.yaw))
+            sdf.attr(root, "xformOpOrder", Sdf.ValueTypeNames.TokenArray, op_order, uniform=True)
             skel = Sdf.PrimSpec(root, CLIP_SKELETON_PATH.name, Sdf.SpecifierDef, "Skeleton")
             offset = Sdf.LayerOffset(float(agent.time_offset), 1.0)
             skel.referenceList.Prepend(
@@ -271,16 +227,6 @@ def build_crowd_stage(path: PathLike, agents: Iterable[AgentSpec], up_axis: str 
 
 
 # --- constraints and tags --------------------------------------------------
-
-def _set_property(prim: Usd.Prim, name: str, type_name: Sdf.ValueTypeName, value) -> Usd.Attribute:
-    # With the schema registered the property is built in: keep its type and
-    # variability. Without it, author what the schema declares (uniform).
-    attr = prim.GetAttribute(name)
-    if not attr:
-        attr = prim.CreateAttribute(name, type_name, False, Sdf.VariabilityUniform)
-    attr.Set(value)
-    return attr
-
 
 def define_mocap_prim(stage: Usd.Stage, path: str | Sdf.Path, type_name: str,
                       attributes: Mapping[str, tuple[Sdf.ValueTypeName, object]] | None = None,
@@ -294,7 +240,7 @@ def define_mocap_prim(stage: Usd.Stage, path: str | Sdf.Path, type_name: str,
     """
     prim = stage.DefinePrim(Sdf.Path(str(path)), type_name)
     for name, (type_name_, value) in (attributes or {}).items():
-        _set_property(prim, name, type_name_, value)
+        clip_layer.set_property(prim, name, type_name_, value)
     for name, targets in (relationships or {}).items():
         rel = prim.GetRelationship(name) or prim.CreateRelationship(name, False)
         rel.SetTargets([Sdf.Path(str(t)) for t in targets])
@@ -390,32 +336,6 @@ def add_path_curve(stage: Usd.Stage, path: str | Sdf.Path, points: Sequence[Sequ
         rel = prim.GetRelationship("mocap:pathCurve") or prim.CreateRelationship("mocap:pathCurve", False)
         rel.SetTargets([curve.GetPath()])
     return curve.GetPrim()
-
-
-def tag_stationary(anim: Usd.Prim | Sdf.PrimSpec, name: str, frames: Sequence[int]) -> None:
-    """Tag an inclusive frame range of a SkelAnimation as stationary.
-
-    Applies ``MocapStationaryAPI:<name>`` and authors
-    ``uniform int2 stationary:<name>:frames``. `anim` is a prim on a stage
-    (authored in its edit target) or a prim spec in a layer (a clip layer).
-    """
-    if not name or ":" in name or not Sdf.Path.IsValidIdentifier(name):
-        raise ValueError(f"stationary range name must be an identifier, got {name!r}")
-    first, last = (int(v) for v in frames)
-    if not 0 <= first <= last:
-        raise ValueError(f"stationary range {name!r} must satisfy 0 <= first <= last, "
-                         f"got ({first}, {last})")
-    attr_name = f"stationary:{name}:frames"
-    value = Gf.Vec2i(first, last)
-    if isinstance(anim, Sdf.PrimSpec):
-        _prepend_api(anim, f"{STATIONARY_API}:{name}")
-        spec = anim.properties.get(attr_name) if attr_name in anim.properties else None
-        if spec is None:
-            spec = _attr(anim, attr_name, Sdf.ValueTypeNames.Int2, uniform=True)
-        spec.default = value
-        return
-    anim.AddAppliedSchema(f"{STATIONARY_API}:{name}")
-    _set_property(anim, attr_name, Sdf.ValueTypeNames.Int2, value)
 
 
 def dense_crowd_paths(agents: int, frames: int = 240, fps: float = 24.0, density: float = 0.25,

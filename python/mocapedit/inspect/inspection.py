@@ -14,6 +14,7 @@ import numpy as np
 
 from mocapedit.inspect import metrics, overlaps
 from mocapedit.model.data import StageInfo
+from mocapedit.model.report import ConstraintEntry
 
 #: Clearance (metres) within which the nearest neighbour is measured for the report's
 #: minSeparation when no pass measured it.
@@ -141,56 +142,57 @@ def from_stages(source, source_trajectories, edited=None, edited_trajectories=No
     return Crowd(info, agents, float(source.settings.sample_step))
 
 
-def constraint_status(entries: list[dict]) -> dict[str, dict]:
+def constraint_status(entries: list[ConstraintEntry]) -> dict[str, ConstraintEntry]:
     """Constraint prim path -> its worst report entry (not met first, then the largest residual)."""
-    out: dict[str, dict] = {}
+    out: dict[str, ConstraintEntry] = {}
     for entry in entries:
-        prim = entry.get("prim")
-        if prim is None:
+        if entry.prim is None:
             continue
-        key = (not entry.get("met", True), float(entry.get("residual") or 0.0))
-        old = out.get(prim)
-        if old is None or key > (not old.get("met", True), float(old.get("residual") or 0.0)):
-            out[prim] = entry
+        old = out.get(entry.prim)
+        if old is None or _badness(entry) > _badness(old):
+            out[entry.prim] = entry
     return out
 
 
-def handles(entries: list[dict], position_constraints) -> list[tuple[np.ndarray, dict | None]]:
+def _badness(entry: ConstraintEntry) -> tuple[bool, float]:
+    return not entry.met, float(entry.residual or 0.0)
+
+
+def handles(entries: list[ConstraintEntry], position_constraints) -> list[tuple[np.ndarray, ConstraintEntry | None]]:
     """(world position (3,), report entry or None) of every constraint handle.
 
     The handles are the report entries that give a ``position`` (collisions aside), and
     the position constraints of the stage that no entry placed (None: not reported on).
     """
-    out = [(np.asarray(e["position"], dtype=np.float64), e) for e in entries
-           if e.get("kind") != "collision" and e.get("position") is not None]
-    placed = {e.get("prim") for e in entries if e.get("position") is not None}
+    out = [(np.asarray(e.position, dtype=np.float64), e) for e in entries
+           if e.kind != "collision" and e.position is not None]
+    placed = {e.prim for e in entries if e.position is not None}
     status = constraint_status(entries)
     out.extend((np.asarray(c.position, dtype=np.float64), status.get(c.path))
                for c in position_constraints if c.path not in placed)
     return out
 
 
-def reported_collisions(entries: list[dict]) -> np.ndarray:
+def reported_collisions(entries: list[ConstraintEntry]) -> np.ndarray:
     """#N by 3 world positions of the collisions a pass reported as left (not met)."""
-    pts = [e["position"] for e in entries
-           if e.get("kind") == "collision" and e.get("position") is not None and not e.get("met", False)]
+    pts = [e.position for e in entries if e.kind == "collision" and e.position is not None and not e.met]
     return np.array(pts, dtype=np.float64).reshape(-1, 3)
 
 
-def path_figures(source: np.ndarray, edited: np.ndarray) -> dict:
-    """Length ratio and displacement of an edited path against its source, frame by frame.
+def path_figures(source: np.ndarray, edited: np.ndarray) -> tuple[float, float, float]:
+    """(length ratio, largest and mean displacement) of an edited path against its source,
+    frame by frame.
 
     Args:
       source, edited: #F by 2 ground paths, one row per source frame
     """
     d = np.linalg.norm(np.asarray(edited) - np.asarray(source), axis=1)
-    return {"lengthRatio": metrics.length_ratio(edited, source),
-            "maxDisplacement": float(d.max(initial=0.0)), "meanDisplacement": float(d.mean()) if len(d) else 0.0}
+    return metrics.length_ratio(edited, source), float(d.max(initial=0.0)), float(d.mean()) if len(d) else 0.0
 
 
 def collision_pass_reported(report) -> bool:
     """True when a collision pass measured what is left (so the inspection keeps its word)."""
-    return "remainingOverlaps" in report.stats or any(c.get("kind") == "collision" for c in report.constraints)
+    return report.stats.remaining_overlaps is not None or any(c.kind == "collision" for c in report.constraints)
 
 
 @dataclass
@@ -222,14 +224,22 @@ def complete_report(ctx, crowd: Crowd) -> Remaining | None:
     """
     for path in sorted(ctx.paths):
         entry = ctx.report.agent(path)
-        for key, value in path_figures(ctx.trajectories[path].ground, ctx.paths[path].ground).items():
-            entry.setdefault(key, value)
+        ratio, largest, mean = path_figures(ctx.trajectories[path].ground, ctx.paths[path].ground)
+        if entry.length_ratio is None:   # the path pass measured it on its own terms
+            entry.length_ratio = ratio
+        if entry.max_displacement is None:
+            entry.max_displacement = largest
+        if entry.mean_displacement is None:
+            entry.mean_displacement = mean
     if collision_pass_reported(ctx.report):
         return None
     remaining, clearance = remaining_overlaps(crowd, progress=ctx.progress,
                                               reach=ctx.data.info.metres(SEPARATION_REACH_M))
     for agent, c in zip(crowd.agents, clearance):
         if agent.collide and np.isfinite(c):
-            ctx.report.agent(agent.path).setdefault("minSeparation", float(c))
-    ctx.report.stats.setdefault("remainingOverlaps", len(remaining.a))
+            entry = ctx.report.agent(agent.path)
+            if entry.min_separation is None:
+                entry.min_separation = float(c)
+    if ctx.report.stats.remaining_overlaps is None:
+        ctx.report.stats.remaining_overlaps = len(remaining.a)
     return remaining

@@ -4,8 +4,10 @@ Two families of functions live here:
 
 * plain numpy measures of trajectories and time maps (path length, constraint residuals, shape
   change, rigidity of stationary ranges, capsule separation, positive time intervals);
-* measures read from a composed ``Usd.Stage`` by forward kinematics through UsdSkel (joint world
-  positions, root positions, foot skate), so an edited stage is judged by what plain UsdSkel plays.
+* measures of joints' world positions and matrices (foot skate, plausibility of the body's
+  turning and walking direction), which :mod:`mocapedit.usd.evaluate` computes from a composed
+  stage by UsdSkel forward kinematics; :mod:`mocapedit.tools.measure` measures a stage in one call,
+  so an edited stage is judged by what plain UsdSkel plays.
 
 Conventions: positions are world space in stage units; quaternions, where they appear, are
 ``(x, y, z, w)``. The ground plane follows the stage's ``upAxis``: for Y-up the ground coordinates
@@ -15,13 +17,17 @@ counter-clockwise about the up axis.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Iterable, Sequence, Union
+from typing import Sequence
 
 import numpy as np
-from pxr import Sdf, Usd, UsdGeom, UsdSkel
 
-from mocapedit.geometry import ground as _ground
+from mocapedit.geometry.ground import from_ground, ground_axes, to_ground
+from mocapedit.geometry.ground import up_token as _up_token
 from mocapedit.geometry import stationary as _stationary
+from mocapedit.solve import collisions
+from mocapedit.geometry.shape import as_points as _points
+from mocapedit.geometry.shape import length_ratio, local_coordinates, path_length, shape_change
+from mocapedit.model.names import default_facing_joint, default_foot_joints
 
 __all__ = [
     "ground_axes", "to_ground", "from_ground",
@@ -29,87 +35,15 @@ __all__ = [
     "local_coordinates", "shape_change", "rigidity_error", "neighbour_distance_change",
     "Separation", "capsule_clearance", "min_separation",
     "time_intervals_positive",
-    "joint_world_positions", "agent_root_positions", "default_foot_joints",
-    "FootSkate", "foot_skate",
-    "SPIN_DEGREES_AT_60FPS", "CHORD_SECONDS", "default_facing_joint", "joint_world_matrices",
+    "default_foot_joints", "FootSkate",
+    "SPIN_DEGREES_AT_60FPS", "CHORD_SECONDS", "default_facing_joint",
     "body_facing", "facing_change_per_second", "spin_threshold", "spins", "direction_deviation",
-    "Plausibility", "plausibility_of", "plausibility", "shot_plausibility", "foot_skate_of_positions", "worst_plausibility",
+    "Plausibility", "plausibility_of", "foot_skate_of_positions", "worst_plausibility",
 ]
-
-PathLike = Union[str, Sdf.Path]
-
-# ---------------------------------------------------------------------------------------------
-# Ground plane
-# ---------------------------------------------------------------------------------------------
-
-
-def _up_token(up_axis) -> str:
-    token = str(up_axis).upper()
-    if token not in ("Y", "Z"):
-        raise ValueError(f"up axis must be 'Y' or 'Z', got {up_axis!r}")
-    return token
-
-
-def ground_axes(up_axis) -> tuple[int, tuple[int, float], tuple[int, float]]:
-    """Where the up axis and the two ground coordinates sit in a 3D point.
-
-    Returns ``(up_index, (u_index, u_sign), (v_index, v_sign))`` such that the ground coordinates of
-    point ``p`` are ``(u_sign * p[u_index], v_sign * p[v_index])``: ``(x, -z)`` for ``"Y"`` up and
-    ``(x, y)`` for ``"Z"`` up (the convention of :mod:`mocapedit.geometry.ground`). Both frames are
-    right-handed seen from above, so angles in the ground plane are counter-clockwise about up.
-    """
-    if _up_token(up_axis) == "Y":
-        return 1, (0, 1.0), (2, -1.0)
-    return 2, (0, 1.0), (1, 1.0)
-
-
-def to_ground(points, up_axis) -> np.ndarray:
-    """Ground-plane coordinates of 3D points: ``(..., 3)`` -> ``(..., 2)`` float64."""
-    p = np.asarray(points, dtype=np.float64)
-    if p.shape[-1:] != (3,):
-        raise ValueError(f"to_ground expects points of shape (..., 3), got {p.shape}")
-    return _ground.to_ground(p, _up_token(up_axis))
-
-
-def from_ground(ground, height, up_axis) -> np.ndarray:
-    """3D points from ground coordinates ``(..., 2)`` and heights along up (broadcast)."""
-    g = np.asarray(ground, dtype=np.float64)
-    if g.shape[-1:] != (2,):
-        raise ValueError(f"from_ground expects ground points of shape (..., 2), got {g.shape}")
-    return _ground.from_ground(g, height, _up_token(up_axis))
-
 
 # ---------------------------------------------------------------------------------------------
 # Trajectory measures
 # ---------------------------------------------------------------------------------------------
-
-
-def _points(points, name: str, dims=(2, 3)) -> np.ndarray:
-    p = np.asarray(points, dtype=np.float64)
-    if p.ndim != 2 or p.shape[1] not in dims:
-        want = " or ".join(f"(N, {d})" for d in dims)
-        raise ValueError(f"{name} must have shape {want}, got {p.shape}")
-    return p
-
-
-def path_length(points) -> float:
-    """Length of the polyline through ``points`` ``(N, 2)`` or ``(N, 3)``; 0 for fewer than 2."""
-    p = _points(points, "points")
-    if len(p) < 2:
-        return 0.0
-    return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
-
-
-def length_ratio(edited, source) -> float:
-    """Distance travelled on the edited path over that of the source path.
-
-    1 means the edit kept the distance travelled. A source that does not move gives 1.0 when the
-    edited path does not move either and ``inf`` when it does.
-    """
-    le, ls = path_length(edited), path_length(source)
-    if ls == 0.0:
-        return 1.0 if le == 0.0 else float("inf")
-    return le / ls
 
 
 def position_residuals(points, targets) -> np.ndarray:
@@ -119,58 +53,6 @@ def position_residuals(points, targets) -> np.ndarray:
     if p.shape != t.shape or p.ndim != 2:
         raise ValueError(f"points {p.shape} and targets {t.shape} must both be (N, d)")
     return np.linalg.norm(p - t, axis=1)
-
-
-def local_coordinates(points, min_base: float = 0.0) -> np.ndarray:
-    """Local coordinates ``(x, y)`` of each interior path point in its neighbour triangle.
-
-    ``points`` is ``(N, 2)``; the result is ``(N - 2, 2)``, row ``k`` for point ``i = k + 1``:
-    ``P_i = P_{i-1} + x (P_{i+1} - P_{i-1}) + y R90 (P_{i+1} - P_{i-1})`` with
-    ``R90 = [[0, 1], [-1, 0]]``. These coordinates do not change under translation, rotation and
-    uniform scale of the whole path. A triangle whose base ``|P_{i+1} - P_{i-1}|`` is not longer
-    than ``min_base`` has no local frame: its row is NaN.
-    """
-    p = _points(points, "points", dims=(2,))
-    if len(p) < 3:
-        return np.zeros((0, 2))
-    d = p[2:] - p[:-2]
-    e = p[1:-1] - p[:-2]
-    rd = np.stack((d[:, 1], -d[:, 0]), axis=1)
-    dd = np.einsum("ij,ij->i", d, d)
-    ok = dd > float(min_base) ** 2
-    safe = np.where(ok, dd, 1.0)
-    along = np.einsum("ij,ij->i", e, d)
-    across = np.einsum("ij,ij->i", e, rd)
-    xy = np.stack((along, across), axis=1) / safe[:, None]
-    xy[~ok] = np.nan
-    return xy
-
-
-def shape_change(source, edited, min_base: float | None = None) -> float:
-    """RMS change of the interior points' local coordinates between two paths ``(N, 2)``.
-
-    Zero for any similarity transform of the source (translation, rotation, uniform scale); a
-    reflection or a bend is not. Points whose source triangle is degenerate (base not longer than
-    ``min_base``; default 1e-9 of the source's bounding-box diagonal) carry no shape and are
-    skipped. A point whose source triangle is fine but whose edited triangle collapsed has lost its
-    shape entirely: the result is ``inf``. Returns 0 when no point is measurable.
-    """
-    s = _points(source, "source", dims=(2,))
-    e = _points(edited, "edited", dims=(2,))
-    if s.shape != e.shape:
-        raise ValueError(f"source {s.shape} and edited {e.shape} must have the same shape")
-    if min_base is None:
-        diag = float(np.linalg.norm(np.ptp(s, axis=0))) if len(s) else 0.0
-        min_base = 1e-9 * diag
-    ls = local_coordinates(s, min_base)
-    measured = np.isfinite(ls).all(axis=1)
-    if not measured.any():
-        return 0.0
-    le = local_coordinates(e, 0.0)[measured]
-    if not np.isfinite(le).all():
-        return float("inf")
-    diff = le - ls[measured]
-    return float(np.sqrt(np.mean(np.einsum("ij,ij->i", diff, diff))))
 
 
 def _range_array(ranges, n: int) -> np.ndarray:
@@ -276,103 +158,22 @@ class Separation:
     overlaps: int
 
 
-def _capsule_extent(base, radius, height):
-    """Bottom and top of the axis segment of a vertical capsule standing on ``base``."""
-    lo = base + radius
-    hi = base + np.maximum(height, 2.0 * radius) - radius
-    return lo, hi
+def _resting_base(base, radius, height):
+    """Bases for the detection, whose capsules shorter than their diameter are spheres half way
+    up, so that such a capsule is a sphere resting on its base here."""
+    radius, height = np.asarray(radius, dtype=np.float64), np.asarray(height, dtype=np.float64)
+    return base + np.where(height < 2.0 * radius, radius - 0.5 * height, 0.0)
 
 
 def capsule_clearance(ground_a, base_a, radius_a, height_a, ground_b, base_b, radius_b, height_b):
     """Clearance between vertical capsules (broadcasting; stage units, negative = overlap).
 
     A capsule stands on ``base`` (its height along up), has total height ``height`` (at least
-    ``2 * radius``) and radius ``radius``; ``ground`` is its ``(..., 2)`` ground position.
+    ``2 * radius``: a shorter one is a sphere resting on its base) and radius ``radius``;
+    ``ground`` is its ``(..., 2)`` ground position.
     """
-    horiz = np.linalg.norm(np.asarray(ground_a, float) - np.asarray(ground_b, float), axis=-1)
-    lo_a, hi_a = _capsule_extent(np.asarray(base_a, float), radius_a, height_a)
-    lo_b, hi_b = _capsule_extent(np.asarray(base_b, float), radius_b, height_b)
-    gap = np.maximum(0.0, np.maximum(lo_b - hi_a, lo_a - hi_b))
-    return np.hypot(horiz, gap) - radius_a - radius_b
-
-
-_PAIR_BUDGET = 2_000_000  # candidate pairs evaluated at once; bounds memory on dense crowds
-
-
-def _grid_pairs(cell_xy: np.ndarray, tix: np.ndarray):
-    """Cell pairs of a uniform grid, per time sample, that can hold close items.
-
-    Returns the sort order of the items and, per candidate cell pair, the start and count of each
-    cell in that order; same-cell pairs come first (``n_same`` of them). Only half of the 3x3
-    neighbourhood is visited so every pair of items is produced once.
-    """
-    nx = int(cell_xy[:, 0].max()) + 2  # one empty column/row of padding: offsets never wrap
-    ny = int(cell_xy[:, 1].max()) + 2
-    key = (tix * ny + cell_xy[:, 1]) * nx + cell_xy[:, 0]
-    order = np.argsort(key, kind="stable")
-    sorted_key = key[order]
-    start = np.flatnonzero(np.r_[True, sorted_key[1:] != sorted_key[:-1]])
-    count = np.diff(np.r_[start, len(key)])
-    ukey = sorted_key[start]
-    multi = count > 1
-    s1, n1, s2, n2 = [start[multi]], [count[multi]], [start[multi]], [count[multi]]
-    last = len(ukey) - 1
-    # The next cell on the row is the next key, if it is there; the three cells of the next row
-    # are found with one search and then follow each other.
-    pos = np.minimum(np.arange(1, len(ukey) + 1), last)
-    row = np.searchsorted(ukey, ukey + (nx - 1))
-    for offset in (1, nx - 1, nx, nx + 1):
-        if offset == nx - 1:
-            pos = np.minimum(row, last)
-        elif offset > nx - 1:
-            pos = np.minimum(pos + (ukey[pos] == ukey + (offset - 1)), last)
-        hit = ukey[pos] == ukey + offset
-        s1.append(start[hit]); n1.append(count[hit])
-        s2.append(start[pos[hit]]); n2.append(count[pos[hit]])
-    cat = lambda parts: np.concatenate(parts).astype(np.int64)  # noqa: E731
-    return order, cat(s1), cat(n1), cat(s2), cat(n2), int(multi.sum())
-
-
-def _grid_pass(gx, gy, lo, hi, rad, tix, cell, origin):
-    """Minimum clearance and overlap count among pairs in neighbouring grid cells."""
-    cell_xy = np.floor((np.stack((gx, gy), axis=1) - origin) / cell).astype(np.int64)
-    order, s1, n1, s2, n2, n_same = _grid_pairs(cell_xy, tix)
-    gx, gy, lo, hi, rad = gx[order], gy[order], lo[order], hi[order], rad[order]
-    sizes = n1 * n2
-    bounds = np.cumsum(sizes)
-    # Index arithmetic in int32 when it fits: it halves the memory traffic of the pair expansion.
-    itype = np.int32 if len(order) < 2 ** 31 and (len(sizes) == 0 or bounds[-1] < 2 ** 31) \
-        else np.int64
-    best, best_i, best_j, overlaps = np.inf, -1, -1, 0
-    first = 0
-    while first < len(sizes):
-        # Take cell pairs until the chunk holds about _PAIR_BUDGET item pairs (at least one).
-        base = bounds[first] - sizes[first]
-        last = max(int(np.searchsorted(bounds, base + _PAIR_BUDGET, "right")), first + 1)
-        sz = sizes[first:last].astype(itype)
-        rep = np.repeat(np.arange(first, last, dtype=itype), sz)
-        local = np.arange(int(bounds[last - 1] - base), dtype=itype)
-        local -= np.repeat((np.cumsum(sz) - sz).astype(itype), sz)
-        width = n2.astype(itype)[rep]
-        i = s1.astype(itype)[rep] + local // width
-        j = s2.astype(itype)[rep] + local % width
-        if first < n_same:  # same-cell blocks hold every ordered pair: keep i < j
-            keep = (rep >= n_same) | (i < j)
-            i, j = i[keep], j[keep]
-        first = last
-        if len(i) == 0:
-            continue
-        gap = np.maximum(lo[j] - hi[i], lo[i] - hi[j])
-        np.maximum(gap, 0.0, out=gap)
-        clear = np.hypot(np.hypot(gx[i] - gx[j], gy[i] - gy[j]), gap)
-        clear -= rad[i]
-        clear -= rad[j]
-        overlaps += int(np.count_nonzero(clear < 0.0))
-        k = int(np.argmin(clear))
-        if clear[k] < best:
-            best, best_i, best_j = float(clear[k]), int(order[i[k]]), int(order[j[k]])
-    exhaustive = cell_xy[:, 0].max() <= 1 and cell_xy[:, 1].max() <= 1
-    return best, best_i, best_j, overlaps, exhaustive
+    return collisions.capsule_clearance(ground_a, _resting_base(base_a, radius_a, height_a), radius_a, height_a,
+                                        ground_b, _resting_base(base_b, radius_b, height_b), radius_b, height_b)
 
 
 def min_separation(positions, radius, height, up_axis) -> Separation:
@@ -380,10 +181,10 @@ def min_separation(positions, radius, height, up_axis) -> Separation:
 
     ``positions`` ``(A, T, 3)``: each agent's capsule base (its ground point) per sample, world
     space; non-finite rows mean the agent is absent at that sample. ``radius`` and ``height``:
-    ``(A,)`` or scalars, stage units; a capsule spans ``height`` along up from its base (at least
-    ``2 * radius``). A uniform grid in the ground plane finds the candidate pairs of each sample,
-    so the cost grows with the number of agents, not its square; the grid is coarsened until the
-    minimum it finds is provably the minimum over all pairs.
+    ``(A,)`` or scalars, stage units, positive; a capsule spans ``height`` along up from its base
+    (at least ``2 * radius``: a shorter one is a sphere resting on its base). The solve's detection
+    (:func:`mocapedit.solve.collisions.detect_at`, a grid per sample) measures it: the clearances
+    it finds are exact up to a reach, widened until some pair is within it.
     """
     p = np.asarray(positions, dtype=np.float64)
     if p.ndim != 3 or p.shape[2] != 3:
@@ -391,43 +192,44 @@ def min_separation(positions, radius, height, up_axis) -> Separation:
     n_agents, n_times = p.shape[:2]
     rad = np.broadcast_to(np.asarray(radius, dtype=np.float64), (n_agents,))
     hgt = np.broadcast_to(np.asarray(height, dtype=np.float64), (n_agents,))
-    if np.any(~np.isfinite(rad)) or np.any(rad < 0) or np.any(~np.isfinite(hgt)) or np.any(hgt < 0):
-        raise ValueError("capsule radius and height must be finite and not negative")
-    iup = ground_axes(up_axis)[0]
-    present = np.isfinite(p[..., 0]) & np.isfinite(p[..., 1]) & np.isfinite(p[..., 2])
-    agent, tix = np.nonzero(present)
-    if len(agent) < 2:
+    if not (np.all(np.isfinite(rad)) and np.all(rad > 0) and np.all(np.isfinite(hgt)) and np.all(hgt > 0)):
+        raise ValueError("capsule radius and height must be finite and positive")
+    present = np.all(np.isfinite(p), axis=2)
+    ground = to_ground(np.where(present[..., None], p, 0.0), up_axis)
+    base = _resting_base(p[..., ground_axes(up_axis)[0]], rad[:, None], hgt[:, None])
+    runs = collisions.sample_runs(present, base)
+    if not runs:
         return Separation(float("inf"), None, None, 0)
-    ground = to_ground(p[agent, tix], up_axis)
-    gx, gy = np.ascontiguousarray(ground[:, 0]), np.ascontiguousarray(ground[:, 1])
-    lo, hi = _capsule_extent(p[agent, tix, iup], rad[agent], hgt[agent])
-    r_item = rad[agent]
-    r_max = float(rad.max())
 
-    origin = ground.min(axis=0)
-    extent = ground.max(axis=0) - origin
-    # Start with cells of 1.5 capsule diameters: overlaps and near misses are then found among
-    # very few candidate pairs; sparser crowds coarsen the grid from there.
-    cell = 3.0 * r_max
-    if cell <= 0.0:  # points, not capsules: start from the typical spacing at one sample
-        per_t = np.bincount(tix, minlength=n_times)
-        area = float(np.prod(np.maximum(extent, 1e-12)))
-        cell = float(np.sqrt(area / max(float(per_t.max()), 1.0)))
-    # Keep the grid keys (time, row, column) inside int64.
-    cell = max(cell, float(extent.max()) / 2.0 ** 20, 1e-300)
-    for attempt in range(64):
-        best, bi, bj, overlaps, exhaustive = _grid_pass(gx, gy, lo, hi, r_item, tix, cell, origin)
-        # Items in cells that are not neighbours are more than `cell` apart on the ground.
-        if exhaustive or best <= cell - 2.0 * r_max:
+    def detect(first, last, idx, margin, reach):
+        return collisions.detect_at(np.ascontiguousarray(ground[idx, first:last].transpose(1, 0, 2)),
+                                    rad[idx], hgt[idx], margin, report_distance=reach, base=base[idx, first])
+
+    # At this reach every pair present at a sample is within it: the search ends there at the latest.
+    widest = float(np.hypot(np.hypot(*np.ptp(ground[present], axis=0)), np.ptp(base[present]) + hgt.max()))
+    reach, overlaps = 3.0 * float(rad.max()), None
+    while True:
+        best, at, count = np.inf, None, 0       # the smallest clearance, at its earliest sample
+        for first, last, idx in runs:
+            found = detect(first, last, idx, 0.0, reach)
+            count += int(found.colliding_samples)
+            c = float(found.min_clearance.min())
+            if np.isfinite(c):
+                t = first + int(found.min_clearance_sample[found.min_clearance == c].min())
+                if c < best or (c == best and t < at[0]):
+                    best, at = c, (t, idx)
+        overlaps = count if overlaps is None else overlaps     # the same at every reach
+        if at is not None or reach >= widest:
             break
-        # A pair already found: cells just wide enough to certify it (the minimum only drops).
-        cell = (best + 2.0 * r_max) * (1.0 + 1e-9) if np.isfinite(best) else 2.0 * cell
-        if attempt == 62:  # never expected; one cell per sample is exhaustive by construction
-            cell = 2.0 * float(extent.max()) + 1.0
-    if bi < 0:
+        reach = min(8.0 * reach, widest)
+    if at is None:
         return Separation(float("inf"), None, None, 0)
-    a, b = int(agent[bi]), int(agent[bj])
-    return Separation(best, (min(a, b), max(a, b)), int(tix[bi]), overlaps)
+    # The pair itself: the intervals at that sample whose clearance is not above the minimum
+    # (the first pair of the deepest when several tie).
+    t, idx = at
+    pairs = detect(t, t + 1, idx, 0.0 if best < 0 else float(np.nextafter(best, np.inf)), 0.0)
+    k = int(np.argmax(pairs.depth))
+    return Separation(best, (int(idx[pairs.agent_a[k]]), int(idx[pairs.agent_b[k]])), t, overlaps)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -435,158 +237,9 @@ def min_separation(positions, radius, height, up_axis) -> Separation:
 # ---------------------------------------------------------------------------------------------
 
 
-class _Skel:
-    """A skeleton of an agent, resolved once: its query, joints and composed sample times."""
-
-    def __init__(self, stage: Usd.Stage, path: PathLike, cache: UsdSkel.Cache | None = None):
-        prim = stage.GetPrimAtPath(Sdf.Path(str(path)))
-        if not prim or not prim.IsValid():
-            raise ValueError(f"{path}: no prim at this path")
-        skel = _find_skeleton(prim)
-        self.path = str(path)
-        self.skeleton = skel
-        cache = cache or UsdSkel.Cache()
-        # Populate so animation sources bound (and inherited) under the SkelRoot resolve.
-        roots = []
-        for p in (prim, skel.GetPrim()):
-            root = UsdSkel.Root(p) if p.IsA(UsdSkel.Root) else UsdSkel.Root.Find(p)
-            if root and root.GetPath() not in [r.GetPath() for r in roots]:
-                roots.append(root)
-        for root in roots:
-            cache.Populate(root, Usd.PrimDefaultPredicate)
-        self.query = cache.GetSkelQuery(skel)
-        if not self.query:
-            raise ValueError(f"{skel.GetPath()}: skeleton is not valid "
-                             "(check its joints and rest pose)")
-        self.joints = [str(j) for j in self.query.GetJointOrder()]
-        anim = self.query.GetAnimQuery()
-        samples = anim.GetJointTransformTimeSamples() if anim else []
-        self.sample_times = np.asarray(sorted(samples), dtype=np.float64)
-
-    def joint_index(self, joint) -> int:
-        if isinstance(joint, (int, np.integer)):
-            if not 0 <= int(joint) < len(self.joints):
-                raise ValueError(f"{self.skeleton.GetPath()}: joint index {joint} out of range "
-                                 f"0..{len(self.joints) - 1}")
-            return int(joint)
-        name = str(joint)
-        if name in self.joints:
-            return self.joints.index(name)
-        hits = [k for k, j in enumerate(self.joints) if j.rsplit("/", 1)[-1] == name]
-        if len(hits) != 1:
-            why = "no joint" if not hits else "several joints"
-            raise ValueError(f"{self.skeleton.GetPath()}: {why} named {name!r}")
-        return hits[0]
-
-    def default_times(self) -> np.ndarray:
-        if len(self.sample_times) == 0:
-            raise ValueError(f"{self.path}: the animation of {self.skeleton.GetPath()} has no time "
-                             "samples; pass times explicitly")
-        return self.sample_times
-
-    def world_translations(self, xform_cache: UsdGeom.XformCache) -> np.ndarray:
-        return self.world_matrices(xform_cache)[:, 3, :3]  # row-vector: translation is the last row
-
-    def world_matrices(self, xform_cache: UsdGeom.XformCache) -> np.ndarray:
-        return np.asarray(self.query.ComputeJointWorldTransforms(xform_cache))
-
-
-def _find_skeleton(prim: Usd.Prim) -> UsdSkel.Skeleton:
-    if prim.IsA(UsdSkel.Skeleton):
-        return UsdSkel.Skeleton(prim)
-    inherited = UsdSkel.BindingAPI(prim).GetInheritedSkeleton()
-    if inherited:
-        return inherited
-    bound, found = [], []
-    for p in Usd.PrimRange(prim):
-        if p.IsA(UsdSkel.Skeleton):
-            found.append(p.GetPath())
-        rel = p.GetRelationship("skel:skeleton")
-        if rel:
-            for target in rel.GetForwardedTargets():
-                if target not in bound:
-                    bound.append(target)
-    for candidates in (bound, found):
-        if len(candidates) == 1:
-            skel = UsdSkel.Skeleton.Get(prim.GetStage(), candidates[0])
-            if skel:
-                return skel
-    if not bound and not found:
-        raise ValueError(f"{prim.GetPath()}: no Skeleton at or below this prim")
-    names = ", ".join(str(c) for c in (bound or found))
-    raise ValueError(f"{prim.GetPath()}: several skeletons ({names}); name the Skeleton prim")
-
-
-def _times(times) -> np.ndarray:
-    out = []
-    for t in times:
-        if isinstance(t, Usd.TimeCode):
-            if t.IsDefault():
-                raise ValueError("the default time code has no place among sample times")
-            t = t.GetValue()
-        out.append(float(t))
-    return np.asarray(out, dtype=np.float64)
-
-
-def joint_world_positions(stage: Usd.Stage, skel_or_root_path: PathLike,
-                          times: Iterable | None = None) -> np.ndarray:
-    """World positions of every joint by UsdSkel forward kinematics: ``(T, J, 3)`` stage units.
-
-    ``skel_or_root_path`` names a Skeleton, or a SkelRoot / agent prim from which the skeleton is
-    found (its ``skel:skeleton`` binding, else the one skeleton below it). ``times`` are time codes
-    (default: the animation's authored joint-transform samples as composed). Joints are in the
-    skeleton's joint order.
-    """
-    skel = _Skel(stage, skel_or_root_path)
-    t = skel.default_times() if times is None else _times(times)
-    out = np.empty((len(t), len(skel.joints), 3))
-    xfc = UsdGeom.XformCache()
-    for k, tc in enumerate(t):
-        xfc.SetTime(Usd.TimeCode(tc))
-        out[k] = skel.world_translations(xfc)
-    return out
-
-
-def agent_root_positions(stage: Usd.Stage, agent_path, times: Iterable,
-                         root_joint: Union[int, str] = 0) -> np.ndarray:
-    """World position of one joint (default: the skeleton's root) for one or many agents.
-
-    ``agent_path``: one path -> ``(T, 3)``; a sequence of paths -> ``(A, T, 3)``, all evaluated
-    through one UsdSkel cache and one transform cache per time. ``root_joint``: index into the
-    joint order, a full joint path or a unique joint name.
-    """
-    single = isinstance(agent_path, (str, Sdf.Path))
-    paths = [agent_path] if single else list(agent_path)
-    t = _times(times)
-    cache = UsdSkel.Cache()
-    skels = [_Skel(stage, p, cache) for p in paths]
-    index = [s.joint_index(root_joint) for s in skels]
-    out = np.empty((len(skels), len(t), 3))
-    xfc = UsdGeom.XformCache()
-    for k, tc in enumerate(t):
-        xfc.SetTime(Usd.TimeCode(tc))
-        for a, (s, j) in enumerate(zip(skels, index)):
-            out[a, k] = s.world_translations(xfc)[j]
-    return out[0] if single else out
-
-
-_FOOT_WORDS = ("foot", "toe", "ankle")
-_NOT_FOOT_WORDS = ("end", "site")
-
-
-def default_foot_joints(joints: Sequence[str]) -> list[int]:
-    """Indices of the joints whose own name says foot, toe or ankle (not an end site)."""
-    out = []
-    for k, j in enumerate(joints):
-        leaf = str(j).rsplit("/", 1)[-1].lower()
-        if any(w in leaf for w in _FOOT_WORDS) and not any(w in leaf for w in _NOT_FOOT_WORDS):
-            out.append(k)
-    return out
-
-
 @dataclass(frozen=True)
 class FootSkate:
-    """Result of :func:`foot_skate`.
+    """Result of :func:`foot_skate_of_positions` (and :func:`mocapedit.tools.measure.foot_skate`).
 
     ``joints``: the measured foot joints (paths in the skeleton). ``speeds``: per foot, mean
     horizontal speed while in contact, stage units per second (NaN without contact).
@@ -603,55 +256,13 @@ class FootSkate:
     mean: float
 
 
-def foot_skate(stage: Usd.Stage, agent_path: PathLike, times: Iterable | None = None,
-               foot_joints: Sequence[Union[int, str]] | None = None,
-               contact_height: float | None = None,
-               contact: np.ndarray | None = None) -> FootSkate:
-    """Foot skate: mean horizontal foot speed while the foot is in contact with the ground.
-
-    Evaluated by forward kinematics on the composed stage. A foot is in contact at a sample when it
-    is within ``contact_height`` (default 2 cm in stage units, from ``metersPerUnit``) above its
-    lowest height over the clip and the sample lies within the clip's sample range. The speed of a
-    foot over an interval between consecutive samples that are both in contact is its horizontal
-    (ground-plane) displacement over the interval's duration in seconds (``timeCodesPerSecond``).
-
-    ``times``: time codes (default: the animation's authored samples as composed). ``foot_joints``:
-    joint indices, full joint paths or unique joint names (default: joints named like a foot, toe
-    or ankle, but not an end site). ``contact``: a (T, feet) boolean mask to use instead of the
-    height test, typically ``source.contact`` from the source stage, so that an edited stage is
-    measured over the frames where the source feet were planted (pass ``times=source.times``).
-    """
-    skel = _Skel(stage, agent_path)
-    t = np.unique(skel.default_times() if times is None else _times(times))
-    if foot_joints is None:
-        feet = default_foot_joints(skel.joints)
-        if not feet:
-            raise ValueError(f"{skel.skeleton.GetPath()}: no joint is named like a foot, toe or "
-                             "ankle; pass foot_joints")
-    else:
-        feet = [skel.joint_index(j) for j in foot_joints]
-    pos = np.empty((len(t), len(feet), 3))
-    xfc = UsdGeom.XformCache()
-    for k, tc in enumerate(t):
-        xfc.SetTime(Usd.TimeCode(tc))
-        pos[k] = skel.world_translations(xfc)[feet]
-    if len(skel.sample_times):
-        first, last = skel.sample_times[0], skel.sample_times[-1]
-        in_clip = (t >= first - 1e-9) & (t <= last + 1e-9)
-    else:
-        in_clip = np.ones(len(t), dtype=bool)
-    return foot_skate_of_positions(pos, t, UsdGeom.GetStageUpAxis(stage), UsdGeom.GetStageMetersPerUnit(stage),
-                                   stage.GetTimeCodesPerSecond(), tuple(skel.joints[f] for f in feet),
-                                   in_clip, contact_height, contact)
-
-
 def foot_skate_of_positions(pos: np.ndarray, t: np.ndarray, up, meters_per_unit: float,
                             time_codes_per_second: float, joints: tuple[str, ...] = (),
                             in_clip: np.ndarray | None = None, contact_height: float | None = None,
                             contact: np.ndarray | None = None) -> FootSkate:
-    """:func:`foot_skate` of feet whose world positions are known: ``pos`` (T, F, 3) stage
-    units at increasing time codes ``t`` (T,); ``in_clip`` (T,) marks the samples inside
-    the clip (default: all). The other arguments are :func:`foot_skate`'s."""
+    """Foot skate (:func:`mocapedit.tools.measure.foot_skate`) of feet whose world positions are
+    known: ``pos`` (T, F, 3) stage units at increasing time codes ``t`` (T,); ``in_clip`` (T,) marks the samples inside
+    the clip (default: all). The other arguments are :func:`mocapedit.tools.measure.foot_skate`'s."""
     t = np.asarray(t, dtype=np.float64)
     if contact_height is None:
         contact_height = 0.02 / meters_per_unit
@@ -700,42 +311,6 @@ EDIT_TURN_SECONDS = 2.0
 #: An edit that turns a walk by more than this (degrees) sends it back the way it came: half
 #: way between a right-angle turn and a full reversal.
 REVERSE_TURN_DEGREES = 135.0
-
-_FACING_NAMES = ("hips", "hip", "pelvis")
-
-
-def default_facing_joint(joints: Sequence[str]) -> int:
-    """Index of the joint whose frame stands for the body's facing: the one named hips, hip or
-    pelvis (leaf name, any case), else the first joint whose leaf name contains one of those
-    words without naming a leg, else the skeleton's root (0)."""
-    leaves = [str(j).rsplit("/", 1)[-1].lower() for j in joints]
-    for k, leaf in enumerate(leaves):
-        if leaf in _FACING_NAMES:
-            return k
-    for k, leaf in enumerate(leaves):
-        if any(w in leaf for w in ("hip", "pelvis")) and not any(w in leaf for w in ("leg", "thigh", "up", "left", "right")):
-            return k
-    return 0
-
-
-def joint_world_matrices(stage: Usd.Stage, agent_path: PathLike, times: Iterable | None = None,
-                         joint: Union[int, str, None] = None) -> tuple[np.ndarray, np.ndarray]:
-    """World matrices of one joint by UsdSkel FK: ``(times (T,), matrices (T, 4, 4))``.
-
-    ``joint``: index, full path or unique name (default :func:`default_facing_joint`). ``times``:
-    time codes (default: the animation's authored samples as composed). Matrices are USD's
-    row-vector convention: row k is the joint's local axis k in world space, row 3 its position.
-    """
-    skel = _Skel(stage, agent_path)
-    t = skel.default_times() if times is None else _times(times)
-    j = default_facing_joint(skel.joints) if joint is None else skel.joint_index(joint)
-    out = np.empty((len(t), 4, 4))
-    xfc = UsdGeom.XformCache()
-    for k, tc in enumerate(t):
-        xfc.SetTime(Usd.TimeCode(tc))
-        out[k] = skel.world_matrices(xfc)[j]
-    return t, out
-
 
 def body_facing(matrices, up_axis) -> np.ndarray:
     """(T,) facing of a body from its hip (or root) joint's world matrices ``(T, 4, 4)``:
@@ -843,7 +418,7 @@ def edit_turn(source_ground, edited_ground, seconds, min_speed: float,
 
 @dataclass(frozen=True)
 class Plausibility:
-    """Plausibility figures of one agent, edited against its source (:func:`plausibility`).
+    """Plausibility figures of one agent, edited against its source (:func:`plausibility_of`).
 
     Turning rates are degrees per second of the body's facing (:func:`body_facing`):
     ``max_facing_rate`` of the edited body, ``source_max_facing_rate`` of the source,
@@ -926,8 +501,8 @@ def plausibility_of(agent: str, source_seconds, source_hip, edited_seconds, edit
     (fractional) source frame each edited sample plays, as a time warp knows it; the source is
     then compared at those frames and the time warp is shot time per source time. Without it,
     edited samples pair with source samples by frame (resampled by frame fraction when T'
-    differs) and the time warp is the ratio of their intervals. :func:`plausibility` measures
-    these on stages by FK."""
+    differs) and the time warp is the ratio of their intervals.
+    :func:`mocapedit.tools.measure.plausibility` measures these on stages by FK."""
     ss, se = np.asarray(source_seconds, np.float64), np.asarray(edited_seconds, np.float64)
     ms, me = np.asarray(source_hip, np.float64), np.asarray(edited_hip, np.float64)
     fs, fe = body_facing(ms, up_axis), body_facing(me, up_axis)
@@ -978,28 +553,6 @@ def plausibility_of(agent: str, source_seconds, source_hip, edited_seconds, edit
                         foot_skate_ratio=_ratio(float(foot_skate_edited), float(foot_skate_source)),
                         worst_turn_frame=turn_frame, worst_direction_frame=dev_frame,
                         max_turned_deviation=max_turned, max_edit_turn=max_turn)
-
-
-def plausibility(source_stage: Usd.Stage, edited_stage: Usd.Stage, agent_path: PathLike,
-                 joint: Union[int, str, None] = None, foot_joints=None) -> Plausibility:
-    """Plausibility of one agent: its edited motion on ``edited_stage`` (the input with the edits
-    layer on top) against its source on ``source_stage``, both by UsdSkel FK at their own composed
-    samples, paired by frame. ``joint``: the facing joint (default :func:`default_facing_joint`)."""
-    ts, ms = joint_world_matrices(source_stage, agent_path, None, joint)
-    te, me = joint_world_matrices(edited_stage, agent_path, None, joint)
-    skate_s = foot_skate(source_stage, agent_path, foot_joints=foot_joints)
-    contact = skate_s.contact if len(skate_s.times) == len(te) else None
-    skate_e = foot_skate(edited_stage, agent_path, times=te if contact is not None else None,
-                         foot_joints=foot_joints, contact=contact)
-    return plausibility_of(str(agent_path), ts / source_stage.GetTimeCodesPerSecond(), ms,
-                           te / edited_stage.GetTimeCodesPerSecond(), me, UsdGeom.GetStageUpAxis(source_stage),
-                           UsdGeom.GetStageMetersPerUnit(source_stage), skate_s.mean, skate_e.mean)
-
-
-def shot_plausibility(source_stage: Usd.Stage, edited_stage: Usd.Stage,
-                      agent_paths: Iterable[PathLike], joint=None, foot_joints=None) -> list[Plausibility]:
-    """:func:`plausibility` of each agent, in the order given."""
-    return [plausibility(source_stage, edited_stage, p, joint, foot_joints) for p in agent_paths]
 
 
 def worst_plausibility(figures: Sequence[Plausibility]) -> dict:

@@ -1,43 +1,262 @@
-"""The solve report: per agent, per constraint, and the solver's notes. JSON-ready."""
+"""The solve report: per agent, per constraint, the shot's figures and the solver's notes.
+
+Every entry is a dataclass whose fields name their JSON key once (``key("lengthRatio")``); the
+edits layer and ``--report`` files store :meth:`Report.to_dict`, and :meth:`Report.from_dict`
+reads it back. A field left ``None`` is not written (unless the key is always written, as a
+constraint's ``target``); keys this version does not know are kept in ``extra`` and written back.
+Readers that go by the stored names (``entry.get("met")``) get the same values.
+"""
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
+from typing import Any, ClassVar
+
+
+def key(name: str, always: bool = False, default: Any = None):
+    """A report field stored under JSON key ``name``; ``always``: written even when None."""
+    return field(default=default, metadata={"key": name, "always": always})
+
+
+class Entry:
+    """What every report entry shares: JSON keys by field, conversion, and access by key."""
+    extra: dict
+    _NESTED: ClassVar[dict[str, type]] = {}
+
+    @classmethod
+    def keys_of(cls, *attrs: str) -> list[str]:
+        """The JSON keys of the given fields."""
+        names = {attr: name for name, (attr, _) in cls._keys().items()}
+        return [names[a] for a in attrs]
+
+    @classmethod
+    def _keys(cls) -> dict[str, tuple[str, bool]]:
+        """JSON key -> (field name, always written)."""
+        cached = cls.__dict__.get("_key_cache")
+        if cached is None:
+            cached = {f.metadata["key"]: (f.name, f.metadata["always"]) for f in fields(cls) if "key" in f.metadata}
+            cls._key_cache = cached
+        return cached
+
+    def to_dict(self) -> dict:
+        out = dict(self.extra)
+        for name, (attr, always) in self._keys().items():
+            value = getattr(self, attr)
+            if value is None and not always:
+                continue
+            out[name] = value.to_dict() if isinstance(value, Entry) else value
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict):
+        """The entry of a stored dict. A key stored as null (a figure that was not finite) stays
+        null when written back, though the field reads None like an absent one."""
+        keys = cls._keys()
+        known, extra = {}, {}
+        for name, value in data.items():
+            if name not in keys or (value is None and not keys[name][1]):
+                extra[name] = value
+            elif name in cls._NESTED and isinstance(value, dict):
+                known[keys[name][0]] = cls._NESTED[name].from_dict(value)
+            else:
+                known[keys[name][0]] = value
+        return cls(**known, extra=extra)
+
+    # Access by the stored key, for readers that go by the names of the JSON.
+    def get(self, name: str, default=None):
+        attr = self._keys().get(name)
+        value = getattr(self, attr[0]) if attr else self.extra.get(name)
+        return default if value is None else value
+
+    def __contains__(self, name: str) -> bool:
+        return self.get(name) is not None
+
+    def __getitem__(self, name: str):
+        value = self.get(name)
+        if value is None:
+            raise KeyError(name)
+        return value
+
+    def __setitem__(self, name: str, value) -> None:
+        attr = self._keys().get(name)
+        if attr:
+            setattr(self, attr[0], value)
+        else:
+            self.extra[name] = value
+
+    def update(self, figures: dict) -> None:
+        """Sets figures given by their stored keys (as the measuring functions name them)."""
+        for name, value in figures.items():
+            self[name] = value
+
+
+@dataclass
+class AgentPlausibility(Entry):
+    """How plausible an edited agent's motion is (:func:`mocapedit.inspect.metrics.plausibility_of`)."""
+    max_facing_rate: float = key("maxFacingRate")                     # degrees per second
+    source_max_facing_rate: float = key("sourceMaxFacingRate")
+    max_extra_facing_rate: float = key("maxExtraFacingRate")
+    spin_frames: int = key("spinFrames")
+    max_direction_deviation: float = key("maxDirectionDeviation")      # degrees
+    max_turned_direction_deviation: float = key("maxTurnedDirectionDeviation")
+    max_edit_turn: float = key("maxEditTurn")
+    reverses: bool = key("reverses")
+    length_ratio: float = key("lengthRatio")
+    time_warp: list = key("timeWarp")                                  # [slowest, fastest]
+    foot_skate_ratio: float = key("footSkateRatio")
+    #: Source frames where the largest extra turn and direction change happen (previews mark them).
+    worst_turn_frame: int = key("worstTurnFrame")
+    worst_direction_frame: int = key("worstDirectionFrame")
+    extra: dict = field(default_factory=dict)
+
+
+@dataclass
+class ShotPlausibility(Entry):
+    """The shot's worst plausibility figures (:func:`mocapedit.inspect.metrics.worst_plausibility`)."""
+    agents: int = key("agents")
+    max_extra_facing_rate: float = key("maxExtraFacingRate")
+    max_extra_turn_per_frame_at_60fps: float = key("maxExtraTurnPerFrameAt60fps")
+    max_extra_facing_rate_agent: str = key("maxExtraFacingRateAgent")
+    spinning_agents: int = key("spinningAgents")
+    max_direction_deviation: float = key("maxDirectionDeviation")
+    max_direction_deviation_agent: str | None = key("maxDirectionDeviationAgent", always=True)
+    max_turned_direction_deviation: float = key("maxTurnedDirectionDeviation")
+    max_turned_direction_deviation_agent: str | None = key("maxTurnedDirectionDeviationAgent", always=True)
+    max_edit_turn: float = key("maxEditTurn")
+    reversing_agents: int = key("reversingAgents")
+    mean_length_ratio: float = key("meanLengthRatio")
+    length_ratio_range: tuple = key("lengthRatioRange")
+    time_warp_range: tuple = key("timeWarpRange")
+    mean_foot_skate_ratio: float = key("meanFootSkateRatio")
+    max_foot_skate_ratio: float = key("maxFootSkateRatio")
+    extra: dict = field(default_factory=dict)
+
+
+@dataclass
+class AgentEntry(Entry):
+    """One agent's figures. Lengths in stage units, times in seconds unless said."""
+    frames: int = key("frames")
+    edited: bool = key("edited")
+    trajectory_joint: str = key("trajectoryJoint")          # when the hip is projected to the ground
+    length_ratio: float = key("lengthRatio")                # edited path length over the source's
+    max_displacement: float = key("maxDisplacement")
+    mean_displacement: float = key("meanDisplacement")
+    shape_change: float = key("shapeChange")
+    solver: str = key("solver")
+    min_interval: float = key("minInterval")                # time codes, after the time warp
+    min_separation: float = key("minSeparation")            # nearest clearance to another agent
+    delay: float = key("delay")                             # waited for collision avoidance
+    # Mean foot speed while in contact (stage units per second).
+    foot_skate_source: float = key("footSkateSource")
+    foot_skate_unlocked: float = key("footSkateUnlocked")   # after the edits, before foot locking
+    foot_skate_edited: float = key("footSkateEdited")       # as the edits layer plays it
+    foot_contacts_locked: int = key("footContactsLocked")
+    max_pelvis_drop: float = key("maxPelvisDrop")
+    max_foot_correction: float = key("maxFootCorrection")
+    plausibility: AgentPlausibility = key("plausibility")
+    notes: list[str] = key("notes")
+    extra: dict = field(default_factory=dict)
+    _NESTED: ClassVar[dict[str, type]] = {"plausibility": AgentPlausibility}
+
+    def add_notes(self, *texts: str) -> list[str]:
+        """Appends notes (the list exists afterwards, even for none); returns it."""
+        if self.notes is None:
+            self.notes = []
+        self.notes.extend(texts)
+        return self.notes
+
+
+@dataclass
+class ConstraintEntry(Entry):
+    """How a constraint (or a collision left, or an avoid region's push) ended. Residuals of time
+    and sync constraints are in time codes, the others in stage units."""
+    prim: str | None = key("prim", always=True)
+    kind: str = key("kind", always=True)   # position, relative, stationary, path-curve, time, sync, collision, avoid-region
+    agent: str | None = key("agent", always=True)
+    frame: int | None = key("frame", always=True)
+    target: str | None = key("target", always=True)
+    target_frame: int | None = key("targetFrame", always=True)
+    hard: bool = key("hard", always=True, default=False)
+    residual: float | None = key("residual", always=True, default=0.0)
+    met: bool = key("met", always=True, default=True)
+    position: list[float] | None = key("position")           # world position of the handle
+    time: float | None = key("time")                         # collision: shot time of the deepest overlap
+    held_by_constraints: bool | None = key("heldByConstraints")  # collision: hard constraints hold both
+    extra: dict = field(default_factory=dict)
+
+
+@dataclass
+class Stats(Entry):
+    """The shot's figures: counts, and each pass's run-wide figures."""
+    agents: int = key("agents")
+    edited_agents: int = key("editedAgents")
+    clips: int = key("clips")
+    constraints: int = key("constraints")
+    groups: int = key("groups")
+    avoid_regions: int = key("avoidRegions")
+    animation_layers: int = key("animationLayers")
+    path_components: int = key("pathComponents")
+    layered_agents: int = key("layeredAgents")
+    layered_joint_samples: int = key("layeredJointSamples")
+    collision_strategy: str = key("collisionStrategy")
+    collision_iterations: int = key("collisionIterations")
+    collisions_per_iteration: list[int] = key("collisionsPerIteration")  # before each solve, then after the last
+    remaining_overlaps: int = key("remainingOverlaps")
+    region_frames_left: int = key("regionFramesLeft")
+    min_separation: float = key("minSeparation")
+    delayed_agents: int = key("delayedAgents")
+    largest_delay: float = key("largestDelay")                # seconds
+    collision_stalled: bool = key("collisionStalled")
+    foot_locked_agents: int = key("footLockedAgents")
+    foot_locking_not_needed: int = key("footLockingNotNeeded")
+    foot_contacts_locked: int = key("footContactsLocked")
+    foot_skate_source: float = key("footSkateSource")         # means over the agents with contacts
+    foot_skate_unlocked: float = key("footSkateUnlocked")
+    foot_skate_edited: float = key("footSkateEdited")
+    max_pelvis_drop: float = key("maxPelvisDrop")
+    max_foot_correction: float = key("maxFootCorrection")
+    plausibility: ShotPlausibility = key("plausibility")
+    extra: dict = field(default_factory=dict)
+    _NESTED: ClassVar[dict[str, type]] = {"plausibility": ShotPlausibility}
 
 
 @dataclass
 class Report:
     input: str = ""
     output: str | None = None
-    agents: dict[str, dict] = field(default_factory=dict)        # agent path -> figures
-    constraints: list[dict] = field(default_factory=list)        # one entry per constraint prim
-    notes: list[str] = field(default_factory=list)               # solver choices, fallbacks, warnings
-    stats: dict = field(default_factory=dict)
-    timings: dict[str, float] = field(default_factory=dict)      # seconds per phase
+    agents: dict[str, AgentEntry] = field(default_factory=dict)       # agent path -> figures
+    constraints: list[ConstraintEntry] = field(default_factory=list)  # one entry per constraint prim
+    notes: list[str] = field(default_factory=list)                    # solver choices, fallbacks, warnings
+    stats: Stats = field(default_factory=Stats)
+    timings: dict[str, float] = field(default_factory=dict)           # seconds per phase
 
-    def agent(self, path: str) -> dict:
-        return self.agents.setdefault(path, {})
+    def agent(self, path: str) -> AgentEntry:
+        entry = self.agents.get(path)
+        if entry is None:
+            entry = self.agents[path] = AgentEntry()
+        return entry
 
     def note(self, text: str) -> None:
         if text not in self.notes:
             self.notes.append(text)
 
     def to_dict(self) -> dict:
-        return {"input": self.input, "output": self.output, "stats": self.stats,
-                "timings": self.timings, "notes": self.notes, "constraints": self.constraints,
-                "agents": self.agents}
+        return {"input": self.input, "output": self.output, "timings": self.timings, **self.to_layer_dict()}
 
     def to_layer_dict(self) -> dict:
         """What the edits layer stores: everything but the timings and the file names, so
         the same input gives the same bytes wherever it is written."""
-        return {"stats": self.stats, "notes": self.notes, "constraints": self.constraints,
-                "agents": self.agents}
+        return {"stats": self.stats.to_dict(), "notes": self.notes,
+                "constraints": [c.to_dict() for c in self.constraints],
+                "agents": {path: entry.to_dict() for path, entry in self.agents.items()}}
 
     @classmethod
     def from_dict(cls, data: dict) -> "Report":
-        return cls(input=data.get("input", ""), output=data.get("output"), agents=dict(data.get("agents", {})),
-                   constraints=list(data.get("constraints", [])), notes=list(data.get("notes", [])),
-                   stats=dict(data.get("stats", {})), timings=dict(data.get("timings", {})))
+        return cls(input=data.get("input", ""), output=data.get("output"),
+                   agents={p: AgentEntry.from_dict(e) for p, e in dict(data.get("agents", {})).items()},
+                   constraints=[ConstraintEntry.from_dict(c) for c in data.get("constraints", [])],
+                   notes=list(data.get("notes", [])), stats=Stats.from_dict(dict(data.get("stats", {}))),
+                   timings=dict(data.get("timings", {})))
 
     def to_json(self, indent: int = 2) -> str:
         return json.dumps(self.to_dict(), indent=indent, sort_keys=True, default=_plain)
@@ -46,10 +265,10 @@ class Report:
         """What ``mocapedit solve`` prints: the same figures, in the same words, as the
         summary of ``mocapedit report``."""
         s = self.stats
-        lines = [f"agents: {s.get('agents', 0)} read, {s.get('editedAgents', 0)} edited; "
-                 f"clips: {s.get('clips', 0)}; constraints: {s.get('constraints', 0)}"]
+        lines = [f"agents: {s.agents or 0} read, {s.edited_agents or 0} edited; "
+                 f"clips: {s.clips or 0}; constraints: {s.constraints or 0}"]
         lines.extend(overview(s, self.constraints))
-        lines.extend(plausibility_lines(s.get("plausibility")))
+        lines.extend(plausibility_lines(s.plausibility))
         lines.extend(foot_locking_lines(s))
         lines.extend(f"note: {n}" for n in self.notes)
         return "\n".join(lines)
@@ -63,57 +282,57 @@ def describe_left(intervals: int, region_frames: int) -> str:
     return text + " left"
 
 
-def overview(stats: dict, constraints: list[dict]) -> list[str]:
+def overview(stats: Stats, constraints: list[ConstraintEntry]) -> list[str]:
     """The lines on constraints and overlaps that the solve summary and the report share.
 
     Constraint figures leave out the soft collision rows; residuals of time and sync
     constraints are in time codes, the others in stage units."""
     lines = []
-    checked = [c for c in constraints if c.get("kind") != "collision"]
+    checked = [c for c in constraints if c.kind != "collision"]
     if checked:
-        unmet = [c for c in checked if not c.get("met", True)]
-        hard = [c.get("residual") or 0.0 for c in checked if c.get("hard")]
+        unmet = [c for c in checked if not c.met]
+        hard = [c.residual or 0.0 for c in checked if c.hard]
         lines.append(f"constraints reported: {len(checked)}, met: {len(checked) - len(unmet)}, "
                      f"not met: {len(unmet)}" + (f"; worst hard residual {_num(max(hard))}" if hard else ""))
-    if "collisionsPerIteration" in stats:
-        iterations = stats.get("collisionIterations", 0)
-        lines.append("collision avoidance: " + describe_left(stats.get("remainingOverlaps", 0),
-                                                             stats.get("regionFramesLeft", 0)) +
+    if stats.collisions_per_iteration is not None:
+        iterations = stats.collision_iterations or 0
+        lines.append("collision avoidance: " + describe_left(stats.remaining_overlaps or 0,
+                                                             stats.region_frames_left or 0) +
                      f" after {iterations} iteration{'s' if iterations != 1 else ''}")
-    elif "remainingOverlaps" in stats:
-        lines.append(f"overlapping agent pairs left: {stats['remainingOverlaps']}")
+    elif stats.remaining_overlaps is not None:
+        lines.append(f"overlapping agent pairs left: {stats.remaining_overlaps}")
     return lines
 
 
-def foot_locking_lines(stats: dict) -> list[str]:
+def foot_locking_lines(stats: Stats) -> list[str]:
     """The shot's foot locking figures, as ``solve`` prints them and the report shows them."""
-    if "footContactsLocked" not in stats:
+    if stats.foot_contacts_locked is None:
         return []
-    return [f"feet: {stats['footContactsLocked']} contacts locked on {stats.get('footLockedAgents', 0)} agents; "
-            f"skate {_num(stats.get('footSkateSource'))} source, {_num(stats.get('footSkateUnlocked'))} after the "
-            f"edits, {_num(stats.get('footSkateEdited'))} locked (stage units/s, mean over agents); "
-            f"largest pelvis drop {_num(stats.get('maxPelvisDrop'))}, "
-            f"largest foot correction {_num(stats.get('maxFootCorrection'))}"]
+    return [f"feet: {stats.foot_contacts_locked} contacts locked on {stats.foot_locked_agents or 0} agents; "
+            f"skate {_num(stats.foot_skate_source)} source, {_num(stats.foot_skate_unlocked)} after the "
+            f"edits, {_num(stats.foot_skate_edited)} locked (stage units/s, mean over agents); "
+            f"largest pelvis drop {_num(stats.max_pelvis_drop)}, "
+            f"largest foot correction {_num(stats.max_foot_correction)}"]
 
 
-def plausibility_lines(p: dict | None) -> list[str]:
-    """The shot's worst plausibility figures (``stats["plausibility"]``), as ``solve`` prints them."""
-    if not p or not p.get("agents"):
+def plausibility_lines(p: ShotPlausibility | None) -> list[str]:
+    """The shot's worst plausibility figures (``stats.plausibility``), as ``solve`` prints them."""
+    if p is None or not p.agents:
         return []
-    lo, hi = p["lengthRatioRange"]
-    wlo, whi = p["timeWarpRange"]
+    lo, hi = p.length_ratio_range
+    wlo, whi = p.time_warp_range
     return [
-        f"plausibility of {p['agents']} moved agents: largest extra turn {p['maxExtraTurnPerFrameAt60fps']:.1f} "
-        f"deg/frame at 60 fps ({p['maxExtraFacingRateAgent']}), {p['spinningAgents']} spinning (over 15)",
-        f"  largest walking direction change {p['maxDirectionDeviation']:.1f} deg"
-        + (f" ({p['maxDirectionDeviationAgent']})" if p.get("maxDirectionDeviationAgent") else "")
-        + (f", {p['maxTurnedDirectionDeviation']:.1f} deg against the edit's own turn"
-           + (f" ({p['maxTurnedDirectionDeviationAgent']})" if p.get("maxTurnedDirectionDeviationAgent") else "")
-           if "maxTurnedDirectionDeviation" in p else "")
-        + f", {p['reversingAgents']} reversing"
-        + (" (over 90 against the edit's turn, or turned over 135)" if "maxEditTurn" in p else " (over 90)"),
-        f"  path length ratio mean {p['meanLengthRatio']:.3f} ({lo:.3f}..{hi:.3f}); time warp {wlo:.3f}..{whi:.3f}; "
-        f"foot skate ratio mean {p['meanFootSkateRatio']:.2f} (max {p['maxFootSkateRatio']:.2f})"]
+        f"plausibility of {p.agents} moved agents: largest extra turn {p.max_extra_turn_per_frame_at_60fps:.1f} "
+        f"deg/frame at 60 fps ({p.max_extra_facing_rate_agent}), {p.spinning_agents} spinning (over 15)",
+        f"  largest walking direction change {p.max_direction_deviation:.1f} deg"
+        + (f" ({p.max_direction_deviation_agent})" if p.max_direction_deviation_agent else "")
+        + (f", {p.max_turned_direction_deviation:.1f} deg against the edit's own turn"
+           + (f" ({p.max_turned_direction_deviation_agent})" if p.max_turned_direction_deviation_agent else "")
+           if p.max_turned_direction_deviation is not None else "")
+        + f", {p.reversing_agents} reversing"
+        + (" (over 90 against the edit's turn, or turned over 135)" if p.max_edit_turn is not None else " (over 90)"),
+        f"  path length ratio mean {p.mean_length_ratio:.3f} ({lo:.3f}..{hi:.3f}); time warp {wlo:.3f}..{whi:.3f}; "
+        f"foot skate ratio mean {p.mean_foot_skate_ratio:.2f} (max {p.max_foot_skate_ratio:.2f})"]
 
 
 def _plain(value):
@@ -148,56 +367,6 @@ class StoredReport:
         return out
 
 
-def _layer_report(layer) -> dict | None:
-    data = dict(layer.customLayerData or {}).get("mocapedit")
-    if not isinstance(data, dict) or "report" not in data:
-        return None
-    return data
-
-
-def load(path: str) -> StoredReport:
-    """Reads the report from an edits layer, or from the edits layer a stage sub-layers.
-
-    Raises:
-      MocapEditError: the file cannot be read or holds no mocapedit report.
-    """
-    import os
-
-    from pxr import Sdf, Usd
-
-    from mocapedit.model.errors import MocapEditError
-    if not os.path.exists(path):
-        raise MocapEditError(f"{path}: no such file")
-    try:
-        layer = Sdf.Layer.FindOrOpen(path)
-    except Exception as exc:  # pxr raises Tf.ErrorException
-        raise MocapEditError(f"{path}: cannot be read as a USD layer: {str(exc).strip().splitlines()[-1]}") from None
-    if layer is None:
-        raise MocapEditError(f"{path}: cannot be read as a USD layer")
-    data = _layer_report(layer)
-    if data is None:
-        # A composed stage: the edits layer is one of the layers it uses.
-        stage = Usd.Stage.Open(layer)
-        for used in sorted(stage.GetUsedLayers(), key=lambda l: l.identifier):
-            data = _layer_report(used)
-            if data is not None:
-                layer = used
-                break
-    if data is None:
-        raise MocapEditError(f"{path}: holds no mocapedit report (customLayerData mocapedit.report); "
-                             "write one with `mocapedit solve STAGE -o EDITS`")
-    try:
-        parsed = json.loads(data["report"])
-    except (TypeError, ValueError) as exc:
-        raise MocapEditError(f"{layer.identifier}: customLayerData mocapedit.report is not valid JSON: {exc}") from None
-    root = layer.pseudoRoot
-    return StoredReport(
-        file=layer.identifier, report=Report.from_dict(parsed), version=str(data.get("version", "")),
-        inputs=[str(x) for x in data.get("inputs", [])], content_hash=str(data.get("contentHash", "")),
-        meters_per_unit=float(root.GetInfo("metersPerUnit")) if root.HasInfo("metersPerUnit") else None,
-        up_axis=str(root.GetInfo("upAxis")) if root.HasInfo("upAxis") else None)
-
-
 def select(stored: StoredReport, patterns: list[str] | None = None) -> StoredReport:
     """The report restricted to agents whose path matches one of the fnmatch ``patterns``."""
     if not patterns:
@@ -207,16 +376,23 @@ def select(stored: StoredReport, patterns: list[str] | None = None) -> StoredRep
     r = stored.report
     sub = Report(input=r.input, output=r.output, stats=r.stats, notes=r.notes, timings=r.timings,
                  agents={p: v for p, v in r.agents.items() if keep(p)},
-                 constraints=[c for c in r.constraints if keep(c.get("agent")) or keep(c.get("target"))])
+                 constraints=[c for c in r.constraints if keep(c.agent) or keep(c.target)])
     return StoredReport(**{**stored.__dict__, "report": sub})
 
 
 _UNIT_NAMES = {1.0: "m", 0.01: "cm", 0.001: "mm", 0.1: "dm", 1000.0: "km"}
 _TIME_KINDS = ("time", "sync")
-_KNOWN_FIGURES = ("frames", "edited", "lengthRatio", "maxDisplacement", "meanDisplacement", "shapeChange",
-                  "footSkateSource", "footSkateEdited", "footSkateUnlocked", "footContactsLocked", "maxPelvisDrop",
-                  "maxFootCorrection", "minSeparation", "minInterval", "solver", "notes",
-                  "plausibility", "trajectoryJoint")
+#: Agent figures that ``format_text`` lists as they are, by key (the others have their own words).
+_LISTED_FIGURES = ("delay",)
+#: Shot figures that ``format_text`` shows in their own lines, by field.
+_SHOWN_STATS = ("agents", "edited_agents", "clips", "constraints", "groups", "avoid_regions", "animation_layers",
+                "remaining_overlaps", "plausibility", "foot_contacts_locked", "foot_locked_agents",
+                "foot_skate_source", "foot_skate_edited", "foot_skate_unlocked", "max_pelvis_drop",
+                "max_foot_correction")
+
+
+def _or(value, default):
+    return default if value is None else value
 
 
 def _num(value, digits: int = 4) -> str:
@@ -247,78 +423,78 @@ def format_text(stored: StoredReport, show_all: bool = False) -> str:
         lines.append(f"input: {', '.join(stored.inputs)}")
     lines.append(f"lengths in {unit}" + (f", up axis {stored.up_axis}" if stored.up_axis else "") +
                  "; time residuals in time codes")
-    lines.append(f"agents: {s.get('agents', len(r.agents))} read, {s.get('editedAgents', 0)} edited; "
-                 f"constraints: {s.get('constraints', 0)}; groups: {s.get('groups', 0)}; "
-                 f"avoid regions: {s.get('avoidRegions', 0)}; animation layers: {s.get('animationLayers', 0)}")
+    lines.append(f"agents: {_or(s.agents, len(r.agents))} read, {s.edited_agents or 0} edited; "
+                 f"constraints: {s.constraints or 0}; groups: {s.groups or 0}; "
+                 f"avoid regions: {s.avoid_regions or 0}; animation layers: {s.animation_layers or 0}")
     lines.extend(overview(s, r.constraints))
-    others = {k: v for k, v in sorted(s.items()) if k not in (
-        "agents", "editedAgents", "clips", "constraints", "groups", "avoidRegions", "animationLayers",
-        "remainingOverlaps", "plausibility", "footContactsLocked", "footLockedAgents", "footSkateSource",
-        "footSkateEdited", "footSkateUnlocked", "maxPelvisDrop", "maxFootCorrection")}
-    lines.extend(plausibility_lines(s.get("plausibility")))
+    shown = set(Stats.keys_of(*_SHOWN_STATS))
+    others = {k: v for k, v in sorted(s.to_dict().items()) if k not in shown}
+    lines.extend(plausibility_lines(s.plausibility))
     lines.extend(foot_locking_lines(s))
     if others:
         lines.append("stats: " + ", ".join(f"{k} {_num(v)}" for k, v in others.items()))
     lines.extend(f"note: {n}" for n in r.notes)
 
-    by_agent: dict[str, list[dict]] = {}
+    by_agent: dict[str, list[ConstraintEntry]] = {}
     for c in r.constraints:
-        by_agent.setdefault(c.get("agent") or "(no agent)", []).append(c)
+        by_agent.setdefault(c.agent or "(no agent)", []).append(c)
+    listed = set(AgentEntry._keys()) - set(_LISTED_FIGURES)
     shown = 0
     for path in sorted(set(r.agents) | set(by_agent)):
-        fig = r.agents.get(path, {})
+        fig = r.agents.get(path) or AgentEntry()
         cons = by_agent.get(path, [])
-        interesting = fig.get("edited") or cons or fig.get("notes") or (fig.get("minSeparation") or 0) < 0
+        interesting = fig.edited or cons or fig.notes or (fig.min_separation or 0) < 0
         if not (show_all or interesting):
             continue
         shown += 1
         lines.append("")
-        state = "edited" if fig.get("edited") else "not edited"
-        lines.append(f"{path}  ({state}" + (f", {fig['frames']} frames" if "frames" in fig else "") + ")")
+        state = "edited" if fig.edited else "not edited"
+        lines.append(f"{path}  ({state}" + (f", {fig.frames} frames" if fig.frames is not None else "") + ")")
         parts = []
-        if "lengthRatio" in fig:
-            parts.append(f"length ratio {_num(fig['lengthRatio'])}")
-        if "maxDisplacement" in fig or "meanDisplacement" in fig:
-            parts.append(f"displacement max {_num(fig.get('maxDisplacement'))}, mean {_num(fig.get('meanDisplacement'))}")
-        if "shapeChange" in fig:
-            parts.append(f"shape change {_num(fig['shapeChange'])}")
-        if "plausibility" in fig:
-            p = fig["plausibility"]
-            parts.append(f"extra turn {_num(p['maxExtraFacingRate'] / 60.0)} deg/frame at 60 fps"
-                         f" ({p['spinFrames']} spinning frames), walking direction change "
-                         f"{_num(p['maxDirectionDeviation'])} deg, foot skate ratio {_num(p['footSkateRatio'])}")
-        if "footSkateSource" in fig or "footSkateEdited" in fig:
-            a, b = fig.get("footSkateSource"), fig.get("footSkateEdited")
+        if fig.length_ratio is not None:
+            parts.append(f"length ratio {_num(fig.length_ratio)}")
+        if fig.max_displacement is not None or fig.mean_displacement is not None:
+            parts.append(f"displacement max {_num(fig.max_displacement)}, mean {_num(fig.mean_displacement)}")
+        if fig.shape_change is not None:
+            parts.append(f"shape change {_num(fig.shape_change)}")
+        if fig.plausibility is not None:
+            p = fig.plausibility
+            parts.append(f"extra turn {_num(p.max_extra_facing_rate / 60.0)} deg/frame at 60 fps"
+                         f" ({p.spin_frames} spinning frames), walking direction change "
+                         f"{_num(p.max_direction_deviation)} deg, foot skate ratio {_num(p.foot_skate_ratio)}")
+        if fig.foot_skate_source is not None or fig.foot_skate_edited is not None:
+            a, b = fig.foot_skate_source, fig.foot_skate_edited
             change = f" ({'+' if b - a >= 0 else ''}{_num(b - a)})" if a is not None and b is not None else ""
-            locked = f" (before locking {_num(fig['footSkateUnlocked'])})" if "footSkateUnlocked" in fig else ""
+            locked = (f" (before locking {_num(fig.foot_skate_unlocked)})"
+                      if fig.foot_skate_unlocked is not None else "")
             parts.append(f"foot skate {_num(a)} -> {_num(b)}{change}{locked}")
-        if "footContactsLocked" in fig:
-            parts.append(f"contacts locked {fig['footContactsLocked']}, pelvis drop {_num(fig.get('maxPelvisDrop'))}, "
-                         f"foot correction {_num(fig.get('maxFootCorrection'))}")
-        if "minSeparation" in fig:
-            sep = fig["minSeparation"]
-            parts.append(f"min separation {_num(sep)}" + ("  OVERLAP" if sep is not None and sep < 0 else ""))
-        if "minInterval" in fig:
-            parts.append(f"min interval {_num(fig['minInterval'])}")
-        if "solver" in fig:
-            parts.append(f"solver {fig['solver']}")
-        extra = {k: v for k, v in sorted(fig.items()) if k not in _KNOWN_FIGURES}
+        if fig.foot_contacts_locked is not None:
+            parts.append(f"contacts locked {fig.foot_contacts_locked}, pelvis drop {_num(fig.max_pelvis_drop)}, "
+                         f"foot correction {_num(fig.max_foot_correction)}")
+        if fig.min_separation is not None:
+            sep = fig.min_separation
+            parts.append(f"min separation {_num(sep)}" + ("  OVERLAP" if sep < 0 else ""))
+        if fig.min_interval is not None:
+            parts.append(f"min interval {_num(fig.min_interval)}")
+        if fig.solver is not None:
+            parts.append(f"solver {fig.solver}")
+        extra = {k: v for k, v in sorted(fig.to_dict().items()) if k not in listed}
         parts.extend(f"{k} {_num(v) if not isinstance(v, (list, dict)) else json.dumps(v)}" for k, v in extra.items())
         if parts:
             lines.append("  " + "; ".join(parts))
         if cons:
             rows = [["constraint", "kind", "frame", "target", "residual", "strength", "met"]]
             for c in cons:
-                target = c.get("target")
-                if target and c.get("targetFrame") is not None:
-                    target = f"{target}@{c['targetFrame']}"
-                res = _num(c.get("residual"))
-                rows.append([str(c.get("prim", "-")), str(c.get("kind", "-")), _num(c.get("frame")),
-                             target or "-", res + (" tc" if c.get("kind") in _TIME_KINDS else ""),
-                             "hard" if c.get("hard") else "soft",
-                             "yes" if c.get("met", True) else "NO"])
+                target = c.target
+                if target and c.target_frame is not None:
+                    target = f"{target}@{c.target_frame}"
+                res = _num(c.residual)
+                rows.append([str(c.prim), str(c.kind), _num(c.frame),
+                             target or "-", res + (" tc" if c.kind in _TIME_KINDS else ""),
+                             "hard" if c.hard else "soft",
+                             "yes" if c.met else "NO"])
             lines.extend(_table(rows))
-        for n in fig.get("notes", []) or []:
+        for n in fig.notes or []:
             lines.append(f"  note: {n}")
     hidden = len(set(r.agents) | set(by_agent)) - shown
     if hidden and not show_all:

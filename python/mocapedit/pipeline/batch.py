@@ -79,19 +79,6 @@ def plan(shots: list[str], outdir: str, suffix: str = ".edits.usdc") -> list[Job
     return jobs
 
 
-def _recorded(output: str) -> tuple[str | None, str | None]:
-    """(content hash, options text) recorded in an existing edits layer, if any."""
-    from pxr import Sdf
-    if not os.path.isfile(output):
-        return None, None
-    try:
-        layer = Sdf.Layer.OpenAsAnonymous(output)
-    except Exception:  # an unreadable old output is solved again
-        return None, None
-    data = (layer.customLayerData or {}).get("mocapedit", {}) if layer else {}
-    return data.get("contentHash"), data.get("options")
-
-
 def _figures(report) -> dict:
     stats = report.stats
     hard = [c.get("residual") or 0.0 for c in report.constraints if c.get("hard")]
@@ -105,20 +92,20 @@ def solve_shot(job: Job, options: dict, force: bool = False) -> ShotResult:
     """Solves one shot (a Dask task; also runs in-process). Never raises: a failure is a
     result with its error."""
     from mocapedit.pipeline import processor
-    from mocapedit.usd import reader
+    from mocapedit.usd import edits_format, reader
     t = time.perf_counter()
     result = ShotResult(shot=job.shot, output=job.output, status="failed")
     try:
         if not force and os.path.isfile(job.output):
             stage = reader.open_stage(job.shot)
             digest = processor.content_hash(stage)
-            if _recorded(job.output) == (digest, processor.options_text(**options)):
+            if edits_format.recorded(job.output) == (digest, processor.options_text(**options)):
                 result.status, result.contentHash = "skipped", digest
                 return result
         solved = processor.solve(job.shot, output=job.output, **options)
         result.status = "solved"
         result.figures = _figures(solved.report)
-        result.contentHash = solved.layer.customLayerData["mocapedit"]["contentHash"]
+        result.contentHash = edits_format.content_hash(solved.layer)
     except MocapEditError as exc:
         result.error = str(exc)
     except Exception as exc:  # any other failure of one shot is reported, the batch goes on

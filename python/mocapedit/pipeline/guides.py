@@ -32,6 +32,8 @@ from mocapedit.geometry import ground
 from mocapedit.inspect import inspection
 from mocapedit.usd import writer
 from mocapedit.inspect.inspection import Crowd, Remaining
+from mocapedit.model.report import ConstraintEntry
+from mocapedit.pipeline.context import SolveContext
 
 SOURCE = (0.55, 0.55, 0.6)
 EDITED = (1.0, 0.55, 0.1)
@@ -48,14 +50,14 @@ COLLISION = (1.0, 0.1, 0.65)
 _LIFT_M = {"source": 0.01, "edited": 0.02, "stationary": 0.03, "links": 0.04, "points": 0.05}
 
 
-def status_color(entry: dict | None, met_color=MET) -> tuple[float, float, float]:
+def status_color(entry: ConstraintEntry | None, met_color=MET) -> tuple[float, float, float]:
     """Green (or ``met_color``) when met, red when not, yellow when no pass reported on it."""
     if entry is None:
         return NOT_REPORTED
-    return met_color if entry.get("met", True) else NOT_MET
+    return met_color if entry.met else NOT_MET
 
 
-def build(ctx, crowd: Crowd, remaining: Remaining | None) -> None:
+def build(ctx: SolveContext, crowd: Crowd, remaining: Remaining | None) -> None:
     """Appends the inspection guides to ``ctx.guides`` (nothing when guides are off)."""
     if not ctx.options.guides:
         return

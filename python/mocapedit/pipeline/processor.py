@@ -4,94 +4,32 @@
 it returns the edits as a new (anonymous) Sdf layer, saved atomically when ``output`` is
 given, plus a :class:`~mocapedit.model.report.Report`.
 
-The solve runs as a list of passes over a shared :class:`SolveContext`. Each pass reads
-the source data and what earlier passes produced (edited paths, time maps, layered
-poses) and adds its own; ``compose_edits`` turns the result into what the writer
-authors. A pass does its numerical work through :mod:`mocapedit._solver` and numpy.
+The solve runs the passes of :data:`mocapedit.pipeline.passes.PASSES`, in order, over a
+shared :class:`~mocapedit.pipeline.context.SolveContext`. Each pass reads the source data and
+what earlier passes produced (edited paths, time maps, pose edits) and adds its own;
+``compose_edits`` turns the result into what the writer authors. A pass does its numerical
+work through :mod:`mocapedit.solve` and numpy.
 """
 from __future__ import annotations
 
-import hashlib
 import os
 import time
-from dataclasses import dataclass, field
-from typing import Callable
+from dataclasses import dataclass
 
 import numpy as np
-from pxr import Sdf, Usd, Vt
 
 from mocapedit.geometry import animation, trajectory
 from mocapedit.pipeline import guides
+from mocapedit.pipeline.context import EditedPath, SolveContext, SolveOptions  # noqa: F401 (the API's names)
+from mocapedit.pipeline.passes import PASSES
 from mocapedit.inspect import inspection, metrics
 from mocapedit.model import limits
-from mocapedit.usd import outputs, reader, writer
+from mocapedit.usd import outputs, reader, stage_io, writer
+from mocapedit.usd.stage_io import content_hash  # noqa: F401 (batches compare it before solving)
 from mocapedit.model.errors import MocapEditError
 from mocapedit.model.data import StageData
 from mocapedit.model.progress import Progress, Silent
-from mocapedit.model.report import Report
-
-
-@dataclass
-class EditedPath:
-    """An agent's edited ground path, one row per source frame."""
-    ground: np.ndarray            # (F,2)
-    heading: np.ndarray           # (F,)
-
-
-@dataclass
-class SolveOptions:
-    guides: bool = True
-    collisions: bool | None = None     # None: follow MocapSolveSettings.collisionAvoidance
-    overrides: dict = field(default_factory=dict)  # settings overrides by python field name
-    # Bake time-only edits into SkelAnimation samples instead of re-timing the source clip
-    # with value clips (the two play the same motion; the baked form is the reference).
-    bake_timing: bool = False
-
-
-@dataclass
-class SolveContext:
-    data: StageData
-    options: SolveOptions
-    report: Report
-    progress: Progress
-    trajectories: dict[str, trajectory.Trajectory] = field(default_factory=dict)
-    # Spatial edits: the edited ground path per source frame.
-    paths: dict[str, EditedPath] = field(default_factory=dict)
-    # Time edits: the shot time at which each source frame plays, (F,) increasing.
-    time_maps: dict[str, np.ndarray] = field(default_factory=dict)
-    # Pose edits (layering), applied in order to the time-warped source pose:
-    # fn(pose, out_times (T,), src_frames (T,)) -> Pose.
-    pose_edits: dict[str, list[Callable]] = field(default_factory=dict)
-    # Output times chosen by a pass for an agent (else whole shot frames for a time map,
-    # the clip's own samples otherwise).
-    out_times: dict[str, np.ndarray] = field(default_factory=dict)
-    edits: dict[str, writer.AgentEdit] = field(default_factory=dict)   # what the writer authors
-    guides: list = field(default_factory=list)
-
-
-Pass = Callable[[SolveContext], None]
-
-#: The solve passes as (order, name, fn), run in ascending order. Each module of
-#: ``mocapedit.pipeline.passes`` registers its own with ``register_pass`` when imported. Orders in
-#: use: 100 path edits, 200 time warp, 300 collision avoidance, 400 layering.
-PASSES: list[tuple[float, str, Pass]] = []
-
-
-def register_pass(order: float, name: str, fn: Pass) -> None:
-    """Adds (or replaces, by name) a solve pass."""
-    PASSES[:] = [p for p in PASSES if p[1] != name]
-    PASSES.append((order, name, fn))
-    PASSES.sort(key=lambda p: (p[0], p[1]))
-
-
-def load_passes() -> None:
-    """Imports every module of ``mocapedit.pipeline.passes`` so each registers its pass."""
-    import importlib
-    import pkgutil
-
-    from mocapedit.pipeline import passes
-    for info in sorted(pkgutil.iter_modules(passes.__path__), key=lambda m: m.name):
-        importlib.import_module(f"{passes.__name__}.{info.name}")
+from mocapedit.model.report import AgentPlausibility, Report, ShotPlausibility
 
 
 def extract_trajectories(ctx: SolveContext) -> None:
@@ -105,42 +43,6 @@ def extract_trajectories(ctx: SolveContext) -> None:
     task.done()
 
 
-def retimed_spec(ctx: SolveContext, path: str) -> tuple[str, str] | None:
-    """(clip layer, prim path) when the agent's only change of pose is its timing and its clip
-    can be re-timed by a value clip (one spec's samples, in a layer on disk); None when it is
-    baked instead (layered, ``bake_timing``, a clip split over specs or only in memory)."""
-    if ctx.options.bake_timing or path not in ctx.time_maps or path in ctx.pose_edits:
-        return None
-    if any(path in layer.agents for layer in ctx.data.layers):
-        return None
-    clip = ctx.data.clip_of(ctx.data.agents[path])
-    spec = clip.sample_spec
-    if spec is None or clip.spec_times is None or Sdf.Layer.IsAnonymousLayerIdentifier(spec[0]):
-        return None
-    return spec
-
-
-def output_frames(ctx: SolveContext, path: str, baked: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """(stage times to author, fractional source frame at each) for one agent.
-
-    ``baked``: the times its animation has when baked, even if it is re-timed by a value clip
-    now (a pass that is about to give it a pose edit, which bakes it, asks for these)."""
-    agent = ctx.data.agents[path]
-    frames = np.arange(agent.frame_count, dtype=np.float64)
-    time_map = ctx.time_maps.get(path)
-    if time_map is None:
-        times = ctx.out_times.get(path, agent.sample_times)
-        return times, np.interp(times, agent.sample_times, frames)
-    if not baked and retimed_spec(ctx, path):
-        # A re-timed clip plays each source frame at its time on the map: those are its samples.
-        return np.asarray(time_map, dtype=np.float64), frames
-    times = ctx.out_times.get(path)
-    if times is None:
-        # A baked warped clip is authored on the shot's whole frames.
-        times = np.arange(np.ceil(time_map[0] - 1e-9), np.floor(time_map[-1] + 1e-9) + 1.0)
-    return times, np.interp(times, time_map, frames)
-
-
 def compose_edits(ctx: SolveContext) -> None:
     """Turns edited paths, time maps and pose edits into what the writer authors.
 
@@ -149,21 +51,20 @@ def compose_edits(ctx: SolveContext) -> None:
     by one rigid ground motion per output time (the prepended xform op).
     """
     up = ctx.data.info.up_axis
-    touched = sorted(set(ctx.paths) | set(ctx.time_maps) | set(ctx.pose_edits))
-    for path in touched:
+    for path in ctx.touched():
         agent, traj = ctx.data.agents[path], ctx.trajectories[path]
-        times, frames = output_frames(ctx, path)
+        times, frames = ctx.output_frames(path)
         edit = writer.AgentEdit()
         clip = ctx.data.clip_of(agent)
-        spec = retimed_spec(ctx, path)
+        spec = ctx.retimed_spec(path)
         if spec:
             # Only the timing changed: the source clip plays on the time map, nothing is baked.
             edit.retimed = writer.RetimedClip(layer=spec[0], prim_path=spec[1], joints=list(clip.joints),
                                               stage_times=ctx.time_maps[path], clip_times=clip.spec_times)
         elif path in ctx.time_maps or path in ctx.pose_edits:
             pose = animation.sample_pose(clip, frames)
-            for fn in ctx.pose_edits.get(path, []):
-                pose = fn(pose, times, frames)
+            for pose_edit in ctx.pose_edits.get(path, []):
+                pose = pose_edit.apply(pose, times, frames)
             edit.animation = writer.BakedAnimation(
                 joints=pose.joints, times=times, translations=pose.translations,
                 rotations=pose.rotations, scales=pose.scales)
@@ -191,7 +92,7 @@ def compose_edits(ctx: SolveContext) -> None:
 
 
 def measure_plausibility(ctx: SolveContext) -> None:
-    """Per edited agent, and for the shot (``stats["plausibility"]``), the figures of
+    """Per edited agent, and for the shot (``stats.plausibility``), the figures of
     :func:`metrics.plausibility_of`: the facing and walking direction of the edited body against
     its source, path length, time warp and foot skate. They come from the same motions the edits
     layer authors, by numpy forward kinematics of the hip and the feet (the composed stage plays
@@ -210,7 +111,7 @@ def measure_plausibility(ctx: SolveContext) -> None:
         if key not in chains:
             chains[key] = np.stack([trajectory.joint_skel_space(agent, clip, j) for j in joints], axis=1)
         source = chains[key] @ agent.skel_to_world[:, None]               # (F, 1 + feet, 4, 4)
-        times, frames = output_frames(ctx, path)
+        times, frames = ctx.output_frames(path)
         edited = animation.interp_frames(source, frames)
         moved = ctx.paths.get(path)
         if moved is not None:
@@ -226,29 +127,29 @@ def measure_plausibility(ctx: SolveContext) -> None:
             mask = before.contact if len(times) == len(agent.sample_times) else None
             skate = [before.mean, metrics.foot_skate_of_positions(edited[:, 1:, 3, :3], times, *units,
                                                                   contact=mask).mean]
-        locked = ctx.report.agents.get(path, {})
-        if "footSkateUnlocked" in locked:  # foot locking measured the legs as the layer plays them
-            skate = [locked["footSkateSource"], locked["footSkateEdited"]]
+        entry = ctx.report.agent(path)
+        if entry.foot_skate_unlocked is not None:  # foot locking measured the legs as the layer plays them
+            skate = [entry.foot_skate_source, entry.foot_skate_edited]
         p = metrics.plausibility_of(path, agent.sample_times * seconds, source[:, 0], times * seconds, edited[:, 0],
                                     up, info.meters_per_unit, *skate, edited_frames=frames)
         figures.append(p)
-        entry = ctx.report.agent(path)
         if np.isfinite(skate).all():
             # Mean foot speed while in contact (stage units per second), over the source's contacts.
-            entry.setdefault("footSkateSource", skate[0])
-            entry.setdefault("footSkateEdited", skate[1])
-        entry["plausibility"] = {
-            "maxFacingRate": p.max_facing_rate, "sourceMaxFacingRate": p.source_max_facing_rate,
-            "maxExtraFacingRate": p.max_extra_facing_rate, "spinFrames": p.spin_frames,
-            "maxDirectionDeviation": p.max_direction_deviation,
-            "maxTurnedDirectionDeviation": p.max_turned_deviation, "maxEditTurn": p.max_edit_turn,
-            "reverses": p.reverses, "lengthRatio": p.length_ratio,
-            "timeWarp": list(p.time_warp), "footSkateRatio": p.foot_skate_ratio,
-            # Source frames where the largest extra turn and direction change happen (previews mark them).
-            "worstTurnFrame": int(round(frames[max(p.worst_turn_frame, 0)])),
-            "worstDirectionFrame": int(round(frames[p.worst_direction_frame])) if p.worst_direction_frame >= 0 else -1}
+            if entry.foot_skate_source is None:
+                entry.foot_skate_source = skate[0]
+            if entry.foot_skate_edited is None:
+                entry.foot_skate_edited = skate[1]
+        entry.plausibility = AgentPlausibility(
+            max_facing_rate=p.max_facing_rate, source_max_facing_rate=p.source_max_facing_rate,
+            max_extra_facing_rate=p.max_extra_facing_rate, spin_frames=p.spin_frames,
+            max_direction_deviation=p.max_direction_deviation,
+            max_turned_direction_deviation=p.max_turned_deviation, max_edit_turn=p.max_edit_turn,
+            reverses=p.reverses, length_ratio=p.length_ratio,
+            time_warp=list(p.time_warp), foot_skate_ratio=p.foot_skate_ratio,
+            worst_turn_frame=int(round(frames[max(p.worst_turn_frame, 0)])),
+            worst_direction_frame=int(round(frames[p.worst_direction_frame])) if p.worst_direction_frame >= 0 else -1)
     if figures:
-        ctx.report.stats["plausibility"] = metrics.worst_plausibility(figures)
+        ctx.report.stats.plausibility = ShotPlausibility.from_dict(metrics.worst_plausibility(figures))
 
 
 def _with_parent(agent, parent_to_world):
@@ -263,34 +164,6 @@ def inspect(ctx: SolveContext) -> None:
     guides.build(ctx, crowd, remaining)
 
 
-def content_hash(stage: Usd.Stage) -> str:
-    """SHA-256 over the content of every layer the input uses, in identifier order."""
-    session = stage.GetSessionLayer()
-    digests = []
-    for layer in stage.GetUsedLayers():
-        if layer == session:
-            continue
-        h = hashlib.sha256()
-        if layer.realPath and os.path.isfile(layer.realPath):
-            h.update(os.path.basename(layer.realPath).encode())
-            with open(layer.realPath, "rb") as f:
-                for block in iter(lambda: f.read(1 << 20), b""):
-                    h.update(block)
-        else:
-            h.update(layer.ExportToString().encode())
-        digests.append(h.hexdigest())
-    # Anonymous identifiers change from run to run: order by content, not by name.
-    return hashlib.sha256("".join(sorted(digests)).encode()).hexdigest()
-
-
-def input_layers(stage: Usd.Stage) -> list[str]:
-    """The input's layer identifiers, root first; anonymous (in-memory) layers are left out."""
-    root = stage.GetRootLayer().identifier
-    others = sorted(l.identifier for l in stage.GetUsedLayers()
-                    if l != stage.GetSessionLayer() and not l.anonymous and l.identifier != root)
-    return [root] + others
-
-
 def options_text(guides: bool = True, collisions: bool | None = None, bake_timing: bool = False,
                  **overrides) -> str:
     """The solve options as the edits layer records them (``customLayerData`` mocapedit
@@ -303,7 +176,7 @@ def options_text(guides: bool = True, collisions: bool | None = None, bake_timin
 
 @dataclass
 class SolveResult:
-    layer: Sdf.Layer
+    layer: object                 # the edits layer (an Sdf.Layer)
     report: Report
     data: StageData
 
@@ -333,13 +206,10 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
     progress = progress or Silent()
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    if isinstance(stage_or_path, Usd.Stage):
-        stage, input_name = stage_or_path, stage_or_path.GetRootLayer().identifier
-    else:
-        stage, input_name = reader.open_stage(str(stage_or_path)), str(stage_or_path)
+    source = stage_io.open_input(stage_or_path)
+    stage, input_name, input_file = source.stage, source.name, source.file
     if (composed or report_json) and not output:
         raise MocapEditError("a composed stage or a report needs an output path for the edits layer (-o)")
-    input_file = stage.GetRootLayer().realPath if isinstance(stage_or_path, Usd.Stage) else input_name
     if composed and not input_file:
         raise MocapEditError("a composed stage sub-layers the input file, but this stage is in memory; "
                              "save it first or leave out the composed stage")
@@ -364,11 +234,10 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
     t = time.perf_counter()
     extract_trajectories(ctx)
     timings["trajectories"] = time.perf_counter() - t
-    load_passes()
-    for _, name, fn in list(PASSES):
+    for solve_pass in PASSES:
         t = time.perf_counter()
-        fn(ctx)
-        timings[name] = time.perf_counter() - t
+        solve_pass.run(ctx)
+        timings[solve_pass.name] = time.perf_counter() - t
     t = time.perf_counter()
     compose_edits(ctx)
     timings["compose"] = time.perf_counter() - t
@@ -382,27 +251,28 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
     constraint_count = sum(len(x) for x in (data.position_constraints, data.relative_constraints,
                                             data.time_constraints, data.sync_constraints))
     # The passes' own run-wide figures (collisionIterations, ...) are kept beside these.
-    report.stats.update({"agents": len(data.agents), "editedAgents": len(ctx.edits), "clips": len(data.clips),
-                         "constraints": constraint_count, "groups": len(data.groups),
-                         "avoidRegions": len(data.avoid_regions), "animationLayers": len(data.layers)})
+    stats = report.stats
+    stats.agents, stats.edited_agents, stats.clips = len(data.agents), len(ctx.edits), len(data.clips)
+    stats.constraints, stats.groups = constraint_count, len(data.groups)
+    stats.avoid_regions, stats.animation_layers = len(data.avoid_regions), len(data.layers)
     for path, traj in ctx.trajectories.items():
         entry = report.agent(path)
-        entry.setdefault("frames", int(len(traj.ground)))
-        entry.setdefault("edited", path in ctx.edits)
-        if traj.projected_hip:
-            entry.setdefault("trajectoryJoint", data.agents[path].joints[traj.joint])
+        if entry.frames is None:
+            entry.frames = int(len(traj.ground))
+        if entry.edited is None:
+            entry.edited = path in ctx.edits
+        if traj.projected_hip and entry.trajectory_joint is None:
+            entry.trajectory_joint = data.agents[path].joints[traj.joint]
 
     t = time.perf_counter()
-    provenance = {"inputs": Vt.StringArray(input_layers(stage)), "contentHash": content_hash(stage),
-                  "options": options_text(guides, collisions, bake_timing, **overrides)}
+    provenance = stage_io.provenance(stage, options_text(guides, collisions, bake_timing, **overrides))
     layer = writer.build_layer(writer.LayerContent(
         info=data.info, agents=data.agents, edits=ctx.edits, guides=ctx.guides,
-        provenance=provenance, stats=report.stats, report=report.to_layer_dict(),
+        provenance=provenance, stats=report.stats.to_dict(), report=report.to_layer_dict(),
         anchor=os.path.dirname(os.path.abspath(output)) if output else None))
     # The layer holds the edits now: their arrays (10,000 moved agents: 250 MB of transforms)
     # go before USD's exporter allocates its own buffers.
-    for part in (ctx.edits, ctx.guides, ctx.paths, ctx.time_maps, ctx.pose_edits, ctx.trajectories):
-        part.clear()
+    ctx.release()
     if output:
         timings["write"] = time.perf_counter() - t
         timings["total"] = time.perf_counter() - t0
@@ -411,7 +281,7 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
             w.add(output, writer.export_layer(layer))
             if composed:
                 w.add(composed, writer.export_layer(writer.composed_layer(
-                    composed, output, input_file, data.info, stage.GetRootLayer().defaultPrim or None)))
+                    composed, output, input_file, data.info, source.default_prim)))
             if report_json:
                 w.add(report_json, outputs.write_text(report.to_json() + "\n"))
     timings["write"] = time.perf_counter() - t

@@ -12,7 +12,10 @@ built from a :class:`~mocapedit.model.data.AvoidRegion`: a circle or a box in th
 own transform, or the ground footprint of a geometry prim's world bound.
 
 The C++ side (:mod:`mocapedit._solver`) does the detection and the geometry; this module
-gathers the arrays and turns its output into per-collision records.
+gathers the arrays and turns its output into per-collision records. :func:`detect_at` is the
+one capsule-overlap routine: the solve's avoidance, the inspection's overlaps
+(:mod:`mocapedit.inspect.overlaps`) and the separation measure
+(:func:`mocapedit.inspect.metrics.min_separation`) all find their pairs with it.
 """
 from __future__ import annotations
 
@@ -36,10 +39,6 @@ class Sampling:
     times: np.ndarray            # (K,) shot times
     frames: np.ndarray           # (K,A) fractional source frame of each agent at each time
     positions: np.ndarray        # (K,A,2) ground positions, stage units
-
-    def flat(self) -> np.ndarray:
-        """(K*A,2) positions, time-major, as :func:`mocapedit._solver.detect_collisions` takes them."""
-        return np.ascontiguousarray(self.positions.reshape(-1, 2))
 
 
 def sample_times(time_ranges: list[tuple[float, float]], step: float) -> np.ndarray:
@@ -163,9 +162,33 @@ def detect(sampling: Sampling, radius: np.ndarray, height: np.ndarray, margin: f
     ``watch``: a clearance above ``margin``; the intervals below it are gathered in the same
     pass as ``near`` (their depth measured from ``watch``).
     """
+    return detect_at(sampling.positions, radius, height, margin, report_distance, active,
+                     brute_force, watch)
+
+
+def detect_at(positions: np.ndarray, radius: np.ndarray, height: np.ndarray, margin: float,
+              report_distance: float = 0.0, active: np.ndarray | None = None,
+              brute_force: bool = False, watch: float | None = None,
+              base: np.ndarray | None = None) -> Collisions:
+    """:func:`detect` on ground positions given as an array: the one capsule-overlap routine
+    behind the solve's detection, the inspection's overlaps and the separation measure.
+
+    Args:
+      positions: #K by #A by 2 ground positions of each agent at each sample, stage units
+        (finite for the active agents)
+      radius, height: #A capsule radii and heights (> 0 for the active agents), stage units
+      margin: clearance (>= 0) below which a pair collides
+      report_distance: ``min_clearance`` is exact up to this clearance, +inf beyond
+      active: #A flags, agents taking part (default: all)
+      brute_force: test every pair at every sample (the reference) instead of the grid
+      watch: see :func:`detect`
+      base: #A base elevations along up (default: all on the ground plane)
+    """
+    k = positions.shape[0]
     out = _solver.detect_collisions(
-        positions=sampling.flat(), samples=len(sampling.times), radius=np.asarray(radius, dtype=np.float64),
-        height=np.asarray(height, dtype=np.float64), base=None,
+        positions=np.ascontiguousarray(np.asarray(positions, dtype=np.float64).reshape(-1, 2)), samples=k,
+        radius=np.asarray(radius, dtype=np.float64), height=np.asarray(height, dtype=np.float64),
+        base=None if base is None else np.asarray(base, dtype=np.float64),
         active=None if active is None else [bool(x) for x in active], margin=float(margin),
         report_distance=float(report_distance), threads=0, brute_force=brute_force,
         watch_distance=float(watch) if watch is not None and watch > margin else 0.0)
@@ -188,16 +211,54 @@ def _intervals(intervals: _solver.CollisionIntervals, out: _solver.CollisionResu
 def clearances(sampling: Sampling, radius: np.ndarray, a: np.ndarray, b: np.ndarray,
                k: np.ndarray) -> np.ndarray:
     """(M,) capsule clearances of agent columns a and b at samples k (agents on one ground)."""
-    d = sampling.positions[k, a] - sampling.positions[k, b]
+    return ground_clearances(sampling.positions, radius, a, b, k)
+
+
+def ground_clearances(positions: np.ndarray, radius: np.ndarray, a: np.ndarray, b: np.ndarray,
+                      k: np.ndarray) -> np.ndarray:
+    """(M,) clearances of the capsules of agents a and b at samples k, all standing on the
+    ground (heights play no part), from #K by #A by 2 positions; the detection's arithmetic."""
+    d = positions[k, a] - positions[k, b]
     return np.linalg.norm(d, axis=-1) - radius[a] - radius[b]
 
 
+def sample_runs(present: np.ndarray, base: np.ndarray | None = None) -> list[tuple[int, int, np.ndarray]]:
+    """(first, end, agents) of each run of samples ``first .. end-1`` in which the same two or
+    more agents are present (at the same base elevations): :func:`detect_at` measures a run in
+    one call, where agents come and go or change elevation.
+
+    Args:
+      present: #A by #T bools
+      base: #A by #T base elevations (NaN where absent); default: all on the ground
+    """
+    runs, first = [], 0
+    n_times = present.shape[1]
+    for t in range(1, n_times + 1):
+        if t < n_times and np.array_equal(present[:, t], present[:, first]) \
+                and (base is None or np.array_equal(base[:, t], base[:, first], equal_nan=True)):
+            continue
+        idx = np.flatnonzero(present[:, first])
+        if len(idx) >= 2:
+            runs.append((first, t, idx))
+        first = t
+    return runs
+
+
+_CAPSULE_CLEARANCE = np.vectorize(_solver.capsule_clearance, otypes=[np.float64])
+
+
+def capsule_clearance(ground_a, base_a, radius_a, height_a, ground_b, base_b, radius_b, height_b):
+    """Clearance between vertical capsules (broadcasting; stage units, negative = overlap).
+
+    A capsule stands on ``base`` (its height along up), has total height ``height`` (a capsule
+    shorter than ``2 * radius`` is a sphere half way up) and radius ``radius``; ``ground`` is
+    its ``(..., 2)`` ground position.
+    """
+    d = np.asarray(ground_b, dtype=np.float64) - np.asarray(ground_a, dtype=np.float64)
+    return _CAPSULE_CLEARANCE(d[..., 0], d[..., 1], radius_a, height_a, base_a, radius_b, height_b, base_b)
+
+
 # ---- avoid regions -----------------------------------------------------------------------
-
-def _ground_axes(up_axis: str) -> tuple[int, int]:
-    """The two local axes that span a region's own ground plane."""
-    return (0, 1) if up_axis == "Z" else (0, 2)
-
 
 def _to_world_ground(points: np.ndarray, local_to_world: np.ndarray, up_axis: str) -> np.ndarray:
     homo = np.concatenate([points, np.ones((len(points), 1))], axis=1)
@@ -225,7 +286,7 @@ def region_footprint(region: AvoidRegion, up_axis: str):
     if region.shape == "circle":
         if not (np.isfinite(region.radius) and region.radius > 0):
             raise prim_error(region.path, f"radius must be positive, got {region.radius:g}", "radius")
-        i, j = _ground_axes(up_axis)
+        i, j = ground.plane_indices(up_axis)   # the region's own ground axes
         local = np.zeros((3, 3))
         local[1, i] = 1.0
         local[2, j] = 1.0

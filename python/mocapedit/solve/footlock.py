@@ -95,7 +95,8 @@ def _rotate(q, v):
     return v + w * t + np.cross(u, t)
 
 
-def _normalize(v, eps=1e-12):
+def normalize(v, eps=1e-12):
+    """Vectors (or quaternions) along the last axis scaled to unit length (zero ones stay zero)."""
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.maximum(n, eps)
 
@@ -106,10 +107,10 @@ def _arc(a, b):
     axis = np.cross(a, b)
     # Opposite vectors: half a turn about any axis perpendicular to a.
     other = np.where(np.abs(a[..., :1]) < 0.9, np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))
-    flip = _normalize(np.cross(a, other))
+    flip = normalize(np.cross(a, other))
     opposite = d < -1.0 + 1e-12
     q = np.where(opposite, np.concatenate([flip, np.zeros_like(d)], -1), np.concatenate([axis, 1.0 + d], -1))
-    return _normalize(q)
+    return normalize(q)
 
 
 def _twist(axis, a, b):
@@ -123,7 +124,7 @@ def _twist(axis, a, b):
     c, s = np.where(none, 1.0, c / r), np.where(none, 0.0, s / r)
     half = 1.0 + c < 1e-12
     q = np.where(half, np.concatenate([axis, np.zeros_like(c)], -1), np.concatenate([axis * s, 1.0 + c], -1))
-    return _normalize(q)
+    return normalize(q)
 
 
 def knee_hinge(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, knee_rot: np.ndarray) -> np.ndarray:
@@ -136,7 +137,7 @@ def knee_hinge(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, knee_rot: n
     weight = np.linalg.norm(cross, axis=-1) / np.maximum(
         np.linalg.norm(knee - hip, axis=-1) * np.linalg.norm(ankle - knee, axis=-1), 1e-30)
     axis = np.sum(local * weight[:, None], axis=0) if len(local) else axis
-    return _normalize(axis) if np.linalg.norm(axis) > 0 else np.array([1.0, 0.0, 0.0])
+    return normalize(axis) if np.linalg.norm(axis) > 0 else np.array([1.0, 0.0, 0.0])
 
 
 def world_hinge(knee_rot: np.ndarray, local: np.ndarray) -> np.ndarray:
@@ -147,7 +148,7 @@ def world_hinge(knee_rot: np.ndarray, local: np.ndarray) -> np.ndarray:
 def _frame_delta(u0, n0, u1, n1):
     """The rotation taking the orthonormal pair (u0, n0) to (u1, n1)."""
     q1 = _arc(u0, u1)
-    return _normalize(quat_multiply(_twist(u1, _rotate(q1, n0), n1), q1))
+    return normalize(quat_multiply(_twist(u1, _rotate(q1, n0), n1), q1))
 
 
 def required_drop(hip, target, reach, up):
@@ -214,36 +215,36 @@ def lock_feet_numpy(inputs: LegInputs) -> LegOutputs:
     squeezed = soft + room * (1.0 - np.exp(-(dist - soft) / room))
     reach = np.where(dist > soft, squeezed, dist)
     reach = np.maximum(reach, np.abs(l1 - l2) * 1.0001 + 1e-9)
-    d = _normalize(to_target)
+    d = normalize(to_target)
 
     # The knee's plane: its normal from the pose before locking, kept perpendicular to the new
     # hip-ankle line; the knee bends to the same side as before (never backwards).
     # A nearly straight knee says little about its plane: there the hinge axis takes over.
     cross = np.cross(knee - hip, ankle - hip)
     trust = np.clip((np.linalg.norm(cross, axis=-1) / np.maximum(l1 * l2, 1e-30) - BEND_NOISE) / BEND_TRUST, 0.0, 1.0)
-    hinge = _normalize(np.asarray(inputs.hinge, dtype=np.float64))
-    normal = trust[..., None] * _normalize(cross) + (1.0 - trust[..., None]) * hinge
+    hinge = normalize(np.asarray(inputs.hinge, dtype=np.float64))
+    normal = trust[..., None] * normalize(cross) + (1.0 - trust[..., None]) * hinge
     weak = np.linalg.norm(normal, axis=-1) < 1e-6
-    normal = _normalize(np.where(weak[..., None], hinge, normal))
-    n1 = _normalize(normal - np.sum(normal * d, -1, keepdims=True) * d)
+    normal = normalize(np.where(weak[..., None], hinge, normal))
+    n1 = normalize(normal - np.sum(normal * d, -1, keepdims=True) * d)
     bend = np.cross(d, n1)
     along = (l1 * l1 - l2 * l2 + reach * reach) / (2.0 * reach)
     height = np.sqrt(np.maximum(l1 * l1 - along * along, 0.0))
     new_knee = hip + along[..., None] * d + height[..., None] * bend
     new_ankle = hip + reach[..., None] * d
 
-    u0 = _normalize(knee - hip)
-    n0 = _normalize(normal - np.sum(normal * u0, -1, keepdims=True) * u0)
-    u1 = _normalize(new_knee - hip)
+    u0 = normalize(knee - hip)
+    n0 = normalize(normal - np.sum(normal * u0, -1, keepdims=True) * u0)
+    u1 = normalize(new_knee - hip)
     hip_rot = quat_multiply(_frame_delta(u0, n0, u1, n1), inputs.hip_rot)
-    v0 = _normalize(ankle - knee)
-    m0 = _normalize(normal - np.sum(normal * v0, -1, keepdims=True) * v0)
-    v1 = _normalize(new_ankle - new_knee)
+    v0 = normalize(ankle - knee)
+    m0 = normalize(normal - np.sum(normal * v0, -1, keepdims=True) * v0)
+    v1 = normalize(new_ankle - new_knee)
     knee_rot = quat_multiply(_frame_delta(v0, m0, v1, n1), inputs.knee_rot)
     ankle_rot = slerp(inputs.ankle_rot, inputs.target_rot, w[..., 0])
 
     def local(parent, child):
-        q = _normalize(quat_multiply(_conj(np.asarray(parent, dtype=np.float64)), child))
+        q = normalize(quat_multiply(_conj(np.asarray(parent, dtype=np.float64)), child))
         return np.where(q[..., 3:] < 0, -q, q)
 
     return LegOutputs(local(inputs.parent_rot, hip_rot), local(hip_rot, knee_rot), local(knee_rot, ankle_rot),

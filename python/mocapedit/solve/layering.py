@@ -29,17 +29,13 @@ import numpy as np
 
 from mocapedit import _solver
 from mocapedit.geometry import animation
-from mocapedit.usd import reader
 from mocapedit.geometry.animation import Pose
 from mocapedit.model.errors import prim_error
 from mocapedit.model.data import CHANNELS, Agent, AnimationLayer, Clip
+from mocapedit.model.names import joint_leaf, resolve_joint
 
 #: A pose as the job takes it: (translations (T,J,3), rotations (T,J,4), scales (T,J,3)).
 PoseArrays = tuple[np.ndarray, np.ndarray, np.ndarray]
-
-
-def _leaf(path: str) -> str:
-    return path.rsplit("/", 1)[-1]
 
 
 def match_joints(layer_joints: list[str], skeleton_joints: list[str]) -> np.ndarray:
@@ -50,16 +46,16 @@ def match_joints(layer_joints: list[str], skeleton_joints: list[str]) -> np.ndar
     rooted elsewhere). No skeleton joint is matched twice; a full path wins.
     """
     index = {j: i for i, j in enumerate(skeleton_joints)}
-    skel_leaves = Counter(_leaf(j) for j in skeleton_joints)
-    by_leaf = {_leaf(j): i for i, j in enumerate(skeleton_joints) if skel_leaves[_leaf(j)] == 1}
-    layer_leaves = Counter(_leaf(j) for j in layer_joints)
+    skel_leaves = Counter(joint_leaf(j) for j in skeleton_joints)
+    by_leaf = {joint_leaf(j): i for i, j in enumerate(skeleton_joints) if skel_leaves[joint_leaf(j)] == 1}
+    layer_leaves = Counter(joint_leaf(j) for j in layer_joints)
     exact = {index[j] for j in layer_joints if j in index}
     out = np.full(len(layer_joints), -1, dtype=np.int64)
     for k, name in enumerate(layer_joints):
         if name in index:
             out[k] = index[name]
-        elif layer_leaves[_leaf(name)] == 1 and by_leaf.get(_leaf(name), -1) not in exact | {-1}:
-            out[k] = by_leaf[_leaf(name)]
+        elif layer_leaves[joint_leaf(name)] == 1 and by_leaf.get(joint_leaf(name), -1) not in exact | {-1}:
+            out[k] = by_leaf[joint_leaf(name)]
     return out
 
 
@@ -309,9 +305,9 @@ def resolve_layer(agent: Agent, layer: AnimationLayer, clip: Clip) -> tuple[int,
     """
     root = -1
     if layer.joint:
-        found = reader.resolve_joint(agent.joints, layer.joint)
+        found = resolve_joint(agent.joints, layer.joint)
         if found is None:
-            same = [j for j in agent.joints if _leaf(j) == layer.joint]
+            same = [j for j in agent.joints if joint_leaf(j) == layer.joint]
             why = (f"the bare name '{layer.joint}' is not unique ({', '.join(same)}): give its joint path"
                    if len(same) > 1 else f"joint '{layer.joint}' is not in the skeleton")
             raise prim_error(layer.path, f"{why} <{agent.skeleton_path}> of agent <{agent.path}>", "joint")

@@ -49,10 +49,13 @@ from itertools import chain
 import numpy as np
 
 from mocapedit import _solver
-from mocapedit.inspect import metrics
-from mocapedit.geometry import trajectory
+from mocapedit.geometry import shape, trajectory
+from mocapedit.geometry.components import UnionFind
 
 HARD = np.inf
+#: Raised by a solve whose hard constraints cannot all hold; ``constraints`` names them, as
+#: (kind, index) pairs ('handle', 'link', 'rigid'), and ``mismatch`` says by how much they miss.
+ContradictionError = _solver.ContradictionError
 #: Weight of the soft terms that keep free agents' turn and scale (see ComponentProblem).
 GAUGE_WEIGHT = 0.01
 #: Target-space links: re-solve until the target headings change less than this (radians).
@@ -357,22 +360,13 @@ class ComponentProblem:
         time) makes them one, an agent is its own."""
         if not self._samples:
             return [[i] for i in range(len(self.order))]
-        parent = list(range(len(self.order)))
-
-        def find(i):
-            while parent[i] != i:
-                parent[i] = parent[parent[i]]
-                i = parent[i]
-            return i
+        joined = UnionFind(range(len(self.order)))
         for n, g in enumerate(self.groups):
             ids = [self.index[m] for m in g.members if m in self.index]
             if n in self._samples:
                 for k in ids[1:]:
-                    parent[find(k)] = find(ids[0])
-        out: dict[int, list[int]] = {}
-        for i in range(len(self.order)):
-            out.setdefault(find(i), []).append(i)
-        return [sorted(v) for _, v in sorted(out.items())]
+                    joined.union(ids[0], k)
+        return [sorted(v) for _, v in sorted(joined.sets(range(len(self.order))).items())]
 
     def _places(self, verts) -> int:
         """How many distinct rest positions the vertices have."""
@@ -683,5 +677,5 @@ def shape_figures(a: AgentInput, g: np.ndarray, min_base: float) -> dict:
     """Report figures of an edited path: its length over the source's, and the RMS change of
     its local shape against the rest path (frames framed by less than ``min_base``, such
     as a stand, carry no shape)."""
-    return {"lengthRatio": metrics.length_ratio(g, a.source),
-            "shapeChange": metrics.shape_change(a.rest, g, min_base=min_base)}
+    return {"lengthRatio": shape.length_ratio(g, a.source),
+            "shapeChange": shape.shape_change(a.rest, g, min_base=min_base)}

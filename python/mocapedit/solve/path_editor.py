@@ -3,8 +3,10 @@
 ::
 
     from mocapedit.solve.path_editor import PathEditor
+    from mocapedit.usd import reader
 
-    editor = PathEditor.for_agent("shot.usda", "/World/Crowd/agent_0007", frames=[0, 60, 119])
+    shot = reader.read_stage(reader.open_stage("shot.usda"))
+    editor = PathEditor.for_agent(shot, "/World/Crowd/agent_0007", frames=[0, 60, 119])
     ground = editor.move(1, (2.0, -3.5))      # handle 1 (frame 60) to ground (u, v); (F, 2)
     heading = editor.heading                  # (F,) radians, the rest heading turned by the edit
 
@@ -80,13 +82,10 @@ class PathEditor:
         self._solve()
 
     @classmethod
-    def for_agent(cls, stage, agent: str, frames: Sequence[int], positions=None, weights=None) -> "PathEditor":
-        """An editor for an agent of a stage (a ``Usd.Stage`` or a file path): its source
-        ground path and the stationary ranges of its clip."""
-        from mocapedit.usd import reader
-        if not hasattr(stage, "GetPrimAtPath"):
-            stage = reader.open_stage(str(stage))
-        data = reader.read_stage(stage)
+    def for_agent(cls, data, agent: str, frames: Sequence[int], positions=None, weights=None) -> "PathEditor":
+        """An editor for an agent of a stage read by :func:`mocapedit.usd.reader.read_stage`
+        (``data``: a :class:`~mocapedit.model.data.StageData`): its source ground path and the
+        stationary ranges of its clip."""
         if agent not in data.agents:
             raise ValueError(f"<{agent}> is not an agent of the stage")
         a = data.agents[agent]

@@ -13,10 +13,9 @@ from dataclasses import dataclass, field
 
 from pxr import Gf, Sdf, Usd
 
-from mocapedit import __version__
 from mocapedit.geometry import contacts
 from mocapedit.tools import tags
-from mocapedit.usd import writer
+from mocapedit.usd import edits_format, sdf
 from mocapedit.model.errors import MocapEditError
 
 API = "MocapFootContactAPI"
@@ -67,7 +66,7 @@ def build_layer(clips: list[ClipContacts], info, settings: contacts.DetectSettin
         for clip in clips:
             if not any(clip.ranges):
                 continue
-            spec = writer._over_chain(layer, Sdf.Path(clip.animation))
+            spec = sdf.over_chain(layer, Sdf.Path(clip.animation))
             applied = []
             for leg, ranges, names in zip(clip.legs, clip.ranges, clip.names):
                 joint = clip.joint_names[leg.toe if leg.toe is not None else leg.ankle]
@@ -75,16 +74,13 @@ def build_layer(clips: list[ClipContacts], info, settings: contacts.DetectSettin
                     applied.append(f"{API}:{name}")
                     for prop, type_name, value in (("joint", Sdf.ValueTypeNames.Token, joint),
                                                    ("frames", Sdf.ValueTypeNames.Int2, Gf.Vec2i(first, last))):
-                        attr = Sdf.AttributeSpec(spec, f"footContact:{name}:{prop}", type_name,
-                                                 Sdf.VariabilityUniform)
-                        attr.default = value
+                        sdf.attr(spec, f"footContact:{name}:{prop}", type_name, value, uniform=True)
             spec.SetInfo("apiSchemas", Sdf.TokenListOp.Create(prependedItems=applied))
-    layer.customLayerData = {"mocapedit": {
-        "version": __version__,
+    edits_format.write(layer, {
         "detectContacts": {"height": settings.height, "releaseHeight": settings.release_height,
                            "speed": settings.speed, "releaseSpeed": settings.release_speed,
                            "minDuration": settings.min_duration, "maxGap": settings.max_gap,
-                           "units": "heights m above the joint's lowest, speeds m/s, durations s"}}}
+                           "units": "heights m above the joint's lowest, speeds m/s, durations s"}})
     return layer
 
 

@@ -31,7 +31,8 @@ import numpy as np
 
 from mocapedit.geometry import ground, trajectory
 from mocapedit.inspect import inspection, overlaps
-from mocapedit.usd import outputs, reader, writer
+from mocapedit.solve import collisions
+from mocapedit.usd import edits_format, outputs, reader
 from mocapedit.model.errors import MocapEditError
 from mocapedit.inspect.inspection import Crowd, Remaining
 from mocapedit.model.progress import Progress, Silent
@@ -65,15 +66,6 @@ class Scene:
 # ---- loading -------------------------------------------------------------------------------
 
 
-def _edits_layer(stage):
-    """The edits layer a stage uses (customLayerData mocapedit with a contentHash), or None."""
-    for layer in sorted(stage.GetUsedLayers(), key=lambda l: l.identifier):
-        data = dict(layer.customLayerData or {}).get("mocapedit")
-        if isinstance(data, dict) and "contentHash" in data:
-            return layer
-    return None
-
-
 def _trajectories(data, progress: Progress, name: str) -> dict:
     task = progress.task(name, len(data.agents), "agents")
     out = {}
@@ -105,12 +97,12 @@ def load(stage_path: str, edits_path: str | None = None, progress: Progress | No
             raise MocapEditError(f"{edits_path}: no such file")
         edited_stage = reader.open_stage(stage_path)
         edited_stage.GetSessionLayer().subLayerPaths.append(os.path.abspath(edits_path))
-        edits_layer = _edits_layer(edited_stage)
+        edits_layer = edits_format.edits_layer(edited_stage)
         if edits_layer is None:
             raise MocapEditError(f"{edits_path}: not an edits layer written by `mocapedit solve` "
                                  "(no customLayerData mocapedit)")
     else:
-        edits_layer = _edits_layer(source_stage)
+        edits_layer = edits_format.edits_layer(source_stage)
         if edits_layer is not None:
             edited_stage = source_stage
             source_stage = Usd.Stage.Open(source_stage.GetRootLayer())
@@ -129,9 +121,9 @@ def load(stage_path: str, edits_path: str | None = None, progress: Progress | No
 
     report = None
     if edits_layer is not None:
-        data = dict(edits_layer.customLayerData or {}).get("mocapedit", {})
-        if "report" in data:
-            report = Report.from_dict(json.loads(data["report"]))
+        stored = edits_format.stored_report(edits_layer)
+        if stored is not None:
+            report = Report.from_dict(stored)
     entries = report.constraints if report else []
     up = source.info.up_axis
     scene = Scene(title=os.path.basename(stage_path), crowd=crowd, report=report, edited=edited is not None)
@@ -187,25 +179,10 @@ def _edited_at_frame(agent: inspection.AgentTracks, frame: int) -> np.ndarray:
 
 
 def region_footprint(region, up_axis: str, segments: int = 96) -> np.ndarray:
-    """#K by 2 ground polygon (counter-clockwise) of an avoid region, margin not included."""
-    if region.geometry_bounds is not None:
-        lo, hi = ground.to_ground(region.geometry_bounds, up_axis)
-        lo, hi = np.minimum(lo, hi), np.maximum(lo, hi)
-        return np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
-    if region.shape == "box":
-        h = 0.5 * np.asarray(region.size, dtype=np.float64)
-        ga, gb = (0, 2) if up_axis == "Y" else (0, 1)
-        local = np.zeros((4, 3))
-        local[:, ga] = [-h[ga], h[ga], h[ga], -h[ga]]
-        local[:, gb] = [-h[gb], -h[gb], h[gb], h[gb]]
-    else:
-        a = np.linspace(0.0, 2 * np.pi, segments, endpoint=False)
-        circle = region.radius * np.stack([np.cos(a), np.sin(a)], axis=-1)
-        local = ground.from_ground(circle, 0.0, up_axis)
-    world = np.c_[local, np.ones(len(local))] @ region.local_to_world
-    poly = ground.to_ground(world[:, :3], up_axis)
-    area = 0.5 * np.sum(poly[:, 0] * np.roll(poly[:, 1], -1) - np.roll(poly[:, 0], -1) * poly[:, 1])
-    return poly if area >= 0 else poly[::-1]
+    """#K by 2 ground polygon (counter-clockwise) of an avoid region, margin not included: the
+    footprint the solve avoids (:func:`mocapedit.solve.collisions.region_footprint`), a circle
+    drawn with ``segments`` sides."""
+    return collisions.outline(collisions.region_footprint(region, up_axis), sides=segments)
 
 
 def offset_polygon(poly: np.ndarray, distance: float) -> np.ndarray:

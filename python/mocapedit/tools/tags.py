@@ -19,12 +19,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numpy as np
 from pxr import Gf, Sdf, Usd, UsdSkel
 
-from mocapedit import __version__
-from mocapedit.data import examples
-from mocapedit.usd import reader, writer
+from mocapedit.usd import clip_layer, edits_format, reader, sdf, writer
 from mocapedit.geometry import stationary, trajectory
 from mocapedit.model.errors import MocapEditError
 
@@ -142,9 +139,7 @@ def clips_to_measure(stage: Usd.Stage, root_joint: str | None = None, animation:
 def review_layer(info, documentation: str) -> Sdf.Layer:
     """A new anonymous layer with the input's time, up axis and units, to review tags in."""
     layer = Sdf.Layer.CreateAnonymous(".usda")
-    writer._set_time_metadata(layer, info)
-    layer.pseudoRoot.SetInfo("upAxis", info.up_axis)
-    layer.pseudoRoot.SetInfo("metersPerUnit", info.meters_per_unit)
+    writer.set_input_metadata(layer, info)
     layer.documentation = documentation
     return layer
 
@@ -158,9 +153,9 @@ def build_layer(clips: list[ClipTags], info, settings: stationary.DetectSettings
         for clip in clips:
             if not clip.ranges:
                 continue
-            spec = writer._over_chain(layer, Sdf.Path(clip.animation))
+            spec = sdf.over_chain(layer, Sdf.Path(clip.animation))
             for name, r in zip(clip.names, clip.ranges):
-                examples.tag_stationary(spec, name, (r.first, r.last))
+                clip_layer.tag_stationary(spec, name, (r.first, r.last))
                 report[f"{clip.animation}.{name}"] = {
                     "frames": Gf.Vec2i(r.first, r.last), "seconds": round(r.duration, 4),
                     "maxSpeed": round(r.max_speed, 4), "maxTurn": round(r.max_turn, 3)}
@@ -168,13 +163,12 @@ def build_layer(clips: list[ClipTags], info, settings: stationary.DetectSettings
                     report[f"{clip.animation}.{name}"].update({
                         "bridgedFrames": r.bridged, "bridgedMaxSpeed": round(r.bridged_max_speed, 4),
                         "bridgedMaxTurn": round(r.bridged_max_turn, 3)})
-    layer.customLayerData = {"mocapedit": {
-        "version": __version__,
+    edits_format.write(layer, {
         "detectStationary": {"maxSpeed": settings.max_speed, "maxTurn": settings.max_turn,
                              "minDuration": settings.min_duration, "window": settings.window,
                              "maxGap": settings.max_gap,
                              "units": "maxSpeed m/s, maxTurn deg/s, minDuration window maxGap s"},
-        "ranges": report}}
+        "ranges": report})
     return layer
 
 

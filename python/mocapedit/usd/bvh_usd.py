@@ -1,7 +1,7 @@
 """Writes an imported BVH clip as a UsdSkel layer; drives :mod:`mocapedit.formats.bvh` chunk by chunk.
 
-The layer has the layout of the clip layers of :mod:`mocapedit.data.examples`, so an imported
-clip is referenced into an agent exactly like a generated one::
+The layer has the layout of :mod:`mocapedit.usd.clip_layer`, as generated clips have, so an
+imported clip is referenced into an agent exactly like a generated one::
 
     def Skeleton "Skel"                     # the default prim: joints, restTransforms,
         (SkelBindingAPI)                    # bindTransforms, skel:animationSource -> <Anim>
@@ -32,16 +32,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from pxr import Sdf, Vt
 
-from mocapedit import __version__
 from mocapedit.formats import bvh
-from mocapedit.data import examples
-from mocapedit.usd import outputs, writer
+from mocapedit.usd import clip_layer, edits_format, outputs, sdf, writer
 from mocapedit.model.errors import MocapEditError
 from mocapedit.model.progress import Progress, Silent
 
-#: Names of the Skeleton and SkelAnimation prims, as in mocapedit.data.examples' clip layers.
-SKELETON = examples.CLIP_SKELETON_PATH.name
-ANIMATION = examples.CLIP_ANIMATION_PATH.name
+#: Names of the Skeleton and SkelAnimation prims, as in every clip layer.
+SKELETON = clip_layer.SKELETON_PATH.name
+ANIMATION = clip_layer.ANIMATION_PATH.name
 
 
 @dataclass
@@ -82,14 +80,6 @@ def clip_name(path: str) -> str:
     return "_" + name if name[0].isdigit() else name
 
 
-def _attr(spec: Sdf.PrimSpec, name: str, type_name, value=None, uniform: bool = False) -> Sdf.AttributeSpec:
-    attr = Sdf.AttributeSpec(spec, name, type_name,
-                             Sdf.VariabilityUniform if uniform else Sdf.VariabilityVarying)
-    if value is not None:
-        attr.default = value
-    return attr
-
-
 class ClipLayerBuilder:
     """Authors the clip layer: the skeleton once, then the samples chunk after chunk."""
 
@@ -101,42 +91,39 @@ class ClipLayerBuilder:
         self.anim_path = self.skel_path.AppendChild(ANIMATION)
         self.frames = 0
         layer = self.layer
-        layer.timeCodesPerSecond = fps
-        layer.framesPerSecond = fps
-        layer.startTimeCode = 0
+        sdf.set_time_metadata(layer, fps, start=0)
         layer.defaultPrim = name
-        layer.pseudoRoot.SetInfo("upAxis", settings.up_axis)
-        layer.pseudoRoot.SetInfo("metersPerUnit", float(settings.meters_per_unit))
+        sdf.set_stage_metadata(layer, settings.up_axis, settings.meters_per_unit)
         layer.documentation = f"Motion capture imported from {provenance['source']} by mocapedit import-bvh."
-        layer.customLayerData = {"mocapedit": {"version": __version__, "bvh": provenance}}
+        edits_format.write(layer, {"bvh": provenance})
         joints = Vt.TokenArray(pose.joints)
         with Sdf.ChangeBlock():
             if settings.agent:
                 top = Sdf.PrimSpec(layer.pseudoRoot, name, Sdf.SpecifierDef, "SkelRoot")
                 top.SetInfo("apiSchemas", Sdf.TokenListOp.Create(prependedItems=["MocapAgentAPI"]))
                 if root_joint:
-                    _attr(top, "mocap:rootJoint", Sdf.ValueTypeNames.Token, root_joint, uniform=True)
+                    sdf.attr(top, "mocap:rootJoint", Sdf.ValueTypeNames.Token, root_joint, uniform=True)
                 if hip_joint:
-                    _attr(top, "mocap:hipJoint", Sdf.ValueTypeNames.Token, hip_joint, uniform=True)
+                    sdf.attr(top, "mocap:hipJoint", Sdf.ValueTypeNames.Token, hip_joint, uniform=True)
                 skel = Sdf.PrimSpec(top, SKELETON, Sdf.SpecifierDef, "Skeleton")
             else:
                 skel = Sdf.PrimSpec(layer.pseudoRoot, name, Sdf.SpecifierDef, "Skeleton")
             skel.SetInfo("apiSchemas", Sdf.TokenListOp.Create(prependedItems=["SkelBindingAPI"]))
             skel.customData = {"bvhJointNames": Vt.StringArray(pose.names)}
-            _attr(skel, "joints", Sdf.ValueTypeNames.TokenArray, joints, uniform=True)
-            _attr(skel, "restTransforms", Sdf.ValueTypeNames.Matrix4dArray,
+            sdf.attr(skel, "joints", Sdf.ValueTypeNames.TokenArray, joints, uniform=True)
+            sdf.attr(skel, "restTransforms", Sdf.ValueTypeNames.Matrix4dArray,
                   Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(pose.rest_transforms)), uniform=True)
-            _attr(skel, "bindTransforms", Sdf.ValueTypeNames.Matrix4dArray,
+            sdf.attr(skel, "bindTransforms", Sdf.ValueTypeNames.Matrix4dArray,
                   Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(pose.bind_transforms)), uniform=True)
             rel = Sdf.RelationshipSpec(skel, "skel:animationSource", custom=False)
             rel.targetPathList.explicitItems = [self.anim_path]
             anim = Sdf.PrimSpec(skel, ANIMATION, Sdf.SpecifierDef, "SkelAnimation")
-            _attr(anim, "joints", Sdf.ValueTypeNames.TokenArray, joints, uniform=True)
+            sdf.attr(anim, "joints", Sdf.ValueTypeNames.TokenArray, joints, uniform=True)
             # BVH has no scale channels: one constant value serves every time.
-            _attr(anim, "scales", Sdf.ValueTypeNames.Half3Array,
+            sdf.attr(anim, "scales", Sdf.ValueTypeNames.Half3Array,
                   Vt.Vec3hArray.FromNumpy(np.ones((len(pose.joints), 3), np.float16)))
-            self._translations = _attr(anim, "translations", Sdf.ValueTypeNames.Float3Array).path
-            self._rotations = _attr(anim, "rotations", Sdf.ValueTypeNames.QuatfArray).path
+            self._translations = sdf.attr(anim, "translations", Sdf.ValueTypeNames.Float3Array).path
+            self._rotations = sdf.attr(anim, "rotations", Sdf.ValueTypeNames.QuatfArray).path
 
     def add(self, translations: np.ndarray, rotations: np.ndarray) -> None:
         """Authors the next frames: (n,J,3) translations and (n,J,4) (x,y,z,w) rotations."""

@@ -16,6 +16,7 @@ from pxr import Sdf, Usd, UsdGeom, UsdSkel
 from mocapedit.geometry import contacts
 from mocapedit.model import data as model
 from mocapedit.model.errors import MocapEditError, prim_error
+from mocapedit.model.names import joint_leaf, resolve_joint
 
 AGENT_API = "MocapAgentAPI"
 STATIONARY_API = "MocapStationaryAPI"
@@ -169,18 +170,6 @@ def _ancestors(prim: Usd.Prim):
     while prim and not prim.IsPseudoRoot():
         yield prim
         prim = prim.GetParent()
-
-
-def _leaf(joint_path: str) -> str:
-    return joint_path.rsplit("/", 1)[-1]
-
-
-def resolve_joint(joints: list[str], name: str) -> int | None:
-    """Index of a joint given as a full joint path or as a bare name that is unique."""
-    if name in joints:
-        return joints.index(name)
-    matches = [i for i, j in enumerate(joints) if _leaf(j) == name]
-    return matches[0] if len(matches) == 1 else None
 
 
 def _frame_range(anim: Usd.Prim, prop: str, frame_count: int, what: str) -> tuple[int, int]:
@@ -774,7 +763,7 @@ def _check_value_clips(prim: Usd.Prim) -> None:
 
 def _guess_hip(joints: list[str], parents: np.ndarray, root_joint: int) -> int | None:
     for i, j in enumerate(joints):
-        name = _leaf(j).lower()
+        name = joint_leaf(j).lower()
         if i != root_joint and ("hip" in name or "pelvis" in name) and \
                 not any(s in name for s in ("left", "right", "_l", "_r", "thigh")):
             return i

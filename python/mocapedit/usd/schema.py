@@ -156,6 +156,19 @@ def _relationship(name: str) -> tuple[Callable[..., Usd.Relationship],
 
 class _Schema:
     SCHEMA_NAME: str = ""
+    #: The schema's properties by their names in schema.usda; each gets ``Get<Name>Attr`` and
+    #: ``Create<Name>Attr`` (``Get<Name>Rel`` and ``Create<Name>Rel``), as usdGenSchema would write.
+    ATTRIBUTES: tuple[str, ...] = ()
+    RELATIONSHIPS: tuple[str, ...] = ()
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        for names, make in ((cls.__dict__.get("ATTRIBUTES", ()), _attribute),
+                            (cls.__dict__.get("RELATIONSHIPS", ()), _relationship)):
+            for name in names:
+                get, create = make(name)
+                setattr(cls, get.__name__, get)
+                setattr(cls, create.__name__, create)
 
     def __init__(self, prim: Any = None) -> None:
         self._prim = _as_prim(prim)
@@ -363,16 +376,12 @@ class AgentAPI(_SingleApplyAPI):
 
     SCHEMA_NAME = "MocapAgentAPI"
 
-    GetAnimationSourceRel, CreateAnimationSourceRel = _relationship("mocap:animationSource")
-    GetRootJointAttr, CreateRootJointAttr = _attribute("mocap:rootJoint")
-    GetHipJointAttr, CreateHipJointAttr = _attribute("mocap:hipJoint")
-    GetCollisionRadiusAttr, CreateCollisionRadiusAttr = _attribute("mocap:collisionRadius")
-    GetCollisionHeightAttr, CreateCollisionHeightAttr = _attribute("mocap:collisionHeight")
-    GetCollideAttr, CreateCollideAttr = _attribute("mocap:collide")
-    GetPathCurveRel, CreatePathCurveRel = _relationship("mocap:pathCurve")
-    GetLeftLegJointsAttr, CreateLeftLegJointsAttr = _attribute("mocap:leftLegJoints")
-    GetRightLegJointsAttr, CreateRightLegJointsAttr = _attribute("mocap:rightLegJoints")
-    GetFootLockingAttr, CreateFootLockingAttr = _attribute("mocap:footLocking")
+    RELATIONSHIPS = ("mocap:animationSource", "mocap:pathCurve")
+    ATTRIBUTES = (
+        "mocap:rootJoint", "mocap:hipJoint", "mocap:collisionRadius",
+        "mocap:collisionHeight", "mocap:collide", "mocap:leftLegJoints",
+        "mocap:rightLegJoints", "mocap:footLocking",
+    )
 
 
 class StationaryAPI(_MultipleApplyAPI):
@@ -381,7 +390,7 @@ class StationaryAPI(_MultipleApplyAPI):
     SCHEMA_NAME = "MocapStationaryAPI"
     NAMESPACE_PREFIX = "stationary"
 
-    GetFramesAttr, CreateFramesAttr = _attribute("frames")
+    ATTRIBUTES = ("frames",)
 
     @classmethod
     def IsStationaryAPIPath(cls, path: Sdf.Path | str) -> bool:
@@ -395,8 +404,7 @@ class FootContactAPI(_MultipleApplyAPI):
     SCHEMA_NAME = "MocapFootContactAPI"
     NAMESPACE_PREFIX = "footContact"
 
-    GetJointAttr, CreateJointAttr = _attribute("joint")
-    GetFramesAttr, CreateFramesAttr = _attribute("frames")
+    ATTRIBUTES = ("joint", "frames")
 
 
 # -- typed schemas --------------------------------------------------------------------
@@ -406,11 +414,8 @@ class PositionConstraint(_Typed):
 
     TYPE_NAME = "MocapPositionConstraint"
 
-    GetAgentRel, CreateAgentRel = _relationship("agent")
-    GetFrameAttr, CreateFrameAttr = _attribute("frame")
-    GetPositionAttr, CreatePositionAttr = _attribute("position")
-    GetStrengthAttr, CreateStrengthAttr = _attribute("strength")
-    GetWeightAttr, CreateWeightAttr = _attribute("weight")
+    RELATIONSHIPS = ("agent",)
+    ATTRIBUTES = ("frame", "position", "strength", "weight")
 
 
 class RelativeConstraint(_Typed):
@@ -418,14 +423,8 @@ class RelativeConstraint(_Typed):
 
     TYPE_NAME = "MocapRelativeConstraint"
 
-    GetAgentRel, CreateAgentRel = _relationship("agent")
-    GetFrameAttr, CreateFrameAttr = _attribute("frame")
-    GetTargetRel, CreateTargetRel = _relationship("target")
-    GetTargetFrameAttr, CreateTargetFrameAttr = _attribute("targetFrame")
-    GetOffsetAttr, CreateOffsetAttr = _attribute("offset")
-    GetSpaceAttr, CreateSpaceAttr = _attribute("space")
-    GetStrengthAttr, CreateStrengthAttr = _attribute("strength")
-    GetWeightAttr, CreateWeightAttr = _attribute("weight")
+    RELATIONSHIPS = ("agent", "target")
+    ATTRIBUTES = ("frame", "targetFrame", "offset", "space", "strength", "weight")
 
 
 class TimeConstraint(_Typed):
@@ -433,11 +432,8 @@ class TimeConstraint(_Typed):
 
     TYPE_NAME = "MocapTimeConstraint"
 
-    GetAgentRel, CreateAgentRel = _relationship("agent")
-    GetFrameAttr, CreateFrameAttr = _attribute("frame")
-    GetTimeAttr, CreateTimeAttr = _attribute("time")
-    GetStrengthAttr, CreateStrengthAttr = _attribute("strength")
-    GetWeightAttr, CreateWeightAttr = _attribute("weight")
+    RELATIONSHIPS = ("agent",)
+    ATTRIBUTES = ("frame", "time", "strength", "weight")
 
 
 class SyncConstraint(_Typed):
@@ -445,13 +441,8 @@ class SyncConstraint(_Typed):
 
     TYPE_NAME = "MocapSyncConstraint"
 
-    GetAgentRel, CreateAgentRel = _relationship("agent")
-    GetFrameAttr, CreateFrameAttr = _attribute("frame")
-    GetTargetRel, CreateTargetRel = _relationship("target")
-    GetTargetFrameAttr, CreateTargetFrameAttr = _attribute("targetFrame")
-    GetOffsetAttr, CreateOffsetAttr = _attribute("offset")
-    GetStrengthAttr, CreateStrengthAttr = _attribute("strength")
-    GetWeightAttr, CreateWeightAttr = _attribute("weight")
+    RELATIONSHIPS = ("agent", "target")
+    ATTRIBUTES = ("frame", "targetFrame", "offset", "strength", "weight")
 
 
 class AgentGroup(_Typed):
@@ -459,8 +450,8 @@ class AgentGroup(_Typed):
 
     TYPE_NAME = "MocapAgentGroup"
 
-    GetMembersRel, CreateMembersRel = _relationship("members")
-    GetStiffnessAttr, CreateStiffnessAttr = _attribute("stiffness")
+    RELATIONSHIPS = ("members",)
+    ATTRIBUTES = ("stiffness",)
 
 
 class AvoidRegion(_Typed):
@@ -472,12 +463,8 @@ class AvoidRegion(_Typed):
 
     TYPE_NAME = "MocapAvoidRegion"
 
-    GetShapeAttr, CreateShapeAttr = _attribute("shape")
-    GetRadiusAttr, CreateRadiusAttr = _attribute("radius")
-    GetSizeAttr, CreateSizeAttr = _attribute("size")
-    GetMarginAttr, CreateMarginAttr = _attribute("margin")
-    GetAgentsRel, CreateAgentsRel = _relationship("agents")
-    GetGeometryRel, CreateGeometryRel = _relationship("geometry")
+    RELATIONSHIPS = ("agents", "geometry")
+    ATTRIBUTES = ("shape", "radius", "size", "margin")
 
 
 class AnimationLayer(_Typed):
@@ -485,14 +472,8 @@ class AnimationLayer(_Typed):
 
     TYPE_NAME = "MocapAnimationLayer"
 
-    GetAgentsRel, CreateAgentsRel = _relationship("agents")
-    GetAnimationRel, CreateAnimationRel = _relationship("animation")
-    GetJointAttr, CreateJointAttr = _attribute("joint")
-    GetModeAttr, CreateModeAttr = _attribute("mode")
-    GetWeightAttr, CreateWeightAttr = _attribute("weight")
-    GetTimeOffsetAttr, CreateTimeOffsetAttr = _attribute("timeOffset")
-    GetWrapAttr, CreateWrapAttr = _attribute("wrap")
-    GetReferencePoseAttr, CreateReferencePoseAttr = _attribute("referencePose")
+    RELATIONSHIPS = ("agents", "animation")
+    ATTRIBUTES = ("joint", "mode", "weight", "timeOffset", "wrap", "referencePose")
 
 
 class SolveSettings(_Typed):
@@ -500,15 +481,10 @@ class SolveSettings(_Typed):
 
     TYPE_NAME = "MocapSolveSettings"
 
-    GetCollisionAvoidanceAttr, CreateCollisionAvoidanceAttr = _attribute("collisionAvoidance")
-    GetMaxIterationsAttr, CreateMaxIterationsAttr = _attribute("maxIterations")
-    GetSampleStepAttr, CreateSampleStepAttr = _attribute("sampleStep")
-    GetMarginAttr, CreateMarginAttr = _attribute("margin")
-    GetMatchSpeedAttr, CreateMatchSpeedAttr = _attribute("matchSpeed")
-    GetCollisionStrategyAttr, CreateCollisionStrategyAttr = _attribute("collisionStrategy")
-    GetMinTimeIntervalAttr, CreateMinTimeIntervalAttr = _attribute("minTimeInterval")
-    GetMaxWaitAttr, CreateMaxWaitAttr = _attribute("maxWait")
-    GetFootLockingAttr, CreateFootLockingAttr = _attribute("footLocking")
+    ATTRIBUTES = (
+        "collisionAvoidance", "maxIterations", "sampleStep", "margin", "matchSpeed",
+        "collisionStrategy", "minTimeInterval", "maxWait", "footLocking",
+    )
 
 
 #: Every schema class of the library, API schemas first.

@@ -16,10 +16,10 @@ UsdSkel and UsdGeom. Layout:
   either is bound to its skeleton with ``skel:animationSource``, and agents whose
   animations are identical share one;
 - guide geometry goes under ``/MocapEdit/Guides`` with purpose ``guide``;
-- ``customLayerData["mocapedit"]`` records the version, the input layers, a content hash,
-  the solve statistics and the whole solve report (``report``: compact JSON text, sorted
-  keys, no timings, so the same input still gives the same bytes); ``mocapedit report``
-  reads it back.
+- ``customLayerData["mocapedit"]`` (:mod:`mocapedit.usd.edits_format`) records the version,
+  the input layers, a content hash, the solve statistics and the whole solve report
+  (``report``: compact JSON text, sorted keys, no timings, so the same input still gives the
+  same bytes); ``mocapedit report`` reads it back.
 
 Prims and samples are authored in sorted order so the same input gives the same bytes.
 Files are written to a temporary name beside the target and renamed into place.
@@ -27,18 +27,14 @@ Files are written to a temporary name beside the target and renamed into place.
 from __future__ import annotations
 
 import hashlib
-import json
-import math
 import os
-import re
 from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 from pxr import Sdf, UsdGeom, Vt
 
-from mocapedit import __version__
-from mocapedit.usd import outputs
+from mocapedit.usd import edits_format, outputs, sdf
 from mocapedit.model.data import Agent, StageInfo
 from mocapedit.model.names import unique_identifier
 
@@ -113,37 +109,15 @@ def _safe_name(path: str, taken: set[str]) -> str:
     return unique_identifier(path.strip("/"), taken, "agent")
 
 
-def _over_chain(layer: Sdf.Layer, path: Sdf.Path) -> Sdf.PrimSpec:
-    spec = layer.GetPrimAtPath(path)
-    if spec:
-        return spec
-    parent = layer.pseudoRoot if path.GetParentPath() == Sdf.Path.absoluteRootPath else \
-        _over_chain(layer, path.GetParentPath())
-    return Sdf.PrimSpec(parent, path.name, Sdf.SpecifierOver)
-
-
-def _def(layer: Sdf.Layer, path: Sdf.Path, type_name: str) -> Sdf.PrimSpec:
-    parent = layer.GetPrimAtPath(path.GetParentPath())
-    return Sdf.PrimSpec(parent, path.name, Sdf.SpecifierDef, type_name)
-
-
-def _attr(spec: Sdf.PrimSpec, name: str, type_name, value=None, uniform=False) -> Sdf.AttributeSpec:
-    attr = Sdf.AttributeSpec(spec, name, type_name,
-                             Sdf.VariabilityUniform if uniform else Sdf.VariabilityVarying)
-    if value is not None:
-        attr.default = value
-    return attr
-
-
 def _author_xform_op(layer: Sdf.Layer, agent: Agent, edit: AgentEdit) -> None:
-    spec = _over_chain(layer, Sdf.Path(agent.path))
+    spec = sdf.over_chain(layer, Sdf.Path(agent.path))
     order = list(agent.xform_op_order)
     if EDIT_OP in order:
         order.remove(EDIT_OP)
     at = 1 if order and order[0] == "!resetXformStack!" else 0
     order.insert(at, EDIT_OP)
-    _attr(spec, "xformOpOrder", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(order), uniform=True)
-    attr = _attr(spec, EDIT_OP, Sdf.ValueTypeNames.Matrix4d)
+    sdf.attr(spec, "xformOpOrder", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(order), uniform=True)
+    attr = sdf.attr(spec, EDIT_OP, Sdf.ValueTypeNames.Matrix4d)
     # One conversion of the whole (T,4,4) array: per-sample Gf.Matrix4d(list) took half the time.
     values = Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(edit.xform_op, dtype=np.float64))
     for t, m in zip(np.asarray(edit.times, dtype=np.float64).tolist(), values):
@@ -167,7 +141,7 @@ def _animation_key(anim: BakedAnimation, digests: dict[int, bytes]) -> tuple:
 
 
 def _bind_animation(layer: Sdf.Layer, agent: Agent, path: Sdf.Path) -> None:
-    skel = _over_chain(layer, Sdf.Path(agent.skeleton_path))
+    skel = sdf.over_chain(layer, Sdf.Path(agent.skeleton_path))
     skel.SetInfo("apiSchemas", Sdf.TokenListOp.Create(prependedItems=["SkelBindingAPI"]))
     rel = Sdf.RelationshipSpec(skel, "skel:animationSource", custom=False)
     rel.targetPathList.explicitItems = [path]
@@ -175,14 +149,14 @@ def _bind_animation(layer: Sdf.Layer, agent: Agent, path: Sdf.Path) -> None:
 
 def _author_animation(layer: Sdf.Layer, anim: BakedAnimation, name: str) -> Sdf.Path:
     path = ANIMATIONS.AppendChild(name)
-    spec = _def(layer, path, "SkelAnimation")
-    _attr(spec, "joints", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(anim.joints), uniform=True)
+    spec = sdf.define(layer, path, "SkelAnimation")
+    sdf.attr(spec, "joints", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(anim.joints), uniform=True)
     values = [("translations", Sdf.ValueTypeNames.Float3Array, Vt.Vec3fArray, anim.translations),
               ("rotations", Sdf.ValueTypeNames.QuatfArray, Vt.QuatfArray, anim.rotations)]
     if anim.scales is not None:
         values.append(("scales", Sdf.ValueTypeNames.Half3Array, Vt.Vec3hArray, anim.scales))
     for attr_name, type_name, array_type, data in values:
-        attr = _attr(spec, attr_name, type_name)
+        attr = sdf.attr(spec, attr_name, type_name)
         data = np.ascontiguousarray(data, dtype=np.float32)
         for t, frame in zip(anim.times, data):
             layer.SetTimeSample(attr.path, float(t), array_type.FromNumpy(frame))
@@ -210,10 +184,10 @@ def _author_retimed(layer: Sdf.Layer, clip: RetimedClip, name: str, anchor: str 
     """A SkelAnimation that references the source clip (its joints, defaults and any other
     property) and plays its samples on the new timing through one value clip."""
     path = ANIMATIONS.AppendChild(name)
-    spec = _def(layer, path, "SkelAnimation")
+    spec = sdf.define(layer, path, "SkelAnimation")
     asset = asset_path(clip.layer, anchor)
     spec.referenceList.Prepend(Sdf.Reference(asset, Sdf.Path(clip.prim_path)))
-    _attr(spec, "joints", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(clip.joints), uniform=True)
+    sdf.attr(spec, "joints", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(clip.joints), uniform=True)
     pairs = np.stack([np.asarray(clip.stage_times, dtype=np.float64),
                       np.asarray(clip.clip_times, dtype=np.float64)], axis=1)
     spec.SetInfo("clips", {"default": {
@@ -226,7 +200,7 @@ def _author_retimed(layer: Sdf.Layer, clip: RetimedClip, name: str, anchor: str 
 
 
 def _colors(spec: Sdf.PrimSpec, colors: np.ndarray, interpolation: str) -> None:
-    _attr(spec, "primvars:displayColor", Sdf.ValueTypeNames.Color3fArray,
+    sdf.attr(spec, "primvars:displayColor", Sdf.ValueTypeNames.Color3fArray,
           Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(colors, dtype=np.float32).reshape(-1, 3)))
     spec.attributes["primvars:displayColor"].SetInfo("interpolation", interpolation)
 
@@ -238,13 +212,13 @@ def _author_guides(layer: Sdf.Layer, guides: list) -> None:
         if len(guide.curves if is_curves else guide.points) == 0:
             continue
         path = GUIDES.AppendChild(_safe_name(guide.name, taken))
-        spec = _def(layer, path, "BasisCurves" if is_curves else "Points")
+        spec = sdf.define(layer, path, "BasisCurves" if is_curves else "Points")
         if is_curves:
             # A curve needs two vertices: a single point becomes a zero-length segment.
             curves = [np.repeat(c, 2, axis=0) if len(c) == 1 else c for c in guide.curves]
             pts = np.concatenate(curves).astype(np.float32)
-            _attr(spec, "type", Sdf.ValueTypeNames.Token, "linear", uniform=True)
-            _attr(spec, "curveVertexCounts", Sdf.ValueTypeNames.IntArray,
+            sdf.attr(spec, "type", Sdf.ValueTypeNames.Token, "linear", uniform=True)
+            sdf.attr(spec, "curveVertexCounts", Sdf.ValueTypeNames.IntArray,
                   Vt.IntArray([int(len(c)) for c in curves]))
             if guide.colors is not None:
                 _colors(spec, guide.colors, "uniform")
@@ -254,82 +228,40 @@ def _author_guides(layer: Sdf.Layer, guides: list) -> None:
             pts = np.asarray(guide.points, dtype=np.float32).reshape(-1, 3)
             _colors(spec, guide.colors, "vertex")
         points = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(pts))
-        _attr(spec, "points", Sdf.ValueTypeNames.Point3fArray, points)
-        _attr(spec, "widths", Sdf.ValueTypeNames.FloatArray, Vt.FloatArray([float(guide.width)]))
+        sdf.attr(spec, "points", Sdf.ValueTypeNames.Point3fArray, points)
+        sdf.attr(spec, "widths", Sdf.ValueTypeNames.FloatArray, Vt.FloatArray([float(guide.width)]))
         spec.attributes["widths"].SetInfo("interpolation", "constant")
         # Boundables carry their extent so every USD tool frames them without computing it.
         compute = UsdGeom.Curves.ComputeExtent if is_curves else UsdGeom.Points.ComputeExtent
         extent = compute(points, Vt.FloatArray([float(guide.width)] * len(pts)))
-        _attr(spec, "extent", Sdf.ValueTypeNames.Float3Array, extent)
-        _attr(spec, "purpose", Sdf.ValueTypeNames.Token, "guide", uniform=True)
+        sdf.attr(spec, "extent", Sdf.ValueTypeNames.Float3Array, extent)
+        sdf.attr(spec, "purpose", Sdf.ValueTypeNames.Token, "guide", uniform=True)
         if guide.doc:
             spec.documentation = guide.doc
 
 
-def report_text(report: dict) -> str:
-    """The report as stored in the layer: compact JSON, sorted keys, non-finite numbers as null."""
-    return json.dumps(_finite(report), sort_keys=True, separators=(",", ":"), allow_nan=False)
-
-
-def _layer_data(value):
-    """A value made fit for customLayerData: lists of numbers or strings become Vt arrays."""
-    if isinstance(value, dict):
-        return {str(k): _layer_data(v) for k, v in value.items()}
-    if isinstance(value, np.ndarray):
-        value = value.tolist()
-    if isinstance(value, (list, tuple)):
-        if all(isinstance(v, str) for v in value):
-            return Vt.StringArray(list(value))
-        if all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in value):
-            return Vt.IntArray([int(v) for v in value])
-        return Vt.DoubleArray([float(v) for v in value])
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
-
-
-def _finite(value):
-    if isinstance(value, dict):
-        return {str(k): _finite(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_finite(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _finite(value.tolist())
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
-def _set_time_metadata(layer: Sdf.Layer, info: StageInfo) -> None:
-    """The input's time codes per second and range: a layer whose rate differs from the
-    stage's would be rescaled when sub-layered."""
-    layer.timeCodesPerSecond = info.time_codes_per_second
-    layer.framesPerSecond = info.time_codes_per_second
-    if info.start_time is not None:
-        layer.startTimeCode = info.start_time
-    if info.end_time is not None:
-        layer.endTimeCode = info.end_time
+def set_input_metadata(layer: Sdf.Layer, info: StageInfo) -> None:
+    """The input's time codes per second and range, up axis and units: a layer whose rate differs
+    from the stage's would be rescaled when sub-layered, and one opened on its own still says in
+    which units and up axis it is."""
+    sdf.set_time_metadata(layer, info.time_codes_per_second, info.start_time, info.end_time)
+    sdf.set_stage_metadata(layer, info.up_axis, info.meters_per_unit)
 
 
 def build_layer(content: LayerContent) -> Sdf.Layer:
     """An anonymous layer holding the edits; save it with :func:`save_layer`."""
     layer = Sdf.Layer.CreateAnonymous(".usda")
     info = content.info
-    _set_time_metadata(layer, info)
+    set_input_metadata(layer, info)
     layer.documentation = "mocapedit edits: place over the input stage (sublayer above it)."
-    # Opened on its own the layer still says what it is, in which units and up axis.
+    # Opened on its own the layer still says what it is.
     layer.defaultPrim = ROOT.name
-    layer.pseudoRoot.SetInfo("upAxis", info.up_axis)
-    layer.pseudoRoot.SetInfo("metersPerUnit", info.meters_per_unit)
-    data = {"version": __version__}
-    data.update(content.provenance)
+    data = dict(content.provenance)
     if content.stats:
-        data["stats"] = _layer_data(content.stats)
+        data[edits_format.STATS] = edits_format.layer_value(content.stats)
     if content.report is not None:
-        data["report"] = report_text(content.report)
-    layer.customLayerData = {"mocapedit": data}
+        data[edits_format.REPORT] = edits_format.report_text(content.report)
+    edits_format.write(layer, data)
     with Sdf.ChangeBlock():
         root = Sdf.PrimSpec(layer.pseudoRoot, ROOT.name, Sdf.SpecifierDef, "Scope")
         Sdf.PrimSpec(root, GUIDES.name, Sdf.SpecifierDef, "Scope")
@@ -377,9 +309,7 @@ def composed_layer(path: str, edits_path: str, input_path: str, info: StageInfo,
     layer.subLayerPaths = [os.path.relpath(os.path.abspath(edits_path), here),
                            os.path.relpath(os.path.abspath(input_path), here)]
     # A root layer that only sub-layers others still sets the stage's time and units.
-    _set_time_metadata(layer, info)
-    layer.pseudoRoot.SetInfo("upAxis", info.up_axis)
-    layer.pseudoRoot.SetInfo("metersPerUnit", info.meters_per_unit)
+    set_input_metadata(layer, info)
     if default_prim:
         layer.defaultPrim = default_prim
     return layer

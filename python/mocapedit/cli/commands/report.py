@@ -33,8 +33,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args) -> int:
     from mocapedit.model import report
+    from mocapedit.usd.report_io import read_report
 
-    stored = report.select(report.load(args.edits), args.agent)
+    stored = report.select(read_report(args.edits), args.agent)
     if args.json:
         print(json.dumps(stored.to_dict(), indent=2, sort_keys=True))
     else:

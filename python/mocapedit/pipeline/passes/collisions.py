@@ -1,6 +1,6 @@
-"""Pass 300: collision avoidance between agents, and avoid regions (chapter 6, section 4.3.2).
+"""Collision avoidance between agents, and avoid regions (chapter 6, section 4.3.2).
 
-A post-process on what the path (100) and time (200) passes produced: agents are
+A post-process on what the path and time passes produced: agents are
 compared at constant shot-time steps (``MocapSolveSettings.sampleStep``) on their edited
 paths, as time-warped, and pushed apart by re-solving their paths
 (:mod:`mocapedit.solve.avoidance`) until no two capsules overlap or ``maxIterations`` is reached.
@@ -37,10 +37,9 @@ from mocapedit.solve import avoidance, collisions, path_edit, retime
 from mocapedit.geometry import ground, trajectory
 from mocapedit.usd import writer
 from mocapedit.model.errors import prim_error
-from mocapedit.pipeline.processor import EditedPath, SolveContext, register_pass
-from mocapedit.model.report import describe_left
+from mocapedit.pipeline.context import EditedPath, SolveContext
+from mocapedit.model.report import ConstraintEntry, describe_left
 
-ORDER = 300
 #: Clearance (metres) up to which each agent's nearest neighbour is measured for the report.
 SEPARATION_REACH_M = 2.0
 #: Sides of the outline drawn for a circular region.
@@ -63,7 +62,7 @@ def _settings(ctx: SolveContext):
     return s
 
 
-def collision_pass(ctx: SolveContext) -> None:
+def run(ctx: SolveContext) -> None:
     data = ctx.data
     info = data.info
     settings = _settings(ctx)
@@ -193,11 +192,11 @@ def _report(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Ou
     names = problem.names
     settings_prim = data.settings.path
     stats = report.stats
-    stats["collisionStrategy"] = data.settings.collision_strategy
-    stats["collisionIterations"] = len(outcome.iterations) - 1
-    stats["collisionsPerIteration"] = [it.collisions for it in outcome.iterations]
-    stats["remainingOverlaps"] = len(outcome.remaining)
-    stats["regionFramesLeft"] = len(outcome.region_left)
+    stats.collision_strategy = data.settings.collision_strategy
+    stats.collision_iterations = len(outcome.iterations) - 1
+    stats.collisions_per_iteration = [it.collisions for it in outcome.iterations]
+    stats.remaining_overlaps = len(outcome.remaining)
+    stats.region_frames_left = len(outcome.region_left)
     # Nearest neighbour of each agent on the final paths, within reach.
     reach = data.info.metres(SEPARATION_REACH_M)
     final = collisions.detect(outcome.sampling, problem.radius, problem.height, problem.margin,
@@ -207,27 +206,27 @@ def _report(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Ou
     if enabled:
         for name, c in zip(names, clearance):
             if np.isfinite(c):
-                report.agent(name)["minSeparation"] = float(c)
+                report.agent(name).min_separation = float(c)
         if np.isfinite(clearance).any():
-            stats["minSeparation"] = float(np.min(clearance))
+            stats.min_separation = float(np.min(clearance))
     fps = data.info.time_codes_per_second
     delayed = np.flatnonzero(outcome.delays > 0)
     if enabled and data.settings.max_wait > 0:
-        stats["delayedAgents"] = int(len(delayed))
-        stats["largestDelay"] = float(outcome.delays.max(initial=0.0) / fps)
+        stats.delayed_agents = int(len(delayed))
+        stats.largest_delay = float(outcome.delays.max(initial=0.0) / fps)
     for i in delayed:
-        report.agent(names[i])["delay"] = float(outcome.delays[i] / fps)
+        report.agent(names[i]).delay = float(outcome.delays[i] / fps)
     times = outcome.sampling.times
     blocked = {(a, b) for a, b, _ in outcome.blocked}
     left = outcome.remaining
     for a, b, k, depth in zip(left.agent_a, left.agent_b, left.deepest, left.depth):
         pa, pb = outcome.sampling.positions[k, a], outcome.sampling.positions[k, b]
-        report.constraints.append({
-            "prim": settings_prim, "kind": "collision", "agent": names[a], "target": names[b],
-            "frame": int(round(outcome.sampling.frames[k, a])), "targetFrame": int(round(outcome.sampling.frames[k, b])),
-            "time": float(times[k]), "hard": False, "residual": float(depth), "met": False,
-            "heldByConstraints": (int(a), int(b)) in blocked,
-            "position": _world(ctx, 0.5 * (pa + pb)).tolist()})
+        report.constraints.append(ConstraintEntry(
+            prim=settings_prim, kind="collision", agent=names[a], target=names[b],
+            frame=int(round(outcome.sampling.frames[k, a])), target_frame=int(round(outcome.sampling.frames[k, b])),
+            time=float(times[k]), hard=False, residual=float(depth), met=False,
+            held_by_constraints=(int(a), int(b)) in blocked,
+            position=_world(ctx, 0.5 * (pa + pb)).tolist()))
     by_link = {(a, b): (t0, t1) for _, a, b, t0, t1, _ in outcome.link_held}
     for name, a, b, t0, t1, distance in outcome.link_held:
         report.note(f"<{name}> holds agents <{names[a]}> and <{names[b]}> {distance:g} apart, closer than "
@@ -240,23 +239,23 @@ def _report(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Ou
         report.note(f"agents <{names[a]}> and <{names[b]}> cannot be separated at time {t:g}: hard "
                     "constraints hold both of them there")
     _region_entries(ctx, problem, outcome)
-    its = stats["collisionsPerIteration"]
+    its = stats.collisions_per_iteration
     if enabled:
         left_text = describe_left(len(left), len(outcome.region_left))
         how = (f"{its[0]} collision interval{'s' if its[0] != 1 else ''} at first, {left_text} after "
-               f"{stats['collisionIterations']} iteration{'s' if stats['collisionIterations'] != 1 else ''} "
-               f"({problem.names and stats['collisionStrategy']})")
+               f"{stats.collision_iterations} iteration{'s' if stats.collision_iterations != 1 else ''} "
+               f"({problem.names and stats.collision_strategy})")
         report.note(f"collision avoidance: {how}")
         if len(left) and not blocked:
-            why = (f"after {stats['collisionIterations']} iterations without progress "
+            why = (f"after {stats.collision_iterations} iterations without progress "
                    "(constraints that cannot all hold)" if outcome.stalled
                    else f"at maxIterations ({data.settings.max_iterations})")
             report.note(f"collision avoidance stopped {why} with {left_text}; see the collision entries")
     if outcome.stalled:
-        stats["collisionStalled"] = True
+        stats.collision_stalled = True
         if outcome.region_left:
             report.note(f"avoid regions: {len(outcome.region_left)} frames left inside after "
-                        f"{stats['collisionIterations']} iterations without progress (constraints that cannot "
+                        f"{stats.collision_iterations} iterations without progress (constraints that cannot "
                         "all hold); see the avoid-region entries")
 
 
@@ -278,11 +277,9 @@ def _region_entries(ctx: SolveContext, problem: avoidance.Problem, outcome: avoi
             depth, frame = worst.get((r, a), (0.0, None))
             if frame is None:
                 frame = int(np.argmin(collisions.signed_distance(region.footprint, outcome.paths[a])))
-            ctx.report.constraints.append({
-                "prim": region.name, "kind": "avoid-region", "agent": names[a], "frame": int(frame),
-                "target": None, "targetFrame": None, "hard": True, "residual": float(depth),
-                "met": depth <= 1e-6,
-                "position": _world(ctx, outcome.paths[a][frame]).tolist()})
+            ctx.report.constraints.append(ConstraintEntry(
+                prim=region.name, kind="avoid-region", agent=names[a], frame=int(frame), hard=True,
+                residual=float(depth), met=depth <= 1e-6, position=_world(ctx, outcome.paths[a][frame]).tolist()))
 
 
 def _region_guides(ctx: SolveContext, footprints) -> None:
@@ -298,5 +295,3 @@ def _region_guides(ctx: SolveContext, footprints) -> None:
         name="AvoidRegions", curves=curves, color=REGION_COLOR, width=info.metres(0.03),
         doc="Each avoid region's ground footprint and, when it has a margin, the footprint grown by it."))
 
-
-register_pass(ORDER, "collisions", collision_pass)

@@ -1,4 +1,4 @@
-"""Pass 500: foot locking, after every other edit (path, time warp, avoidance, layering).
+"""Foot locking, after every other edit (path, time warp, avoidance, layering).
 
 For each edited agent with two legs (found by name or set by ``mocap:leftLegJoints`` /
 ``mocap:rightLegJoints``), the pose every earlier pass produced is evaluated by forward
@@ -10,19 +10,21 @@ solver's foot-locking job (:mod:`mocapedit.solve.footlock`) moves the legs of al
 rotations (and the skeleton root's translation where the pelvis is lowered), so the writer
 bakes their animation.
 
-The report gets, per agent, the foot skate (as :func:`mocapedit.inspect.metrics.foot_skate` measures
+The report gets, per agent, the foot skate (as :func:`mocapedit.tools.measure.foot_skate` measures
 it, stage units per second) of the source (``footSkateSource``), after the edits alone
 (``footSkateUnlocked``) and as the edits layer plays it, locked (``footSkateEdited``); the
 contacts locked, the largest pelvis drop and the largest IK correction (stage units).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from mocapedit.geometry import animation, contacts, ground, kinematics, trajectory
 from mocapedit.solve import footlock
 from mocapedit.inspect import metrics
-from mocapedit.pipeline import processor
+from mocapedit.pipeline.context import SolveContext
 from mocapedit.usd import writer
 from mocapedit.model.errors import MocapEditError
 from mocapedit.solve.layering import quat_multiply, trs_from_matrices
@@ -86,8 +88,8 @@ def _posed_legs(ctx, path: str, frames: np.ndarray, times: np.ndarray, shared: d
     hit = shared.get(key) if key is not None else None
     if hit is None:
         pose = animation.sample_pose(ctx.data.clip_of(agent), frames)
-        for fn in edits:
-            pose = fn(pose, times, frames)
+        for edit in edits:
+            pose = edit.apply(pose, times, frames)
         skel = _skel_space(agent, pose, needed)
         hit = (pose, {j: skel[j][:, 3, :3] for j in needed},
                {j: trs_from_matrices(skel[j])[1].astype(np.float64) for j in needed})
@@ -150,14 +152,14 @@ def _ramp(frames: np.ndarray, first: int, last: int, blend: float) -> np.ndarray
 class _AgentLock:
     """One agent's side of the job: what it needs, and what it gets back."""
 
-    def __init__(self, ctx: processor.SolveContext, path: str, source_contacts: list, shared: dict):
+    def __init__(self, ctx: SolveContext, path: str, source_contacts: list, shared: dict):
         data = ctx.data
         info = data.info
         self.path = path
         agent = self.agent = data.agents[path]
         self.legs = agent.legs
         # Locked legs are a pose edit, and a pose edit bakes the animation: lock on its frames.
-        self.times, self.frames = processor.output_frames(ctx, path, baked=True)
+        self.times, self.frames = ctx.output_frames(path, baked=True)
         self.root = _top(agent, self.legs[0].hip)
         pose, skel_pos, skel_rot = _posed_legs(ctx, path, self.frames, self.times, shared)
         self.pose = pose
@@ -273,7 +275,7 @@ class _AgentLock:
             np.maximum.at(self.weight[:, k], rows, w[valid])
         some = w_sum > 0
         self.target[some] = pos_sum[some] / w_sum[some][:, None]
-        self.target_rot[some] = footlock._normalize(rot_sum[some])
+        self.target_rot[some] = footlock.normalize(rot_sum[some])
 
     def inputs(self) -> dict:
         return {"hip": self.hip, "knee": self.knee, "ankle": self.ankle, "parent_rot": self.parent_rot,
@@ -344,7 +346,7 @@ def _source(ctx, agent: Agent, cache: dict) -> tuple[list[list[tuple[int, int]]]
 
 def _report_skate(ctx, lock: "_AgentLock", locked_pose, chains: dict) -> tuple[float, float, float] | None:
     """(source, after the edits, after locking) foot skate of a locked agent, stage units per
-    second, as :func:`mocapedit.inspect.metrics.foot_skate` measures it on the input and on the composed
+    second, as :func:`mocapedit.tools.measure.foot_skate` measures it on the input and on the composed
     stage: joints named like feet, over the source's planted frames (a retimed agent: over its own).
     None for a skeleton without such joints."""
     agent, info = lock.agent, ctx.data.info
@@ -370,12 +372,12 @@ def _report_skate(ctx, lock: "_AgentLock", locked_pose, chains: dict) -> tuple[f
     return before.mean, unlocked, skate(locked_pose) if locked_pose is not None else unlocked
 
 
-def foot_locking_pass(ctx: processor.SolveContext) -> None:
+def run(ctx: SolveContext) -> None:
     data = ctx.data
     info = data.info
     if not data.settings.foot_locking:
         return
-    touched = sorted(set(ctx.paths) | set(ctx.time_maps) | set(ctx.pose_edits))
+    touched = ctx.touched()
     cache: dict = {}
     shared: dict = {}
     locks: list[_AgentLock] = []
@@ -384,15 +386,15 @@ def foot_locking_pass(ctx: processor.SolveContext) -> None:
         agent = data.agents[path]
         entry = ctx.report.agent(path)
         if not agent.foot_locking:
-            entry.setdefault("notes", []).append("foot locking off (mocap:footLocking = false)")
+            entry.add_notes("foot locking off (mocap:footLocking = false)")
         elif len(agent.legs) != 2:
-            entry.setdefault("notes", []).append(
+            entry.add_notes(
                 "foot locking skipped: legs not found by name; set mocap:leftLegJoints and mocap:rightLegJoints")
         else:
             lock = _AgentLock(ctx, path, _source(ctx, agent, cache), shared)
             why = lock.writable()
             if why:
-                entry.setdefault("notes", []).append(f"foot locking skipped: {why}")
+                entry.add_notes(f"foot locking skipped: {why}")
             elif lock.locked:
                 locks.append(lock)
         task.update(i + 1)
@@ -422,28 +424,27 @@ def foot_locking_pass(ctx: processor.SolveContext) -> None:
             kept += 1
         if skate is not None and np.isfinite(skate).all():
             # footSkateEdited is what the edits layer plays; footSkateUnlocked, the edits alone.
-            entry["footSkateSource"], entry["footSkateUnlocked"], entry["footSkateEdited"] = skate
+            entry.foot_skate_source, entry.foot_skate_unlocked, entry.foot_skate_edited = skate
             skates.append(skate)
-        entry["footContactsLocked"] = lock.locked
-        entry["maxPelvisDrop"] = lock.max_drop
-        entry["maxFootCorrection"] = lock.max_correction
+        entry.foot_contacts_locked = lock.locked
+        entry.max_pelvis_drop = lock.max_drop
+        entry.max_foot_correction = lock.max_correction
         contacts_locked += lock.locked
         if locked_pose is not None:
             changed += 1
-            ctx.pose_edits.setdefault(lock.path, []).append(
-                lambda pose, out_times, src_frames, locked=locked_pose, lock=lock: _replace_legs(pose, locked, lock))
+            ctx.pose_edits.setdefault(lock.path, []).append(LockedLegs(lock.path, locked_pose))
     if ctx.options.guides:
         _plant_guides(ctx, [lock for lock in locks if lock.path in ctx.pose_edits])
     stats = ctx.report.stats
-    stats["footLockedAgents"] = changed
-    stats["footLockingNotNeeded"] = kept
-    stats["footContactsLocked"] = contacts_locked
+    stats.foot_locked_agents = changed
+    stats.foot_locking_not_needed = kept
+    stats.foot_contacts_locked = contacts_locked
     # The shot's figures: mean skate over the agents with contacts, the largest corrections.
     if skates:
-        for key, values in zip(("footSkateSource", "footSkateUnlocked", "footSkateEdited"), np.transpose(skates)):
-            stats[key] = float(np.mean(values))
-    stats["maxPelvisDrop"] = max(lock.max_drop for lock in locks)
-    stats["maxFootCorrection"] = max(lock.max_correction for lock in locks)
+        stats.foot_skate_source, stats.foot_skate_unlocked, stats.foot_skate_edited = (
+            float(np.mean(values)) for values in np.transpose(skates))
+    stats.max_pelvis_drop = max(lock.max_drop for lock in locks)
+    stats.max_foot_correction = max(lock.max_correction for lock in locks)
 
 
 #: Guide colours of the left and right feet's plants.
@@ -467,11 +468,15 @@ def _plant_guides(ctx, locks: list) -> None:
             doc="Where foot locking plants each contact of the locked agents: left feet blue, right orange."))
 
 
-def _replace_legs(pose: animation.Pose, locked: animation.Pose, lock: _AgentLock) -> animation.Pose:
-    """The pose with the locked legs (and lowered root) of ``locked``, whose joints it shares."""
-    if pose.joints != locked.joints or pose.rotations.shape != locked.rotations.shape:
-        raise MocapEditError(f"<{lock.path}>: foot locking was computed for another pose")
-    return locked
+@dataclass
+class LockedLegs:
+    """The pose edit of foot locking: the agent's pose with its locked legs (and lowered root)."""
+    path: str
+    locked: animation.Pose
 
+    def apply(self, pose: animation.Pose, out_times: np.ndarray, src_frames: np.ndarray) -> animation.Pose:
+        """``locked``, which was computed for ``pose`` (an error for any other pose)."""
+        if pose.joints != self.locked.joints or pose.rotations.shape != self.locked.rotations.shape:
+            raise MocapEditError(f"<{self.path}>: foot locking was computed for another pose")
+        return self.locked
 
-processor.register_pass(500, "foot locking", foot_locking_pass)

@@ -1,4 +1,4 @@
-"""Pass 400: animation layers (MocapAnimationLayer), blended or added on a joint subtree.
+"""Animation layers (MocapAnimationLayer), blended or added on a joint subtree.
 
 Each layer prim applies to the agents of its ``agents`` relationship; the layers of one
 agent stack in stage order. Layering happens in each joint's local space on the
@@ -12,14 +12,25 @@ the writer authors one baked animation for them all.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from mocapedit.geometry import animation
 from mocapedit.solve import layering
-from mocapedit.pipeline import processor
+from mocapedit.pipeline.context import SolveContext
 
 
-def check_layers(ctx: processor.SolveContext) -> None:
+@dataclass
+class LayeredPose:
+    """The pose edit of an agent's layers: its stack of layers applied at the output times."""
+    plan: layering.AgentLayers
+
+    def apply(self, pose: animation.Pose, out_times: np.ndarray, src_frames: np.ndarray) -> animation.Pose:
+        return self.plan.apply(pose, out_times)
+
+
+def check_layers(ctx: SolveContext) -> None:
     """Before any other pass: every layer's weights, and its joint and clip against the
     skeleton of each of its agents, so a bad layer stops the solve before the work."""
     data = ctx.data
@@ -34,7 +45,7 @@ def check_layers(ctx: processor.SolveContext) -> None:
                 layering.resolve_layer(agent, layer, data.clips[layer.clip_key])
 
 
-def layering_pass(ctx: processor.SolveContext) -> None:
+def run(ctx: SolveContext) -> None:
     data = ctx.data
     if not data.layers:
         return
@@ -59,9 +70,9 @@ def layering_pass(ctx: processor.SolveContext) -> None:
         if plan is None:
             plan = plans[key] = layering.plan_agent(
                 agent, source, [(layer, data.clips[layer.clip_key]) for layer in layers], deltas)
-        times, frames = processor.output_frames(ctx, agent_path)
+        times, frames = ctx.output_frames(agent_path)
         entry = ctx.report.agent(agent_path)
-        notes = entry.setdefault("notes", [])
+        notes = entry.add_notes()
         for p in plan.layers:
             notes.append(f"layer <{p.layer.path}>: {p.describe()}")
         pose_key = (agent.clip_key, frames.tobytes())
@@ -69,17 +80,13 @@ def layering_pass(ctx: processor.SolveContext) -> None:
         if pose is None:  # unwarped agents of one clip all play frames 0, 1, ...: one pose
             pose = poses[pose_key] = animation.sample_pose(source, frames)
         if plan.changes(pose, times):
-            ctx.pose_edits.setdefault(agent_path, []).append(
-                lambda pose, out_times, src_frames, plan=plan: plan.apply(pose, out_times))
+            ctx.pose_edits.setdefault(agent_path, []).append(LayeredPose(plan))
             layered += 1
             samples += len(times) * sum(len(p.pose_columns) for p in plan.layers)
         else:
             notes.append("layers leave the pose unchanged: not written")
         task.update(i + 1)
     task.done()
-    ctx.report.stats["layeredAgents"] = layered
-    ctx.report.stats["layeredJointSamples"] = samples
+    ctx.report.stats.layered_agents = layered
+    ctx.report.stats.layered_joint_samples = samples
 
-
-processor.register_pass(0, "layering-check", check_layers)
-processor.register_pass(400, "layering", layering_pass)

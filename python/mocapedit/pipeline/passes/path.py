@@ -1,4 +1,4 @@
-"""Path edits (order 100): position and relative constraints, stationary tags, path curves
+"""Path edits: position and relative constraints, stationary tags, path curves
 and groups (chapters 4 and 5 of the deliverable).
 
 Agents tied together by relative constraints or groups form a component; each component
@@ -18,14 +18,14 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from mocapedit import _solver
 from mocapedit.geometry import curves, ground
+from mocapedit.geometry.components import UnionFind
 from mocapedit.inspect import metrics
 from mocapedit.solve import path_edit
 from mocapedit.model.errors import MocapEditError, prim_error
-from mocapedit.pipeline.processor import EditedPath, SolveContext, register_pass
+from mocapedit.model.report import ConstraintEntry
+from mocapedit.pipeline.context import EditedPath, SolveContext
 
-ORDER = 100
 MET = 1e-6  # stage units: a hard constraint's residual within this is met
 
 #: Lengths that set the solve's tolerances, in metres.
@@ -58,28 +58,15 @@ def _validate(ctx: SolveContext) -> None:
 def _components(ctx: SolveContext) -> list[list[str]]:
     """Agents tied by relative constraints and groups, each component sorted, in order."""
     data = ctx.data
-    parent = {a: a for a in data.agents}
-
-    def find(a):
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        return a
-
-    def union(a, b):
-        ra, rb = find(a), find(b)
-        if ra != rb:
-            parent[max(ra, rb)] = min(ra, rb)
+    joined = UnionFind(data.agents)
     for c in data.relative_constraints:
-        union(c.agent, c.target)
+        joined.union_smallest(c.agent, c.target)
     for g in data.groups:
         for m in g.members[1:]:
-            union(g.members[0], m)
+            joined.union_smallest(g.members[0], m)
     active = {c.agent for c in data.position_constraints} | {c.agent for c in data.relative_constraints}
     active |= {a.path for a in data.agents.values() if a.path_curve}
-    groups: dict[str, list[str]] = {}
-    for a in sorted(data.agents):
-        groups.setdefault(find(a), []).append(a)
+    groups = joined.sets(sorted(data.agents))
     return [members for _, members in sorted(groups.items()) if active & set(members)]
 
 
@@ -175,7 +162,7 @@ class _Component:
                                                       [path_edit.Group(g.members, g.stiffness, g.path)
                                                        for g in self.groups], self.settings)
             self.result = self.problem.solve()
-        except _solver.ContradictionError as exc:
+        except path_edit.ContradictionError as exc:
             raise self._contradiction(exc) from None
 
     def _contradiction(self, exc) -> MocapEditError:
@@ -228,43 +215,42 @@ def _report(ctx: SolveContext, comp: _Component) -> None:
     for c in comp.positions:
         target = ground.to_ground(c.position, ctx.data.info.up_axis)
         residual = float(np.linalg.norm(edited[c.agent][c.frame] - target))
-        ctx.report.constraints.append({
-            "prim": c.path, "kind": "position", "agent": c.agent, "frame": c.frame, "target": None,
-            "targetFrame": None, "hard": c.hard, "residual": residual, "met": residual <= MET,
-            "position": [float(v) for v in c.position]})
+        ctx.report.constraints.append(ConstraintEntry(
+            prim=c.path, kind="position", agent=c.agent, frame=c.frame, hard=c.hard, residual=residual,
+            met=residual <= MET, position=[float(v) for v in c.position]))
     for c, offset in zip(comp.relatives, res.link_offsets):
         d = edited[c.agent][c.frame] - edited[c.target][c.target_frame]
         residual = float(np.linalg.norm(d - offset))
-        ctx.report.constraints.append({
-            "prim": c.path, "kind": "relative", "agent": c.agent, "frame": c.frame, "target": c.target,
-            "targetFrame": c.target_frame, "hard": c.hard, "residual": residual, "met": residual <= MET,
-            "position": _world(ctx, c.agent, edited[c.agent][c.frame], c.frame)})
+        ctx.report.constraints.append(ConstraintEntry(
+            prim=c.path, kind="relative", agent=c.agent, frame=c.frame, target=c.target,
+            target_frame=c.target_frame, hard=c.hard, residual=residual, met=residual <= MET,
+            position=_world(ctx, c.agent, edited[c.agent][c.frame], c.frame)))
     for a in comp.inputs:
         g = edited[a.path]
         for (first, last), ref in zip(a.stationary, a.stationary_refs):
             residual = float(metrics.rigidity_error(a.source, g, [(first, last)])[0])
-            ctx.report.constraints.append({
-                "prim": ref.split(".stationary:")[0], "kind": "stationary", "agent": a.path, "frame": first,
-                "target": None, "targetFrame": None, "hard": True, "residual": residual, "met": residual <= MET,
-                "position": _world(ctx, a.path, g[first], first)})
+            ctx.report.constraints.append(ConstraintEntry(
+                prim=ref.split(".stationary:")[0], kind="stationary", agent=a.path, frame=first,
+                hard=True, residual=residual, met=residual <= MET, position=_world(ctx, a.path, g[first], first)))
         agent = ctx.data.agents[a.path]
         if agent.path_curve:
             residual = float(np.linalg.norm(g - a.rest, axis=1).max(initial=0.0))
-            ctx.report.constraints.append({
-                "prim": agent.path_curve, "kind": "path-curve", "agent": a.path, "frame": 0, "target": None,
-                "targetFrame": None, "hard": False, "residual": residual, "met": residual <= MET})
+            ctx.report.constraints.append(ConstraintEntry(
+                prim=agent.path_curve, kind="path-curve", agent=a.path, frame=0, hard=False, residual=residual,
+                met=residual <= MET))
         entry = ctx.report.agent(a.path)
         entry.update(path_edit.shape_figures(a, g, ctx.data.info.metres(MIN_BASELINE_M)))
         r = res.agents[a.path]
-        entry["solver"] = "translation only" if r.translate_only and res.solver not in ("none",) else res.solver
+        entry.solver = "translation only" if r.translate_only and res.solver not in ("none",) else res.solver
         if res.notes:
-            entry.setdefault("notes", []).extend(n for n in res.notes if n not in entry.get("notes", []))
+            notes = entry.add_notes()
+            notes.extend(n for n in res.notes if n not in notes)
     if "SPQR" in res.solver:
         ctx.report.note(f"path solve of {', '.join(comp.members[:5])}{' ...' if len(comp.members) > 5 else ''}: "
                         f"fell back to sparse QR ({res.solver})")
 
 
-def path_pass(ctx: SolveContext) -> None:
+def run(ctx: SolveContext) -> None:
     _validate(ctx)
     members = _components(ctx)
     if not members:
@@ -288,7 +274,5 @@ def path_pass(ctx: SolveContext) -> None:
         for path, r in comp.result.agents.items():
             ctx.paths[path] = EditedPath(ground=r.ground, heading=r.heading)
         _report(ctx, comp)
-    ctx.report.stats["pathComponents"] = len(comps)
+    ctx.report.stats.path_components = len(comps)
 
-
-register_pass(ORDER, "path", path_pass)

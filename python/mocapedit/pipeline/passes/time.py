@@ -1,10 +1,10 @@
-"""Time edits (order 200): world time and synchronised time constraints, speed matching.
+"""Time edits: world time and synchronised time constraints, speed matching.
 
 Reads ``MocapTimeConstraint`` and ``MocapSyncConstraint`` prims and
 ``MocapSolveSettings.matchSpeed`` / ``minTimeInterval``, and fills ``ctx.time_maps``:
 the shot time at which each source frame of an agent plays (sections 5.4.2.3, 5.4.2.4
 and 5.4.2.6 of the deliverable). The warp itself is the solver's
-(``_solver.time_warp``): agents linked by sync constraints solve together, hard
+(:func:`mocapedit.solve.time_warp.warp`): agents linked by sync constraints solve together, hard
 constraints hold exactly, every interval stays at or above ``minTimeInterval`` times the
 source interval, and contradicting constraints stop the solve with an error naming them.
 
@@ -21,14 +21,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from mocapedit import _solver
 from mocapedit.geometry import ground
 from mocapedit.model import limits
-from mocapedit.solve import retime
+from mocapedit.solve import retime, time_warp
 from mocapedit.model.errors import prim_error
-from mocapedit.pipeline.processor import SolveContext, register_pass
+from mocapedit.model.report import ConstraintEntry
+from mocapedit.pipeline.context import SolveContext
 
-ORDER = 200
 MET = 1e-6  # time codes: a hard constraint's residual within this is met
 
 
@@ -51,7 +50,7 @@ def _validate(ctx: SolveContext) -> float:
     return fraction
 
 
-def _conflict_error(exc: _solver.TimeWarpConflict, agents: list[str], ctx: SolveContext):
+def _conflict_error(exc: time_warp.TimeWarpConflict, agents: list[str], ctx: SolveContext):
     times = [ctx.data.time_constraints[i] for i in exc.time_constraints]
     syncs = [ctx.data.sync_constraints[i] for i in exc.sync_constraints]
     prims = sorted({c.path for c in times} | {c.path for c in syncs})
@@ -94,7 +93,7 @@ def _root_position(ctx: SolveContext, agent: str, frame: int) -> list[float]:
     return ground.from_ground(uv, traj.height[frame], ctx.data.info.up_axis).tolist()
 
 
-def time_pass(ctx: SolveContext) -> None:
+def run(ctx: SolveContext) -> None:
     data = ctx.data
     fraction = _validate(ctx)
     matched = sorted(ctx.paths) if data.settings.match_speed else []
@@ -121,15 +120,15 @@ def time_pass(ctx: SolveContext) -> None:
     sync_frames = np.array([[index[c.agent], c.frame, index[c.target], c.target_frame] for c in sc],
                            dtype=np.int32).reshape(-1, 4)
     try:
-        result = _solver.time_warp(
-            rest_times=rest, time_frames=time_frames, time_hard=np.array([c.hard for c in tc], dtype=bool),
+        result = time_warp.warp(
+            rest_times=rest, min_intervals=minimum, min_interval_fraction=fraction,
+            time_frames=time_frames, time_hard=np.array([c.hard for c in tc], dtype=bool),
             time_weights=np.array([c.weight for c in tc], dtype=np.float64),
-            times=np.array([c.time for c in tc], dtype=np.float64), sync_frames=sync_frames,
-            sync_hard=np.array([c.hard for c in sc], dtype=bool),
+            times=np.array([c.time for c in tc], dtype=np.float64),
+            sync_frames=sync_frames, sync_hard=np.array([c.hard for c in sc], dtype=bool),
             sync_weights=np.array([c.weight for c in sc], dtype=np.float64),
-            offsets=np.array([c.offset for c in sc], dtype=np.float64),
-            min_interval_fraction=fraction, min_intervals=minimum)
-    except _solver.TimeWarpConflict as exc:
+            offsets=np.array([c.offset for c in sc], dtype=np.float64))
+    except time_warp.TimeWarpConflict as exc:
         raise _conflict_error(exc, agents, ctx) from None
 
     keys: dict[str, list[int]] = {a: [] for a in agents}
@@ -153,8 +152,8 @@ def time_pass(ctx: SolveContext) -> None:
             times = np.union1d(times, ctx.out_times[path])
         ctx.out_times[path] = times
         entry = ctx.report.agent(path)
-        entry["minInterval"] = float(result.min_interval[i])
-        entry["solver"] = "matchSpeed" if solvers[i] == "rest" else solvers[i]
+        entry.min_interval = float(result.min_interval[i])
+        entry.solver = "matchSpeed" if solvers[i] == "rest" else solvers[i]
         notes = []
         if path in matched:
             notes.append("time map matches the source speed along the edited path (matchSpeed)")
@@ -164,7 +163,7 @@ def time_pass(ctx: SolveContext) -> None:
             notes.append(f"time warp held {held} interval(s) at the minimum "
                          f"(minTimeInterval {fraction:g} of the source interval)")
         if notes:
-            entry.setdefault("notes", []).extend(notes)
+            entry.add_notes(*notes)
         if solvers[i] == "SPQR fallback":
             ctx.report.note(f"time warp: a singular system for <{path}> was solved by {solvers[i]}")
     if enforced:
@@ -174,16 +173,13 @@ def time_pass(ctx: SolveContext) -> None:
 
     for c, residual in zip(tc, result.time_residuals):
         residual = float(residual)
-        ctx.report.constraints.append({
-            "prim": c.path, "kind": "time", "agent": c.agent, "frame": c.frame, "target": None,
-            "targetFrame": None, "hard": c.hard, "residual": residual, "met": residual <= MET,
-            "position": _root_position(ctx, c.agent, c.frame)})
+        ctx.report.constraints.append(ConstraintEntry(
+            prim=c.path, kind="time", agent=c.agent, frame=c.frame, hard=c.hard, residual=residual,
+            met=residual <= MET, position=_root_position(ctx, c.agent, c.frame)))
     for c, residual in zip(sc, result.sync_residuals):
         residual = float(residual)
-        ctx.report.constraints.append({
-            "prim": c.path, "kind": "sync", "agent": c.agent, "frame": c.frame, "target": c.target,
-            "targetFrame": c.target_frame, "hard": c.hard, "residual": residual, "met": residual <= MET,
-            "position": _root_position(ctx, c.agent, c.frame)})
+        ctx.report.constraints.append(ConstraintEntry(
+            prim=c.path, kind="sync", agent=c.agent, frame=c.frame, target=c.target,
+            target_frame=c.target_frame, hard=c.hard, residual=residual, met=residual <= MET,
+            position=_root_position(ctx, c.agent, c.frame)))
 
-
-register_pass(ORDER, "time", time_pass)

@@ -1,0 +1,113 @@
+"""The solve context: what the passes of a solve read and produce, field by field.
+
+A pass reads the stage data, the options and what earlier passes produced, and adds its own
+results under the fields below (agent path -> result); the processor turns the results into
+what the writer authors. Nothing here is a function stored as data: a pose edit is an object
+with an ``apply`` method (:class:`PoseEdit`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from mocapedit.geometry import animation, trajectory
+from mocapedit.model.data import StageData
+from mocapedit.model.progress import Progress
+from mocapedit.model.report import Report
+from mocapedit.usd import stage_io, writer
+
+
+@dataclass
+class EditedPath:
+    """An agent's edited ground path, one row per source frame."""
+    ground: np.ndarray            # (F,2) stage units, on the ground plane
+    heading: np.ndarray           # (F,) radians, counter-clockwise about up
+
+
+class PoseEdit(Protocol):
+    """A change of an agent's pose (layering, locked legs), applied in order to the time-warped
+    source pose."""
+
+    def apply(self, pose: animation.Pose, out_times: np.ndarray, src_frames: np.ndarray) -> animation.Pose:
+        """The edited pose. ``out_times``: (T,) stage times of the pose's rows; ``src_frames``:
+        (T,) the fractional source frame each row plays."""
+        ...
+
+
+@dataclass
+class SolveOptions:
+    guides: bool = True
+    collisions: bool | None = None     # None: follow MocapSolveSettings.collisionAvoidance
+    overrides: dict = field(default_factory=dict)  # settings overrides by python field name
+    # Bake time-only edits into SkelAnimation samples instead of re-timing the source clip
+    # with value clips (the two play the same motion; the baked form is the reference).
+    bake_timing: bool = False
+
+
+@dataclass
+class SolveContext:
+    """The state of one solve, shared by its passes."""
+    data: StageData
+    options: SolveOptions
+    report: Report
+    progress: Progress
+    #: The source ground path of every agent, extracted before the passes run.
+    trajectories: dict[str, trajectory.Trajectory] = field(default_factory=dict)
+    #: Spatial edits: the edited ground path per source frame.
+    paths: dict[str, EditedPath] = field(default_factory=dict)
+    #: Time edits: the shot time at which each source frame plays, (F,) increasing.
+    time_maps: dict[str, np.ndarray] = field(default_factory=dict)
+    #: Pose edits (layering, foot locking), applied in order to the time-warped source pose.
+    pose_edits: dict[str, list[PoseEdit]] = field(default_factory=dict)
+    #: Output times chosen by a pass for an agent (else whole shot frames for a time map,
+    #: the clip's own samples otherwise).
+    out_times: dict[str, np.ndarray] = field(default_factory=dict)
+    #: What the writer authors, per edited agent (filled after the passes).
+    edits: dict[str, writer.AgentEdit] = field(default_factory=dict)
+    #: Guide geometry the passes and the inspection add.
+    guides: list = field(default_factory=list)
+
+    def touched(self) -> list[str]:
+        """The agents some pass edited (path, time or pose), sorted."""
+        return sorted(set(self.paths) | set(self.time_maps) | set(self.pose_edits))
+
+    def retimed_spec(self, path: str) -> tuple[str, str] | None:
+        """(clip layer, prim path) when the agent's only change of pose is its timing and its clip
+        can be re-timed by a value clip (one spec's samples, in a layer on disk); None when it is
+        baked instead (layered, ``bake_timing``, a clip split over specs or only in memory)."""
+        if self.options.bake_timing or path not in self.time_maps or path in self.pose_edits:
+            return None
+        if any(path in layer.agents for layer in self.data.layers):
+            return None
+        clip = self.data.clip_of(self.data.agents[path])
+        spec = clip.sample_spec
+        if spec is None or clip.spec_times is None or stage_io.is_anonymous(spec[0]):
+            return None
+        return spec
+
+    def output_frames(self, path: str, baked: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """(stage times to author, fractional source frame at each) for one agent.
+
+        ``baked``: the times its animation has when baked, even if it is re-timed by a value clip
+        now (a pass that is about to give it a pose edit, which bakes it, asks for these)."""
+        agent = self.data.agents[path]
+        frames = np.arange(agent.frame_count, dtype=np.float64)
+        time_map = self.time_maps.get(path)
+        if time_map is None:
+            times = self.out_times.get(path, agent.sample_times)
+            return times, np.interp(times, agent.sample_times, frames)
+        if not baked and self.retimed_spec(path):
+            # A re-timed clip plays each source frame at its time on the map: those are its samples.
+            return np.asarray(time_map, dtype=np.float64), frames
+        times = self.out_times.get(path)
+        if times is None:
+            # A baked warped clip is authored on the shot's whole frames.
+            times = np.arange(np.ceil(time_map[0] - 1e-9), np.floor(time_map[-1] + 1e-9) + 1.0)
+        return times, np.interp(times, time_map, frames)
+
+    def release(self) -> None:
+        """Drops the per-agent results (the edits layer holds them once it is built)."""
+        for part in (self.edits, self.guides, self.paths, self.time_maps, self.pose_edits, self.trajectories):
+            part.clear()

@@ -1,0 +1,65 @@
+"""Measures of a composed stage: foot skate and plausibility of agents, evaluated by UsdSkel FK.
+
+Stage in, figures out: :mod:`mocapedit.usd.evaluate` computes the joints' world positions on the
+composed stage, :mod:`mocapedit.inspect.metrics` measures them. An edited stage (the input with
+the edits layer on top) is thus judged by what plain UsdSkel plays.
+"""
+from __future__ import annotations
+
+from typing import Iterable, Sequence, Union
+
+import numpy as np
+
+from mocapedit.inspect import metrics
+from mocapedit.inspect.metrics import FootSkate, Plausibility
+from mocapedit.usd import evaluate
+
+__all__ = ["foot_skate", "plausibility", "shot_plausibility"]
+
+
+def foot_skate(stage, agent_path, times: Iterable | None = None,
+               foot_joints: Sequence[Union[int, str]] | None = None,
+               contact_height: float | None = None,
+               contact: np.ndarray | None = None) -> FootSkate:
+    """Foot skate: mean horizontal foot speed while the foot is in contact with the ground.
+
+    Evaluated by forward kinematics on the composed ``stage`` (a ``Usd.Stage``). A foot is in
+    contact at a sample when it is within ``contact_height`` (default 2 cm in stage units, from
+    ``metersPerUnit``) above its lowest height over the clip and the sample lies within the clip's
+    sample range. The speed of a foot over an interval between consecutive samples that are both in
+    contact is its horizontal (ground-plane) displacement over the interval's duration in seconds
+    (``timeCodesPerSecond``).
+
+    ``times``: time codes (default: the animation's authored samples as composed). ``foot_joints``:
+    joint indices, full joint paths or unique joint names (default: joints named like a foot, toe
+    or ankle, but not an end site). ``contact``: a (T, feet) boolean mask to use instead of the
+    height test, typically ``source.contact`` from the source stage, so that an edited stage is
+    measured over the frames where the source feet were planted (pass ``times=source.times``).
+    """
+    feet = evaluate.foot_positions(stage, agent_path, times, foot_joints)
+    return metrics.foot_skate_of_positions(feet.positions, feet.times, *evaluate.stage_units(stage),
+                                           feet.joints, feet.in_clip, contact_height, contact)
+
+
+def plausibility(source_stage, edited_stage, agent_path, joint: Union[int, str, None] = None,
+                 foot_joints=None) -> Plausibility:
+    """Plausibility of one agent: its edited motion on ``edited_stage`` (the input with the edits
+    layer on top) against its source on ``source_stage``, both by UsdSkel FK at their own composed
+    samples, paired by frame. ``joint``: the facing joint (default
+    :func:`~mocapedit.model.names.default_facing_joint`)."""
+    ts, ms = evaluate.joint_world_matrices(source_stage, agent_path, None, joint)
+    te, me = evaluate.joint_world_matrices(edited_stage, agent_path, None, joint)
+    skate_s = foot_skate(source_stage, agent_path, foot_joints=foot_joints)
+    contact = skate_s.contact if len(skate_s.times) == len(te) else None
+    skate_e = foot_skate(edited_stage, agent_path, times=te if contact is not None else None,
+                         foot_joints=foot_joints, contact=contact)
+    source, edited = evaluate.stage_units(source_stage), evaluate.stage_units(edited_stage)
+    return metrics.plausibility_of(str(agent_path), ts / source.time_codes_per_second, ms,
+                                   te / edited.time_codes_per_second, me, source.up_axis,
+                                   source.meters_per_unit, skate_s.mean, skate_e.mean)
+
+
+def shot_plausibility(source_stage, edited_stage, agent_paths: Iterable, joint=None,
+                      foot_joints=None) -> list[Plausibility]:
+    """:func:`plausibility` of each agent, in the order given."""
+    return [plausibility(source_stage, edited_stage, p, joint, foot_joints) for p in agent_paths]
