@@ -171,3 +171,74 @@ def test_a_batch_on_a_local_cluster(tmp_path, shots):
     assert proc.returncode == 0, proc.stderr
     assert (out / "s1.edits.usdc").read_bytes() == expected
     assert "2 done, 0 failed, 0 remaining" in proc.stderr
+
+
+# ---- a shot split over workers by path component ---------------------------------------------
+
+def _components_shot(folder: Path, contradiction: bool = False) -> Path:
+    """Nine walkers, five path components: a0 tied to a1 by a relative constraint; a group
+    a2-a4 with a pin; a5, a6 and a8 pinned alone (a5 also late); a7 untouched.
+    ``contradiction`` pins a6's frame 10 to two places."""
+    clip = walker.walk(frames=48, name="walk")
+    specs = [examples.AgentSpec(f"a{i}", clip, (3.0 * (i % 3), 0, 3.0 * (i // 3)), 0.0, float(i)) for i in range(9)]
+    path = folder / ("contradiction.usda" if contradiction else "components.usda")
+    stage = examples.build_crowd_stage(path, specs, clips_dir=folder / "clips")
+    pins = [("a0_end", 0, 47, (1.0, 0.0, 4.0)), ("a2_end", 2, 47, (7.0, 0.0, 5.0))]
+    pins += [(f"a{i}_end", i, 40, (3.0 * (i % 3) - 1.0, 0.0, 3.0 * (i // 3) + 2.5)) for i in (5, 6, 8)]
+    if contradiction:
+        pins += [("a6_here", 6, 10, (0.0, 0.0, 6.0)), ("a6_there", 6, 10, (2.0, 0.0, 6.0))]
+    for name, i, frame, position in pins:
+        examples.add_position_constraint(stage, f"/Edits/{name}", f"{CROWD}/a{i}", frame, position)
+    examples.add_relative_constraint(stage, "/Edits/a1_beside", f"{CROWD}/a1", 30, f"{CROWD}/a0", 30, (1.0, 0.0, 0.0))
+    examples.add_group(stage, "/Edits/group", [f"{CROWD}/a{i}" for i in (2, 3, 4)])
+    examples.add_time_constraint(stage, "/Edits/a5_late", f"{CROWD}/a5", 24, 30.0)
+    stage.GetRootLayer().Save()
+    return path
+
+
+@pytest.fixture
+def component_shots(tmp_path):
+    (tmp_path / "split").mkdir()
+    return tuple(_components_shot(tmp_path / "split", contradiction) for contradiction in (False, True))
+
+
+@pytest.mark.slow
+def test_a_shot_split_by_component_on_a_local_cluster_gives_the_single_solves_bytes(tmp_path, component_shots):
+    from distributed import Client, LocalCluster
+    shot, bad = map(str, component_shots)
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+            Client(cluster) as client:
+        for collisions in (None, True):
+            single, split = tmp_path / f"single-{collisions}.usdc", tmp_path / f"split-{collisions}.usdc"
+            whole = solve(shot, output=str(single), collisions=collisions)
+            pool = batch.DaskComponents(client)
+            parts = solve(shot, output=str(split), collisions=collisions, components=pool)
+            assert whole.report.stats.path_components == 5
+            assert pool.chunks == 4 and 2 <= pool.tasks <= 4  # up to two runs per worker, on the cluster
+            assert split.read_bytes() == single.read_bytes()
+            assert parts.report.to_layer_dict() == whole.report.to_layer_dict()
+        # A contradiction in one component is the error the single solve gives, and nothing is written.
+        with pytest.raises(MocapEditError) as single_error:
+            solve(bad, output=str(tmp_path / "bad-single.usdc"))
+        with pytest.raises(MocapEditError) as split_error:
+            solve(bad, output=str(tmp_path / "bad-split.usdc"), components=batch.DaskComponents(client))
+    assert "</Edits/a6_here>" in str(split_error.value) and str(split_error.value) == str(single_error.value)
+    assert split_error.value.prim == single_error.value.prim == "/Edits/a6_here"
+    assert not (tmp_path / "bad-split.usdc").exists()
+
+
+@pytest.mark.slow
+def test_split_components_on_a_running_cluster_writes_what_single_solves_write(tmp_path, component_shots, cluster):
+    shot = component_shots[0]
+    expected = _single(shot, tmp_path / "single")
+    out = tmp_path / "out"
+    proc = run_cli("batch", shot, "-o", out, "--scheduler", cluster, "--split-components")
+    assert proc.returncode == 0, proc.stderr
+    assert (out / batch.output_name(str(shot), ".edits.usdc")).read_bytes() == expected
+    summary = json.loads((out / batch.SUMMARY).read_text())
+    assert summary["shots"][0]["status"] == "solved" and summary["shots"][0]["componentTasks"] >= 2
+    # Without the switch the shot's own task solves its components.
+    proc = run_cli("batch", shot, "-o", out, "--scheduler", cluster, "--force")
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads((out / batch.SUMMARY).read_text())["shots"][0]["componentTasks"] == 0
+    assert (out / batch.output_name(str(shot), ".edits.usdc")).read_bytes() == expected

@@ -10,11 +10,14 @@ its absolute path (the layer records the input path as given).
 
 One failing shot does not stop the others: its error goes into its :class:`ShotResult`.
 A shot whose output already holds the same input content hash and the same options is
-skipped (``force`` solves it anyway). Workers must see the shots and the output folder at
+skipped (``force`` solves it anyway). With ``split``, a shot's independent path components are
+solved as tasks of their own (:class:`DaskComponents`), so a shot with many components keeps
+idle workers busy; its bytes are the same. Workers must see the shots and the output folder at
 the same paths as the client (a shared file system) and have mocapedit installed.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 from dataclasses import asdict, dataclass, field
@@ -43,6 +46,7 @@ class ShotResult:
     error: str | None = None
     contentHash: str | None = None
     figures: dict = field(default_factory=dict)
+    componentTasks: int = 0          # tasks its path components were solved in (0: in its own)
 
 
 def output_name(shot: str, suffix: str) -> str:
@@ -88,9 +92,44 @@ def _figures(report) -> dict:
     return figures
 
 
-def solve_shot(job: Job, options: dict, force: bool = False) -> ShotResult:
+class DaskComponents:
+    """A :class:`~mocapedit.pipeline.context.ComponentPool` on a ``distributed.Client``: each run of
+    path components is one task, gathered back in order."""
+
+    def __init__(self, client, chunks: int | None = None):
+        self.client = client
+        #: Two runs per worker, so a run that takes longer leaves the other worker another one.
+        self.chunks = chunks or 2 * max(1, len(client.scheduler_info().get("workers", {})))
+        #: Tasks submitted so far.
+        self.tasks = 0
+
+    def map(self, fn, items: list) -> list:
+        self.tasks += len(items)
+        return self.client.gather(self.client.map(fn, items, pure=False))
+
+
+@contextlib.contextmanager
+def _component_pool(split: bool):
+    """Where a shot's path components are solved: on the cluster this task runs on (``split``),
+    else (or outside any cluster) in the shot's own process (None)."""
+    if split:
+        from distributed import get_worker
+        try:
+            get_worker()
+        except ValueError:
+            split = False
+    if not split:
+        yield None
+        return
+    from distributed import worker_client
+    with worker_client() as client:   # leaves the worker's thread to the component tasks
+        yield DaskComponents(client)
+
+
+def solve_shot(job: Job, options: dict, force: bool = False, split: bool = False) -> ShotResult:
     """Solves one shot (a Dask task; also runs in-process). Never raises: a failure is a
-    result with its error."""
+    result with its error. ``split``: the shot's path components are solved as tasks of their
+    own on the same cluster (in-process, they are solved in the shot's process)."""
     from mocapedit.pipeline import processor
     from mocapedit.usd import edits_format, reader
     t = time.perf_counter()
@@ -102,7 +141,9 @@ def solve_shot(job: Job, options: dict, force: bool = False) -> ShotResult:
             if edits_format.recorded(job.output) == (digest, processor.options_text(**options)):
                 result.status, result.contentHash = "skipped", digest
                 return result
-        solved = processor.solve(job.shot, output=job.output, **options)
+        with _component_pool(split) as pool:
+            solved = processor.solve(job.shot, output=job.output, components=pool, **options)
+            result.componentTasks = pool.tasks if pool is not None else 0
         result.status = "solved"
         result.figures = _figures(solved.report)
         result.contentHash = edits_format.content_hash(solved.layer)
@@ -145,11 +186,13 @@ def connect(scheduler: str | None, workers: int | None):
     return Client(cluster), cluster
 
 
-def run(jobs: list[Job], options: dict, client, force: bool = False, on_result=None) -> list[ShotResult]:
+def run(jobs: list[Job], options: dict, client, force: bool = False, on_result=None,
+        split: bool = False) -> list[ShotResult]:
     """Runs the jobs on a Dask ``client``, one task per shot, and returns their results in
-    job order. ``on_result(result, done, failed, remaining)`` is called as each finishes."""
+    job order. ``on_result(result, done, failed, remaining)`` is called as each finishes.
+    ``split``: each shot's path components are tasks of their own too (see :func:`solve_shot`)."""
     from distributed import as_completed
-    futures = {client.submit(solve_shot, job, options, force, key=f"mocapedit-shot-{i}-{job.output}",
+    futures = {client.submit(solve_shot, job, options, force, split, key=f"mocapedit-shot-{i}-{job.output}",
                              pure=False): i for i, job in enumerate(jobs)}
     results: list[ShotResult | None] = [None] * len(jobs)
     done = failed = 0

@@ -8,7 +8,7 @@ with an ``apply`` method (:class:`PoseEdit`).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Callable, Iterable, Protocol
 
 import numpy as np
 
@@ -36,6 +36,19 @@ class PoseEdit(Protocol):
         ...
 
 
+class ComponentPool(Protocol):
+    """Somewhere else to solve a shot's independent path components (Dask workers, see
+    :class:`mocapedit.pipeline.batch.DaskComponents`). The path pass hands it up to ``chunks`` runs of
+    consecutive components and merges the results in component order, so the shot's bytes are
+    the same as when its own process solves them."""
+
+    chunks: int
+
+    def map(self, fn: Callable, items: list) -> Iterable:
+        """``fn(item)`` for each item, run elsewhere, yielded in the order of ``items``."""
+        ...
+
+
 @dataclass
 class SolveOptions:
     guides: bool = True
@@ -44,6 +57,9 @@ class SolveOptions:
     # Bake time-only edits into SkelAnimation samples instead of re-timing the source clip
     # with value clips (the two play the same motion; the baked form is the reference).
     bake_timing: bool = False
+    # Where the path pass solves its components; None: this process (two threads). Not an
+    # option of the result: the edits layer is the same either way and does not record it.
+    components: ComponentPool | None = None
 
 
 @dataclass

@@ -183,7 +183,8 @@ class SolveResult:
 
 def solve(stage_or_path, output: str | None = None, composed: str | None = None,
           guides: bool = True, collisions: bool | None = None, progress: Progress | None = None,
-          report_json: str | None = None, bake_timing: bool = False, **overrides) -> SolveResult:
+          report_json: str | None = None, bake_timing: bool = False, components=None,
+          **overrides) -> SolveResult:
     """Solves every edit authored on a stage and returns the edits layer and a report.
 
     Args:
@@ -197,6 +198,8 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
       progress: a :class:`~mocapedit.model.progress.Progress`; silent by default.
       bake_timing: bake agents whose only edit is timing into SkelAnimation samples instead
         of re-timing their source clips with value clips (the same motion, a larger layer).
+      components: a :class:`~mocapedit.pipeline.context.ComponentPool` that solves the path
+        pass's independent components elsewhere (Dask workers); the result is the same bytes.
       overrides: MocapSolveSettings values by their Python names (``max_iterations=...``).
 
     Raises:
@@ -229,7 +232,8 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
 
     report = Report(input=input_name, output=output)
     ctx = SolveContext(data=data, options=SolveOptions(guides=guides, collisions=collisions,
-                                                       overrides=overrides, bake_timing=bake_timing),
+                                                       overrides=overrides, bake_timing=bake_timing,
+                                                       components=components),
                        report=report, progress=progress)
     t = time.perf_counter()
     extract_trajectories(ctx)

@@ -22,6 +22,15 @@ mocapedit installed and see SHOT and OUTDIR at the same paths. One failing shot 
 not stop the others. A shot whose output already records the same input content hash
 and options is skipped (--force solves it again).
 
+--split-components also solves each shot's independent path components (agents
+that no relative constraint or group ties together) as tasks of their own, so
+workers left idle by a shot with many components help it; the edits layer is the
+same bytes. It is a switch, not automatic: a component's path solve takes
+milliseconds, about what sending it to a worker costs, so it pays only when a
+batch has fewer shots than workers and its shots have many or large components
+(long clips, big groups). Time warp, collision avoidance (which couples agents that
+can meet), layering and foot locking run in the shot's own task either way.
+
 Exit status: 0 when every shot was solved or skipped, 1 when any failed or on bad
 input (a missing shot, two shots writing the same output, an unreachable scheduler:
 then nothing is solved), 2 on bad usage."""
@@ -38,6 +47,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="a running Dask scheduler (tcp://host:port) instead of a local cluster")
     p.add_argument("--workers", type=int, metavar="N",
                    help="worker processes of the local cluster (default: the CPU count, at most 8)")
+    p.add_argument("--split-components", action="store_true",
+                   help="solve each shot's independent path components as tasks of their own (same bytes)")
     p.add_argument("--force", action="store_true", help="solve shots whose outputs are up to date too")
     p.add_argument("--summary", metavar="JSON", help="where to write the summary (default OUTDIR/batch-summary.json)")
     add_solve_options(p)
@@ -69,7 +80,8 @@ def run(args) -> int:
               f"[{os.path.basename(result.shot)} {what}]", file=sys.stderr, flush=True)
 
     try:
-        results = batch.run(jobs, options, client, force=args.force, on_result=report)
+        results = batch.run(jobs, options, client, force=args.force, on_result=report,
+                            split=args.split_components)
     finally:
         client.close()
         if cluster is not None:

@@ -13,6 +13,7 @@ agents, and per agent ``lengthRatio``, ``shapeChange`` and ``solver``.
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 from concurrent.futures import ThreadPoolExecutor
 
@@ -250,6 +251,43 @@ def _report(ctx: SolveContext, comp: _Component) -> None:
                         f"fell back to sparse QR ({res.solver})")
 
 
+def solve_components(comps: list[_Component]) -> list:
+    """Solves components where this runs (a Dask task of a split shot, see
+    :class:`~mocapedit.pipeline.context.ComponentPool`) and returns, per component, its result or
+    the :class:`MocapEditError` it raised, so the shot's process raises the first in order. The
+    solver's records of each step (bound objects, which do not pickle) stay here: the pass reads
+    only the solver's name."""
+    out = []
+    for comp in comps:
+        try:
+            comp.run()
+            out.append(dataclasses.replace(comp.result, step1=None, step2=None))
+        except MocapEditError as exc:
+            out.append(exc)
+    return out
+
+
+def _chunks(comps: list[_Component], count: int) -> list[list[_Component]]:
+    """Consecutive runs of components of about equal work (frames solved), at most ``count``."""
+    work = np.cumsum([sum(a.frames for a in c.inputs) for c in comps], dtype=np.float64)
+    cut = np.searchsorted(work, work[-1] * np.arange(1, count) / count, side="right")
+    bounds = [0] + sorted(set(int(b) for b in cut if 0 < b < len(comps))) + [len(comps)]
+    return [comps[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
+
+
+def _run_on_pool(ctx: SolveContext, comps: list[_Component], task) -> None:
+    pool = ctx.options.components
+    chunks = _chunks(comps, pool.chunks)
+    done = 0
+    for chunk, results in zip(chunks, pool.map(solve_components, chunks)):
+        for comp, result in zip(chunk, results):
+            if isinstance(result, MocapEditError):
+                raise result
+            comp.result = result
+        done += len(chunk)
+        task.update(done)
+
+
 def run(ctx: SolveContext) -> None:
     _validate(ctx)
     members = _components(ctx)
@@ -259,7 +297,9 @@ def run(ctx: SolveContext) -> None:
     comps = [_Component(ctx, m, fps, *mine) for m, mine in zip(members, _by_component(ctx, members))]
     task = ctx.progress.task("path edits", len(comps))
     workers = min(len(comps), os.cpu_count() or 1, 2)
-    if workers > 1:
+    if ctx.options.components is not None:
+        _run_on_pool(ctx, comps, task)
+    elif workers > 1:
         with ThreadPoolExecutor(max_workers=workers) as pool:
             futures = [pool.submit(c.run) for c in comps]
             for i, f in enumerate(futures):
@@ -275,4 +315,3 @@ def run(ctx: SolveContext) -> None:
             ctx.paths[path] = EditedPath(ground=r.ground, heading=r.heading)
         _report(ctx, comp)
     ctx.report.stats.path_components = len(comps)
-
