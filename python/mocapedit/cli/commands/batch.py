@@ -25,11 +25,12 @@ and options is skipped (--force solves it again).
 --split-components also solves each shot's independent path components (agents
 that no relative constraint or group ties together) as tasks of their own, so
 workers left idle by a shot with many components help it; the edits layer is the
-same bytes. It is a switch, not automatic: a component's path solve takes
-milliseconds, about what sending it to a worker costs, so it pays only when a
-batch has fewer shots than workers and its shots have many or large components
-(long clips, big groups). Time warp, collision avoidance (which couples agents that
-can meet), layering and foot locking run in the shot's own task either way.
+same bytes. It is a switch, not automatic: a component's path solve takes a few
+milliseconds, near what sending it to a worker costs, and the path pass is a small
+part of a shot's solve, so it pays only for shots whose components each take long
+(very long clips, very large groups) while workers are idle. Time warp, collision
+avoidance (which couples agents that can meet), layering and foot locking run in
+the shot's own task either way.
 
 Exit status: 0 when every shot was solved or skipped, 1 when any failed or on bad
 input (a missing shot, two shots writing the same output, an unreachable scheduler:
