@@ -18,11 +18,12 @@ from pathlib import Path
 import pytest
 
 from mocapedit.pipeline import batch
-from mocapedit.data import examples, walker
+from mocapedit.data import examples, gestures, walker
 from mocapedit.model.errors import MocapEditError
 from mocapedit.pipeline.processor import solve
 
 from conftest import run_cli
+from solve.test_layering import add_clip, add_layer
 
 CROWD = "/World/Crowd"
 BIN = Path(sys.executable).parent
@@ -185,6 +186,7 @@ def _components_shot(folder: Path, contradiction: bool = False) -> Path:
     stage = examples.build_crowd_stage(path, specs, clips_dir=folder / "clips")
     pins = [("a0_end", 0, 47, (1.0, 0.0, 4.0)), ("a2_end", 2, 47, (7.0, 0.0, 5.0))]
     pins += [(f"a{i}_end", i, 40, (3.0 * (i % 3) - 1.0, 0.0, 3.0 * (i // 3) + 2.5)) for i in (5, 6, 8)]
+    pins += [(f"a{i}_start", i, 0, (3.0 * (i % 3), 0.0, 3.0 * (i // 3))) for i in (0, 2, 5, 6, 8)]
     if contradiction:
         pins += [("a6_here", 6, 10, (0.0, 0.0, 6.0)), ("a6_there", 6, 10, (2.0, 0.0, 6.0))]
     for name, i, frame, position in pins:
@@ -192,6 +194,10 @@ def _components_shot(folder: Path, contradiction: bool = False) -> Path:
     examples.add_relative_constraint(stage, "/Edits/a1_beside", f"{CROWD}/a1", 30, f"{CROWD}/a0", 30, (1.0, 0.0, 0.0))
     examples.add_group(stage, "/Edits/group", [f"{CROWD}/a{i}" for i in (2, 3, 4)])
     examples.add_time_constraint(stage, "/Edits/a5_late", f"{CROWD}/a5", 24, 30.0)
+    phone = gestures.phone_call(frames=48)   # a layered pose edit, which foot locking applies first
+    add_clip(stage, "/Layers/Phone", phone.joints, phone.translations, phone.rotations)
+    add_layer(stage, "/Layers/Call", [f"{CROWD}/a8"], "/Layers/Phone", "Spine", "additive",
+              weight={4: 0.0, 12: 1.0}, reference="restPose")
     stage.GetRootLayer().Save()
     return path
 
@@ -213,8 +219,10 @@ def test_a_shot_split_by_component_on_a_local_cluster_gives_the_single_solves_by
             whole = solve(shot, output=str(single), collisions=collisions)
             pool = batch.DaskComponents(client)
             parts = solve(shot, output=str(split), collisions=collisions, components=pool)
-            assert whole.report.stats.path_components == 5
-            assert pool.chunks == 4 and 2 <= pool.tasks <= 4  # up to two runs per worker, on the cluster
+            stats = whole.report.stats
+            assert stats.path_components == 5 and stats.foot_locked_agents >= 3 and stats["layeredAgents"] == 1
+            # Up to two runs per worker for the path pass, and as many for foot locking.
+            assert pool.chunks == 4 and 4 <= pool.tasks <= 8
             assert split.read_bytes() == single.read_bytes()
             assert parts.report.to_layer_dict() == whole.report.to_layer_dict()
         # A contradiction in one component is the error the single solve gives, and nothing is written.

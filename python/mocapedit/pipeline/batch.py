@@ -10,8 +10,8 @@ its absolute path (the layer records the input path as given).
 
 One failing shot does not stop the others: its error goes into its :class:`ShotResult`.
 A shot whose output already holds the same input content hash and the same options is
-skipped (``force`` solves it anyway). With ``split``, a shot's independent path components are
-solved as tasks of their own (:class:`DaskComponents`), so a shot with many components keeps
+skipped (``force`` solves it anyway). With ``split``, a shot's independent path components, and its
+agents' foot locking, are solved as tasks of their own (:class:`DaskComponents`), so a shot keeps
 idle workers busy; its bytes are the same. Workers must see the shots and the output folder at
 the same paths as the client (a shared file system) and have mocapedit installed.
 """
@@ -94,7 +94,7 @@ def _figures(report) -> dict:
 
 class DaskComponents:
     """A :class:`~mocapedit.pipeline.context.ComponentPool` on a ``distributed.Client``: each run of
-    path components is one task, gathered back in order."""
+    path components, or of agents to lock the feet of, is one task, gathered back in order."""
 
     def __init__(self, client, chunks: int | None = None):
         self.client = client
@@ -105,12 +105,14 @@ class DaskComponents:
 
     def map(self, fn, items: list) -> list:
         self.tasks += len(items)
-        return self.client.gather(self.client.map(fn, items, pure=False))
+        # Sent as data, not inside the task graph (a 1,000-agent shot's runs are tens of MB).
+        data = self.client.scatter(items, hash=False)
+        return self.client.gather(self.client.map(fn, data, pure=False))
 
 
 @contextlib.contextmanager
 def _component_pool(split: bool):
-    """Where a shot's path components are solved: on the cluster this task runs on (``split``),
+    """Where a shot's path components and foot locking run: on the cluster this task runs on (``split``),
     else (or outside any cluster) in the shot's own process (None)."""
     if split:
         from distributed import get_worker
@@ -128,8 +130,8 @@ def _component_pool(split: bool):
 
 def solve_shot(job: Job, options: dict, force: bool = False, split: bool = False) -> ShotResult:
     """Solves one shot (a Dask task; also runs in-process). Never raises: a failure is a
-    result with its error. ``split``: the shot's path components are solved as tasks of their
-    own on the same cluster (in-process, they are solved in the shot's process)."""
+    result with its error. ``split``: the shot's path components and foot locking are solved as
+    tasks of their own on the same cluster (in-process, in the shot's process)."""
     from mocapedit.pipeline import processor
     from mocapedit.usd import edits_format, reader
     t = time.perf_counter()
@@ -190,7 +192,7 @@ def run(jobs: list[Job], options: dict, client, force: bool = False, on_result=N
         split: bool = False) -> list[ShotResult]:
     """Runs the jobs on a Dask ``client``, one task per shot, and returns their results in
     job order. ``on_result(result, done, failed, remaining)`` is called as each finishes.
-    ``split``: each shot's path components are tasks of their own too (see :func:`solve_shot`)."""
+    ``split``: each shot's path components and foot locking are tasks of their own too (see :func:`solve_shot`)."""
     from distributed import as_completed
     futures = {client.submit(solve_shot, job, options, force, split, key=f"mocapedit-shot-{i}-{job.output}",
                              pure=False): i for i, job in enumerate(jobs)}

@@ -37,16 +37,25 @@ class PoseEdit(Protocol):
 
 
 class ComponentPool(Protocol):
-    """Somewhere else to solve a shot's independent path components (Dask workers, see
+    """Somewhere else to solve a shot's independent parts (Dask workers, see
     :class:`mocapedit.pipeline.batch.DaskComponents`). The path pass hands it up to ``chunks`` runs of
-    consecutive components and merges the results in component order, so the shot's bytes are
-    the same as when its own process solves them."""
+    consecutive path components, foot locking as many runs of edited agents, and each merges the
+    results in order, so the shot's bytes are the same as when its own process does the work."""
 
     chunks: int
 
     def map(self, fn: Callable, items: list) -> Iterable:
         """``fn(item)`` for each item, run elsewhere, yielded in the order of ``items``."""
         ...
+
+
+def consecutive_runs(work: list[float], count: int) -> list[slice]:
+    """At most ``count`` runs of consecutive items of about equal total ``work`` (one per item),
+    as slices, in order, covering every item."""
+    total = np.cumsum(work, dtype=np.float64)
+    cut = np.searchsorted(total, total[-1] * np.arange(1, count) / count, side="right")
+    bounds = [0] + sorted({int(b) for b in cut if 0 < b < len(work)}) + [len(work)]
+    return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:])]
 
 
 @dataclass
@@ -57,8 +66,9 @@ class SolveOptions:
     # Bake time-only edits into SkelAnimation samples instead of re-timing the source clip
     # with value clips (the two play the same motion; the baked form is the reference).
     bake_timing: bool = False
-    # Where the path pass solves its components; None: this process (two threads). Not an
-    # option of the result: the edits layer is the same either way and does not record it.
+    # Where the path pass solves its components and foot locking locks the agents; None: this
+    # process. Not an option of the result: the edits layer is the same either way and does not
+    # record it.
     components: ComponentPool | None = None
 
 

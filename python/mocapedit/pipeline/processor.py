@@ -199,7 +199,8 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
       bake_timing: bake agents whose only edit is timing into SkelAnimation samples instead
         of re-timing their source clips with value clips (the same motion, a larger layer).
       components: a :class:`~mocapedit.pipeline.context.ComponentPool` that solves the path
-        pass's independent components elsewhere (Dask workers); the result is the same bytes.
+        pass's independent components and locks the feet elsewhere (Dask workers); the result
+        is the same bytes.
       overrides: MocapSolveSettings values by their Python names (``max_iterations=...``).
 
     Raises:

@@ -22,15 +22,15 @@ mocapedit installed and see SHOT and OUTDIR at the same paths. One failing shot 
 not stop the others. A shot whose output already records the same input content hash
 and options is skipped (--force solves it again).
 
---split-components also solves each shot's independent path components (agents
-that no relative constraint or group ties together) as tasks of their own, so
-workers left idle by a shot with many components help it; the edits layer is the
-same bytes. It is a switch, not automatic: a component's path solve takes a few
-milliseconds, near what sending it to a worker costs, and the path pass is a small
-part of a shot's solve, so it pays only for shots whose components each take long
-(very long clips, very large groups) while workers are idle. Time warp, collision
-avoidance (which couples agents that can meet), layering and foot locking run in
-the shot's own task either way.
+--split-components also sends each shot's independent path components (agents
+that no relative constraint or group ties together), and then its edited agents'
+foot locking, to the workers as tasks of their own, so workers left idle by a
+batch of fewer shots than workers help solve them; the edits layer is the same
+bytes. It is a switch, not automatic: each task carries its agents' clips and
+paths, and a path component's solve takes a few milliseconds, near what a task
+costs, so it pays only when workers would be idle. Time warp, collision avoidance
+(which couples agents that can meet), layering, inspection and writing run in the
+shot's own task either way.
 
 Exit status: 0 when every shot was solved or skipped, 1 when any failed or on bad
 input (a missing shot, two shots writing the same output, an unreachable scheduler:
@@ -49,7 +49,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=int, metavar="N",
                    help="worker processes of the local cluster (default: the CPU count, at most 8)")
     p.add_argument("--split-components", action="store_true",
-                   help="solve each shot's independent path components as tasks of their own (same bytes)")
+                   help="solve each shot's path components and foot locking as tasks of their own (same bytes)")
     p.add_argument("--force", action="store_true", help="solve shots whose outputs are up to date too")
     p.add_argument("--summary", metavar="JSON", help="where to write the summary (default OUTDIR/batch-summary.json)")
     add_solve_options(p)

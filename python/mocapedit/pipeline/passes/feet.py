@@ -6,7 +6,9 @@ kinematics and carried by the agent's edited ground motion. Each foot contact of
 source clip (authored with ``MocapFootContactAPI``, else detected) gets one plant: the
 source foot carried by one turn and one ground shift, chosen by least squares where the
 edit puts the foot, and leashed to stay within ``LEASH_M`` and ``LEASH_DEGREES`` of it. The
-solver's foot-locking job (:mod:`mocapedit.solve.footlock`) moves the legs of all agents at once. Agents whose legs change get a pose edit that replaces their hip, knee and ankle
+solver's foot-locking job (:mod:`mocapedit.solve.footlock`) moves the legs of all agents at once
+(all of the shot's, or a run of them on a worker when ``SolveOptions.components`` is set: an
+agent's legs depend on no other agent's, :func:`lock_agents`). Agents whose legs change get a pose edit that replaces their hip, knee and ankle
 rotations (and the skeleton root's translation where the pelvis is lowered), so the writer
 bakes their animation.
 
@@ -17,6 +19,7 @@ contacts locked, the largest pelvis drop and the largest IK correction (stage un
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,11 +27,13 @@ import numpy as np
 from mocapedit.geometry import animation, contacts, ground, kinematics, trajectory
 from mocapedit.solve import footlock
 from mocapedit.inspect import metrics
-from mocapedit.pipeline.context import SolveContext
+from mocapedit.pipeline.context import SolveContext, consecutive_runs
 from mocapedit.usd import writer
 from mocapedit.model.errors import MocapEditError
 from mocapedit.solve.layering import quat_multiply, trs_from_matrices
 from mocapedit.model.data import Agent
+from mocapedit.model.progress import Silent
+from mocapedit.model.report import Report
 
 #: Seconds over which a lock blends in before a contact and out after it.
 BLEND_SECONDS = 0.1
@@ -372,99 +377,170 @@ def _report_skate(ctx, lock: "_AgentLock", locked_pose, chains: dict) -> tuple[f
     return before.mean, unlocked, skate(locked_pose) if locked_pose is not None else unlocked
 
 
-def run(ctx: SolveContext) -> None:
+@dataclass
+class AgentLocking:
+    """What foot locking decided for one edited agent (see :func:`lock_agents`)."""
+    path: str
+    note: str | None = None               # why it was skipped
+    contacts: int = 0                      # contacts locked (0: not locked)
+    skate: tuple | None = None             # (source, unlocked, edited) foot skate
+    max_drop: float = 0.0
+    max_correction: float = 0.0
+    pose: animation.Pose | None = None     # the locked pose, when the legs change
+    kept: bool = False                     # locked, but the legs kept (as planted as the source's)
+    plants: tuple | None = None            # (points, colors) of its plant guides
+
+
+def lock_agents(ctx: SolveContext) -> list[AgentLocking]:
+    """Locks the feet of every edited agent of ``ctx`` (its :meth:`touched`), in order. The result
+    of one agent depends on nothing else, so a shot's agents can be locked in runs elsewhere
+    (``SolveOptions.components``) and merged in order."""
     data = ctx.data
     info = data.info
-    if not data.settings.foot_locking:
-        return
-    touched = ctx.touched()
     cache: dict = {}
     shared: dict = {}
-    locks: list[_AgentLock] = []
-    task = ctx.progress.task("foot locking", len(touched))
-    for i, path in enumerate(touched):
+    out: list[AgentLocking] = []
+    locks: list[tuple[_AgentLock, AgentLocking]] = []
+    for path in ctx.touched():
         agent = data.agents[path]
-        entry = ctx.report.agent(path)
+        result = AgentLocking(path)
+        out.append(result)
         if not agent.foot_locking:
-            entry.add_notes("foot locking off (mocap:footLocking = false)")
+            result.note = "foot locking off (mocap:footLocking = false)"
         elif len(agent.legs) != 2:
-            entry.add_notes(
-                "foot locking skipped: legs not found by name; set mocap:leftLegJoints and mocap:rightLegJoints")
+            result.note = "foot locking skipped: legs not found by name; set mocap:leftLegJoints and mocap:rightLegJoints"
         else:
             lock = _AgentLock(ctx, path, _source(ctx, agent, cache), shared)
             why = lock.writable()
             if why:
-                entry.add_notes(f"foot locking skipped: {why}")
+                result.note = f"foot locking skipped: {why}"
             elif lock.locked:
-                locks.append(lock)
-        task.update(i + 1)
-    task.done()
+                locks.append((lock, result))
     if not locks:
-        return
+        return out
     up = np.zeros(3)
     up[ground.up_index(info.up_axis)] = 1.0
-    offsets = np.cumsum([0] + [len(lock.times) for lock in locks])
-    parts = [lock.inputs() for lock in locks]
+    offsets = np.cumsum([0] + [len(lock.times) for lock, _ in locks])
+    parts = [lock.inputs() for lock, _ in locks]
     inputs = footlock.LegInputs(
-        offsets=offsets.astype(np.int64), smooth=np.array([lock.blend_frames for lock in locks], dtype=np.int64),
+        offsets=offsets.astype(np.int64), smooth=np.array([lock.blend_frames for lock, _ in locks], dtype=np.int64),
         up=up, **{k: np.concatenate([p[k] for p in parts]) for k in parts[0]})
-    out = footlock.lock_feet(inputs)
-    changed = contacts_locked = 0
+    legs = footlock.lock_feet(inputs)
     chains: dict = {}
-    skates = []
     tolerance = SKATE_TOLERANCE_M / info.meters_per_unit
-    kept = 0
-    for lock, lo, hi in zip(locks, offsets[:-1], offsets[1:]):
-        locked_pose = lock.apply(out, int(lo), int(hi), up, info.meters_per_unit)
-        entry = ctx.report.agent(lock.path)
+    for (lock, result), lo, hi in zip(locks, offsets[:-1], offsets[1:]):
+        locked_pose = lock.apply(legs, int(lo), int(hi), up, info.meters_per_unit)
         skate = _report_skate(ctx, lock, locked_pose, chains)
         if locked_pose is not None and skate is not None and skate[1] <= skate[0] + tolerance:
             # The edit left the feet as planted as the source's: keep the legs, bake nothing.
             locked_pose, skate = None, (skate[0], skate[1], skate[1])
-            kept += 1
-        if skate is not None and np.isfinite(skate).all():
+            result.kept = True
+        result.contacts, result.skate, result.pose = lock.locked, skate, locked_pose
+        result.max_drop, result.max_correction = lock.max_drop, lock.max_correction
+        result.plants = _plants(lock)
+    return out
+
+
+def lock_part(part: dict) -> list[AgentLocking]:
+    """:func:`lock_agents` on a part of a shot made by :func:`_part` (a Dask task of a split shot)."""
+    return lock_agents(SolveContext(**part, report=Report(), progress=Silent()))
+
+
+def _part(ctx: SolveContext, paths: list[str]) -> dict:
+    """The fields of ``ctx`` that foot locking reads for these agents (to lock them elsewhere)."""
+    data = ctx.data
+    agents = {p: data.agents[p] for p in paths}
+    clips = {a.clip_key: data.clips[a.clip_key] for a in agents.values()}
+    part = dataclasses.replace(data, agents=agents, clips=clips, position_constraints=[], relative_constraints=[],
+                               time_constraints=[], sync_constraints=[], groups=[], avoid_regions=[], curves={})
+
+    def mine(values: dict) -> dict:
+        return {p: values[p] for p in paths if p in values}
+
+    return dict(data=part, options=dataclasses.replace(ctx.options, components=None),
+                trajectories=mine(ctx.trajectories), paths=mine(ctx.paths), time_maps=mine(ctx.time_maps),
+                pose_edits=mine(ctx.pose_edits), out_times=mine(ctx.out_times))
+
+
+def _lock_elsewhere(ctx: SolveContext) -> list[AgentLocking]:
+    pool = ctx.options.components
+    touched = ctx.touched()
+    runs = consecutive_runs([ctx.data.agents[p].frame_count for p in touched], pool.chunks)
+    out: list[AgentLocking] = []
+    for part in pool.map(lock_part, [_part(ctx, touched[run]) for run in runs]):
+        out.extend(part)
+    for r in out:
+        if r.pose is not None:
+            # Arrays that crossed the network may sit unaligned in their message, which USD's
+            # array conversion rejects: the writer gets aligned copies.
+            r.pose = dataclasses.replace(r.pose, **{k: np.require(getattr(r.pose, k), requirements=("C", "A"))
+                                                     for k in ("translations", "rotations", "scales")})
+    return out
+
+
+def run(ctx: SolveContext) -> None:
+    if not ctx.data.settings.foot_locking:
+        return
+    touched = ctx.touched()
+    task = ctx.progress.task("foot locking", len(touched))
+    results = _lock_elsewhere(ctx) if ctx.options.components is not None and touched else lock_agents(ctx)
+    task.update(len(touched))
+    task.done()
+    locked = [r for r in results if r.contacts]
+    for r in results:
+        entry = ctx.report.agent(r.path)
+        if r.note:
+            entry.add_notes(r.note)
+    if not locked:
+        return
+    skates = []
+    for r in locked:
+        entry = ctx.report.agent(r.path)
+        if r.skate is not None and np.isfinite(r.skate).all():
             # footSkateEdited is what the edits layer plays; footSkateUnlocked, the edits alone.
-            entry.foot_skate_source, entry.foot_skate_unlocked, entry.foot_skate_edited = skate
-            skates.append(skate)
-        entry.foot_contacts_locked = lock.locked
-        entry.max_pelvis_drop = lock.max_drop
-        entry.max_foot_correction = lock.max_correction
-        contacts_locked += lock.locked
-        if locked_pose is not None:
-            changed += 1
-            ctx.pose_edits.setdefault(lock.path, []).append(LockedLegs(lock.path, locked_pose))
+            entry.foot_skate_source, entry.foot_skate_unlocked, entry.foot_skate_edited = r.skate
+            skates.append(r.skate)
+        entry.foot_contacts_locked = r.contacts
+        entry.max_pelvis_drop = r.max_drop
+        entry.max_foot_correction = r.max_correction
+        if r.pose is not None:
+            ctx.pose_edits.setdefault(r.path, []).append(LockedLegs(r.path, r.pose))
     if ctx.options.guides:
-        _plant_guides(ctx, [lock for lock in locks if lock.path in ctx.pose_edits])
+        _plant_guides(ctx, [r.plants for r in locked if r.path in ctx.pose_edits])
     stats = ctx.report.stats
-    stats.foot_locked_agents = changed
-    stats.foot_locking_not_needed = kept
-    stats.foot_contacts_locked = contacts_locked
+    stats.foot_locked_agents = sum(r.pose is not None for r in locked)
+    stats.foot_locking_not_needed = sum(r.kept for r in locked)
+    stats.foot_contacts_locked = sum(r.contacts for r in locked)
     # The shot's figures: mean skate over the agents with contacts, the largest corrections.
     if skates:
         stats.foot_skate_source, stats.foot_skate_unlocked, stats.foot_skate_edited = (
             float(np.mean(values)) for values in np.transpose(skates))
-    stats.max_pelvis_drop = max(lock.max_drop for lock in locks)
-    stats.max_foot_correction = max(lock.max_correction for lock in locks)
+    stats.max_pelvis_drop = max(r.max_drop for r in locked)
+    stats.max_foot_correction = max(r.max_correction for r in locked)
 
 
 #: Guide colours of the left and right feet's plants.
 PLANT_COLORS = np.array([[0.2, 0.5, 1.0], [1.0, 0.55, 0.1]])
 
 
-def _plant_guides(ctx, locks: list) -> None:
-    """Guide points where the locked feet are planted: the ankle at the first fully locked frame
-    of each contact, blue for left feet and orange for right."""
+def _plants(lock: _AgentLock) -> tuple[np.ndarray, np.ndarray]:
+    """Where the agent's locked feet are planted: the ankle at the first fully locked frame of
+    each contact, blue for left feet and orange for right. (points, colors)."""
     points, colors = [], []
-    for lock in locks:
-        for k, leg in enumerate(lock.legs):
-            full = lock.weight[:, k] >= 1.0
-            starts = np.flatnonzero(full & ~np.concatenate([[False], full[:-1]]))
-            points.append(lock.target[starts, k])
-            colors.append(np.tile(PLANT_COLORS[0 if leg.side == "left" else 1], (len(starts), 1)))
-    if points:
+    for k, leg in enumerate(lock.legs):
+        full = lock.weight[:, k] >= 1.0
+        starts = np.flatnonzero(full & ~np.concatenate([[False], full[:-1]]))
+        points.append(lock.target[starts, k])
+        colors.append(np.tile(PLANT_COLORS[0 if leg.side == "left" else 1], (len(starts), 1)))
+    return np.concatenate(points), np.concatenate(colors)
+
+
+def _plant_guides(ctx, plants: list) -> None:
+    """One guide of the plants of the locked agents."""
+    if plants:
         ctx.guides.append(writer.GuidePoints(
-            name="FootPlants", points=np.concatenate(points), colors=np.concatenate(colors),
-            width=ctx.data.info.metres(0.06),
+            name="FootPlants", points=np.concatenate([p for p, _ in plants]),
+            colors=np.concatenate([c for _, c in plants]), width=ctx.data.info.metres(0.06),
             doc="Where foot locking plants each contact of the locked agents: left feet blue, right orange."))
 
 

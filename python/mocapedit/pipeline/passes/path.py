@@ -25,7 +25,7 @@ from mocapedit.inspect import metrics
 from mocapedit.solve import path_edit
 from mocapedit.model.errors import MocapEditError, prim_error
 from mocapedit.model.report import ConstraintEntry
-from mocapedit.pipeline.context import EditedPath, SolveContext
+from mocapedit.pipeline.context import EditedPath, SolveContext, consecutive_runs
 
 MET = 1e-6  # stage units: a hard constraint's residual within this is met
 
@@ -267,17 +267,9 @@ def solve_components(comps: list[_Component]) -> list:
     return out
 
 
-def _chunks(comps: list[_Component], count: int) -> list[list[_Component]]:
-    """Consecutive runs of components of about equal work (frames solved), at most ``count``."""
-    work = np.cumsum([sum(a.frames for a in c.inputs) for c in comps], dtype=np.float64)
-    cut = np.searchsorted(work, work[-1] * np.arange(1, count) / count, side="right")
-    bounds = [0] + sorted(set(int(b) for b in cut if 0 < b < len(comps))) + [len(comps)]
-    return [comps[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
-
-
 def _run_on_pool(ctx: SolveContext, comps: list[_Component], task) -> None:
     pool = ctx.options.components
-    chunks = _chunks(comps, pool.chunks)
+    chunks = [comps[run] for run in consecutive_runs([sum(a.frames for a in c.inputs) for c in comps], pool.chunks)]
     done = 0
     for chunk, results in zip(chunks, pool.map(solve_components, chunks)):
         for comp, result in zip(chunk, results):
