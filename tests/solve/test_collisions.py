@@ -24,7 +24,7 @@ from mocapedit.model.errors import MocapEditError
 from mocapedit.pipeline.processor import solve
 from mocapedit.model.progress import Progress
 
-from conftest import REPO, run_cli
+from conftest import CROSSROADS_MEET, REPO, run_cli, write_crossroads
 
 FPS = 24.0
 
@@ -290,6 +290,47 @@ def test_a_time_constraint_keeps_the_later_walker_from_waiting(tmp_path):
     result, out = _solve(tmp_path, stage_path)
     assert "delay" not in result.report.agents["/World/Crowd/agent_0001"]
     assert result.report.stats["remainingOverlaps"] == 0
+
+
+def _crossroads(tmp_path, marks=True, cues=True, settings=None):
+    stage_path = write_crossroads(tmp_path / "s.usda", marks=marks)
+    stage = Usd.Stage.Open(str(stage_path))
+    for k in range(2 if cues else 0):
+        examples.add_time_constraint(stage, f"/World/Cues/cue{k}", f"/World/Crowd/agent_000{k}",
+                                     CROSSROADS_MEET, float(CROSSROADS_MEET))
+    if settings:
+        examples.define_mocap_prim(stage, "/World/Settings", "MocapSolveSettings", attributes=settings)
+    stage.GetRootLayer().Save()
+    return stage_path
+
+
+def test_time_constraints_that_leave_no_room_for_a_needed_delay_are_an_error_naming_them(tmp_path):
+    """Both walkers are timed to reach the crossroads at frame 60 and held where they are
+    half a second either side of it: one must wait, neither may, stepping aside cannot part them."""
+    stage_path = _crossroads(tmp_path)
+    with pytest.raises(MocapEditError) as err:
+        _solve(tmp_path, stage_path)
+    message = str(err.value)
+    for name in ("/World/Crowd/agent_0000", "/World/Crowd/agent_0001", "/World/Cues/cue0", "/World/Cues/cue1"):
+        assert f"<{name}>" in message
+    assert "frame 60" in message and "wait" in message and "move a constraint's time" in message and "steer" in message
+    assert not (tmp_path / "s.edits.usda").exists()
+
+
+@pytest.mark.parametrize("case", ["steering slides them apart", "no time constraint", "waiting off"])
+def test_a_delay_the_constraints_refuse_is_no_error_when_nothing_needs_it(tmp_path, case):
+    """Without the marks the walkers slide along their lanes; without the time constraints
+    only position marks fix the timing (a note, as before); without waiting nobody wants a delay."""
+    if case == "steering slides them apart":
+        result, _ = _solve(tmp_path, _crossroads(tmp_path, marks=False))
+        assert result.report.stats["remainingOverlaps"] == 0
+        cues = [c for c in result.report.constraints if c["kind"] == "time"]
+        assert len(cues) == 2 and all(c["met"] for c in cues)
+    else:
+        settings = {"maxWait": (Sdf.ValueTypeNames.Double, 0.0)} if case == "waiting off" else None
+        result, _ = _solve(tmp_path, _crossroads(tmp_path, cues=case == "waiting off", settings=settings))
+        assert result.report.stats["remainingOverlaps"] >= 1
+        assert any("see the collision entries" in n for n in result.report.notes)
 
 
 def test_a_wait_slows_the_pace_smoothly_and_never_reverses_time():

@@ -24,7 +24,11 @@ Report: ``stats`` ``collisionStrategy``, ``collisionIterations``, ``collisionsPe
 constraints hold together (once per hard relative constraint that holds two agents
 closer than their clearance, naming it).
 
-Bad input: a capsule radius above :data:`MAX_RADIUS_M` (no character is that wide; a
+Bad input: two agents that waiting would part (crossing, or one behind the other) where
+neither may wait and hard time or sync constraints fix when at least one of them plays,
+and that stepping aside leaves overlapping, are an error naming both agents, the
+constraints and the frames (the constraints leave no room for the delay). A capsule
+radius above :data:`MAX_RADIUS_M` (no character is that wide; a
 typing slip in it would push the whole crowd kilometres) is an error naming the agent
 and ``mocap:collisionRadius``; so is a hard constraint that holds an agent inside an avoid
 region it must keep out of (the error names both prims).
@@ -80,6 +84,7 @@ def run(ctx: SolveContext) -> None:
         strategy=settings.collision_strategy, max_iterations=int(settings.max_iterations),
         meters_per_unit=info.meters_per_unit, max_wait_s=float(settings.max_wait),
         time_codes_per_second=float(info.time_codes_per_second)), ctx.progress)
+    _check_refused_waits(ctx, problem, outcome)
     _apply(ctx, problem, outcome)
     _report(ctx, problem, outcome, enabled)
     if ctx.options.guides and data.avoid_regions:
@@ -109,6 +114,45 @@ def _check_pins_outside_regions(ctx: SolveContext, problem: avoidance.Problem) -
                                  f"{depth:g} stage units inside avoid region <{region.name}> (its footprint grown "
                                  "by the agent's collision radius and the region's margin); move the constraint "
                                  "or the region, or make one of them soft or inactive")
+
+
+def _time_holds(ctx: SolveContext) -> dict[str, list[tuple[str, int]]]:
+    """Agent -> (prim, frame) of each hard time or sync constraint that fixes when it plays."""
+    holds: dict[str, list[tuple[str, int]]] = {}
+    for c in ctx.data.time_constraints:
+        if c.hard:
+            holds.setdefault(c.agent, []).append((c.path, c.frame))
+    for c in ctx.data.sync_constraints:
+        if c.hard:
+            holds.setdefault(c.agent, []).append((c.path, c.frame))
+            holds.setdefault(c.target, []).append((c.path, c.target_frame))
+    return holds
+
+
+def _check_refused_waits(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Outcome) -> None:
+    """A pair that waiting would part, that hard time constraints keep from waiting and that
+    stepping aside did not part either, is an error naming the agents, the constraints and
+    the frames: the constraints leave no room for the delay the crossing needs."""
+    if not outcome.wait_refused or not len(outcome.remaining):
+        return
+    holds = _time_holds(ctx)
+    names, left, sampling = problem.names, outcome.remaining, outcome.sampling
+    blocked = {(min(a, b), max(a, b)) for a, b, _ in outcome.blocked}
+    blocked |= {(min(a, b), max(a, b)) for _, a, b, _, _, _ in outcome.link_held}
+    for a, b, k, depth in zip(left.agent_a.tolist(), left.agent_b.tolist(), left.deepest.tolist(), left.depth.tolist()):
+        pair = (min(a, b), max(a, b))
+        prims = [(p, f, names[i]) for i in pair for p, f in holds.get(names[i], [])]
+        if pair not in outcome.wait_refused or pair in blocked or not prims:
+            continue
+        meet = {i: int(round(sampling.frames[k, i])) for i in pair}
+        held = ", ".join(f"<{p}> (frame {f} of <{agent}>)" for p, f, agent in prims)
+        raise prim_error(prims[0][0], (
+            f"agents <{names[pair[0]]}> (frame {meet[pair[0]]}) and <{names[pair[1]]}> (frame {meet[pair[1]]}) "
+            f"still overlap by {depth:g} stage units at shot time {float(sampling.times[k]):g}: one of them must "
+            f"wait for the other, but hard time constraints fix when both play ({held}), and stepping aside "
+            "did not part them; move a constraint's time so that one of them reaches the meeting later, "
+            "remove one, or give avoidance room to steer (fewer hard position constraints or avoid regions "
+            "near the meeting)"))
 
 
 def _problem(ctx: SolveContext, names: list[str], footprints, enabled: bool) -> avoidance.Problem:
