@@ -29,9 +29,8 @@ from conftest import CROSSROADS_MEET, REPO, run_cli, write_crossroads
 FPS = 24.0
 
 
-def _stage_module():
-    spec = importlib.util.spec_from_file_location("mocapedit_stages_collisions",
-                                                  REPO / "example_stages" / "stages_collisions.py")
+def _stage_module(name: str = "stages_collisions"):
+    spec = importlib.util.spec_from_file_location(f"mocapedit_{name}", REPO / "example_stages" / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -455,6 +454,29 @@ def test_a_pair_a_link_holds_closer_than_their_clearance_is_left_there_and_named
     assert handshake and handshake[0]["met"]
 
 
+def test_a_pair_that_walks_into_each_other_after_a_close_handshake_is_still_parted(tmp_path):
+    """path_handshake with the handshake 0.52 m apart (capsules need 0.6): the two stand that
+    close, then walk off through each other's spot (0.15 m apart at frame 142). The hold covers
+    the standing only; the walk-off is parted (before, the hold ran on to the end of the shot
+    and left a 0.45 m overlap there, marked as held by the handshake)."""
+    _stage_module("stages_path").path_handshake(tmp_path)
+    stage = Usd.Stage.Open(str(tmp_path / "path_handshake.usda"))
+    stage.GetPrimAtPath("/Edits/handshake").GetAttribute("offset").Set(Gf.Vec3d(0.5, 0.0, 0.15))
+    stage.GetRootLayer().Save()
+    result, out = _solve(tmp_path, tmp_path / "path_handshake.usda", collisions=True)
+    notes = [n for n in result.report.notes if "/Edits/handshake" in n]
+    assert len(notes) == 1 and "not pushed apart" in notes[0]
+    held = float(notes[0].split(" to ")[1].split(";")[0])
+    assert held < 140.0
+    left = [c for c in result.report.constraints if c["kind"] == "collision"]
+    assert all(c["heldByConstraints"] and c["time"] <= held for c in left)
+    assert all(c["met"] for c in result.report.constraints if c.get("prim") == "/Edits/handshake")
+    agents = ["/World/Crowd/host", "/World/Crowd/guest"]
+    times = np.arange(held + 1.0, 150.0)
+    sep = metrics.min_separation(_ground_roots(out, agents, times), 0.3, 1.8, "Y")
+    assert sep.clearance >= -1e-3
+
+
 def test_collide_false_agents_are_neither_moved_nor_obstacles(tmp_path):
     STAGES.head_on(tmp_path)
     stage = Usd.Stage.Open(str(tmp_path / "collisions_head_on.usda"))
@@ -731,10 +753,7 @@ def test_a_standing_agent_pushed_aside_does_not_spin(tmp_path):
     """A walker crosses the spot where another stands for 4 s with a jittering root (60 fps, Z-up,
     cm; no waiting, so the stander is pushed). The stander's body turns with the push, never by
     the tangent of its jitter: with the tangent rule it turned 28 degrees in one frame, 14 times."""
-    spec = importlib.util.spec_from_file_location("mocapedit_stages_path", REPO / "example_stages" / "stages_path.py")
-    stages_path = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(stages_path)
-    clip, (first, last) = stages_path.long_stand_clip()
+    clip, (first, last) = _stage_module("stages_path").long_stand_clip()
     middle = (first + last) // 2
     spot = clip.translations[middle, 0].astype(np.float64)
     crosser = walker.walk(frames=600, fps=60.0, up="Z", meters_per_unit=0.01, name="crosser")

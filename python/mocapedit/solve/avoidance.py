@@ -63,6 +63,9 @@ STRATEGIES = ("relinearize", "accumulate")
 #: Softness of separation and region rows (1 / weight, relative to the shape terms): nearly
 #: hard, but two constraints that cannot both hold give way instead of failing.
 SEPARATION_SOFTNESS = 1e-5
+#: Fraction of the distance a hard link holds two agents at by which they may come closer
+#: around the link's moment and still count as held there (the sway of a standing pair).
+LINK_HOLD_SLACK = 0.1
 
 
 @dataclass
@@ -254,16 +257,21 @@ class _State:
 
     def _link_holds(self) -> list[tuple[int, int, int, int, int]]:
         """(link, a, b, first, last): samples around each hard link that holds its two agents
-        closer than their clearance, over which their input paths stay that close. The pair
-        is not pushed apart there (the artist put them there); elsewhere it is."""
+        closer than their clearance, over which their input paths stay that close, but no
+        closer than the link holds them (within ``LINK_HOLD_SLACK``). The pair is not pushed
+        apart there (the artist put them there); elsewhere it is, so two agents who walk into
+        each other after a handshake are still parted."""
         p, pos = self.p, self.sampling.positions
         out = []
         for i, link in enumerate(p.links):
             need = p.radius[link.a] + p.radius[link.b] + p.margin
-            if np.linalg.norm(link.offset) >= need or not len(self.sampling.times):
+            holds = float(np.linalg.norm(link.offset))
+            if holds >= need or not len(self.sampling.times):
                 continue
             at = int(np.argmin(np.abs(self.sampling.times - self.times[link.a][link.fa])))
-            close = np.linalg.norm(pos[:, link.a] - pos[:, link.b], axis=1) < need * (1.0 + self.s.overshoot)
+            gap = np.linalg.norm(pos[:, link.a] - pos[:, link.b], axis=1)
+            close = (gap < need * (1.0 + self.s.overshoot)) & (gap >= (1.0 - LINK_HOLD_SLACK) * holds)
+            close[at] = True
             first, last = at, at
             while first > 0 and close[first - 1]:
                 first -= 1
