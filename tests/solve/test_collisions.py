@@ -291,10 +291,13 @@ def test_a_time_constraint_keeps_the_later_walker_from_waiting(tmp_path):
     assert result.report.stats["remainingOverlaps"] == 0
 
 
-def _crossroads(tmp_path, marks=True, cues=True, settings=None):
+def _crossroads(tmp_path, marks=True, cues=True, settings=None, sync=False):
     stage_path = write_crossroads(tmp_path / "s.usda", marks=marks)
     stage = Usd.Stage.Open(str(stage_path))
-    for k in range(2 if cues else 0):
+    if sync:
+        examples.add_sync_constraint(stage, "/World/Cues/cue0", "/World/Crowd/agent_0001", CROSSROADS_MEET,
+                                     "/World/Crowd/agent_0000", CROSSROADS_MEET)
+    for k in range(2 if cues and not sync else 0):
         examples.add_time_constraint(stage, f"/World/Cues/cue{k}", f"/World/Crowd/agent_000{k}",
                                      CROSSROADS_MEET, float(CROSSROADS_MEET))
     if settings:
@@ -303,14 +306,17 @@ def _crossroads(tmp_path, marks=True, cues=True, settings=None):
     return stage_path
 
 
-def test_time_constraints_that_leave_no_room_for_a_needed_delay_are_an_error_naming_them(tmp_path):
-    """Both walkers are timed to reach the crossroads at frame 60 and held where they are
-    half a second either side of it: one must wait, neither may, stepping aside cannot part them."""
-    stage_path = _crossroads(tmp_path)
+@pytest.mark.parametrize("sync", [False, True], ids=["time", "sync"])
+def test_time_constraints_that_leave_no_room_for_a_needed_delay_are_an_error_naming_them(tmp_path, sync):
+    """Both walkers are timed to reach the crossroads at frame 60 (two time constraints, or
+    one sync constraint) and held where they are half a second either side of it: one must
+    wait, neither may, stepping aside cannot part them."""
+    stage_path = _crossroads(tmp_path, sync=sync)
     with pytest.raises(MocapEditError) as err:
         _solve(tmp_path, stage_path)
     message = str(err.value)
-    for name in ("/World/Crowd/agent_0000", "/World/Crowd/agent_0001", "/World/Cues/cue0", "/World/Cues/cue1"):
+    cues = ("/World/Cues/cue0",) if sync else ("/World/Cues/cue0", "/World/Cues/cue1")
+    for name in ("/World/Crowd/agent_0000", "/World/Crowd/agent_0001", *cues):
         assert f"<{name}>" in message
     assert "frame 60" in message and "wait" in message and "move a constraint's time" in message and "steer" in message
     assert not (tmp_path / "s.edits.usda").exists()

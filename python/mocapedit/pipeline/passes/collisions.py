@@ -149,8 +149,9 @@ def _check_refused_waits(ctx: SolveContext, problem: avoidance.Problem, outcome:
         raise prim_error(prims[0][0], (
             f"agents <{names[pair[0]]}> (frame {meet[pair[0]]}) and <{names[pair[1]]}> (frame {meet[pair[1]]}) "
             f"still overlap by {depth:g} stage units at shot time {float(sampling.times[k]):g}: one of them must "
-            f"wait for the other, but hard time constraints fix when both play ({held}), and stepping aside "
-            "did not part them; move a constraint's time so that one of them reaches the meeting later, "
+            f"wait for the other, but neither may: their timing is fixed, by the hard time or sync constraints "
+            f"{held}, and stepping aside did not part them; move a constraint's time (a sync constraint's "
+            "offset) so that one of them reaches the meeting later, "
             "remove one, or give avoidance room to steer (fewer hard position constraints or avoid regions "
             "near the meeting)"))
 
