@@ -318,8 +318,31 @@ def test_time_constraints_that_leave_no_room_for_a_needed_delay_are_an_error_nam
     cues = ("/World/Cues/cue0",) if sync else ("/World/Cues/cue0", "/World/Cues/cue1")
     for name in ("/World/Crowd/agent_0000", "/World/Crowd/agent_0001", *cues):
         assert f"<{name}>" in message
-    assert "frame 60" in message and "wait" in message and "move a constraint's time" in message and "steer" in message
+    assert "frame 60" in message and "wait" in message and "soft" in message and "move a constraint's time" in message
+    assert "steer" in message
     assert not (tmp_path / "s.edits.usda").exists()
+
+
+def test_a_soft_time_constraint_gives_way_to_a_wait_and_says_so(tmp_path):
+    """No marks: with hard cues the walkers slide along their lanes (below); with soft ones
+    the later walker waits, and its cue's entry and a note give what the wait cost it."""
+    stage_path = write_crossroads(tmp_path / "s.usda", marks=False)
+    stage = Usd.Stage.Open(str(stage_path))
+    for k in range(2):
+        examples.add_time_constraint(stage, f"/World/Cues/cue{k}", f"/World/Crowd/agent_000{k}",
+                                     CROSSROADS_MEET, float(CROSSROADS_MEET), strength="soft")
+    stage.GetRootLayer().Save()
+    result, _ = _solve(tmp_path, stage_path)
+    stats = result.report.stats
+    assert stats["delayedAgents"] == 1 and stats["remainingOverlaps"] == 0
+    (waiter,) = [a for a, e in result.report.agents.items() if e.get("delay")]
+    cue = f"/World/Cues/cue{waiter[-1]}"
+    (entry,) = [c for c in result.report.constraints if c.get("prim") == cue]
+    assert not entry["met"] and entry["residual"] == pytest.approx(result.report.agents[waiter]["delay"] * FPS, abs=0.5)
+    (other,) = [c for c in result.report.constraints if c["kind"] == "time" and c["prim"] != cue]
+    assert other["met"]
+    notes = [n for n in result.report.notes if f"<{cue}> is soft" in n]
+    assert len(notes) == 1 and waiter in notes[0]
 
 
 @pytest.mark.parametrize("case", ["steering slides them apart", "no time constraint", "waiting off"])

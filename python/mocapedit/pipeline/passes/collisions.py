@@ -87,6 +87,7 @@ def run(ctx: SolveContext) -> None:
     _check_refused_waits(ctx, problem, outcome)
     _apply(ctx, problem, outcome)
     _report(ctx, problem, outcome, enabled)
+    _soft_timing_given_way(ctx, problem, outcome)
     if ctx.options.guides and data.avoid_regions:
         _region_guides(ctx, footprints)
 
@@ -150,8 +151,9 @@ def _check_refused_waits(ctx: SolveContext, problem: avoidance.Problem, outcome:
             f"agents <{names[pair[0]]}> (frame {meet[pair[0]]}) and <{names[pair[1]]}> (frame {meet[pair[1]]}) "
             f"still overlap by {depth:g} stage units at shot time {float(sampling.times[k]):g}: one of them must "
             f"wait for the other, but neither may: their timing is fixed, by the hard time or sync constraints "
-            f"{held}, and stepping aside did not part them; move a constraint's time (a sync constraint's "
-            "offset) so that one of them reaches the meeting later, "
+            f"{held}, and stepping aside did not part them; make those constraints soft (a soft one gives way "
+            "to a wait, unless hard position or relative constraints on the agent also fix its timing), move "
+            "a constraint's time (a sync constraint's offset) so that one of them reaches the meeting later, "
             "remove one, or give avoidance room to steer (fewer hard position constraints or avoid regions "
             "near the meeting)"))
 
@@ -168,7 +170,9 @@ def _problem(ctx: SolveContext, names: list[str], footprints, enabled: bool) -> 
     # Constraints fix the timing of the agents they name: a time or sync constraint states
     # it, a relative constraint meets another agent at a moment, a position constraint marks
     # where the agent is at a moment of the shot.
-    timed = {c.agent for c in data.time_constraints} | {a for c in data.sync_constraints for a in (c.agent, c.target)}
+    # A soft time or sync constraint gives way to a wait (the report says by how much).
+    timed = {c.agent for c in data.time_constraints if c.hard}
+    timed |= {a for c in data.sync_constraints if c.hard for a in (c.agent, c.target)}
     timed |= {a for c in data.relative_constraints for a in (c.agent, c.target)}
     timed |= {c.agent for c in data.position_constraints if c.hard}
     problem = avoidance.Problem(
@@ -226,6 +230,31 @@ def _apply(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Out
         turn = trajectory.deformation_turns(problem.paths[i], outcome.paths[i], [0, len(outcome.paths[i])],
                                             ranges, angles, window["turn_window"], window["turn_min_travel"])
         ctx.paths[name] = EditedPath(ground=outcome.paths[i], heading=np.asarray(heading) + turn)
+
+
+def _soft_timing_given_way(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Outcome) -> None:
+    """The residuals of soft time and sync constraints on agents that waited, on their new
+    time maps, and a note for each that the wait moved."""
+    data = ctx.data
+    fps = data.info.time_codes_per_second
+    delay = {problem.names[i]: float(outcome.delays[i]) / fps for i in np.flatnonzero(outcome.delays > 0)}
+    if not delay:
+        return
+
+    def at(agent: str, frame: int) -> float:
+        return float(np.asarray(ctx.time_maps.get(agent, data.agents[agent].sample_times))[frame])
+
+    moved = [(c, "time", (c.agent,), abs(at(c.agent, c.frame) - c.time))
+             for c in data.time_constraints if not c.hard and c.agent in delay]
+    moved += [(c, "sync", (c.agent, c.target), abs(at(c.agent, c.frame) - at(c.target, c.target_frame) - c.offset))
+              for c in data.sync_constraints if not c.hard and (c.agent in delay or c.target in delay)]
+    for c, kind, agents, residual in moved:
+        for entry in ctx.report.constraints:
+            if entry.prim == c.path and entry.kind == kind:
+                entry.residual, entry.met = float(residual), bool(residual <= 1e-6)
+        waits = ", ".join(f"<{a}> waits {delay[a]:g} s" for a in agents if a in delay)
+        ctx.report.note(f"<{c.path}> is soft and gives way to collision avoidance ({waits}): its residual is "
+                        f"now {residual:g} time codes")
 
 
 def _world(ctx: SolveContext, uv: np.ndarray) -> np.ndarray:
