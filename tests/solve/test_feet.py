@@ -416,6 +416,26 @@ def test_a_walk_sped_up_or_slowed_down_keeps_its_feet_beyond_the_constant_leash(
     assert all(c["met"] and c["residual"] < 1e-6 for c in result.report.constraints)
 
 
+def test_a_walk_sped_up_beyond_the_legs_reach_slides_but_its_legs_move_no_faster(tmp_path, walk_clip):
+    # 13 m in the time of 10 m: the planted feet are dragged further than any leash, so the plant
+    # follows 15 cm from the edited foot, and the lock eases out over longer so the leg catching
+    # up after the contact turns no faster than 1.5 times the source.
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", walk_clip)], up_axis="Y",
+                                       fps=FPS, clips_dir=tmp_path / "clips")
+    a = f"{CROWD}/a"
+    examples.add_position_constraint(stage, "/Edits/start", a, 0, (0.0, 0.0, 0.0))
+    examples.add_position_constraint(stage, "/Edits/end", a, 192, (0.0, 0.0, 13.0))
+    stage.GetRootLayer().Save()
+    _, free = _solve(tmp_path, "free", foot_locking=False)
+    result, out = _solve(tmp_path)
+    entry = result.report.agents[a]
+    assert entry["footSkateEdited"] < 0.5 * entry["footSkateUnlocked"]
+    assert entry["maxFootCorrection"] <= 0.15 + 1e-9 and entry["maxPelvisDrop"] <= 0.08 + 1e-9
+    src = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    bones, flips, speed = _leg_quality(src, out, a, evaluate.sample_times(src, a), LEGS, FPS, unlocked=free)
+    assert bones < 1e-6 and flips == 0 and speed < 1.5
+
+
 def test_a_z_up_centimetre_stage_at_60_fps_with_a_time_offset(tmp_path):
     fps = 60.0
     clip = walker.walk(frames=481, fps=fps, speed=1.25, up="Z", meters_per_unit=0.01, name="zwalk")

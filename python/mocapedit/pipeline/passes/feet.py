@@ -32,7 +32,9 @@ from mocapedit.model.errors import MocapEditError
 from mocapedit.solve.layering import quat_multiply, trs_from_matrices
 from mocapedit.model.data import Agent
 
-#: Seconds over which a lock blends in before a contact and out after it.
+#: Seconds over which a lock blends in before a contact and out after it; longer in proportion
+#: where the plant lies further than ``LEASH_M`` from where the edit puts the foot at the
+#: contact's end, so the leg catches up no faster than from ``LEASH_M``.
 BLEND_SECONDS = 0.1
 #: Metres a plant may always lie from where the edit puts the foot before it is dragged along;
 #: further where the leg reaches it (:func:`_reach`).
@@ -166,10 +168,11 @@ def _leash_rows(offset: np.ndarray, base: np.ndarray, inside: np.ndarray, rigid:
     return out
 
 
-def _ramp(frames: np.ndarray, first: int, last: int, blend: float) -> np.ndarray:
-    """1 inside [first, last], easing to 0 over ``blend`` frames outside (smoothstep)."""
-    outside = np.maximum(first - frames, 0.0) + np.maximum(frames - last, 0.0)
-    x = np.clip(1.0 - outside / blend, 0.0, 1.0)
+def _ramp(frames: np.ndarray, first, last, blend, blend_out=None) -> np.ndarray:
+    """1 inside [first, last], easing to 0 over ``blend`` frames before and ``blend_out`` (default
+    ``blend``) after (smoothstep)."""
+    blend_out = blend if blend_out is None else blend_out
+    x = np.clip(1.0 - np.maximum(first - frames, 0.0) / blend - np.maximum(frames - last, 0.0) / blend_out, 0.0, 1.0)
     return x * x * (3.0 - 2.0 * x)
 
 
@@ -262,15 +265,13 @@ class _AgentLock:
                 continue
             self.locked += len(ranges)
             self.contact[:, k] = inside.any(axis=0)
-            w_all = _ramp(self.frames, ranges[:, :1], ranges[:, 1:], blend)                          # (C,T)
-            reached = w_all > 0
+            reached = _ramp(self.frames, ranges[:, :1], ranges[:, 1:], blend * MAX_LEASH_M / LEASH_M) > 0  # (C,T)
             lo = reached.argmax(axis=1)
             width = int((reached.sum(axis=1)).max())
             at = lo[:, None] + np.arange(width)                                                      # (C,W)
             valid = at < count
             at = np.minimum(at, count - 1)
             valid &= np.take_along_axis(reached, at, axis=1)
-            w = np.where(valid, np.take_along_axis(w_all, at, axis=1), 0.0)
             inside = np.take_along_axis(inside, at, axis=1) & valid
             # Where a contact meets a stationary range, the body moves rigidly there: the plant
             # is that motion, so the range keeps its shape (no correction inside it).
@@ -292,6 +293,13 @@ class _AgentLock:
             offset = pos[leg.ankle][at] - carried
             offset[..., up] = 0.0  # feet stay at their source height: never below their ground
             shift = _leash_rows(offset, (offset * chosen[..., None]).sum(1) / n_chosen, inside, rigid, radius[at])
+            # The lock eases in and out over longer where the plant lies far from the edited foot.
+            far = np.linalg.norm(shift - offset, axis=-1) / (LEASH_M / info.meters_per_unit)    # (C,W)
+            rows_c = np.arange(len(at))
+            ends = inside.argmax(axis=1), width - 1 - inside[:, ::-1].argmax(axis=1)
+            blend_in, blend_out = (blend * np.maximum(far[rows_c, e], 1.0)[:, None] for e in ends)
+            w = np.where(valid, _ramp(self.frames[at], ranges[:, :1], ranges[:, 1:], blend_in, blend_out), 0.0)
+            valid &= w > 0
             plant_rot = quat_multiply(_yaw_quat(yaw.reshape(-1), up_vector).reshape(yaw.shape + (4,)),
                                       posed_rot[leg.ankle][at])
             plant_rot *= np.where(np.sum(plant_rot * rot[leg.ankle][at], -1) < 0, -1.0, 1.0)[..., None]
