@@ -293,11 +293,12 @@ class _AgentLock:
             offset = pos[leg.ankle][at] - carried
             offset[..., up] = 0.0  # feet stay at their source height: never below their ground
             shift = _leash_rows(offset, (offset * chosen[..., None]).sum(1) / n_chosen, inside, rigid, radius[at])
-            # The lock eases in and out over longer where the plant lies far from the edited foot.
+            # The lock eases in and out over longer where the plant lies far from the edited foot
+            # (within the frames reached above).
             far = np.linalg.norm(shift - offset, axis=-1) / (LEASH_M / info.meters_per_unit)    # (C,W)
             rows_c = np.arange(len(at))
             ends = inside.argmax(axis=1), width - 1 - inside[:, ::-1].argmax(axis=1)
-            blend_in, blend_out = (blend * np.maximum(far[rows_c, e], 1.0)[:, None] for e in ends)
+            blend_in, blend_out = (blend * np.clip(far[rows_c, e], 1.0, MAX_LEASH_M / LEASH_M)[:, None] for e in ends)
             w = np.where(valid, _ramp(self.frames[at], ranges[:, :1], ranges[:, 1:], blend_in, blend_out), 0.0)
             valid &= w > 0
             plant_rot = quat_multiply(_yaw_quat(yaw.reshape(-1), up_vector).reshape(yaw.shape + (4,)),
