@@ -171,3 +171,23 @@ def test_a_batch_on_a_local_cluster(tmp_path, shots):
     assert proc.returncode == 0, proc.stderr
     assert (out / "s1.edits.usdc").read_bytes() == expected
     assert "2 done, 0 failed, 0 remaining" in proc.stderr
+
+
+def test_a_local_cluster_starts_when_the_dashboard_port_is_taken():
+    # Dask's scheduler serves HTTP on 8787 unless told otherwise; a dashboard or another batch
+    # on the same machine holds that port, which must not stop a batch.
+    holder = socket.socket()
+    try:
+        holder.bind(("0.0.0.0", 8787))
+        holder.listen()
+    except OSError:
+        pass  # already held by another process: the same situation
+    try:
+        client, cluster = batch.connect(None, 1)
+        try:
+            assert client.submit(sum, [1, 2], pure=False).result(timeout=60) == 3
+        finally:
+            client.close()
+            cluster.close()
+    finally:
+        holder.close()
