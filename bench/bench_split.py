@@ -55,12 +55,12 @@ def _measure(shot, out_dir, client, name: str) -> dict:
 
 
 def run(ctx):
-    from distributed import Client, LocalCluster
+    from mocapedit.pipeline import batch
     agents = 100 if ctx.quick else 1000
     crowd, grouped = _grouped(ctx, agents)
     t = time.perf_counter()
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
-            Client(cluster) as client:
+    client, cluster = batch.connect(None, 2)
+    with cluster, client:
         # Workers import the solver once, before the clock runs (a farm's workers stay up).
         client.run(importlib.import_module, "mocapedit.pipeline.passes.path")
         start = time.perf_counter() - t

@@ -82,6 +82,39 @@ def write_toy_stage(path, agents=3, up_axis="Z", meters_per_unit=0.01, fps=24.0,
     return Path(path)
 
 
+CROSSROADS_MEET = 60
+
+
+def write_crossroads(path, marks: bool = True) -> Path:
+    """Two walkers cross at the origin at frame 60 (Y-up, metres, 24 fps, collision
+    avoidance on) in lanes 0.8 m wide between four blocks (box avoid regions): neither can
+    step aside there. With ``marks``, hard position constraints hold each where it is half a
+    second before and after the crossing, so neither can slide along its lane either."""
+    from mocapedit.data import examples, walker
+    from mocapedit.usd import evaluate
+    path = Path(path)
+    walk = walker.walk(frames=120, fps=24.0, speed=1.4, up="Y", meters_per_unit=1.0, name="walk_x")
+    specs = [examples.AgentSpec("agent_0000", walk, (0.0, 0.0, -3.5), 0.0),
+             examples.AgentSpec("agent_0001", walk, (-3.5, 0.0, 0.0), 90.0)]
+    stage = examples.build_crowd_stage(path, specs, up_axis="Y", meters_per_unit=1.0, fps=24.0,
+                                       clips_dir=path.parent / "clips")
+    vt = Sdf.ValueTypeNames
+    examples.define_mocap_prim(stage, "/World/Settings", "MocapSolveSettings", attributes={
+        "collisionAvoidance": (vt.Bool, True), "margin": (vt.Double, 0.05)})
+    for k, (x, z) in enumerate(((1, 1), (1, -1), (-1, 1), (-1, -1))):
+        block = examples.define_mocap_prim(stage, f"/World/Regions/block{k}", "MocapAvoidRegion", attributes={
+            "shape": (vt.Token, "box"), "size": (vt.Double3, Gf.Vec3d(8.0, 1.0, 8.0))})
+        UsdGeom.Xformable(block).AddTranslateOp().Set(Gf.Vec3d(x * 4.4, 0.5, z * 4.4))
+    for k in range(2 if marks else 0):
+        agent = f"/World/Crowd/agent_000{k}"
+        for frame in (CROSSROADS_MEET - 12, CROSSROADS_MEET + 12):
+            p = evaluate.agent_root_positions(stage, agent, [float(frame)])[0]
+            examples.add_position_constraint(stage, f"/World/Marks/a{k}_f{frame}", agent, frame,
+                                             (float(p[0]), 0.0, float(p[2])))
+    stage.GetRootLayer().Save()
+    return path
+
+
 def world_joints(stage: Usd.Stage, skel_path: str, times) -> np.ndarray:
     """(T,J,3) joint world positions by UsdSkel forward kinematics on a composed stage."""
     cache = UsdSkel.Cache()

@@ -359,6 +359,15 @@ shot("fountain-geometry-inactive", prim("MocapAvoidRegion", "Fountain", "rel geo
 shot("fountain-geometry-typeless", prim("MocapAvoidRegion", "Fountain", "rel geometry = </Thing>") + 'def "Thing"\n{\n}\n',
      AR + r"geometry: targets </Thing>, which is not a UsdGeom prim")
 
+# Two walkers timed to meet at the crossroads, where neither can step aside: one must wait.
+CROSSROADS_HEADER = SHOT_HEADER.replace('"Z"', '"Y"').replace("0.01", "1").replace("23", "119")
+CUES = "".join(prim("MocapTimeConstraint", f"Cue{k}", f"rel agent = </World/Crowd/agent_000{k}>\n"
+                    "uniform int frame = 60\nuniform double time = 60") for k in range(2))
+shot("time-constraints-leave-no-room-to-wait", CUES,
+     r"</Cue0>: agents </World/Crowd/agent_0000> \(frame 60\) and </World/Crowd/agent_0001> \(frame 60\) "
+     r"still overlap.*</Cue1>", header=CROSSROADS_HEADER,
+     base=lambda folder: __import__("conftest").write_crossroads(folder / "base.usda"))
+
 # ---- animation layers --------------------------------------------------------------------------
 L = r"</Nodding>\."
 prop_cases("MocapAnimationLayer", "Nodding", LAYER, {

@@ -174,6 +174,26 @@ def test_a_batch_on_a_local_cluster(tmp_path, shots):
     assert "2 done, 0 failed, 0 remaining" in proc.stderr
 
 
+def test_a_local_cluster_starts_when_the_dashboard_port_is_taken():
+    # Dask's scheduler serves HTTP on 8787 unless told otherwise; a dashboard or another batch
+    # on the same machine holds that port, which must not stop a batch.
+    holder = socket.socket()
+    try:
+        holder.bind(("0.0.0.0", 8787))
+        holder.listen()
+    except OSError:
+        pass  # already held by another process: the same situation
+    try:
+        client, cluster = batch.connect(None, 1)
+        try:
+            assert client.submit(sum, [1, 2], pure=False).result(timeout=60) == 3
+        finally:
+            client.close()
+            cluster.close()
+    finally:
+        holder.close()
+
+
 # ---- a shot split over workers by path component ---------------------------------------------
 
 def _components_shot(folder: Path, contradiction: bool = False) -> Path:
@@ -210,10 +230,9 @@ def component_shots(tmp_path):
 
 @pytest.mark.slow
 def test_a_shot_split_by_component_on_a_local_cluster_gives_the_single_solves_bytes(tmp_path, component_shots):
-    from distributed import Client, LocalCluster
     shot, bad = map(str, component_shots)
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
-            Client(cluster) as client:
+    client, cluster = batch.connect(None, 2)
+    with cluster, client:
         for collisions in (None, True):
             single, split = tmp_path / f"single-{collisions}.usdc", tmp_path / f"split-{collisions}.usdc"
             whole = solve(shot, output=str(single), collisions=collisions)

@@ -24,14 +24,13 @@ from mocapedit.model.errors import MocapEditError
 from mocapedit.pipeline.processor import solve
 from mocapedit.model.progress import Progress
 
-from conftest import REPO, run_cli
+from conftest import CROSSROADS_MEET, REPO, run_cli, write_crossroads
 
 FPS = 24.0
 
 
-def _stage_module():
-    spec = importlib.util.spec_from_file_location("mocapedit_stages_collisions",
-                                                  REPO / "example_stages" / "stages_collisions.py")
+def _stage_module(name: str = "stages_collisions"):
+    spec = importlib.util.spec_from_file_location(f"mocapedit_{name}", REPO / "example_stages" / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -292,6 +291,76 @@ def test_a_time_constraint_keeps_the_later_walker_from_waiting(tmp_path):
     assert result.report.stats["remainingOverlaps"] == 0
 
 
+def _crossroads(tmp_path, marks=True, cues=True, settings=None, sync=False):
+    stage_path = write_crossroads(tmp_path / "s.usda", marks=marks)
+    stage = Usd.Stage.Open(str(stage_path))
+    if sync:
+        examples.add_sync_constraint(stage, "/World/Cues/cue0", "/World/Crowd/agent_0001", CROSSROADS_MEET,
+                                     "/World/Crowd/agent_0000", CROSSROADS_MEET)
+    for k in range(2 if cues and not sync else 0):
+        examples.add_time_constraint(stage, f"/World/Cues/cue{k}", f"/World/Crowd/agent_000{k}",
+                                     CROSSROADS_MEET, float(CROSSROADS_MEET))
+    if settings:
+        examples.define_mocap_prim(stage, "/World/Settings", "MocapSolveSettings", attributes=settings)
+    stage.GetRootLayer().Save()
+    return stage_path
+
+
+@pytest.mark.parametrize("sync", [False, True], ids=["time", "sync"])
+def test_time_constraints_that_leave_no_room_for_a_needed_delay_are_an_error_naming_them(tmp_path, sync):
+    """Both walkers are timed to reach the crossroads at frame 60 (two time constraints, or
+    one sync constraint) and held where they are half a second either side of it: one must
+    wait, neither may, stepping aside cannot part them."""
+    stage_path = _crossroads(tmp_path, sync=sync)
+    with pytest.raises(MocapEditError) as err:
+        _solve(tmp_path, stage_path)
+    message = str(err.value)
+    cues = ("/World/Cues/cue0",) if sync else ("/World/Cues/cue0", "/World/Cues/cue1")
+    for name in ("/World/Crowd/agent_0000", "/World/Crowd/agent_0001", *cues):
+        assert f"<{name}>" in message
+    assert "frame 60" in message and "wait" in message and "soft" in message and "move a constraint's time" in message
+    assert "steer" in message
+    assert not (tmp_path / "s.edits.usda").exists()
+
+
+def test_a_soft_time_constraint_gives_way_to_a_wait_and_says_so(tmp_path):
+    """No marks: with hard cues the walkers slide along their lanes (below); with soft ones
+    the later walker waits, and its cue's entry and a note give what the wait cost it."""
+    stage_path = write_crossroads(tmp_path / "s.usda", marks=False)
+    stage = Usd.Stage.Open(str(stage_path))
+    for k in range(2):
+        examples.add_time_constraint(stage, f"/World/Cues/cue{k}", f"/World/Crowd/agent_000{k}",
+                                     CROSSROADS_MEET, float(CROSSROADS_MEET), strength="soft")
+    stage.GetRootLayer().Save()
+    result, _ = _solve(tmp_path, stage_path)
+    stats = result.report.stats
+    assert stats["delayedAgents"] == 1 and stats["remainingOverlaps"] == 0
+    (waiter,) = [a for a, e in result.report.agents.items() if e.get("delay")]
+    cue = f"/World/Cues/cue{waiter[-1]}"
+    (entry,) = [c for c in result.report.constraints if c.get("prim") == cue]
+    assert not entry["met"] and entry["residual"] == pytest.approx(result.report.agents[waiter]["delay"] * FPS, abs=0.5)
+    (other,) = [c for c in result.report.constraints if c["kind"] == "time" and c["prim"] != cue]
+    assert other["met"]
+    notes = [n for n in result.report.notes if f"<{cue}> is soft" in n]
+    assert len(notes) == 1 and waiter in notes[0]
+
+
+@pytest.mark.parametrize("case", ["steering slides them apart", "no time constraint", "waiting off"])
+def test_a_delay_the_constraints_refuse_is_no_error_when_nothing_needs_it(tmp_path, case):
+    """Without the marks the walkers slide along their lanes; without the time constraints
+    only position marks fix the timing (a note, as before); without waiting nobody wants a delay."""
+    if case == "steering slides them apart":
+        result, _ = _solve(tmp_path, _crossroads(tmp_path, marks=False))
+        assert result.report.stats["remainingOverlaps"] == 0
+        cues = [c for c in result.report.constraints if c["kind"] == "time"]
+        assert len(cues) == 2 and all(c["met"] for c in cues)
+    else:
+        settings = {"maxWait": (Sdf.ValueTypeNames.Double, 0.0)} if case == "waiting off" else None
+        result, _ = _solve(tmp_path, _crossroads(tmp_path, cues=case == "waiting off", settings=settings))
+        assert result.report.stats["remainingOverlaps"] >= 1
+        assert any("see the collision entries" in n for n in result.report.notes)
+
+
 def test_a_wait_slows_the_pace_smoothly_and_never_reverses_time():
     t = np.arange(200.0)
     for delay in (6.0, 24.0, 72.0):
@@ -412,6 +481,29 @@ def test_a_pair_a_link_holds_closer_than_their_clearance_is_left_there_and_named
     assert np.abs(g1[:2, k - 12:k + 13] - g0[:2, k - 12:k + 13]).max() < 0.05
     handshake = [c for c in result.report.constraints if c["prim"] == "/World/Handshake"]
     assert handshake and handshake[0]["met"]
+
+
+def test_a_pair_that_walks_into_each_other_after_a_close_handshake_is_still_parted(tmp_path):
+    """path_handshake with the handshake 0.52 m apart (capsules need 0.6): the two stand that
+    close, then walk off through each other's spot (0.15 m apart at frame 142). The hold covers
+    the standing only; the walk-off is parted (before, the hold ran on to the end of the shot
+    and left a 0.45 m overlap there, marked as held by the handshake)."""
+    _stage_module("stages_path").path_handshake(tmp_path)
+    stage = Usd.Stage.Open(str(tmp_path / "path_handshake.usda"))
+    stage.GetPrimAtPath("/Edits/handshake").GetAttribute("offset").Set(Gf.Vec3d(0.5, 0.0, 0.15))
+    stage.GetRootLayer().Save()
+    result, out = _solve(tmp_path, tmp_path / "path_handshake.usda", collisions=True)
+    notes = [n for n in result.report.notes if "/Edits/handshake" in n]
+    assert len(notes) == 1 and "not pushed apart" in notes[0]
+    held = float(notes[0].split(" to ")[1].split(";")[0])
+    assert held < 140.0
+    left = [c for c in result.report.constraints if c["kind"] == "collision"]
+    assert all(c["heldByConstraints"] and c["time"] <= held for c in left)
+    assert all(c["met"] for c in result.report.constraints if c.get("prim") == "/Edits/handshake")
+    agents = ["/World/Crowd/host", "/World/Crowd/guest"]
+    times = np.arange(held + 1.0, 150.0)
+    sep = metrics.min_separation(_ground_roots(out, agents, times), 0.3, 1.8, "Y")
+    assert sep.clearance >= -1e-3
 
 
 def test_collide_false_agents_are_neither_moved_nor_obstacles(tmp_path):
@@ -690,10 +782,7 @@ def test_a_standing_agent_pushed_aside_does_not_spin(tmp_path):
     """A walker crosses the spot where another stands for 4 s with a jittering root (60 fps, Z-up,
     cm; no waiting, so the stander is pushed). The stander's body turns with the push, never by
     the tangent of its jitter: with the tangent rule it turned 28 degrees in one frame, 14 times."""
-    spec = importlib.util.spec_from_file_location("mocapedit_stages_path", REPO / "example_stages" / "stages_path.py")
-    stages_path = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(stages_path)
-    clip, (first, last) = stages_path.long_stand_clip()
+    clip, (first, last) = _stage_module("stages_path").long_stand_clip()
     middle = (first + last) // 2
     spot = clip.translations[middle, 0].astype(np.float64)
     crosser = walker.walk(frames=600, fps=60.0, up="Z", meters_per_unit=0.01, name="crosser")

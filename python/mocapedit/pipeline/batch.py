@@ -184,7 +184,10 @@ def connect(scheduler: str | None, workers: int | None):
     # Workers forked from a fresh server process start in about a second; spawned ones, which
     # import everything again, took four (and a batch of small shots waits for them).
     with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
+        # No dashboard, and the scheduler's HTTP routes on a free port: its default, 8787, is
+        # often held by a dashboard or another batch on the same machine.
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                               scheduler_kwargs={"dashboard": False, "dashboard_address": ":0"})
     return Client(cluster), cluster
 
 

@@ -63,6 +63,9 @@ STRATEGIES = ("relinearize", "accumulate")
 #: Softness of separation and region rows (1 / weight, relative to the shape terms): nearly
 #: hard, but two constraints that cannot both hold give way instead of failing.
 SEPARATION_SOFTNESS = 1e-5
+#: Fraction of the distance a hard link holds two agents at by which they may come closer
+#: around the link's moment and still count as held there (the sway of a standing pair).
+LINK_HOLD_SLACK = 0.1
 
 
 @dataclass
@@ -177,6 +180,9 @@ class Outcome:
     #: (constraint, agent a, agent b, first and last shot time, distance): hard links that hold
     #: two agents closer than their clearance; the pair is left as it is over that time
     link_held: list[tuple[str, int, int, float, float, float]] = field(default_factory=list)
+    #: (agent a, agent b) with a < b: pairs that waiting would part (crossing, or one behind
+    #: the other) but neither of which may wait, their timing being fixed
+    wait_refused: set[tuple[int, int]] = field(default_factory=set)
 
     @property
     def converged(self) -> bool:
@@ -251,16 +257,21 @@ class _State:
 
     def _link_holds(self) -> list[tuple[int, int, int, int, int]]:
         """(link, a, b, first, last): samples around each hard link that holds its two agents
-        closer than their clearance, over which their input paths stay that close. The pair
-        is not pushed apart there (the artist put them there); elsewhere it is."""
+        closer than their clearance, over which their input paths stay that close, but no
+        closer than the link holds them (within ``LINK_HOLD_SLACK``). The pair is not pushed
+        apart there (the artist put them there); elsewhere it is, so two agents who walk into
+        each other after a handshake are still parted."""
         p, pos = self.p, self.sampling.positions
         out = []
         for i, link in enumerate(p.links):
             need = p.radius[link.a] + p.radius[link.b] + p.margin
-            if np.linalg.norm(link.offset) >= need or not len(self.sampling.times):
+            holds = float(np.linalg.norm(link.offset))
+            if holds >= need or not len(self.sampling.times):
                 continue
             at = int(np.argmin(np.abs(self.sampling.times - self.times[link.a][link.fa])))
-            close = np.linalg.norm(pos[:, link.a] - pos[:, link.b], axis=1) < need * (1.0 + self.s.overshoot)
+            gap = np.linalg.norm(pos[:, link.a] - pos[:, link.b], axis=1)
+            close = (gap < need * (1.0 + self.s.overshoot)) & (gap >= (1.0 - LINK_HOLD_SLACK) * holds)
+            close[at] = True
             first, last = at, at
             while first > 0 and close[first - 1]:
                 first -= 1
@@ -447,7 +458,7 @@ def resolve(problem: Problem, settings: Settings | None = None, progress=None) -
     return Outcome(paths=state.split(flat), rigid_angles=angles, iterations=run.iterations,
                    sampling=state.sampling, remaining=found, region_left=region_left,
                    blocked=_blocked(state, found), link_held=_link_held(state), moved=moved, solves=run.solves, stalled=run.stalled,
-                   frame_times=waits.frame_times, delays=waits.delay,
+                   frame_times=waits.frame_times, delays=waits.delay, wait_refused=waits.refused,
                    seconds=time.perf_counter() - t0, timing=run.timing(time.perf_counter() - t0), work=dict(run.work))
 
 
@@ -999,6 +1010,8 @@ class _Waits:
     delay: np.ndarray
     span: tuple[float, float] | None = None
     rounds: int = 0
+    #: (a, b), a < b: pairs a wait would part whose timing is fixed on both sides
+    refused: set[tuple[int, int]] = field(default_factory=set)
 
 
 def _velocities(positions: np.ndarray, k: np.ndarray, cols: np.ndarray) -> np.ndarray:
@@ -1018,7 +1031,8 @@ def _waits(problem: Problem, settings: Settings, fixed: np.ndarray) -> _Waits:
     ``max_wait_s``) after which the pair keeps its clearance over the encounter; take that delay up smoothly before the encounter, slowing to no less than
     ``SLOWEST_PACE``. Each agent takes up at most one delay per round (its earliest), so
     delays that create new encounters are seen by the next round. Collisions waiting
-    cannot part (head-on, standing agents, no room) are left to the lateral solve.
+    cannot part (head-on, standing agents, no room) are left to the lateral solve; so are
+    those neither agent may wait for, which ``refused`` lists.
     """
     fps = settings.time_codes_per_second
     names = list(range(len(problem.names)))
@@ -1064,6 +1078,8 @@ def _waits(problem: Problem, settings: Settings, fixed: np.ndarray) -> _Waits:
         who = np.where(later_a, a, b)
         other = np.where(later_a, b, a)
         ok = (crossing | following) & ~fixed[who]
+        stuck = (crossing | following) & fixed[a] & fixed[b]
+        out.refused.update(zip(np.minimum(a, b)[stuck].tolist(), np.maximum(a, b)[stuck].tolist()))
         # First guess of each delay (time codes): crossing, from when the other leaves the
         # crossing point by the clearance to when the waiting one would come within it;
         # following, the time to fall back by the clearance missing between them.

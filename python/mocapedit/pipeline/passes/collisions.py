@@ -24,7 +24,11 @@ Report: ``stats`` ``collisionStrategy``, ``collisionIterations``, ``collisionsPe
 constraints hold together (once per hard relative constraint that holds two agents
 closer than their clearance, naming it).
 
-Bad input: a capsule radius above :data:`MAX_RADIUS_M` (no character is that wide; a
+Bad input: two agents that waiting would part (crossing, or one behind the other) where
+neither may wait and hard time or sync constraints fix when at least one of them plays,
+and that stepping aside leaves overlapping, are an error naming both agents, the
+constraints and the frames (the constraints leave no room for the delay). A capsule
+radius above :data:`MAX_RADIUS_M` (no character is that wide; a
 typing slip in it would push the whole crowd kilometres) is an error naming the agent
 and ``mocap:collisionRadius``; so is a hard constraint that holds an agent inside an avoid
 region it must keep out of (the error names both prims).
@@ -80,8 +84,10 @@ def run(ctx: SolveContext) -> None:
         strategy=settings.collision_strategy, max_iterations=int(settings.max_iterations),
         meters_per_unit=info.meters_per_unit, max_wait_s=float(settings.max_wait),
         time_codes_per_second=float(info.time_codes_per_second)), ctx.progress)
+    _check_refused_waits(ctx, problem, outcome)
     _apply(ctx, problem, outcome)
     _report(ctx, problem, outcome, enabled)
+    _soft_timing_given_way(ctx, problem, outcome)
     if ctx.options.guides and data.avoid_regions:
         _region_guides(ctx, footprints)
 
@@ -111,6 +117,47 @@ def _check_pins_outside_regions(ctx: SolveContext, problem: avoidance.Problem) -
                                  "or the region, or make one of them soft or inactive")
 
 
+def _time_holds(ctx: SolveContext) -> dict[str, list[tuple[str, int]]]:
+    """Agent -> (prim, frame) of each hard time or sync constraint that fixes when it plays."""
+    holds: dict[str, list[tuple[str, int]]] = {}
+    for c in ctx.data.time_constraints:
+        if c.hard:
+            holds.setdefault(c.agent, []).append((c.path, c.frame))
+    for c in ctx.data.sync_constraints:
+        if c.hard:
+            holds.setdefault(c.agent, []).append((c.path, c.frame))
+            holds.setdefault(c.target, []).append((c.path, c.target_frame))
+    return holds
+
+
+def _check_refused_waits(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Outcome) -> None:
+    """A pair that waiting would part, that hard time constraints keep from waiting and that
+    stepping aside did not part either, is an error naming the agents, the constraints and
+    the frames: the constraints leave no room for the delay the crossing needs."""
+    if not outcome.wait_refused or not len(outcome.remaining):
+        return
+    holds = _time_holds(ctx)
+    names, left, sampling = problem.names, outcome.remaining, outcome.sampling
+    blocked = {(min(a, b), max(a, b)) for a, b, _ in outcome.blocked}
+    blocked |= {(min(a, b), max(a, b)) for _, a, b, _, _, _ in outcome.link_held}
+    for a, b, k, depth in zip(left.agent_a.tolist(), left.agent_b.tolist(), left.deepest.tolist(), left.depth.tolist()):
+        pair = (min(a, b), max(a, b))
+        prims = [(p, f, names[i]) for i in pair for p, f in holds.get(names[i], [])]
+        if pair not in outcome.wait_refused or pair in blocked or not prims:
+            continue
+        meet = {i: int(round(sampling.frames[k, i])) for i in pair}
+        held = ", ".join(f"<{p}> (frame {f} of <{agent}>)" for p, f, agent in prims)
+        raise prim_error(prims[0][0], (
+            f"agents <{names[pair[0]]}> (frame {meet[pair[0]]}) and <{names[pair[1]]}> (frame {meet[pair[1]]}) "
+            f"still overlap by {depth:g} stage units at shot time {float(sampling.times[k]):g}: one of them must "
+            f"wait for the other, but neither may: their timing is fixed, by the hard time or sync constraints "
+            f"{held}, and stepping aside did not part them; make those constraints soft (a soft one gives way "
+            "to a wait, unless hard position or relative constraints on the agent also fix its timing), move "
+            "a constraint's time (a sync constraint's offset) so that one of them reaches the meeting later, "
+            "remove one, or give avoidance room to steer (fewer hard position constraints or avoid regions "
+            "near the meeting)"))
+
+
 def _problem(ctx: SolveContext, names: list[str], footprints, enabled: bool) -> avoidance.Problem:
     data = ctx.data
     index = {p: i for i, p in enumerate(names)}
@@ -123,7 +170,9 @@ def _problem(ctx: SolveContext, names: list[str], footprints, enabled: bool) -> 
     # Constraints fix the timing of the agents they name: a time or sync constraint states
     # it, a relative constraint meets another agent at a moment, a position constraint marks
     # where the agent is at a moment of the shot.
-    timed = {c.agent for c in data.time_constraints} | {a for c in data.sync_constraints for a in (c.agent, c.target)}
+    # A soft time or sync constraint gives way to a wait (the report says by how much).
+    timed = {c.agent for c in data.time_constraints if c.hard}
+    timed |= {a for c in data.sync_constraints if c.hard for a in (c.agent, c.target)}
     timed |= {a for c in data.relative_constraints for a in (c.agent, c.target)}
     timed |= {c.agent for c in data.position_constraints if c.hard}
     problem = avoidance.Problem(
@@ -181,6 +230,31 @@ def _apply(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Out
         turn = trajectory.deformation_turns(problem.paths[i], outcome.paths[i], [0, len(outcome.paths[i])],
                                             ranges, angles, window["turn_window"], window["turn_min_travel"])
         ctx.paths[name] = EditedPath(ground=outcome.paths[i], heading=np.asarray(heading) + turn)
+
+
+def _soft_timing_given_way(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Outcome) -> None:
+    """The residuals of soft time and sync constraints on agents that waited, on their new
+    time maps, and a note for each that the wait moved."""
+    data = ctx.data
+    fps = data.info.time_codes_per_second
+    delay = {problem.names[i]: float(outcome.delays[i]) / fps for i in np.flatnonzero(outcome.delays > 0)}
+    if not delay:
+        return
+
+    def at(agent: str, frame: int) -> float:
+        return float(np.asarray(ctx.time_maps.get(agent, data.agents[agent].sample_times))[frame])
+
+    moved = [(c, "time", (c.agent,), abs(at(c.agent, c.frame) - c.time))
+             for c in data.time_constraints if not c.hard and c.agent in delay]
+    moved += [(c, "sync", (c.agent, c.target), abs(at(c.agent, c.frame) - at(c.target, c.target_frame) - c.offset))
+              for c in data.sync_constraints if not c.hard and (c.agent in delay or c.target in delay)]
+    for c, kind, agents, residual in moved:
+        for entry in ctx.report.constraints:
+            if entry.prim == c.path and entry.kind == kind:
+                entry.residual, entry.met = float(residual), bool(residual <= 1e-6)
+        waits = ", ".join(f"<{a}> waits {delay[a]:g} s" for a in agents if a in delay)
+        ctx.report.note(f"<{c.path}> is soft and gives way to collision avoidance ({waits}): its residual is "
+                        f"now {residual:g} time codes")
 
 
 def _world(ctx: SolveContext, uv: np.ndarray) -> np.ndarray:

@@ -5,10 +5,12 @@ For each edited agent with two legs (found by name or set by ``mocap:leftLegJoin
 kinematics and carried by the agent's edited ground motion. Each foot contact of the
 source clip (authored with ``MocapFootContactAPI``, else detected) gets one plant: the
 source foot carried by one turn and one ground shift, chosen by least squares where the
-edit puts the foot, and leashed to stay within ``LEASH_M`` and ``LEASH_DEGREES`` of it. The
-solver's foot-locking job (:mod:`mocapedit.solve.footlock`) moves the legs of all agents at once
-(all of the shot's, or a run of them on a worker when ``SolveOptions.components`` is set: an
-agent's legs depend on no other agent's, :func:`lock_agents`). Agents whose legs change get a pose edit that replaces their hip, knee and ankle
+edit puts the foot, and leashed to stay within what the leg can reach from where the edit puts
+the foot (at least ``LEASH_M``, with the pelvis lowered by at most ``MAX_DROP_M``) and
+``LEASH_DEGREES`` of its turn. The solver's foot-locking job (:mod:`mocapedit.solve.footlock`)
+moves the legs of all agents at once (all of the shot's, or a run of them on a worker when
+``SolveOptions.components`` is set: an agent's legs depend on no other agent's,
+:func:`lock_agents`). Agents whose legs change get a pose edit that replaces their hip, knee and ankle
 rotations (and the skeleton root's translation where the pelvis is lowered), so the writer
 bakes their animation.
 
@@ -35,10 +37,18 @@ from mocapedit.model.data import Agent
 from mocapedit.model.progress import Silent
 from mocapedit.model.report import Report
 
-#: Seconds over which a lock blends in before a contact and out after it.
+#: Seconds over which a lock blends in before a contact and out after it; longer in proportion
+#: where the plant lies further than ``LEASH_M`` from where the edit puts the foot at the
+#: contact's end, so the leg catches up no faster than from ``LEASH_M``.
 BLEND_SECONDS = 0.1
-#: Metres a plant may lie from where the edit puts the foot before it is dragged along.
+#: Metres a plant may always lie from where the edit puts the foot before it is dragged along;
+#: further where the leg reaches it (:func:`_reach`).
 LEASH_M = 0.08
+#: Metres the pelvis may be lowered for a leg to reach a plant further than ``LEASH_M``.
+MAX_DROP_M = 0.08
+#: Metres a plant never lies further than from where the edit puts the foot, however far the
+#: leg reaches (a body dragged sideways would otherwise straddle).
+MAX_LEASH_M = 0.15
 #: Degrees a plant may be turned from the edited foot before it is turned along.
 LEASH_DEGREES = 15.0
 #: Agents whose feet the edits make slide by at most this much more than the source's (metres
@@ -109,16 +119,30 @@ def _top(agent: Agent, joint: int) -> int:
     return joint
 
 
-def _leash(offset: np.ndarray, base: np.ndarray, inside: np.ndarray, rigid: np.ndarray, radius: float) -> np.ndarray:
+def _reach(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, up: np.ndarray, drop: float) -> np.ndarray:
+    """(T,) how far (stage units, over the ground) an ankle may move from ``ankle`` in any
+    direction and still lie within the leg's soft reach from ``hip`` lowered by ``drop``: the
+    leg's soft length over the ground at that height, less the ankle's ground distance from the
+    hip. (T,3) world positions of one leg."""
+    length = np.linalg.norm(knee - hip, axis=-1) + np.linalg.norm(ankle - knee, axis=-1)
+    apart = hip - ankle
+    height = np.maximum(apart @ up - drop, 0.0)
+    over = np.linalg.norm(apart - np.outer(apart @ up, up), axis=-1)
+    return np.sqrt(np.maximum((footlock.SOFT_REACH * length) ** 2 - height ** 2, 0.0)) - over
+
+
+def _leash(offset: np.ndarray, base: np.ndarray, inside: np.ndarray, rigid: np.ndarray,
+           radius: np.ndarray) -> np.ndarray:
     """(T,D) plant shifts (or turns, D = 1) over one contact (frames ``inside``, increasing).
 
     The plant stays at ``base`` while the edited foot (``offset``, (T,D)) stays within ``radius``
-    of it; where the edit drags the body further (a long idle moved by a path edit), the plant
-    follows at that distance, so the legs never stretch beyond it. Frames ``rigid`` (a stationary
-    range, inside the contact) keep ``base``, and the plant is followed from them outwards.
-    Frames before and after the contact take its first and last plant."""
+    ((T,) or a number) of it; where the edit drags the body further (a long idle moved by a path
+    edit), the plant follows at that distance, so the legs never stretch beyond it. Frames
+    ``rigid`` (a stationary range, inside the contact) keep ``base``, and the plant is followed
+    from them outwards. Frames before and after the contact take its first and last plant."""
     out = np.broadcast_to(base, offset.shape).copy()
-    if not len(inside) or np.linalg.norm(offset[inside] - base, axis=-1).max() <= radius:
+    radius = np.broadcast_to(radius, offset.shape[:1])
+    if not len(inside) or np.all(np.linalg.norm(offset[inside] - base, axis=-1) <= radius[inside]):
         return out
     if len(rigid):
         runs = [inside[inside < rigid[0]][::-1], inside[inside > rigid[-1]]]
@@ -129,8 +153,8 @@ def _leash(offset: np.ndarray, base: np.ndarray, inside: np.ndarray, rigid: np.n
         for i in run:
             v = offset[i] - current
             d = float(np.linalg.norm(v))
-            if d > radius:
-                current = offset[i] - v * (radius / d)
+            if d > radius[i]:
+                current = offset[i] - v * (radius[i] / d)
             out[i] = current
     out[:inside[0]] = out[inside[0]]
     out[inside[-1] + 1:] = out[inside[-1]]
@@ -138,19 +162,22 @@ def _leash(offset: np.ndarray, base: np.ndarray, inside: np.ndarray, rigid: np.n
 
 
 def _leash_rows(offset: np.ndarray, base: np.ndarray, inside: np.ndarray, rigid: np.ndarray,
-                radius: float) -> np.ndarray:
-    """:func:`_leash` for many contacts at once: (C,W,D) offsets, (C,D) bases, (C,W) masks."""
+                radius: np.ndarray) -> np.ndarray:
+    """:func:`_leash` for many contacts at once: (C,W,D) offsets, (C,D) bases, (C,W) masks and
+    radii (or a number)."""
     out = np.broadcast_to(base[:, None], offset.shape).copy()
-    far = np.where(inside, np.linalg.norm(offset - base[:, None], axis=-1), 0.0).max(axis=1) > radius
+    radius = np.broadcast_to(radius, inside.shape)
+    far = (inside & (np.linalg.norm(offset - base[:, None], axis=-1) > radius)).any(axis=1)
     for c in np.flatnonzero(far):
-        out[c] = _leash(offset[c], base[c], np.flatnonzero(inside[c]), np.flatnonzero(rigid[c]), radius)
+        out[c] = _leash(offset[c], base[c], np.flatnonzero(inside[c]), np.flatnonzero(rigid[c]), radius[c])
     return out
 
 
-def _ramp(frames: np.ndarray, first: int, last: int, blend: float) -> np.ndarray:
-    """1 inside [first, last], easing to 0 over ``blend`` frames outside (smoothstep)."""
-    outside = np.maximum(first - frames, 0.0) + np.maximum(frames - last, 0.0)
-    x = np.clip(1.0 - outside / blend, 0.0, 1.0)
+def _ramp(frames: np.ndarray, first, last, blend, blend_out=None) -> np.ndarray:
+    """1 inside [first, last], easing to 0 over ``blend`` frames before and ``blend_out`` (default
+    ``blend``) after (smoothstep)."""
+    blend_out = blend if blend_out is None else blend_out
+    x = np.clip(1.0 - np.maximum(first - frames, 0.0) / blend - np.maximum(frames - last, 0.0) / blend_out, 0.0, 1.0)
     return x * x * (3.0 - 2.0 * x)
 
 
@@ -228,8 +255,12 @@ class _AgentLock:
         stationary = self.keep = np.zeros(count, dtype=bool)
         for _, first, last in agent.stationary:
             stationary |= (self.frames >= first - 1e-9) & (self.frames <= last + 1e-9)
-        radius = LEASH_M / info.meters_per_unit
         for k, leg in enumerate(self.legs):
+            # The leash: as far as the leg reaches with the pelvis lowered a little, from LEASH_M
+            # to MAX_LEASH_M.
+            radius = np.clip(_reach(self.hip[:, k], self.knee[:, k], self.ankle[:, k], up_vector,
+                                    MAX_DROP_M / info.meters_per_unit),
+                             LEASH_M / info.meters_per_unit, MAX_LEASH_M / info.meters_per_unit)
             ranges = np.array(source_contacts[k], dtype=np.float64).reshape(-1, 2)
             # The contacts of this foot at once, one row each over the frames its ramp reaches.
             inside = (self.frames >= ranges[:, :1] - 1e-9) & (self.frames <= ranges[:, 1:] + 1e-9)   # (C,T)
@@ -239,15 +270,13 @@ class _AgentLock:
                 continue
             self.locked += len(ranges)
             self.contact[:, k] = inside.any(axis=0)
-            w_all = _ramp(self.frames, ranges[:, :1], ranges[:, 1:], blend)                          # (C,T)
-            reached = w_all > 0
+            reached = _ramp(self.frames, ranges[:, :1], ranges[:, 1:], blend * MAX_LEASH_M / LEASH_M) > 0  # (C,T)
             lo = reached.argmax(axis=1)
             width = int((reached.sum(axis=1)).max())
             at = lo[:, None] + np.arange(width)                                                      # (C,W)
             valid = at < count
             at = np.minimum(at, count - 1)
             valid &= np.take_along_axis(reached, at, axis=1)
-            w = np.where(valid, np.take_along_axis(w_all, at, axis=1), 0.0)
             inside = np.take_along_axis(inside, at, axis=1) & valid
             # Where a contact meets a stationary range, the body moves rigidly there: the plant
             # is that motion, so the range keeps its shape (no correction inside it).
@@ -268,7 +297,15 @@ class _AgentLock:
             carried = np.einsum("cti,ctij->ctj", foot - pivot[:, None], spin) + np.einsum("ci,cij->cj", pivot, base)[:, None]
             offset = pos[leg.ankle][at] - carried
             offset[..., up] = 0.0  # feet stay at their source height: never below their ground
-            shift = _leash_rows(offset, (offset * chosen[..., None]).sum(1) / n_chosen, inside, rigid, radius)
+            shift = _leash_rows(offset, (offset * chosen[..., None]).sum(1) / n_chosen, inside, rigid, radius[at])
+            # The lock eases in and out over longer where the plant lies far from the edited foot
+            # (within the frames reached above).
+            far = np.linalg.norm(shift - offset, axis=-1) / (LEASH_M / info.meters_per_unit)    # (C,W)
+            rows_c = np.arange(len(at))
+            ends = inside.argmax(axis=1), width - 1 - inside[:, ::-1].argmax(axis=1)
+            blend_in, blend_out = (blend * np.clip(far[rows_c, e], 1.0, MAX_LEASH_M / LEASH_M)[:, None] for e in ends)
+            w = np.where(valid, _ramp(self.frames[at], ranges[:, :1], ranges[:, 1:], blend_in, blend_out), 0.0)
+            valid &= w > 0
             plant_rot = quat_multiply(_yaw_quat(yaw.reshape(-1), up_vector).reshape(yaw.shape + (4,)),
                                       posed_rot[leg.ankle][at])
             plant_rot *= np.where(np.sum(plant_rot * rot[leg.ankle][at], -1) < 0, -1.0, 1.0)[..., None]
