@@ -191,3 +191,49 @@ def test_a_cmu_walk_retimed_on_a_24_fps_z_up_stage_plays_the_source_at_its_new_t
     # The baked form, on the same shot frames: 4.4e-5 m apart at most (measured), see BETWEEN_SAMPLES.
     assert np.abs(edited - _world(ref, path, shot)).max() * 0.01 < 1e-4
     assert np.abs(_world(src, path, shot) - edited).max() * 0.01 > 0.1   # it was retimed
+
+
+def test_locked_legs_are_baked_as_rotations_over_the_retimed_source(tmp_path):
+    """Foot locking changes only leg rotations (and lowers the pelvis): the agent's animation
+    re-times its source clip by a value clip and holds only the rotations as samples; the
+    lowering rides on the agent's transform op. Evaluated by UsdSkel it plays what the fully
+    baked form plays, and the layer is smaller."""
+    clip = walker.walk(frames=FRAMES, name="walk")
+    specs = [examples.AgentSpec("a", clip, (0, 0, 0), 0.0, 0.0),
+             examples.AgentSpec("b", clip, (3, 0, 0), 20.0, 5.0)]
+    shot = tmp_path / "shot.usda"
+    stage = examples.build_crowd_stage(shot, specs)
+    # Both bent sideways at their last frame (a: also played later from frame 30).
+    for agent, start, dx in (("a", 0.0, 0.9), ("b", 5.0, -0.8)):
+        path = f"{CROWD}/{agent}"
+        ends = world_joints(stage, f"{path}/Skel", [start, start + FRAMES - 1])[:, 0]
+        ends[:, 1] = 0.0
+        examples.add_position_constraint(stage, f"/Edits/{agent}0", path, 0, tuple(map(float, ends[0])))
+        examples.add_position_constraint(stage, f"/Edits/{agent}1", path, FRAMES - 1,
+                                         tuple(map(float, ends[1] + [dx, 0.0, 0.0])))
+    examples.add_time_constraint(stage, "/Edits/late", f"{CROWD}/a", 30, 36.5)
+    stage.GetRootLayer().Save()
+    clips, out, layer_path = _composed(tmp_path, str(shot), "clips")
+    baked, ref, baked_path = _composed(tmp_path, str(shot), "baked", bake_timing=True)
+    assert clips.report.stats.foot_locked_agents == baked.report.stats.foot_locked_agents == 2
+    assert clips.report.agent(f"{CROWD}/a").max_pelvis_drop > 1e-3
+    layer = Sdf.Layer.FindOrOpen(str(layer_path))
+    for spec in layer.GetPrimAtPath("/MocapEdit/Animations").nameChildren:
+        assert spec.HasInfo("clips")
+        samples = {a.name: layer.GetNumTimeSamplesForPath(a.path) for a in spec.attributes}
+        assert samples.get("rotations", 0) > 0 and not samples.get("translations") and not samples.get("scales")
+    assert baked_path.stat().st_size > 1.3 * layer_path.stat().st_size
+    src = Usd.Stage.Open(str(shot))
+    for agent in ("a", "b"):
+        path = f"{CROWD}/{agent}"
+        times = _anim_times(ref, path)
+        a, b = _world(out, path, times), _world(ref, path, times)
+        assert np.abs(a - b).max() < 1e-6, agent
+        # Between two shot frames the value clip plays the source's translations at the time the
+        # map gives, the baked form interpolates its frames: a warped agent differs by a few
+        # millimetres there (2.3 mm measured), an unwarped one by float rounding.
+        between = times[:-1] + 0.5
+        apart = np.abs(_world(out, path, between) - _world(ref, path, between)).max()
+        assert apart < (5e-3 if agent == "a" else BETWEEN_SAMPLES), agent
+        # The locked legs did change the pose: the source carried along plays otherwise.
+        assert np.abs(_world(src, path, times) - a).max() > 1e-2

@@ -167,6 +167,12 @@ def ground_motion(src_uv: np.ndarray, src_heading: np.ndarray, new_uv: np.ndarra
     return to_origin @ turn @ to_new
 
 
+def lowering(drop: np.ndarray, up_axis: str) -> np.ndarray:
+    """(T,4,4) world translations lowering a body by ``drop`` (T,) stage units along up."""
+    drop = np.asarray(drop, dtype=np.float64)
+    return kinematics.translation_matrix(ground.from_ground(np.zeros(drop.shape + (2,)), -drop, up_axis))
+
+
 def agent_xform_op(agent: Agent, motion: np.ndarray) -> np.ndarray:
     """(F,4,4) values of the transform op prepended to the agent prim's xformOpOrder.
 

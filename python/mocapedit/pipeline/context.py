@@ -103,9 +103,24 @@ class SolveContext:
         """(clip layer, prim path) when the agent's only change of pose is its timing and its clip
         can be re-timed by a value clip (one spec's samples, in a layer on disk); None when it is
         baked instead (layered, ``bake_timing``, a clip split over specs or only in memory)."""
-        if self.options.bake_timing or path not in self.time_maps or path in self.pose_edits:
+        if path not in self.time_maps or path in self.pose_edits:
             return None
-        if any(path in layer.agents for layer in self.data.layers):
+        return self.clip_spec(path)
+
+    def rotations_spec(self, path: str) -> tuple[str, str] | None:
+        """(clip layer, prim path) when the agent's pose edits change only joint rotations
+        (locked legs, their lowering carried by the agent's transform) and its clip can be
+        re-timed by a value clip: the writer then bakes the rotations alone over the re-timed
+        source. None otherwise."""
+        edits = self.pose_edits.get(path)
+        if not edits or any(getattr(e, "CHANNELS", None) != ("rotations",) for e in edits):
+            return None
+        return self.clip_spec(path)
+
+    def clip_spec(self, path: str) -> tuple[str, str] | None:
+        """(clip layer, prim path) of the agent's clip when a value clip can re-time it: its
+        samples in one spec of a layer on disk, no animation layer over it, no ``bake_timing``."""
+        if self.options.bake_timing or any(path in layer.agents for layer in self.data.layers):
             return None
         clip = self.data.clip_of(self.data.agents[path])
         spec = clip.sample_spec

@@ -56,12 +56,25 @@ def compose_edits(ctx: SolveContext) -> None:
         times, frames = ctx.output_frames(path)
         edit = writer.AgentEdit()
         clip = ctx.data.clip_of(agent)
-        spec = ctx.retimed_spec(path)
+        spec = ctx.retimed_spec(path) or ctx.rotations_spec(path)
+        lowered = None
         if spec:
-            # Only the timing changed: the source clip plays on the time map, nothing is baked.
-            edit.retimed = writer.RetimedClip(layer=spec[0], prim_path=spec[1], joints=list(clip.joints),
-                                              stage_times=ctx.time_maps[path], clip_times=clip.spec_times)
-        elif path in ctx.time_maps or path in ctx.pose_edits:
+            # The source clip plays on the agent's timing (its own, or the time map), nothing
+            # of it is baked ...
+            edit.retimed = writer.RetimedClip(
+                layer=spec[0], prim_path=spec[1], joints=list(clip.joints),
+                stage_times=ctx.time_maps.get(path, agent.sample_times), clip_times=clip.spec_times)
+        if path in ctx.pose_edits and spec:
+            # ... but the rotations the pose edits change, authored over it; a lowered body is
+            # carried by the agent's transform.
+            pose = animation.sample_pose(clip, frames)
+            for pose_edit in ctx.pose_edits[path]:
+                pose = pose_edit.apply(pose, times, frames)
+                if pose_edit.drop is not None:
+                    lowered = pose_edit.drop if lowered is None else lowered + pose_edit.drop
+            edit.animation = writer.BakedAnimation(joints=pose.joints, times=times, translations=None,
+                                                   rotations=pose.rotations, scales=None)
+        elif not spec and (path in ctx.time_maps or path in ctx.pose_edits):
             pose = animation.sample_pose(clip, frames)
             for pose_edit in ctx.pose_edits.get(path, []):
                 pose = pose_edit.apply(pose, times, frames)
@@ -69,16 +82,20 @@ def compose_edits(ctx: SolveContext) -> None:
                 joints=pose.joints, times=times, translations=pose.translations,
                 rotations=pose.rotations, scales=pose.scales)
         edited = ctx.paths.get(path)
-        if edited is not None:
+        if edited is not None or lowered is not None:
             # Untimed agents are written at their own frames: nothing to interpolate.
             whole = len(frames) == len(traj.ground) and np.array_equal(frames, np.arange(len(frames)))
             at = (lambda values: values) if whole else (lambda values: animation.interp_frames(values, frames))
-            motion = trajectory.ground_motion(at(traj.ground), at(traj.heading), at(edited.ground),
-                                              at(edited.heading), up)
+            moved = edited if edited is not None else traj
+            motion = trajectory.ground_motion(at(traj.ground), at(traj.heading), at(moved.ground),
+                                              at(moved.heading), up)
+            if lowered is not None:
+                motion = motion @ trajectory.lowering(lowered, up)
             # A path moved by less than a nanometre (numerical noise of a solve that had nothing
             # to do) is not an edit: the agent is not written.
             still = 1e-9 / ctx.data.info.meters_per_unit
-            if (np.abs(edited.ground - traj.ground).max(initial=0.0) > still
+            if lowered is not None or (
+                    np.abs(edited.ground - traj.ground).max(initial=0.0) > still
                     or np.abs(edited.heading - traj.heading).max(initial=0.0) > 1e-9):
                 edit.times = times
                 parent = agent.agent_parent_to_world

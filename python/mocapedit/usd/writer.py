@@ -12,8 +12,12 @@ UsdSkel and UsdGeom. Layout:
   clip's own time, ``clips:active`` plays the one clip): nothing is baked, the layer grows
   by one time pair per source frame (an edit op of such an agent is sampled at the same
   shot times);
-- an agent whose poses changed (layering) gets a baked SkelAnimation there instead;
-  either is bound to its skeleton with ``skel:animationSource``, and agents whose
+- an agent whose locked legs change only joint rotations gets that re-timed animation
+  too, with the rotations baked over it (local time samples are stronger than the value
+  clip's; translations and scales still play the source's, and a lowered pelvis is carried
+  by the agent's transform op);
+- an agent whose poses changed otherwise (layering) gets a baked SkelAnimation there
+  instead; each is bound to its skeleton with ``skel:animationSource``, and agents whose
   animations are identical share one;
 - guide geometry goes under ``/MocapEdit/Guides`` with purpose ``guide``;
 - ``customLayerData["mocapedit"]`` (:mod:`mocapedit.usd.edits_format`) records the version,
@@ -46,11 +50,13 @@ ANIMATIONS = ROOT.AppendChild("Animations")
 
 @dataclass
 class BakedAnimation:
+    """Joint transforms baked at stage times. Over a :class:`RetimedClip` (``AgentEdit.retimed``)
+    a channel left None plays the re-timed source's."""
     joints: list[str]
-    times: np.ndarray            # (T,) stage times
-    translations: np.ndarray     # (T,J,3)
-    rotations: np.ndarray        # (T,J,4) (x,y,z,w)
-    scales: np.ndarray | None    # (T,J,3)
+    times: np.ndarray                  # (T,) stage times
+    translations: np.ndarray | None    # (T,J,3)
+    rotations: np.ndarray              # (T,J,4) (x,y,z,w)
+    scales: np.ndarray | None          # (T,J,3)
 
 
 @dataclass
@@ -65,7 +71,9 @@ class RetimedClip:
 
 @dataclass
 class AgentEdit:
-    """What the writer authors for one agent; every part optional (at most one animation)."""
+    """What the writer authors for one agent; every part optional. With both ``retimed`` and
+    ``animation``, the animation's channels are authored over the re-timed source clip (the
+    pose changes only there: locked legs' rotations); with one of them, that one alone."""
     times: np.ndarray | None = None          # (T,) stage times of the xform op samples
     xform_op: np.ndarray | None = None       # (T,4,4) prepended op values
     animation: BakedAnimation | None = None
@@ -137,7 +145,8 @@ def _animation_key(anim: BakedAnimation, digests: dict[int, bytes]) -> tuple:
             digests[id(array)] = d
         return d
     return (tuple(anim.joints), np.asarray(anim.times, dtype=np.float64).tobytes(),
-            digest(anim.translations), digest(anim.rotations), digest(anim.scales))
+            digest(anim.translations), digest(anim.rotations), digest(anim.scales),
+            anim.translations is None, anim.scales is None)
 
 
 def _bind_animation(layer: Sdf.Layer, agent: Agent, path: Sdf.Path) -> None:
@@ -151,16 +160,23 @@ def _author_animation(layer: Sdf.Layer, anim: BakedAnimation, name: str) -> Sdf.
     path = ANIMATIONS.AppendChild(name)
     spec = sdf.define(layer, path, "SkelAnimation")
     sdf.attr(spec, "joints", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(anim.joints), uniform=True)
+    _author_channels(layer, spec, anim)
+    return path
+
+
+def _author_channels(layer: Sdf.Layer, spec: Sdf.PrimSpec, anim: BakedAnimation) -> None:
+    """The animation's channels that are not None, as time samples on ``spec``."""
     values = [("translations", Sdf.ValueTypeNames.Float3Array, Vt.Vec3fArray, anim.translations),
-              ("rotations", Sdf.ValueTypeNames.QuatfArray, Vt.QuatfArray, anim.rotations)]
-    if anim.scales is not None:
-        values.append(("scales", Sdf.ValueTypeNames.Half3Array, Vt.Vec3hArray, anim.scales))
+              ("rotations", Sdf.ValueTypeNames.QuatfArray, Vt.QuatfArray, anim.rotations),
+              ("scales", Sdf.ValueTypeNames.Half3Array, Vt.Vec3hArray, anim.scales)]
+    times = np.asarray(anim.times, dtype=np.float64).tolist()
     for attr_name, type_name, array_type, data in values:
+        if data is None:
+            continue
         attr = sdf.attr(spec, attr_name, type_name)
         data = np.ascontiguousarray(data, dtype=np.float32)
-        for t, frame in zip(anim.times, data):
-            layer.SetTimeSample(attr.path, float(t), array_type.FromNumpy(frame))
-    return path
+        for t, frame in zip(times, data):
+            layer.SetTimeSample(attr.path, t, array_type.FromNumpy(frame))
 
 
 def asset_path(identifier: str, anchor: str | None) -> str:
@@ -276,13 +292,19 @@ def build_layer(content: LayerContent) -> Sdf.Layer:
             if edit.xform_op is not None:
                 _author_xform_op(layer, agent, edit)
             if edit.animation is not None or edit.retimed is not None:
-                retimed = edit.retimed
-                key = _retimed_key(retimed) if retimed else _animation_key(edit.animation, digests)
+                retimed, anim = edit.retimed, edit.animation
+                key = ((_retimed_key(retimed) if retimed else ())
+                       + (_animation_key(anim, digests) if anim is not None else ()))
                 path = authored.get(key)
                 if path is None:
                     name = _safe_name(agent_path, taken)
-                    path = authored[key] = (_author_retimed(layer, retimed, name, content.anchor) if retimed
-                                            else _author_animation(layer, edit.animation, name))
+                    if retimed:
+                        path = _author_retimed(layer, retimed, name, content.anchor)
+                        if anim is not None:
+                            _author_channels(layer, layer.GetPrimAtPath(path), anim)
+                    else:
+                        path = _author_animation(layer, anim, name)
+                    authored[key] = path
                 _bind_animation(layer, agent, path)
         _author_guides(layer, content.guides)
     return layer

@@ -333,15 +333,13 @@ class _AgentLock:
         return None
 
     def apply(self, out: footlock.LegOutputs, lo: int, hi: int, up: np.ndarray,
-              meters_per_unit: float) -> animation.Pose | None:
-        """The locked pose, or None when locking leaves the legs as they are."""
-        pose = self.pose
-        rotations = pose.rotations.copy()
-        translations = pose.translations.copy()
-        for k, leg in enumerate(self.legs):
-            for j, new in ((leg.hip, out.hip_local), (leg.knee, out.knee_local), (leg.ankle, out.ankle_local)):
-                rotations[:, self.columns[self.agent.joints[j]]] = new[lo:hi, k]
+              meters_per_unit: float) -> "LockedLegs | None":
+        """The locked legs, or None when locking leaves them as they are."""
+        columns = [self.columns[self.agent.joints[j]] for leg in self.legs for j in (leg.hip, leg.knee, leg.ankle)]
+        rotations = np.stack([new[lo:hi, k] for k in range(len(self.legs))
+                              for new in (out.hip_local, out.knee_local, out.ankle_local)], axis=1)
         drop = out.drop[lo:hi]
+        root, shift = None, None
         if np.any(drop > 0):
             root = self.columns.get(self.agent.joints[self.root])
             if root is None:
@@ -350,8 +348,7 @@ class _AgentLock:
                     f"'{self.agent.joints[self.root]}' is not animated by the clip")
             # World offset -drop * up, in the root's parent space (the skeleton's).
             inv = np.linalg.inv(self.to_world[:, :3, :3])
-            translations[:, root] += (-drop[:, None] * up) @ inv if inv.ndim == 2 else \
-                np.einsum("ti,tij->tj", -drop[:, None] * up, inv)
+            shift = (-drop[:, None] * up) @ inv if inv.ndim == 2 else np.einsum("ti,tij->tj", -drop[:, None] * up, inv)
         correction = np.linalg.norm(out.reached[lo:hi] - self.ankle, axis=-1)
         self.max_correction = float(correction.max(initial=0.0))
         self.max_drop = float(drop.max(initial=0.0))
@@ -359,8 +356,10 @@ class _AgentLock:
         still = STILL_M / meters_per_unit
         if self.max_correction <= still and self.max_drop <= still:
             return None
-        return animation.Pose(joints=list(pose.joints), translations=translations.astype(np.float32),
-                              rotations=rotations.astype(np.float32), scales=pose.scales)
+        return LockedLegs(self.path, list(self.pose.joints), np.array(columns, dtype=np.int64),
+                          rotations.astype(np.float32),
+                          None if root is None else drop.astype(np.float64), root,
+                          None if shift is None else np.asarray(shift, dtype=np.float64))
 
 
 def _source(ctx, agent: Agent, cache: dict) -> tuple[list[list[tuple[int, int]]], float]:
@@ -386,7 +385,7 @@ def _source(ctx, agent: Agent, cache: dict) -> tuple[list[list[tuple[int, int]]]
     return hit
 
 
-def _report_skate(ctx, lock: "_AgentLock", locked_pose, chains: dict) -> tuple[float, float, float] | None:
+def _report_skate(ctx, lock: "_AgentLock", legs: "LockedLegs | None", chains: dict) -> tuple[float, float, float] | None:
     """(source, after the edits, after locking) foot skate of a locked agent, stage units per
     second, as :func:`mocapedit.tools.measure.foot_skate` measures it on the input and on the composed
     stage: joints named like feet, over the source's planted frames (a retimed agent: over its own).
@@ -411,7 +410,7 @@ def _report_skate(ctx, lock: "_AgentLock", locked_pose, chains: dict) -> tuple[f
                                                contact=before.contact if same else None).mean
 
     unlocked = skate(lock.pose)
-    return before.mean, unlocked, skate(locked_pose) if locked_pose is not None else unlocked
+    return before.mean, unlocked, skate(legs.apply(lock.pose)) if legs is not None else unlocked
 
 
 @dataclass
@@ -423,7 +422,7 @@ class AgentLocking:
     skate: tuple | None = None             # (source, unlocked, edited) foot skate
     max_drop: float = 0.0
     max_correction: float = 0.0
-    pose: animation.Pose | None = None     # the locked pose, when the legs change
+    legs: "LockedLegs | None" = None       # the pose edit, when the legs change
     kept: bool = False                     # locked, but the legs kept (as planted as the source's)
     plants: tuple | None = None            # (points, colors) of its plant guides
 
@@ -466,13 +465,13 @@ def lock_agents(ctx: SolveContext) -> list[AgentLocking]:
     chains: dict = {}
     tolerance = SKATE_TOLERANCE_M / info.meters_per_unit
     for (lock, result), lo, hi in zip(locks, offsets[:-1], offsets[1:]):
-        locked_pose = lock.apply(legs, int(lo), int(hi), up, info.meters_per_unit)
-        skate = _report_skate(ctx, lock, locked_pose, chains)
-        if locked_pose is not None and skate is not None and skate[1] <= skate[0] + tolerance:
+        locked_legs = lock.apply(legs, int(lo), int(hi), up, info.meters_per_unit)
+        skate = _report_skate(ctx, lock, locked_legs, chains)
+        if locked_legs is not None and skate is not None and skate[1] <= skate[0] + tolerance:
             # The edit left the feet as planted as the source's: keep the legs, bake nothing.
-            locked_pose, skate = None, (skate[0], skate[1], skate[1])
+            locked_legs, skate = None, (skate[0], skate[1], skate[1])
             result.kept = True
-        result.contacts, result.skate, result.pose = lock.locked, skate, locked_pose
+        result.contacts, result.skate, result.legs = lock.locked, skate, locked_legs
         result.max_drop, result.max_correction = lock.max_drop, lock.max_correction
         result.plants = _plants(lock)
     return out
@@ -507,11 +506,10 @@ def _lock_elsewhere(ctx: SolveContext) -> list[AgentLocking]:
     for part in pool.map(lock_part, [_part(ctx, touched[run]) for run in runs]):
         out.extend(part)
     for r in out:
-        if r.pose is not None:
+        if r.legs is not None:
             # Arrays that crossed the network may sit unaligned in their message, which USD's
             # array conversion rejects: the writer gets aligned copies.
-            r.pose = dataclasses.replace(r.pose, **{k: np.require(getattr(r.pose, k), requirements=("C", "A"))
-                                                     for k in ("translations", "rotations", "scales")})
+            r.legs = r.legs.aligned()
     return out
 
 
@@ -540,12 +538,12 @@ def run(ctx: SolveContext) -> None:
         entry.foot_contacts_locked = r.contacts
         entry.max_pelvis_drop = r.max_drop
         entry.max_foot_correction = r.max_correction
-        if r.pose is not None:
-            ctx.pose_edits.setdefault(r.path, []).append(LockedLegs(r.path, r.pose))
+        if r.legs is not None:
+            ctx.pose_edits.setdefault(r.path, []).append(r.legs)
     if ctx.options.guides:
         _plant_guides(ctx, [r.plants for r in locked if r.path in ctx.pose_edits])
     stats = ctx.report.stats
-    stats.foot_locked_agents = sum(r.pose is not None for r in locked)
+    stats.foot_locked_agents = sum(r.legs is not None for r in locked)
     stats.foot_locking_not_needed = sum(r.kept for r in locked)
     stats.foot_contacts_locked = sum(r.contacts for r in locked)
     # The shot's figures: mean skate over the agents with contacts, the largest corrections.
@@ -583,13 +581,39 @@ def _plant_guides(ctx, plants: list) -> None:
 
 @dataclass
 class LockedLegs:
-    """The pose edit of foot locking: the agent's pose with its locked legs (and lowered root)."""
+    """The pose edit of foot locking: new local rotations of the legs' hip, knee and ankle joints
+    and, where the pelvis is lowered, the skeleton root lowered with it. Only what changes is
+    kept (an agent's whole pose is many times larger)."""
     path: str
-    locked: animation.Pose
+    joints: list[str]                   # the joints of the pose it was computed for
+    columns: np.ndarray                 # (K,) columns of that pose whose rotations it replaces
+    rotations: np.ndarray               # (T,K,4) float32 local rotations (x, y, z, w)
+    drop: np.ndarray | None = None      # (T,) how far the whole body is lowered along up, stage units
+    root: int | None = None             # column of the skeleton root, when lowered
+    root_shift: np.ndarray | None = None  # (T,3) the lowering as the root's local translation
 
-    def apply(self, pose: animation.Pose, out_times: np.ndarray, src_frames: np.ndarray) -> animation.Pose:
-        """``locked``, which was computed for ``pose`` (an error for any other pose)."""
-        if pose.joints != self.locked.joints or pose.rotations.shape != self.locked.rotations.shape:
+    #: The pose channels it changes when the lowering is carried by the agent's transform
+    #: instead (:attr:`drop`): the writer then bakes only these over the re-timed source.
+    CHANNELS = ("rotations",)
+
+    def apply(self, pose: animation.Pose, out_times: np.ndarray | None = None,
+              src_frames: np.ndarray | None = None) -> animation.Pose:
+        """``pose`` (the pose the legs were locked on) with the locked legs and lowered root."""
+        if list(pose.joints) != self.joints or pose.rotations.shape[0] != self.rotations.shape[0]:
             raise MocapEditError(f"<{self.path}>: foot locking was computed for another pose")
-        return self.locked
+        rotations = pose.rotations.copy()
+        rotations[:, self.columns] = self.rotations
+        translations = pose.translations
+        if self.root_shift is not None:
+            translations = translations.copy()
+            translations[:, self.root] += self.root_shift
+        return animation.Pose(joints=list(pose.joints), translations=translations.astype(np.float32),
+                              rotations=rotations.astype(np.float32), scales=pose.scales)
 
+    def aligned(self) -> "LockedLegs":
+        """A copy whose arrays are C-contiguous and aligned (arrays that crossed the network
+        may not be, and USD's array conversion rejects those)."""
+        def fix(a):
+            return None if a is None else np.require(a, requirements=("C", "A"))
+        return dataclasses.replace(self, columns=fix(self.columns), rotations=fix(self.rotations),
+                                   drop=fix(self.drop), root_shift=fix(self.root_shift))
