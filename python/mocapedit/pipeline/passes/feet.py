@@ -427,14 +427,19 @@ class AgentLocking:
     plants: tuple | None = None            # (points, colors) of its plant guides
 
 
+#: Agents whose legs one run of the IK job moves: their legs' arrays are alive together, so a
+#: crowd's memory stays bounded (results do not depend on it).
+LOCK_RUN = 256
+
+
 def lock_agents(ctx: SolveContext) -> list[AgentLocking]:
     """Locks the feet of every edited agent of ``ctx`` (its :meth:`touched`), in order. The result
     of one agent depends on nothing else, so a shot's agents can be locked in runs elsewhere
     (``SolveOptions.components``) and merged in order."""
     data = ctx.data
-    info = data.info
     cache: dict = {}
     shared: dict = {}
+    chains: dict = {}
     out: list[AgentLocking] = []
     locks: list[tuple[_AgentLock, AgentLocking]] = []
     for path in ctx.touched():
@@ -452,8 +457,17 @@ def lock_agents(ctx: SolveContext) -> list[AgentLocking]:
                 result.note = f"foot locking skipped: {why}"
             elif lock.locked:
                 locks.append((lock, result))
-    if not locks:
-        return out
+        if len(locks) >= LOCK_RUN:
+            _lock_run(ctx, locks, chains)
+            locks = []
+    if locks:
+        _lock_run(ctx, locks, chains)
+    return out
+
+
+def _lock_run(ctx: SolveContext, locks: list, chains: dict) -> None:
+    """Runs the IK job on some agents' legs and fills in their results."""
+    info = ctx.data.info
     up = np.zeros(3)
     up[ground.up_index(info.up_axis)] = 1.0
     offsets = np.cumsum([0] + [len(lock.times) for lock, _ in locks])
@@ -462,7 +476,6 @@ def lock_agents(ctx: SolveContext) -> list[AgentLocking]:
         offsets=offsets.astype(np.int64), smooth=np.array([lock.blend_frames for lock, _ in locks], dtype=np.int64),
         up=up, **{k: np.concatenate([p[k] for p in parts]) for k in parts[0]})
     legs = footlock.lock_feet(inputs)
-    chains: dict = {}
     tolerance = SKATE_TOLERANCE_M / info.meters_per_unit
     for (lock, result), lo, hi in zip(locks, offsets[:-1], offsets[1:]):
         locked_legs = lock.apply(legs, int(lo), int(hi), up, info.meters_per_unit)
@@ -474,7 +487,6 @@ def lock_agents(ctx: SolveContext) -> list[AgentLocking]:
         result.contacts, result.skate, result.legs = lock.locked, skate, locked_legs
         result.max_drop, result.max_correction = lock.max_drop, lock.max_correction
         result.plants = _plants(lock)
-    return out
 
 
 def lock_part(part: dict) -> list[AgentLocking]:
