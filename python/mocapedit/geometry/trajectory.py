@@ -182,3 +182,26 @@ def agent_xform_op(agent: Agent, motion: np.ndarray) -> np.ndarray:
     """
     w = agent.agent_parent_to_world
     return w @ motion @ np.linalg.inv(w)
+
+
+def xform_ops(op: np.ndarray, up_axis: str) -> list[tuple[str, np.ndarray]]:
+    """The transform op values of :func:`agent_xform_op` as the fewest USD ops that make them,
+    outermost first: ``("translate", (T,3))`` then ``("rotateY" or "rotateZ", (T,) degrees)``
+    where each op turns about the up axis alone (an edit's turn in an upright parent: a quarter
+    of a matrix's bytes, and values an artist can read), else ``[("transform", (T,4,4))]``."""
+    op = np.asarray(op, dtype=np.float64)
+    rot = op[:, :3, :3]
+    up = ground.up_index(up_axis)
+    axis = np.zeros(3)
+    axis[up] = 1.0
+    upright = (np.abs(rot[:, up, :] - axis).max(initial=0.0) < 1e-12
+               and np.abs(rot[:, :, up] - axis).max(initial=0.0) < 1e-12
+               and np.abs(op[:, :3, 3]).max(initial=0.0) < 1e-12 and np.abs(op[:, 3, 3] - 1.0).max(initial=0.0) < 1e-12
+               and np.abs(np.einsum("tij,tkj->tik", rot, rot) - np.eye(3)).max(initial=0.0) < 1e-12)
+    if not upright:
+        return [("transform", op)]
+    if up_axis.upper() == "Z":
+        name, angle = "rotateZ", np.arctan2(rot[:, 0, 1], rot[:, 0, 0])
+    else:
+        name, angle = "rotateY", np.arctan2(-rot[:, 0, 2], rot[:, 0, 0])
+    return [("translate", op[:, 3, :3].copy()), (name, np.degrees(angle))]

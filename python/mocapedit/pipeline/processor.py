@@ -103,8 +103,8 @@ def compose_edits(ctx: SolveContext) -> None:
                     agent_view = _with_parent(agent, animation.interp_frames(parent, frames))
                 else:
                     agent_view = agent
-                edit.xform_op = trajectory.agent_xform_op(agent_view, motion)
-        if edit.animation is not None or edit.retimed is not None or edit.xform_op is not None:
+                edit.xform_ops = trajectory.xform_ops(trajectory.agent_xform_op(agent_view, motion), up)
+        if edit.animation is not None or edit.retimed is not None or edit.xform_ops:
             ctx.edits[path] = edit
 
 

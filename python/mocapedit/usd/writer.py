@@ -4,8 +4,10 @@ The layer holds only ``over`` opinions on edited agents and new prims under
 ``/MocapEdit``; placed over the input stage it plays the edited motion through plain
 UsdSkel and UsdGeom. Layout:
 
-- an edited agent gets ``xformOp:transform:mocapEdit`` (time-sampled) prepended to its
-  ``xformOpOrder``: the rigid ground motion of its path edit;
+- an edited agent gets ``xformOp:translate:mocapEdit`` and ``xformOp:rotateY:mocapEdit``
+  (``rotateZ`` on a Z-up stage; ``xformOp:transform:mocapEdit`` under a parent that is not
+  upright), time-sampled and prepended to its ``xformOpOrder``: the rigid ground motion of
+  its path edit;
 - an agent whose joints changed only in timing (time warp, time and sync constraints,
   speed matching) gets a SkelAnimation under ``/MocapEdit/Animations`` that references its
   source clip and re-times it with USD value clips (``clips:times`` maps shot time to the
@@ -42,7 +44,13 @@ from mocapedit.usd import edits_format, outputs, sdf
 from mocapedit.model.data import Agent, StageInfo
 from mocapedit.model.names import unique_identifier
 
-EDIT_OP = "xformOp:transform:mocapEdit"
+#: The suffix of the transform ops the writer prepends (``xformOp:<kind>:mocapEdit``).
+EDIT_SUFFIX = "mocapEdit"
+#: USD value type of each kind of op it writes (all in double precision).
+_OP_TYPES = {"translate": (Sdf.ValueTypeNames.Double3, Vt.Vec3dArray),
+             "rotateY": (Sdf.ValueTypeNames.Double, Vt.DoubleArray),
+             "rotateZ": (Sdf.ValueTypeNames.Double, Vt.DoubleArray),
+             "transform": (Sdf.ValueTypeNames.Matrix4d, Vt.Matrix4dArray)}
 ROOT = Sdf.Path("/MocapEdit")
 GUIDES = ROOT.AppendChild("Guides")
 ANIMATIONS = ROOT.AppendChild("Animations")
@@ -75,7 +83,9 @@ class AgentEdit:
     ``animation``, the animation's channels are authored over the re-timed source clip (the
     pose changes only there: locked legs' rotations); with one of them, that one alone."""
     times: np.ndarray | None = None          # (T,) stage times of the xform op samples
-    xform_op: np.ndarray | None = None       # (T,4,4) prepended op values
+    # The prepended ops, outermost first: (kind, (T,...) values), kind one of translate,
+    # rotateY, rotateZ (degrees) or transform ((T,4,4) matrices).
+    xform_ops: list[tuple[str, np.ndarray]] = field(default_factory=list)
     animation: BakedAnimation | None = None
     retimed: RetimedClip | None = None
 
@@ -117,19 +127,21 @@ def _safe_name(path: str, taken: set[str]) -> str:
     return unique_identifier(path.strip("/"), taken, "agent")
 
 
-def _author_xform_op(layer: Sdf.Layer, agent: Agent, edit: AgentEdit) -> None:
+def _author_xform_ops(layer: Sdf.Layer, agent: Agent, edit: AgentEdit) -> None:
     spec = sdf.over_chain(layer, Sdf.Path(agent.path))
-    order = list(agent.xform_op_order)
-    if EDIT_OP in order:
-        order.remove(EDIT_OP)
+    order = [o for o in agent.xform_op_order if not o.endswith(":" + EDIT_SUFFIX)]
     at = 1 if order and order[0] == "!resetXformStack!" else 0
-    order.insert(at, EDIT_OP)
+    names = [f"xformOp:{kind}:{EDIT_SUFFIX}" for kind, _ in edit.xform_ops]
+    order[at:at] = names
     sdf.attr(spec, "xformOpOrder", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(order), uniform=True)
-    attr = sdf.attr(spec, EDIT_OP, Sdf.ValueTypeNames.Matrix4d)
-    # One conversion of the whole (T,4,4) array: per-sample Gf.Matrix4d(list) took half the time.
-    values = Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(edit.xform_op, dtype=np.float64))
-    for t, m in zip(np.asarray(edit.times, dtype=np.float64).tolist(), values):
-        layer.SetTimeSample(attr.path, t, m)
+    times = np.asarray(edit.times, dtype=np.float64).tolist()
+    for name, (kind, values) in zip(names, edit.xform_ops):
+        type_name, array_type = _OP_TYPES[kind]
+        attr = sdf.attr(spec, name, type_name)
+        # One conversion of the whole array: per-sample Gf values from lists took half the time.
+        converted = array_type.FromNumpy(np.ascontiguousarray(values, dtype=np.float64))
+        for t, v in zip(times, converted):
+            layer.SetTimeSample(attr.path, t, v)
 
 
 def _animation_key(anim: BakedAnimation, digests: dict[int, bytes]) -> tuple:
@@ -289,8 +301,8 @@ def build_layer(content: LayerContent) -> Sdf.Layer:
         digests: dict[int, bytes] = {}
         for agent_path in sorted(content.edits):
             edit, agent = content.edits[agent_path], content.agents[agent_path]
-            if edit.xform_op is not None:
-                _author_xform_op(layer, agent, edit)
+            if edit.xform_ops:
+                _author_xform_ops(layer, agent, edit)
             if edit.animation is not None or edit.retimed is not None:
                 retimed, anim = edit.retimed, edit.animation
                 key = ((_retimed_key(retimed) if retimed else ())
