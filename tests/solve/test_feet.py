@@ -487,3 +487,27 @@ def test_an_edit_that_keeps_the_feet_planted_is_not_locked_nor_baked(tmp_path, w
     result, _ = _solve(tmp_path, "bent")
     assert result.report.stats["footLockedAgents"] == 1
     assert "SkelAnimation" in result.layer.ExportToString()
+
+
+def test_agents_a_solve_leaves_where_they_were_are_not_locked(tmp_path):
+    """A solve may give back unchanged the path of an agent it includes (pinned where it already
+    walks, a near miss that collision avoidance watched but never pushed): that is no edit. Foot
+    locking leaves such agents alone (no figures in the report, not counted in the shot's), as
+    the writer does."""
+    walk = walker.walk(frames=120, fps=24.0, name="walk")
+    specs = [examples.AgentSpec("moved", walk, (0.0, 0.0, 0.0), 0.0, 0.0),
+             examples.AgentSpec("pinned", walk, (3.0, 0.0, 0.0), 0.0, 0.0)]
+    path = tmp_path / "s.usda"
+    stage = examples.build_crowd_stage(path, specs)
+    for name, shift in (("moved", 0.6), ("pinned", 0.0)):
+        agent = f"/World/Crowd/{name}"
+        end = evaluate.agent_root_positions(stage, agent, [119.0])[0]
+        end[1] = 0.0
+        examples.add_position_constraint(stage, f"/Edits/{name}", agent, 119,
+                                         tuple(map(float, end + np.array([shift, 0.0, 0.0]))))
+    stage.GetRootLayer().Save()
+    result = solve(str(path), guides=False)
+    report = result.report
+    assert report.stats["editedAgents"] == 1
+    assert report.agent("/World/Crowd/moved").foot_contacts_locked > 0
+    assert report.agent("/World/Crowd/pinned").foot_contacts_locked is None

@@ -96,8 +96,20 @@ class SolveContext:
     guides: list = field(default_factory=list)
 
     def touched(self) -> list[str]:
-        """The agents some pass edited (path, time or pose), sorted."""
-        return sorted(set(self.paths) | set(self.time_maps) | set(self.pose_edits))
+        """The agents some pass edited (path, time or pose), sorted. A path a solve gave back
+        unchanged (an agent of a collision or group solve that nothing moved) is no edit."""
+        return sorted({p for p in self.paths if self.moved(p)} | set(self.time_maps) | set(self.pose_edits))
+
+    def moved(self, path: str) -> bool:
+        """Whether the agent's edited path differs from its source: by more than a nanometre
+        (numerical noise of a solve that had nothing to do) or 1e-9 radians of heading."""
+        edited = self.paths.get(path)
+        if edited is None:
+            return False
+        source = self.trajectories[path]
+        still = 1e-9 / self.data.info.meters_per_unit
+        return bool(np.abs(edited.ground - source.ground).max(initial=0.0) > still
+                    or np.abs(edited.heading - source.heading).max(initial=0.0) > 1e-9)
 
     def retimed_spec(self, path: str) -> tuple[str, str] | None:
         """(clip layer, prim path) when the agent's only change of pose is its timing and its clip

@@ -91,12 +91,8 @@ def compose_edits(ctx: SolveContext) -> None:
                                               at(moved.heading), up)
             if lowered is not None:
                 motion = motion @ trajectory.lowering(lowered, up)
-            # A path moved by less than a nanometre (numerical noise of a solve that had nothing
-            # to do) is not an edit: the agent is not written.
-            still = 1e-9 / ctx.data.info.meters_per_unit
-            if lowered is not None or (
-                    np.abs(edited.ground - traj.ground).max(initial=0.0) > still
-                    or np.abs(edited.heading - traj.heading).max(initial=0.0) > 1e-9):
+            # A path moved by less than a nanometre is not an edit: only its timing is written.
+            if lowered is not None or ctx.moved(path):
                 edit.times = times
                 parent = agent.agent_parent_to_world
                 if parent.shape[0] > 1:  # a moving parent, sampled per source frame
