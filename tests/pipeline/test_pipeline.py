@@ -5,10 +5,11 @@ import hashlib
 
 import numpy as np
 import pytest
-from pxr import Sdf, Usd, UsdGeom
+from pxr import Sdf, Usd, UsdGeom, Vt
 
 import mocapedit
 from mocapedit.usd import reader
+from mocapedit.data import examples, walker
 from mocapedit.geometry import trajectory
 from mocapedit.model.errors import MocapEditError
 from mocapedit.pipeline.processor import solve
@@ -178,3 +179,27 @@ def test_walker_crowd_round_trip_keeps_foot_skate(tmp_path):
     assert src.mean < 5.0, "the procedural walker plants its feet (cm/s)"
     assert out.mean == pytest.approx(src.mean, abs=1e-6)
     assert out.contact_seconds.sum() > 0.5
+
+
+def test_agents_sharing_a_skeleton_asset_read_their_own_overrides(tmp_path):
+    """The reader reads a skeleton or clip that many agents reference once; an agent whose own
+    layer overrides the rest pose or the clip's joint order still gets its own."""
+    clip = walker.walk(frames=10, name="walk")
+    specs = [examples.AgentSpec(n, clip, (i * 2.0, 0.0, 0.0)) for i, n in enumerate(("a", "b", "c", "d"))]
+    stage = examples.build_crowd_stage(tmp_path / "s.usda", specs)
+    rest = np.array(stage.GetPrimAtPath("/World/Crowd/a/Skel").GetAttribute("restTransforms").Get())
+    moved = rest.copy()
+    moved[1, 3, :3] += (0.0, 0.25, 0.0)
+    stage.GetPrimAtPath("/World/Crowd/b/Skel").GetAttribute("restTransforms").Set(Vt.Matrix4dArray.FromNumpy(moved))
+    anim = stage.GetPrimAtPath("/World/Crowd/c/Skel/Anim").GetAttribute("joints")
+    joints = list(anim.Get())
+    swapped = joints[:1] + joints[2:3] + joints[1:2] + joints[3:]
+    anim.Set(Vt.TokenArray(swapped))
+    stage.GetRootLayer().Save()
+    data = reader.read_stage(Usd.Stage.Open(str(tmp_path / "s.usda")))
+    agents = data.agents
+    assert np.allclose(agents["/World/Crowd/a"].rest_transforms, rest)
+    assert np.allclose(agents["/World/Crowd/b"].rest_transforms, moved)
+    assert np.allclose(agents["/World/Crowd/d"].rest_transforms, rest)
+    assert data.clip_of(agents["/World/Crowd/c"]).joints == swapped
+    assert data.clip_of(agents["/World/Crowd/d"]).joints == joints

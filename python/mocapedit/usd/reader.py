@@ -165,6 +165,23 @@ def _get(prim: Usd.Prim, name: str, default=None):
     return value
 
 
+def _origin(attr: Usd.Attribute):
+    """Where an attribute's value comes from: the layer stack and prim path of the site that
+    holds its strongest opinion (``("fallback", name)`` without one), or None when it comes from
+    value clips. Attributes of many prims that reference one asset (a crowd's skeletons) share
+    it, and then their values."""
+    if not attr:
+        return None
+    info = attr.GetResolveInfo()
+    source = info.GetSource()
+    if source in (Usd.ResolveInfoSourceNone, Usd.ResolveInfoSourceFallback):
+        return ("fallback", attr.GetName())
+    if source not in (Usd.ResolveInfoSourceDefault, Usd.ResolveInfoSourceTimeSamples):
+        return None
+    node = info.GetNode()
+    return (node.layerStack.identifier.rootLayer.identifier, str(node.path), attr.GetName())
+
+
 def _ancestors(prim: Usd.Prim):
     """The prim and its ancestors up to (not including) the pseudo-root."""
     while prim and not prim.IsPseudoRoot():
@@ -240,7 +257,9 @@ class StageReader:
         self.xforms = _XformTimes(stage)
         self.clips: dict[tuple, model.Clip] = {}
         self.agents: dict[str, model.Agent] = {}
-        self._skeletons: dict[str, tuple] = {}
+        self._skeletons: dict = {}    # skeleton path, or the origin of its values -> (joints, parents, rest)
+        self._anim_joints: dict = {}  # origin of a clip's joints -> its joints
+        self._legs_by_name: dict = {}  # a skeleton's joints -> its legs found by name
         self._same_times: dict[tuple, bool] = {}
 
     # ---- agents ---------------------------------------------------------------------
@@ -293,6 +312,13 @@ class StageReader:
         hit = self._skeletons.get(key)
         if hit is not None:
             return hit
+        # Skeletons that take their joints and rest pose from one site (a crowd referencing one
+        # character) share what is read and checked of them.
+        origin = tuple(_origin(skel.GetAttribute(n)) for n in ("joints", "restTransforms"))
+        shared = self._skeletons.get(origin) if None not in origin else None
+        if shared is not None:
+            self._skeletons[key] = shared
+            return shared
         joints = [str(j) for j in (_get(skel, "joints") or [])]
         if not joints:
             raise prim_error(skel.GetPath(), "skeleton has no joints", "joints")
@@ -308,6 +334,8 @@ class StageReader:
                              f"{len(joints)} joints", "restTransforms")
         hit = (joints, parents, rest)
         self._skeletons[key] = hit
+        if None not in origin:
+            self._skeletons[origin] = hit
         return hit
 
     @staticmethod
@@ -349,7 +377,13 @@ class StageReader:
             if all_channels and (not attr or not attr.HasValue()):
                 raise prim_error(anim.GetPath(), "has no value; UsdSkel poses an animation only when "
                                  "translations, rotations and scales are all authored", name)
-        anim_joints = tuple(str(j) for j in (_get(anim, "joints") or []))
+        # Clips of many agents that reference one asset share their joints: read them once.
+        origin = _origin(anim.GetAttribute("joints"))
+        anim_joints = self._anim_joints.get(origin) if origin is not None else None
+        if anim_joints is None:
+            anim_joints = tuple(str(j) for j in (_get(anim, "joints") or []))
+            if origin is not None:
+                self._anim_joints[origin] = anim_joints
         if not anim_joints:
             raise prim_error(anim.GetPath(), "SkelAnimation has no joints", "joints")
         key = (anim_joints, specs, times.size)
@@ -412,7 +446,11 @@ class StageReader:
         return sorted(tags, key=lambda t: (t[1], t[2], t[0]))
 
     def _legs(self, prim: Usd.Prim, joints: list[str], parents: np.ndarray) -> list:
-        found = {leg.side: leg for leg in contacts.find_legs(joints, parents)}
+        key = (tuple(joints), parents.tobytes())
+        by_name = self._legs_by_name.get(key)
+        if by_name is None:
+            by_name = self._legs_by_name[key] = {leg.side: leg for leg in contacts.find_legs(joints, parents)}
+        found = dict(by_name)
         for side in contacts.SIDES:
             prop = f"mocap:{side}LegJoints"
             names = [str(n) for n in (_get(prim, prop) or [])]
