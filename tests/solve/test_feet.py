@@ -11,6 +11,7 @@ from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
 from mocapedit.geometry import contacts
 from mocapedit.data import examples, walker
 from mocapedit.solve import footlock
+from mocapedit.inspect import metrics
 from mocapedit.tools import measure
 from mocapedit.usd import evaluate
 from mocapedit.model.errors import MocapEditError
@@ -487,3 +488,37 @@ def test_an_edit_that_keeps_the_feet_planted_is_not_locked_nor_baked(tmp_path, w
     result, _ = _solve(tmp_path, "bent")
     assert result.report.stats["footLockedAgents"] == 1
     assert "SkelAnimation" in result.layer.ExportToString()
+
+
+# ---- retimed agents ------------------------------------------------------------------------------
+
+
+def test_a_retimed_walk_is_measured_against_its_source_as_its_timing_plays_it(tmp_path):
+    """A walk re-timed to hurry and then slow down (time constraints alone) is played by a value
+    clip; its feet are where its source put them at each clip time. Its foot skate at the shot's
+    frames is its source's at the same clip times, per shot second: between the clip's samples
+    (where the warp falls) the poses are interpolated, and a sped-up heel-toe roll is faster.
+    Measured against its source at the clip's own samples, the warp alone counted 1.2 cm/s more."""
+    clip = walker.walk(frames=120, fps=FPS, name="beats")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)], up_axis="Y",
+                                       fps=FPS, clips_dir=tmp_path / "clips")
+    a = f"{CROWD}/a"
+    for k, (frame, time) in enumerate(((22, 24.0), (46, 44.0), (70, 72.0))):
+        examples.add_time_constraint(stage, f"/Edits/beat{k}", a, frame, time)
+    stage.GetRootLayer().Save()
+    result, out = _solve(tmp_path)
+    entry = result.report.agents[a]
+    assert entry["footSkateEdited"] <= entry["footSkateSource"] + 0.005
+    # The same by FK: the source at the clip time each shot frame plays, the edited at that frame.
+    warped = next(Usd.ClipsAPI(p).GetClipTimes() for p in out.Traverse() if Usd.ClipsAPI(p).GetClipTimes())
+    stage_times, clip_times = np.array(warped).T
+    # The shot's frames it plays through, and the clip's first and last samples.
+    shot = np.unique(np.r_[stage_times[0], np.arange(np.ceil(stage_times[0]), stage_times[-1]), stage_times[-1]])
+    src = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    units = evaluate.stage_units(src)
+    played = evaluate.foot_positions(src, a, np.interp(shot, stage_times, clip_times))
+    source = metrics.foot_skate_of_positions(played.positions, shot, *units)
+    edited = evaluate.foot_positions(out, a, shot)
+    assert source.mean == pytest.approx(entry["footSkateSource"], rel=1e-3)
+    assert metrics.foot_skate_of_positions(edited.positions, shot, *units, contact=source.contact).mean == \
+        pytest.approx(entry["footSkateEdited"], rel=1e-3)

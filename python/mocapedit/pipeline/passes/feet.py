@@ -389,26 +389,36 @@ def _source(ctx, agent: Agent, cache: dict) -> tuple[list[list[tuple[int, int]]]
 def _report_skate(ctx, lock: "_AgentLock", locked_pose, chains: dict) -> tuple[float, float, float] | None:
     """(source, after the edits, after locking) foot skate of a locked agent, stage units per
     second, as :func:`mocapedit.tools.measure.foot_skate` measures it on the input and on the composed
-    stage: joints named like feet, over the source's planted frames (a retimed agent: over its own).
-    None for a skeleton without such joints."""
+    stage: joints named like feet, over the frames where the source's feet are planted.
+
+    A retimed agent is measured against its source as its timing plays it: the clip's poses at
+    the same clip times, per second of the shot. Against the source at its own samples, a time
+    warp alone would count as sliding what the source does between its samples (where a warp
+    falls) and its heel-toe roll played faster. None for a skeleton without such joints."""
     agent, info = lock.agent, ctx.data.info
     feet = metrics.default_foot_joints(agent.joints)
     if not feet:
         return None
     units = (info.up_axis, info.meters_per_unit, info.time_codes_per_second)
-    clip = ctx.data.clip_of(agent)
-    source = np.stack([trajectory.joint_world(agent, clip, f, chains)[:, 3, :3] for f in feet], axis=1)
-    before = metrics.foot_skate_of_positions(source, agent.sample_times, *units)
-    same = len(lock.times) == agent.frame_count and np.allclose(lock.times, agent.sample_times)
     count = len(lock.times)
-    place = np.broadcast_to(lock.to_world, (count, 4, 4)) @ lock.motion
+    to_world = np.broadcast_to(lock.to_world, (count, 4, 4))
+    place = to_world @ lock.motion
+
+    def world(pose, placement):
+        skel = _skel_space(agent, pose, feet)
+        return np.stack([np.einsum("ti,tij->tj", skel[f][:, 3, :3], placement[:, :3, :3]) + placement[:, 3, :3]
+                         for f in feet], axis=1)
+
+    same = count == agent.frame_count and np.allclose(lock.times, agent.sample_times)
+    if same:
+        clip = ctx.data.clip_of(agent)
+        source = np.stack([trajectory.joint_world(agent, clip, f, chains)[:, 3, :3] for f in feet], axis=1)
+    else:
+        source = world(animation.sample_pose(ctx.data.clip_of(agent), lock.frames), to_world)
+    before = metrics.foot_skate_of_positions(source, lock.times, *units)
 
     def skate(pose):
-        skel = _skel_space(agent, pose, feet)
-        world = np.stack([np.einsum("ti,tij->tj", skel[f][:, 3, :3], place[:, :3, :3]) + place[:, 3, :3]
-                          for f in feet], axis=1)
-        return metrics.foot_skate_of_positions(world, lock.times, *units,
-                                               contact=before.contact if same else None).mean
+        return metrics.foot_skate_of_positions(world(pose, place), lock.times, *units, contact=before.contact).mean
 
     unlocked = skate(lock.pose)
     return before.mean, unlocked, skate(locked_pose) if locked_pose is not None else unlocked
