@@ -10,7 +10,8 @@ from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
 
 from mocapedit.geometry import contacts
 from mocapedit.data import examples, walker
-from mocapedit.solve import footlock
+from mocapedit.solve import footlock, footplant
+from mocapedit.inspect import metrics
 from mocapedit.tools import measure
 from mocapedit.usd import evaluate
 from mocapedit.model.errors import MocapEditError
@@ -511,3 +512,160 @@ def test_agents_a_solve_leaves_where_they_were_are_not_locked(tmp_path):
     assert report.stats["editedAgents"] == 1
     assert report.agent("/World/Crowd/moved").foot_contacts_locked > 0
     assert report.agent("/World/Crowd/pinned").foot_contacts_locked is None
+
+
+# ---- plants that slide least, feet that step, retimed agents -----------------------------------
+
+
+def test_a_plant_dragged_one_way_late_in_its_contact_starts_where_it_slides_least():
+    """The edited foot stays put for most of a contact and is dragged 25 cm at its end: a leash of
+    15 cm lets the plant stay put all along (it starts 10 cm ahead); followed from the least-squares
+    plant (5 cm ahead), it slid 5 cm. A drag of 50 cm slides 20 cm, no more (50 less twice 15)."""
+    inside = np.arange(50)
+    for reach, slid in ((0.25, 0.0), (0.5, 0.2)):
+        offset = np.zeros((50, 2))
+        offset[40:, 0] = np.linspace(0.0, reach, 10)
+        plant = footplant.leash(offset, offset.mean(axis=0), inside, np.array([], dtype=int), np.full(50, 0.15))
+        assert np.all(np.linalg.norm(plant - offset, axis=1) <= 0.15 + 1e-12)
+        assert np.linalg.norm(np.diff(plant, axis=0), axis=1).sum() == pytest.approx(slid, abs=1e-9)
+
+
+def _dragged_stand(tmp_path, along=0.5, idle=96):
+    """A walk that stops and stands 4 s: the stand's end is moved ``along`` metres forward, its
+    start held, so the standing body is dragged while both feet are planted."""
+    clip, (first, last) = walker.walk_idle_walk(frames=idle + 100, fps=FPS, stop_frame=50, idle_frames=idle,
+                                                name="stand")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)], up_axis="Y",
+                                       fps=FPS, clips_dir=tmp_path / "clips")
+    a = f"{CROWD}/a"
+    reach, end = float(clip.translations[first, 0, 2]), float(clip.translations[-1, 0, 2])
+    for name, frame, z in (("start", 0, 0.0), ("in", first, reach), ("out", last, reach + along),
+                           ("end", clip.num_frames - 1, end + along)):
+        examples.add_position_constraint(stage, f"/Edits/{name}", a, frame, (0.0, 0.0, z))
+    stage.GetRootLayer().Save()
+    return stage, a, (first, last)
+
+
+def test_a_standing_body_dragged_further_than_a_leg_reaches_steps_instead_of_sliding(tmp_path):
+    """The stand dragged 50 cm over 4 s: each foot takes steps, one at a time while the other
+    bears the weight, lifted 5 cm, and its plants never slide; before, the plants slid at the
+    leash's length (3.3 cm/s over the source). Measured on the composed stage by UsdSkel FK."""
+    _, a, (first, last) = _dragged_stand(tmp_path)
+    _, free = _solve(tmp_path, "free", foot_locking=False)
+    result, out = _solve(tmp_path)
+    entry = result.report.agents[a]
+    assert entry["footSteps"] >= 4 and result.report.stats["footSteps"] == entry["footSteps"]
+    assert entry["footSkateUnlocked"] > entry["footSkateSource"] + 0.03
+    assert entry["footSkateEdited"] <= entry["footSkateSource"] + 0.005
+    assert entry["maxFootCorrection"] <= 0.15 + 1e-9
+    src = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    p = measure.plausibility(src, out, a)
+    assert p.foot_skate_edited == pytest.approx(entry["footSkateEdited"], abs=1e-5)
+    # Feet leave the ground only in the stand, by the step's height, one at a time.
+    times = evaluate.sample_times(src, a)
+    feet = ["LeftFoot", "RightFoot"]
+    lift = (evaluate.foot_positions(out, a, times, feet).positions[..., 1]
+            - evaluate.foot_positions(src, a, times, feet).positions[..., 1])
+    up = lift > 0.02
+    assert up.any(axis=0).all() and not (up[:, 0] & up[:, 1]).any()
+    assert np.all(np.flatnonzero(up.any(axis=1)) >= first) and np.all(np.flatnonzero(up.any(axis=1)) <= last)
+    assert lift.max() == pytest.approx(0.05, abs=0.01)
+    bones, flips, speed = _leg_quality(src, out, a, times, LEGS, FPS, unlocked=free)
+    assert bones < 1e-6 and flips == 0 and speed < 1.5
+
+
+def test_a_retimed_walk_is_measured_against_its_source_as_its_timing_plays_it(tmp_path):
+    """A walk re-timed to hurry and then slow down (time constraints alone) is played by a value
+    clip; its feet are where its source put them at each clip time. Its foot skate at the shot's
+    frames is its source's at the same clip times, per shot second: between the clip's samples
+    (where the warp falls) the poses are interpolated, and a sped-up heel-toe roll is faster.
+    Measured against its source at the clip's own samples, the warp alone counted 1.2 cm/s more."""
+    clip = walker.walk(frames=120, fps=FPS, name="beats")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)], up_axis="Y",
+                                       fps=FPS, clips_dir=tmp_path / "clips")
+    a = f"{CROWD}/a"
+    for k, (frame, time) in enumerate(((22, 24.0), (46, 44.0), (70, 72.0))):
+        examples.add_time_constraint(stage, f"/Edits/beat{k}", a, frame, time)
+    stage.GetRootLayer().Save()
+    result, out = _solve(tmp_path)
+    entry = result.report.agents[a]
+    assert entry["footSkateEdited"] <= entry["footSkateSource"] + 0.005
+    # The same by FK: the source at the clip time each shot frame plays, the edited at that frame.
+    warped = next(Usd.ClipsAPI(p).GetClipTimes() for p in out.Traverse() if Usd.ClipsAPI(p).GetClipTimes())
+    stage_times, clip_times = np.array(warped).T
+    # The shot's frames it plays through, and the clip's first and last samples.
+    shot = np.unique(np.r_[stage_times[0], np.arange(np.ceil(stage_times[0]), stage_times[-1]), stage_times[-1]])
+    src = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    units = evaluate.stage_units(src)
+    played = evaluate.foot_positions(src, a, np.interp(shot, stage_times, clip_times))
+    source = metrics.foot_skate_of_positions(played.positions, shot, *units)
+    edited = evaluate.foot_positions(out, a, shot)
+    assert source.mean == pytest.approx(entry["footSkateSource"], rel=1e-3)
+    assert metrics.foot_skate_of_positions(edited.positions, shot, *units, contact=source.contact).mean == \
+        pytest.approx(entry["footSkateEdited"], rel=1e-3)
+
+
+CC_LEGS = [("CC_Base_L_Thigh", "CC_Base_L_Calf", "CC_Base_L_Foot"), ("CC_Base_R_Thigh", "CC_Base_R_Calf", "CC_Base_R_Foot")]
+
+
+def _imported_shot(tmp_path, name):
+    """A CMU clip (centimetres, 60 fps) as an agent, on a shot stage of its own."""
+    imported = run_cli("import-bvh", MOCAP / f"{name}.bvh", "-o", tmp_path / "clip.usda", "--agent")
+    assert imported.returncode == 0, imported.stderr
+    clip = Usd.Stage.Open(str(tmp_path / "clip.usda"))
+    shot = Sdf.Layer.CreateNew(str(tmp_path / "shot.usda"))
+    shot.subLayerPaths = ["clip.usda"]
+    layer = clip.GetRootLayer()
+    shot.timeCodesPerSecond, shot.framesPerSecond = layer.timeCodesPerSecond, layer.framesPerSecond
+    for key in ("upAxis", "metersPerUnit"):
+        shot.pseudoRoot.SetInfo(key, layer.pseudoRoot.GetInfo(key))
+    shot.Save()
+    return Usd.Stage.Open(str(tmp_path / "shot.usda")), str(clip.GetDefaultPrim().GetPath())
+
+
+@pytest.mark.skipif(not MOCAP.exists(), reason="needs ../shared/mocap")
+def test_a_real_standing_clip_moved_by_a_handle_steps_within_the_bars(tmp_path):
+    """A 22 s standing CMU clip (washing) whose middle is moved 40 cm aside, its ends held: its
+    feet step instead of sliding (before: +0.31 cm/s over the source), no leg joint turning
+    faster than 1.5 times the source's fastest."""
+    stage, a = _imported_shot(tmp_path, "cc_cmu02_10_wash_self")
+    times = evaluate.sample_times(stage, a)
+    ends = (0, len(times) // 2, len(times) - 1)
+    for k, (f, p) in enumerate(zip(ends, evaluate.agent_root_positions(stage, a, times[list(ends)]))):
+        examples.add_position_constraint(stage, f"/Edits/c{k}", a, f, p + (np.array([40.0, 0.0, 0.0]) if k == 1 else 0))
+    stage.GetRootLayer().Save()
+    _, free = _solve(tmp_path, "free", foot_locking=False)
+    result, out = _solve(tmp_path)
+    entry = result.report.agents[a]
+    assert entry["footSteps"] >= 2
+    assert entry["footSkateEdited"] <= entry["footSkateSource"] + 0.5        # cm/s
+    bones, flips, speed = _leg_quality(stage, out, a, times, CC_LEGS, 60.0, unlocked=free)
+    assert bones < 1e-4 and flips == 0 and speed < 1.5
+    assert all(c["residual"] < 1e-6 for c in result.report.constraints)
+
+
+@pytest.mark.skipif(not MOCAP.exists(), reason="needs ../shared/mocap")
+def test_two_real_walkers_crossing_with_avoidance_keep_their_feet(tmp_path):
+    """Two CMU walks crossing at right angles at their middles, parted by collision avoidance:
+    each keeps its feet within 0.5 cm/s of its source, bones and knees as they were."""
+    stage, _ = _imported_shot(tmp_path, "cc_cmu07_01_walk")
+    stage.GetRootLayer().subLayerPaths = []
+    names = [f"{CROWD}/a", f"{CROWD}/b"]
+    for p in names:
+        stage.DefinePrim(p).GetReferences().AddReference("./clip.usda")
+    times, hips = evaluate.joint_world_matrices(stage, names[0])
+    middle = hips[len(times) // 2, 3, :3] * np.array([1.0, 0.0, 1.0])
+    turned = UsdGeom.Xformable(stage.GetPrimAtPath(names[1]))
+    turned.AddTranslateOp().Set(Gf.Vec3d(*map(float, middle)))
+    turned.AddRotateYOp().Set(90.0)
+    turned.AddTranslateOp(opSuffix="back").Set(Gf.Vec3d(*map(float, -middle)))
+    stage.GetRootLayer().Save()
+    _, free = _solve(tmp_path, "free", foot_locking=False, collisions=True)
+    result, out = _solve(tmp_path, collisions=True)
+    assert result.report.stats["remainingOverlaps"] == 0
+    for a in names:
+        entry = result.report.agents[a]
+        assert entry["footSkateUnlocked"] > entry["footSkateSource"] + 1.0      # avoidance slid the feet
+        assert entry["footSkateEdited"] <= entry["footSkateSource"] + 0.5       # cm/s
+        bones, flips, speed = _leg_quality(stage, out, a, times, CC_LEGS, 60.0, unlocked=free)
+        assert bones < 1e-4 and flips == 0 and speed < 1.5

@@ -35,7 +35,7 @@ __all__ = [
     "local_coordinates", "shape_change", "rigidity_error", "neighbour_distance_change",
     "Separation", "capsule_clearance", "min_separation",
     "time_intervals_positive",
-    "default_foot_joints", "FootSkate",
+    "default_foot_joints", "FootSkate", "on_ground",
     "SPIN_DEGREES_AT_60FPS", "CHORD_SECONDS", "default_facing_joint",
     "body_facing", "facing_change_per_second", "spin_threshold", "spins", "direction_deviation",
     "Plausibility", "plausibility_of", "foot_skate_of_positions", "worst_plausibility",
@@ -291,6 +291,18 @@ def foot_skate_of_positions(pos: np.ndarray, t: np.ndarray, up, meters_per_unit:
     total = float(duration.sum())
     mean = float(slide.sum() / total) if total > 0 else float("nan")
     return FootSkate(tuple(joints), speeds, duration, contact, t, mean)
+
+
+def on_ground(contact: np.ndarray, source: np.ndarray, edited: np.ndarray, up, meters_per_unit: float,
+              contact_height: float | None = None) -> np.ndarray:
+    """(T, F) the source's ``contact`` mask, less the samples where the edited foot is lifted more
+    than ``contact_height`` (default 2 cm in stage units) above the source foot: a foot that an
+    edit makes step is in the air there, and a foot in the air does not slide. ``source`` and
+    ``edited`` are (T, F, 3) positions at the same samples."""
+    if contact_height is None:
+        contact_height = 0.02 / meters_per_unit
+    axis = ground_axes(up)[0]
+    return np.asarray(contact, dtype=bool) & (edited[..., axis] - source[..., axis] <= contact_height)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -151,8 +151,9 @@ class AgentEntry(Entry):
     foot_skate_unlocked: float = key("footSkateUnlocked")   # after the edits, before foot locking
     foot_skate_edited: float = key("footSkateEdited")       # as the edits layer plays it
     foot_contacts_locked: int = key("footContactsLocked")
+    foot_steps: int = key("footSteps")                      # steps foot locking made a standing foot take
     max_pelvis_drop: float = key("maxPelvisDrop")
-    max_foot_correction: float = key("maxFootCorrection")
+    max_foot_correction: float = key("maxFootCorrection")   # of a planted foot
     plausibility: AgentPlausibility = key("plausibility")
     notes: list[str] = key("notes")
     extra: dict = field(default_factory=dict)
@@ -210,6 +211,7 @@ class Stats(Entry):
     foot_locked_agents: int = key("footLockedAgents")
     foot_locking_not_needed: int = key("footLockingNotNeeded")
     foot_contacts_locked: int = key("footContactsLocked")
+    foot_steps: int = key("footSteps")
     foot_skate_source: float = key("footSkateSource")         # means over the agents with contacts
     foot_skate_unlocked: float = key("footSkateUnlocked")
     foot_skate_edited: float = key("footSkateEdited")
@@ -308,7 +310,8 @@ def foot_locking_lines(stats: Stats) -> list[str]:
     """The shot's foot locking figures, as ``solve`` prints them and the report shows them."""
     if stats.foot_contacts_locked is None:
         return []
-    return [f"feet: {stats.foot_contacts_locked} contacts locked on {stats.foot_locked_agents or 0} agents; "
+    steps = f", {stats.foot_steps} steps taken" if stats.foot_steps else ""
+    return [f"feet: {stats.foot_contacts_locked} contacts locked on {stats.foot_locked_agents or 0} agents{steps}; "
             f"skate {_num(stats.foot_skate_source)} source, {_num(stats.foot_skate_unlocked)} after the "
             f"edits, {_num(stats.foot_skate_edited)} locked (stage units/s, mean over agents); "
             f"largest pelvis drop {_num(stats.max_pelvis_drop)}, "
@@ -388,7 +391,7 @@ _LISTED_FIGURES = ("delay",)
 _SHOWN_STATS = ("agents", "edited_agents", "clips", "constraints", "groups", "avoid_regions", "animation_layers",
                 "remaining_overlaps", "plausibility", "foot_contacts_locked", "foot_locked_agents",
                 "foot_skate_source", "foot_skate_edited", "foot_skate_unlocked", "max_pelvis_drop",
-                "max_foot_correction")
+                "max_foot_correction", "foot_steps")
 
 
 def _or(value, default):
@@ -469,7 +472,8 @@ def format_text(stored: StoredReport, show_all: bool = False) -> str:
                       if fig.foot_skate_unlocked is not None else "")
             parts.append(f"foot skate {_num(a)} -> {_num(b)}{change}{locked}")
         if fig.foot_contacts_locked is not None:
-            parts.append(f"contacts locked {fig.foot_contacts_locked}, pelvis drop {_num(fig.max_pelvis_drop)}, "
+            steps = f", {fig.foot_steps} steps" if fig.foot_steps else ""
+            parts.append(f"contacts locked {fig.foot_contacts_locked}{steps}, pelvis drop {_num(fig.max_pelvis_drop)}, "
                          f"foot correction {_num(fig.max_foot_correction)}")
         if fig.min_separation is not None:
             sep = fig.min_separation

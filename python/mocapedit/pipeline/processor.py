@@ -136,10 +136,12 @@ def measure_plausibility(ctx: SolveContext) -> None:
         skate = [float("nan"), float("nan")]
         if feet:
             units = (up, info.meters_per_unit, info.time_codes_per_second)
-            before = metrics.foot_skate_of_positions(source[:, 1:, 3, :3], agent.sample_times, *units)
-            mask = before.contact if len(times) == len(agent.sample_times) else None
+            # A retimed agent against its source as its timing plays it (see the feet pass).
+            same = len(times) == len(agent.sample_times) and np.allclose(times, agent.sample_times)
+            played = source if same else animation.interp_frames(source, frames)
+            before = metrics.foot_skate_of_positions(played[:, 1:, 3, :3], times, *units)
             skate = [before.mean, metrics.foot_skate_of_positions(edited[:, 1:, 3, :3], times, *units,
-                                                                  contact=mask).mean]
+                                                                  contact=before.contact).mean]
         entry = ctx.report.agent(path)
         if entry.foot_skate_unlocked is not None:  # foot locking measured the legs as the layer plays them
             skate = [entry.foot_skate_source, entry.foot_skate_edited]

@@ -45,15 +45,24 @@ def plausibility(source_stage, edited_stage, agent_path, joint: Union[int, str, 
                  foot_joints=None) -> Plausibility:
     """Plausibility of one agent: its edited motion on ``edited_stage`` (the input with the edits
     layer on top) against its source on ``source_stage``, both by UsdSkel FK at their own composed
-    samples, paired by frame. ``joint``: the facing joint (default
+    samples, paired by frame. Its foot skate is measured over the source's planted samples, less
+    those where the edited foot is lifted more than 2 cm above the source's (a step,
+    :func:`~mocapedit.inspect.metrics.on_ground`). ``joint``: the facing joint (default
     :func:`~mocapedit.model.names.default_facing_joint`)."""
     ts, ms = evaluate.joint_world_matrices(source_stage, agent_path, None, joint)
     te, me = evaluate.joint_world_matrices(edited_stage, agent_path, None, joint)
-    skate_s = foot_skate(source_stage, agent_path, foot_joints=foot_joints)
-    contact = skate_s.contact if len(skate_s.times) == len(te) else None
-    skate_e = foot_skate(edited_stage, agent_path, times=te if contact is not None else None,
-                         foot_joints=foot_joints, contact=contact)
+    feet_s = evaluate.foot_positions(source_stage, agent_path, None, foot_joints)
     source, edited = evaluate.stage_units(source_stage), evaluate.stage_units(edited_stage)
+    skate_s = metrics.foot_skate_of_positions(feet_s.positions, feet_s.times, *source, feet_s.joints, feet_s.in_clip)
+    if len(skate_s.times) == len(te):
+        # Over the source's contacts, less where the edited foot is lifted (a step).
+        feet_e = evaluate.foot_positions(edited_stage, agent_path, te, foot_joints)
+        contact = metrics.on_ground(skate_s.contact, feet_s.positions, feet_e.positions, source.up_axis,
+                                    source.meters_per_unit)
+        skate_e = metrics.foot_skate_of_positions(feet_e.positions, feet_e.times, *edited, feet_e.joints,
+                                                  feet_e.in_clip, contact=contact)
+    else:
+        skate_e = foot_skate(edited_stage, agent_path, foot_joints=foot_joints)
     return metrics.plausibility_of(str(agent_path), ts / source.time_codes_per_second, ms,
                                    te / edited.time_codes_per_second, me, source.up_axis,
                                    source.meters_per_unit, skate_s.mean, skate_e.mean)

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mocapedit.geometry import animation, contacts, ground, kinematics, trajectory
-from mocapedit.solve import footlock
+from mocapedit.solve import footlock, footplant
 from mocapedit.inspect import metrics
 from mocapedit.pipeline.context import SolveContext, consecutive_runs
 from mocapedit.usd import writer
@@ -51,6 +51,22 @@ MAX_DROP_M = 0.08
 MAX_LEASH_M = 0.15
 #: Degrees a plant may be turned from the edited foot before it is turned along.
 LEASH_DEGREES = 15.0
+#: Seconds a foot takes to step where an edit drags or turns a standing body further than the
+#: leash (:func:`footplant.replant`): at least STEP_SECONDS, longer so that the foot moves no
+#: faster than its source does, but no longer than STEP_LONGEST_SECONDS; and metres it lifts at
+#: the top of the step.
+STEP_SECONDS = 0.3
+STEP_LONGEST_SECONDS = 1.5
+STEP_HEIGHT_M = 0.05
+#: A foot steps only through contacts where the leash would let it slide further than this
+#: (metres), or turn further (degrees).
+STEP_SLIDE_M = 0.05
+STEP_SLIDE_DEGREES = 10.0
+#: A step turns no joint of the leg faster than this many times the fastest the pose before
+#: locking turns it (the issue's bar is 1.5); an agent whose steps do gets longer steps and its
+#: legs solved again, up to STEP_ROUNDS times.
+STEP_SPEED_RATIO = 1.35
+STEP_ROUNDS = 3
 #: Agents whose feet the edits make slide by at most this much more than the source's (metres
 #: per second, the issue's quality bar) keep their legs: locking them would bake their whole
 #: animation for a change no one sees.
@@ -131,46 +147,15 @@ def _reach(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, up: np.ndarray,
     return np.sqrt(np.maximum((footlock.SOFT_REACH * length) ** 2 - height ** 2, 0.0)) - over
 
 
-def _leash(offset: np.ndarray, base: np.ndarray, inside: np.ndarray, rigid: np.ndarray,
-           radius: np.ndarray) -> np.ndarray:
-    """(T,D) plant shifts (or turns, D = 1) over one contact (frames ``inside``, increasing).
-
-    The plant stays at ``base`` while the edited foot (``offset``, (T,D)) stays within ``radius``
-    ((T,) or a number) of it; where the edit drags the body further (a long idle moved by a path
-    edit), the plant follows at that distance, so the legs never stretch beyond it. Frames
-    ``rigid`` (a stationary range, inside the contact) keep ``base``, and the plant is followed
-    from them outwards. Frames before and after the contact take its first and last plant."""
-    out = np.broadcast_to(base, offset.shape).copy()
-    radius = np.broadcast_to(radius, offset.shape[:1])
-    if not len(inside) or np.all(np.linalg.norm(offset[inside] - base, axis=-1) <= radius[inside]):
-        return out
-    if len(rigid):
-        runs = [inside[inside < rigid[0]][::-1], inside[inside > rigid[-1]]]
-    else:
-        runs = [inside]
-    for run in runs:
-        current = base.copy()
-        for i in run:
-            v = offset[i] - current
-            d = float(np.linalg.norm(v))
-            if d > radius[i]:
-                current = offset[i] - v * (radius[i] / d)
-            out[i] = current
-    out[:inside[0]] = out[inside[0]]
-    out[inside[-1] + 1:] = out[inside[-1]]
-    return out
+_CONJUGATE = np.array([-1.0, -1.0, -1.0, 1.0])
 
 
-def _leash_rows(offset: np.ndarray, base: np.ndarray, inside: np.ndarray, rigid: np.ndarray,
-                radius: np.ndarray) -> np.ndarray:
-    """:func:`_leash` for many contacts at once: (C,W,D) offsets, (C,D) bases, (C,W) masks and
-    radii (or a number)."""
-    out = np.broadcast_to(base[:, None], offset.shape).copy()
-    radius = np.broadcast_to(radius, inside.shape)
-    far = (inside & (np.linalg.norm(offset - base[:, None], axis=-1) > radius)).any(axis=1)
-    for c in np.flatnonzero(far):
-        out[c] = _leash(offset[c], base[c], np.flatnonzero(inside[c]), np.flatnonzero(rigid[c]), radius[c])
-    return out
+def _turn_speed(q: np.ndarray, seconds: np.ndarray) -> np.ndarray:
+    """(T-1,) how fast (T,4) rotations turn between samples ``seconds`` apart, radians per second."""
+    q = np.asarray(q, dtype=np.float64)
+    dot = np.abs(np.sum(q[1:] * q[:-1], axis=-1)) / np.maximum(
+        np.linalg.norm(q[1:], axis=-1) * np.linalg.norm(q[:-1], axis=-1), 1e-300)
+    return 2.0 * np.arccos(np.clip(dot, 0.0, 1.0)) / np.maximum(np.diff(seconds), 1e-300)
 
 
 def _ramp(frames: np.ndarray, first, last, blend, blend_out=None) -> np.ndarray:
@@ -179,6 +164,40 @@ def _ramp(frames: np.ndarray, first, last, blend, blend_out=None) -> np.ndarray:
     blend_out = blend if blend_out is None else blend_out
     x = np.clip(1.0 - np.maximum(first - frames, 0.0) / blend - np.maximum(frames - last, 0.0) / blend_out, 0.0, 1.0)
     return x * x * (3.0 - 2.0 * x)
+
+
+@dataclass
+class _Contacts:
+    """The contacts of one foot, one row each (C) over the W frames ``at`` its ramp reaches."""
+    ranges: np.ndarray      # (C,2) source frames, inclusive
+    at: np.ndarray          # (C,W) output frames
+    valid: np.ndarray       # (C,W) frames the ramp reaches
+    inside: np.ndarray      # (C,W) frames inside the contact
+    rigid: np.ndarray       # (C,W) ... and inside a stationary range
+    turn: np.ndarray        # (C,W) the edit's turn of the body (radians)
+    yaw: np.ndarray         # (C,W) the plant's turn
+    foot: np.ndarray        # (C,W,3) the posed source ankle
+    pivot: np.ndarray       # (C,3) its mean over the contact, which the plant turns about
+    base: np.ndarray        # (C,3) where the pivot goes
+    radius: np.ndarray      # (C,W) the leash
+    up_axis: str
+    offset: np.ndarray | None = None   # (C,W,3) the edited ankle against the carried source foot
+    shift: np.ndarray | None = None    # (C,W,3) the plant's ground shift
+    lift: np.ndarray | None = None     # (C,W) how far a stepping foot is up (0 to 1 of STEP_HEIGHT_M)
+
+    @property
+    def carried(self) -> np.ndarray:
+        """(C,W,3) the source foot turned by the plant's turn about the pivot, pivot at ``base``."""
+        spin = kinematics.yaw_matrix(self.yaw, self.up_axis)[..., :3, :3]
+        return np.einsum("cti,ctij->ctj", self.foot - self.pivot[:, None], spin) + self.base[:, None]
+
+    def sliding(self, distance: float, angle: float) -> np.ndarray:
+        """(C,) contacts whose leashed plant slides further than ``distance`` or turns further
+        than ``angle`` (radians) inside them."""
+        both = self.inside[:, 1:] & self.inside[:, :-1]
+        slide = np.where(both, np.linalg.norm(np.diff(self.shift, axis=1), axis=-1), 0.0).sum(axis=1)
+        turn = np.where(both, np.abs(np.diff(self.yaw, axis=1)), 0.0).sum(axis=1)
+        return (slide > distance) | (turn > angle)
 
 
 class _AgentLock:
@@ -243,81 +262,184 @@ class _AgentLock:
         step = np.median(np.diff(agent.sample_times)) if agent.frame_count > 1 else 1.0
         blend = max(2.0, BLEND_SECONDS * fps / max(step, 1e-9))
         self.blend_frames = int(np.ceil(blend))
-        self.target = self.ankle.copy()
-        self.target_rot = self.ankle_rot.copy()
-        self.weight = np.zeros((count, len(self.legs)))
+        self.agent_fps = fps
         self.contact = np.zeros((count, len(self.legs)), dtype=bool)
         self.locked = 0
-        pos_sum = np.zeros((count, len(self.legs), 3))
-        rot_sum = np.zeros((count, len(self.legs), 4))
-        w_sum = np.zeros((count, len(self.legs)))
-        up = ground.up_index(info.up_axis)
         stationary = self.keep = np.zeros(count, dtype=bool)
         for _, first, last in agent.stationary:
             stationary |= (self.frames >= first - 1e-9) & (self.frames <= last + 1e-9)
-        for k, leg in enumerate(self.legs):
-            # The leash: as far as the leg reaches with the pelvis lowered a little, from LEASH_M
-            # to MAX_LEASH_M.
-            radius = np.clip(_reach(self.hip[:, k], self.knee[:, k], self.ankle[:, k], up_vector,
-                                    MAX_DROP_M / info.meters_per_unit),
-                             LEASH_M / info.meters_per_unit, MAX_LEASH_M / info.meters_per_unit)
-            ranges = np.array(source_contacts[k], dtype=np.float64).reshape(-1, 2)
-            # The contacts of this foot at once, one row each over the frames its ramp reaches.
-            inside = (self.frames >= ranges[:, :1] - 1e-9) & (self.frames <= ranges[:, 1:] + 1e-9)   # (C,T)
-            used = inside.any(axis=1)
-            ranges, inside = ranges[used], inside[used]
-            if not len(ranges):
+        self.up_vector = up_vector
+        self._rows = [self._contacts(k, leg, source_contacts[k], info, turn, posed, pos, stationary, blend)
+                      for k, leg in enumerate(self.legs)]
+        self._plan_data = (info, blend, posed, posed_rot, rot)
+        self.plan()
+
+    def plan(self, stretch=(1.0, 1.0)) -> None:
+        """The targets, turns and weights of the legs from the contacts' plants, where feet step
+        (their steps ``stretch`` times as long as :func:`footplant.replant` would make them)."""
+        info, blend, posed, posed_rot, rot = self._plan_data
+        count = len(self.times)
+        up_vector = self.up_vector
+        rows = [None if r is None else dataclasses.replace(r, shift=r.shift.copy(), yaw=r.yaw.copy(),
+                                                           lift=r.lift.copy()) for r in self._rows]
+        self.steps = self._replant(rows, info, posed, posed_rot, stretch) if all(r is not None for r in rows) else 0
+        self.stepping = np.zeros((count, len(self.legs)), dtype=bool)
+        self.target = self.ankle.copy()
+        self.target_rot = self.ankle_rot.copy()
+        self.weight = np.zeros((count, len(self.legs)))
+        pos_sum = np.zeros((count, len(self.legs), 3))
+        rot_sum = np.zeros((count, len(self.legs), 4))
+        w_sum = np.zeros((count, len(self.legs)))
+        for k, (leg, r) in enumerate(zip(self.legs, rows)):
+            if r is None:
                 continue
-            self.locked += len(ranges)
-            self.contact[:, k] = inside.any(axis=0)
-            reached = _ramp(self.frames, ranges[:, :1], ranges[:, 1:], blend * MAX_LEASH_M / LEASH_M) > 0  # (C,T)
-            lo = reached.argmax(axis=1)
-            width = int((reached.sum(axis=1)).max())
-            at = lo[:, None] + np.arange(width)                                                      # (C,W)
-            valid = at < count
-            at = np.minimum(at, count - 1)
-            valid &= np.take_along_axis(reached, at, axis=1)
-            inside = np.take_along_axis(inside, at, axis=1) & valid
-            # Where a contact meets a stationary range, the body moves rigidly there: the plant
-            # is that motion, so the range keeps its shape (no correction inside it).
-            rigid = inside & stationary[at]
-            chosen = np.where(rigid.any(axis=1, keepdims=True), rigid, inside)
-            n_chosen = chosen.sum(axis=1)[:, None]
-            turn_c = turn[at]
-            yaw0 = np.arctan2((np.sin(turn_c) * chosen).sum(1), (np.cos(turn_c) * chosen).sum(1))[:, None]
-            # An edit that turns the body far during a contact turns the plant too.
-            apart = np.angle(np.exp(1j * (turn_c - yaw0)))
-            yaw = yaw0 + _leash_rows(apart[..., None], np.zeros((len(at), 1)), inside, rigid,
-                                     np.radians(LEASH_DEGREES))[..., 0]
-            spin = kinematics.yaw_matrix(yaw, info.up_axis)[..., :3, :3]
-            # Turned about the planted foot itself, so a plant that turns along does not slide.
-            foot = posed[leg.ankle][at]                                                               # (C,W,3)
-            pivot = (foot * chosen[..., None]).sum(1) / n_chosen
-            base = kinematics.yaw_matrix((yaw * chosen).sum(1) / n_chosen[:, 0], info.up_axis)[:, :3, :3]
-            carried = np.einsum("cti,ctij->ctj", foot - pivot[:, None], spin) + np.einsum("ci,cij->cj", pivot, base)[:, None]
-            offset = pos[leg.ankle][at] - carried
-            offset[..., up] = 0.0  # feet stay at their source height: never below their ground
-            shift = _leash_rows(offset, (offset * chosen[..., None]).sum(1) / n_chosen, inside, rigid, radius[at])
+            self.stepping[r.at[r.lift > 0], k] = True
             # The lock eases in and out over longer where the plant lies far from the edited foot
             # (within the frames reached above).
-            far = np.linalg.norm(shift - offset, axis=-1) / (LEASH_M / info.meters_per_unit)    # (C,W)
-            rows_c = np.arange(len(at))
-            ends = inside.argmax(axis=1), width - 1 - inside[:, ::-1].argmax(axis=1)
+            far = np.linalg.norm(r.shift - r.offset, axis=-1) / (LEASH_M / info.meters_per_unit)    # (C,W)
+            rows_c = np.arange(len(r.at))
+            ends = r.inside.argmax(axis=1), r.at.shape[1] - 1 - r.inside[:, ::-1].argmax(axis=1)
             blend_in, blend_out = (blend * np.clip(far[rows_c, e], 1.0, MAX_LEASH_M / LEASH_M)[:, None] for e in ends)
-            w = np.where(valid, _ramp(self.frames[at], ranges[:, :1], ranges[:, 1:], blend_in, blend_out), 0.0)
-            valid &= w > 0
-            plant_rot = quat_multiply(_yaw_quat(yaw.reshape(-1), up_vector).reshape(yaw.shape + (4,)),
-                                      posed_rot[leg.ankle][at])
-            plant_rot *= np.where(np.sum(plant_rot * rot[leg.ankle][at], -1) < 0, -1.0, 1.0)[..., None]
+            w = np.where(r.valid, _ramp(self.frames[r.at], r.ranges[:, :1], r.ranges[:, 1:], blend_in, blend_out), 0.0)
+            valid = r.valid & (w > 0)
+            plant_rot = quat_multiply(_yaw_quat(r.yaw.reshape(-1), up_vector).reshape(r.yaw.shape + (4,)),
+                                      posed_rot[leg.ankle][r.at])
+            plant_rot *= np.where(np.sum(plant_rot * rot[leg.ankle][r.at], -1) < 0, -1.0, 1.0)[..., None]
+            plant = r.carried + r.shift + (r.lift * (STEP_HEIGHT_M / info.meters_per_unit))[..., None] * up_vector
             # Where the ramps of two contacts meet, their plants blend by weight: no jump.
-            rows = at[valid]
-            np.add.at(pos_sum[:, k], rows, (w[..., None] * (carried + shift))[valid])
-            np.add.at(rot_sum[:, k], rows, (w[..., None] * plant_rot)[valid])
-            np.add.at(w_sum[:, k], rows, w[valid])
-            np.maximum.at(self.weight[:, k], rows, w[valid])
+            at = r.at[valid]
+            np.add.at(pos_sum[:, k], at, (w[..., None] * plant)[valid])
+            np.add.at(rot_sum[:, k], at, (w[..., None] * plant_rot)[valid])
+            np.add.at(w_sum[:, k], at, w[valid])
+            np.maximum.at(self.weight[:, k], at, w[valid])
         some = w_sum > 0
         self.target[some] = pos_sum[some] / w_sum[some][:, None]
         self.target_rot[some] = footlock.normalize(rot_sum[some])
+
+    def step_speed(self, out: footlock.LegOutputs, lo: int, hi: int) -> np.ndarray:
+        """(legs,) the largest angular speed of a leg's hip, knee or ankle around its steps, against
+        the largest the joint turns at in the pose before locking (1 when it steps no faster)."""
+        seconds = self.times / self.agent_fps
+        out_ratio = np.ones(len(self.legs))
+        if not self.steps or len(seconds) < 2:
+            return out_ratio
+
+        near = self.stepping.copy()
+        for shift_by in (1, 2):
+            near[shift_by:] |= self.stepping[:-shift_by]
+            near[:-shift_by] |= self.stepping[shift_by:]
+        for k, leg in enumerate(self.legs):
+            if not near[:, k].any():
+                continue
+            around = near[1:, k] | near[:-1, k]
+            for j, new in ((leg.hip, out.hip_local), (leg.knee, out.knee_local), (leg.ankle, out.ankle_local)):
+                source = _turn_speed(self.pose.rotations[:, self.columns[self.agent.joints[j]]], seconds).max()
+                locked = _turn_speed(new[lo:hi, k], seconds)[around].max()
+                out_ratio[k] = max(out_ratio[k], locked / max(source, 1e-9))
+        return out_ratio
+
+    def _contacts(self, k: int, leg, ranges, info, turn, posed, pos, stationary, blend) -> "_Contacts | None":
+        """The contacts of one foot at once, one row each over the frames its ramp reaches, with
+        their leashed plants; None without contacts on the output frames."""
+        count = len(self.times)
+        up = ground.up_index(info.up_axis)
+        # The leash: as far as the leg reaches with the pelvis lowered a little, from LEASH_M
+        # to MAX_LEASH_M.
+        radius = np.clip(_reach(self.hip[:, k], self.knee[:, k], self.ankle[:, k], self.up_vector,
+                                MAX_DROP_M / info.meters_per_unit),
+                         LEASH_M / info.meters_per_unit, MAX_LEASH_M / info.meters_per_unit)
+        ranges = np.array(ranges, dtype=np.float64).reshape(-1, 2)
+        inside = (self.frames >= ranges[:, :1] - 1e-9) & (self.frames <= ranges[:, 1:] + 1e-9)   # (C,T)
+        used = inside.any(axis=1)
+        ranges, inside = ranges[used], inside[used]
+        if not len(ranges):
+            return None
+        self.locked += len(ranges)
+        self.contact[:, k] = inside.any(axis=0)
+        reached = _ramp(self.frames, ranges[:, :1], ranges[:, 1:], blend * MAX_LEASH_M / LEASH_M) > 0  # (C,T)
+        lo = reached.argmax(axis=1)
+        width = int((reached.sum(axis=1)).max())
+        at = lo[:, None] + np.arange(width)                                                      # (C,W)
+        valid = at < count
+        at = np.minimum(at, count - 1)
+        valid &= np.take_along_axis(reached, at, axis=1)
+        inside = np.take_along_axis(inside, at, axis=1) & valid
+        # Where a contact meets a stationary range, the body moves rigidly there: the plant
+        # is that motion, so the range keeps its shape (no correction inside it).
+        rigid = inside & stationary[at]
+        chosen = np.where(rigid.any(axis=1, keepdims=True), rigid, inside)
+        n_chosen = chosen.sum(axis=1)[:, None]
+        turn_c = turn[at]
+        yaw0 = np.arctan2((np.sin(turn_c) * chosen).sum(1), (np.cos(turn_c) * chosen).sum(1))[:, None]
+        # An edit that turns the body far during a contact turns the plant too.
+        apart = np.angle(np.exp(1j * (turn_c - yaw0)))
+        yaw = yaw0 + footplant.leash_rows(apart[..., None], np.zeros((len(at), 1)), inside, rigid,
+                                          np.radians(LEASH_DEGREES))[..., 0]
+        # Turned about the planted foot itself, so a plant that turns along does not slide.
+        foot = posed[leg.ankle][at]                                                               # (C,W,3)
+        pivot = (foot * chosen[..., None]).sum(1) / n_chosen
+        base = np.einsum("ci,cij->cj", pivot, kinematics.yaw_matrix((yaw * chosen).sum(1) / n_chosen[:, 0],
+                                                                    info.up_axis)[:, :3, :3])
+        out = _Contacts(ranges=ranges, at=at, valid=valid, inside=inside, rigid=rigid, turn=turn_c, yaw=yaw,
+                        foot=foot, pivot=pivot, base=base, radius=radius[at], up_axis=info.up_axis)
+        out.offset = pos[leg.ankle][at] - out.carried
+        out.offset[..., up] = 0.0  # feet stay at their source height: never below their ground
+        out.shift = footplant.leash_rows(out.offset, (out.offset * chosen[..., None]).sum(1) / n_chosen, inside,
+                                         rigid, out.radius)
+        out.lift = np.zeros(at.shape)
+        return out
+
+    def _replant(self, rows: list["_Contacts"], info, posed: dict, posed_rot: dict, stretch) -> int:
+        """Where the leash lets a foot slide through a contact and the other foot bears the
+        weight, the foot steps instead (:func:`footplant.replant`), no faster than the source
+        moves and turns that foot; returns the steps taken."""
+        count = len(self.times)
+        sliding = [r.sliding(STEP_SLIDE_M / info.meters_per_unit, np.radians(STEP_SLIDE_DEGREES)) for r in rows]
+        if not any(s.any() for s in sliding) or count < 3:
+            return 0
+        contact = np.full((count, 2), -1)
+        movable = np.zeros((count, 2), dtype=bool)
+        offset = np.zeros((count, 2, 3))
+        shift = np.zeros((count, 2, 3))
+        radius = np.zeros((count, 2))
+        turn = np.zeros((count, 2))
+        yaw = np.zeros((count, 2))
+        for k, (r, s) in enumerate(zip(rows, sliding)):
+            c, w = np.nonzero(r.inside)
+            t = r.at[c, w]
+            contact[t, k] = c
+            movable[t, k] = s[c] & ~r.rigid[c, w]
+            offset[t, k], shift[t, k], radius[t, k] = r.offset[c, w], r.shift[c, w], r.radius[c, w]
+            turn[t, k], yaw[t, k] = r.turn[c, w], r.yaw[c, w]
+        seconds = self.times / info.time_codes_per_second
+        # The fastest the source moves each foot against its hip, turns it, and bends its knee.
+        speed = [float(np.linalg.norm(np.gradient(posed[leg.ankle] - posed[leg.hip], seconds, axis=0), axis=-1).max())
+                 for leg in self.legs]
+        spin = [float(_turn_speed(posed_rot[leg.ankle], seconds).max()) for leg in self.legs]
+        knee_spin = [float(_turn_speed(quat_multiply(posed_rot[leg.hip] * _CONJUGATE, posed_rot[leg.knee]),
+                                       seconds).max()) for leg in self.legs]
+        height = STEP_HEIGHT_M / info.meters_per_unit
+        bend = footplant.lift_bend(np.linalg.norm(self.knee - self.hip, axis=-1),
+                                   np.linalg.norm(self.ankle - self.knee, axis=-1),
+                                   np.linalg.norm(self.ankle - self.hip, axis=-1), height)
+        frame = float(np.median(np.diff(seconds)))
+        out = footplant.replant(contact, movable, offset, radius, turn, shift, yaw, np.radians(LEASH_DEGREES),
+                                seconds=frame, shortest=max(2, int(round(STEP_SECONDS / frame))),
+                                longest=max(2, int(round(STEP_LONGEST_SECONDS / frame))),
+                                height=height, bend=bend, speed=np.array(speed), spin=np.array(spin),
+                                knee_spin=np.array(knee_spin), stretch=np.asarray(stretch, dtype=np.float64))
+        if not out.steps:
+            return 0
+        for k, (r, s) in enumerate(zip(rows, sliding)):
+            for c in np.flatnonzero(s):
+                w = np.flatnonzero(r.inside[c])
+                t = r.at[c, w]
+                for values, new in ((r.shift, out.shift), (r.yaw, out.yaw), (r.lift, out.lift)):
+                    values[c, w] = new[t, k]
+                    values[c, :w[0]] = values[c, w[0]]
+                    values[c, w[-1] + 1:] = values[c, w[-1]]
+                r.lift[c, :w[0]] = r.lift[c, w[-1] + 1:] = 0.0
+        return out.steps
 
     def inputs(self) -> dict:
         return {"hip": self.hip, "knee": self.knee, "ankle": self.ankle, "parent_rot": self.parent_rot,
@@ -349,7 +471,8 @@ class _AgentLock:
             # World offset -drop * up, in the root's parent space (the skeleton's).
             inv = np.linalg.inv(self.to_world[:, :3, :3])
             shift = (-drop[:, None] * up) @ inv if inv.ndim == 2 else np.einsum("ti,tij->tj", -drop[:, None] * up, inv)
-        correction = np.linalg.norm(out.reached[lo:hi] - self.ankle, axis=-1)
+        # The correction of a planted foot: a stepping foot is in the air, moving to its next plant.
+        correction = np.where(self.stepping, 0.0, np.linalg.norm(out.reached[lo:hi] - self.ankle, axis=-1))
         self.max_correction = float(correction.max(initial=0.0))
         self.max_drop = float(drop.max(initial=0.0))
         self.reached = out.reached[lo:hi]
@@ -388,26 +511,38 @@ def _source(ctx, agent: Agent, cache: dict) -> tuple[list[list[tuple[int, int]]]
 def _report_skate(ctx, lock: "_AgentLock", legs: "LockedLegs | None", chains: dict) -> tuple[float, float, float] | None:
     """(source, after the edits, after locking) foot skate of a locked agent, stage units per
     second, as :func:`mocapedit.tools.measure.foot_skate` measures it on the input and on the composed
-    stage: joints named like feet, over the source's planted frames (a retimed agent: over its own).
-    None for a skeleton without such joints."""
+    stage: joints named like feet, over the frames where the source's feet are planted.
+
+    A retimed agent is measured against its source as its timing plays it: the clip's poses at
+    the same clip times, per second of the shot. Against the source at its own samples, a time
+    warp alone would count as sliding what the source does between its samples (where a warp
+    falls) and its heel-toe roll played faster. None for a skeleton without such joints."""
     agent, info = lock.agent, ctx.data.info
     feet = metrics.default_foot_joints(agent.joints)
     if not feet:
         return None
     units = (info.up_axis, info.meters_per_unit, info.time_codes_per_second)
-    clip = ctx.data.clip_of(agent)
-    source = np.stack([trajectory.joint_world(agent, clip, f, chains)[:, 3, :3] for f in feet], axis=1)
-    before = metrics.foot_skate_of_positions(source, agent.sample_times, *units)
-    same = len(lock.times) == agent.frame_count and np.allclose(lock.times, agent.sample_times)
     count = len(lock.times)
-    place = np.broadcast_to(lock.to_world, (count, 4, 4)) @ lock.motion
+    to_world = np.broadcast_to(lock.to_world, (count, 4, 4))
+    place = to_world @ lock.motion
+
+    def world(pose, placement):
+        skel = _skel_space(agent, pose, feet)
+        return np.stack([np.einsum("ti,tij->tj", skel[f][:, 3, :3], placement[:, :3, :3]) + placement[:, 3, :3]
+                         for f in feet], axis=1)
+
+    same = count == agent.frame_count and np.allclose(lock.times, agent.sample_times)
+    if same:
+        clip = ctx.data.clip_of(agent)
+        source = np.stack([trajectory.joint_world(agent, clip, f, chains)[:, 3, :3] for f in feet], axis=1)
+    else:
+        source = world(animation.sample_pose(ctx.data.clip_of(agent), lock.frames), to_world)
+    before = metrics.foot_skate_of_positions(source, lock.times, *units)
 
     def skate(pose):
-        skel = _skel_space(agent, pose, feet)
-        world = np.stack([np.einsum("ti,tij->tj", skel[f][:, 3, :3], place[:, :3, :3]) + place[:, 3, :3]
-                          for f in feet], axis=1)
-        return metrics.foot_skate_of_positions(world, lock.times, *units,
-                                               contact=before.contact if same else None).mean
+        feet_world = world(pose, place)
+        contact = metrics.on_ground(before.contact, source, feet_world, info.up_axis, info.meters_per_unit)
+        return metrics.foot_skate_of_positions(feet_world, lock.times, *units, contact=contact).mean
 
     unlocked = skate(lock.pose)
     return before.mean, unlocked, skate(legs.apply(lock.pose)) if legs is not None else unlocked
@@ -419,6 +554,7 @@ class AgentLocking:
     path: str
     note: str | None = None               # why it was skipped
     contacts: int = 0                      # contacts locked (0: not locked)
+    steps: int = 0                         # steps a standing foot takes
     skate: tuple | None = None             # (source, unlocked, edited) foot skate
     max_drop: float = 0.0
     max_correction: float = 0.0
@@ -470,23 +606,46 @@ def _lock_run(ctx: SolveContext, locks: list, chains: dict) -> None:
     info = ctx.data.info
     up = np.zeros(3)
     up[ground.up_index(info.up_axis)] = 1.0
-    offsets = np.cumsum([0] + [len(lock.times) for lock, _ in locks])
-    parts = [lock.inputs() for lock, _ in locks]
-    inputs = footlock.LegInputs(
-        offsets=offsets.astype(np.int64), smooth=np.array([lock.blend_frames for lock, _ in locks], dtype=np.int64),
-        up=up, **{k: np.concatenate([p[k] for p in parts]) for k in parts[0]})
-    legs = footlock.lock_feet(inputs)
+    solved = _solve_legs([lock for lock, _ in locks], up)
+    # A step that turns a leg's joint too fast against the pose is made longer, and the agent's
+    # legs solved again.
+    stretch = {a: np.ones(2) for a in range(len(locks))}
+    for _ in range(STEP_ROUNDS):
+        again = []
+        for a, ((lock, _), (legs, lo, hi)) in enumerate(zip(locks, solved)):
+            ratio = lock.step_speed(legs, lo, hi) / STEP_SPEED_RATIO
+            if np.any(ratio > 1.0 + 1e-6):
+                stretch[a] = stretch[a] * np.maximum(ratio * 1.05, 1.0)
+                lock.plan(stretch[a])
+                again.append(a)
+        if not again:
+            break
+        for a, done in zip(again, _solve_legs([locks[a][0] for a in again], up)):
+            solved[a] = done
     tolerance = SKATE_TOLERANCE_M / info.meters_per_unit
-    for (lock, result), lo, hi in zip(locks, offsets[:-1], offsets[1:]):
-        locked_legs = lock.apply(legs, int(lo), int(hi), up, info.meters_per_unit)
+    for (lock, result), (legs, lo, hi) in zip(locks, solved):
+        locked_legs = lock.apply(legs, lo, hi, up, info.meters_per_unit)
         skate = _report_skate(ctx, lock, locked_legs, chains)
         if locked_legs is not None and skate is not None and skate[1] <= skate[0] + tolerance:
             # The edit left the feet as planted as the source's: keep the legs, bake nothing.
             locked_legs, skate = None, (skate[0], skate[1], skate[1])
             result.kept = True
         result.contacts, result.skate, result.legs = lock.locked, skate, locked_legs
+        result.steps = lock.steps if locked_legs is not None else 0
         result.max_drop, result.max_correction = lock.max_drop, lock.max_correction
         result.plants = _plants(lock)
+
+
+def _solve_legs(locks: list[_AgentLock], up: np.ndarray) -> list[tuple[footlock.LegOutputs, int, int]]:
+    """The solver's job on these agents' legs at once: per agent, (the outputs, its first and
+    last + 1 pose in them)."""
+    offsets = np.cumsum([0] + [len(lock.times) for lock in locks])
+    parts = [lock.inputs() for lock in locks]
+    inputs = footlock.LegInputs(
+        offsets=offsets.astype(np.int64), smooth=np.array([lock.blend_frames for lock in locks], dtype=np.int64),
+        up=up, **{k: np.concatenate([p[k] for p in parts]) for k in parts[0]})
+    legs = footlock.lock_feet(inputs)
+    return [(legs, int(lo), int(hi)) for lo, hi in zip(offsets[:-1], offsets[1:])]
 
 
 def lock_part(part: dict) -> list[AgentLocking]:
@@ -548,6 +707,8 @@ def run(ctx: SolveContext) -> None:
             entry.foot_skate_source, entry.foot_skate_unlocked, entry.foot_skate_edited = r.skate
             skates.append(r.skate)
         entry.foot_contacts_locked = r.contacts
+        if r.steps:
+            entry.foot_steps = r.steps
         entry.max_pelvis_drop = r.max_drop
         entry.max_foot_correction = r.max_correction
         if r.legs is not None:
@@ -558,6 +719,8 @@ def run(ctx: SolveContext) -> None:
     stats.foot_locked_agents = sum(r.legs is not None for r in locked)
     stats.foot_locking_not_needed = sum(r.kept for r in locked)
     stats.foot_contacts_locked = sum(r.contacts for r in locked)
+    if any(r.steps for r in locked):
+        stats.foot_steps = sum(r.steps for r in locked)
     # The shot's figures: mean skate over the agents with contacts, the largest corrections.
     if skates:
         stats.foot_skate_source, stats.foot_skate_unlocked, stats.foot_skate_edited = (
@@ -572,13 +735,17 @@ PLANT_COLORS = np.array([[0.2, 0.5, 1.0], [1.0, 0.55, 0.1]])
 
 def _plants(lock: _AgentLock) -> tuple[np.ndarray, np.ndarray]:
     """Where the agent's locked feet are planted: the ankle at the first fully locked frame of
-    each contact, blue for left feet and orange for right. (points, colors)."""
+    each contact and where each step lands, blue for left feet and orange for right.
+    (points, colors)."""
     points, colors = [], []
     for k, leg in enumerate(lock.legs):
         full = lock.weight[:, k] >= 1.0
         starts = np.flatnonzero(full & ~np.concatenate([[False], full[:-1]]))
-        points.append(lock.target[starts, k])
-        colors.append(np.tile(PLANT_COLORS[0 if leg.side == "left" else 1], (len(starts), 1)))
+        stepping = lock.stepping[:, k]
+        landed = np.flatnonzero(~stepping & np.concatenate([[False], stepping[:-1]]))
+        at = np.union1d(starts, landed)
+        points.append(lock.target[at, k])
+        colors.append(np.tile(PLANT_COLORS[0 if leg.side == "left" else 1], (len(at), 1)))
     return np.concatenate(points), np.concatenate(colors)
 
 
