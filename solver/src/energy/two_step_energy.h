@@ -36,6 +36,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cstddef>
 #include <cmath>
 #include <complex>
 #include <initializer_list>
@@ -48,7 +49,7 @@ namespace mocapedit::detail {
 using LCplx = std::complex<long double>;
 
 // A row of a term: (vertex, coefficient) pairs, sum coeff * x_vertex = target.
-template <int N>
+template <size_t N>
 using TermRow = std::array<std::pair<int, LCplx>, N>;
 
 // ---------------------------------------------------------------------------------------
