@@ -258,7 +258,11 @@ struct SeparationState {
 
   // Step 2's targets from step 1's result (unknowns y1, positions z1) of one agent: each
   // step's edge (EdgeTarget) and each range's turn, the rotation of its similarity. A
-  // range too small to carry a rotation keeps its source facing.
+  // range too small to carry a rotation keeps its source facing here, where the path
+  // editor turns it with the step-1 edges entering and leaving it: avoidance moves a
+  // standing agent within a detour whose turns in and out cancel, and the edges next to a
+  // stand (a walker slowing down, tens of micrometres) turn by noise in step 1; on stages
+  // of agents that stop in crossing flows, turning them so spun their bodies.
   void Step2Targets(const Agent& ag, const Eigen::VectorXcd& y1, const std::vector<Complex>& z1,
                     std::vector<Complex>& edges, std::vector<Complex>& turn) const {
     edges.resize(static_cast<size_t>(std::max(ag.count - 1, 0)));

@@ -25,6 +25,8 @@ void Validate(const SeparationProblem& problem) {
   if (!(problem.anchor_weight > 0.0) || !std::isfinite(problem.anchor_weight))
     throw InvalidInput(kWhere, "anchor_weight must be positive");
   if (!(problem.still_extent >= 0.0)) throw InvalidInput(kWhere, "still_extent must not be negative");
+  if (!(problem.min_baseline >= 0.0) || !std::isfinite(problem.min_baseline))
+    throw InvalidInput(kWhere, "min_baseline must be a finite value >= 0");
 }
 
 // Each agent's vertices, and the rigid ranges inside it.
@@ -138,7 +140,7 @@ void SeparationPrecompute(const SeparationProblem& problem, SeparationData& out)
   SetUpAgents(problem, *data);
   const double scale = 1.0 + (nv ? problem.rest.cwiseAbs().maxCoeff() : 0.0);
   // Frames closer than still_extent stand still: they never frame a shape term.
-  const double baseline = std::max(problem.still_extent, 1e-12 * scale);
+  const double baseline = std::max({problem.min_baseline, problem.still_extent, 1e-12 * scale});
   const int na = static_cast<int>(data->agents.size());
   ParallelFor(na, data->threads, [&](int a) {
     Agent& ag = data->agents[static_cast<size_t>(a)];

@@ -91,6 +91,12 @@ TEST(Separation, ValidityRejectsBadInput) {
   }
   {
     SeparationProblem p = HeadOn();
+    p.min_baseline = -0.1;
+    mocapedit::SeparationData data;
+    EXPECT_THROW(mocapedit::SeparationPrecompute(p, data), mocapedit::InvalidInput);
+  }
+  {
+    SeparationProblem p = HeadOn();
     p.rigid = {{70, 90}};  // spans both agents
     mocapedit::SeparationData data;
     EXPECT_THROW(mocapedit::SeparationPrecompute(p, data), mocapedit::InvalidInput);
@@ -265,7 +271,7 @@ TEST(Separation, WarmStartsOfBothStepsResumeTheSolve) {
 TEST(Separation, ItsEnergyIsThePathEditors) {
   // An agent walks along x, slows to a sway of millimetres (steps much shorter than the
   // baseline), turns in place along an arc (a stationary range) and walks on; frame 45 is
-  // pinned 0.5 aside. Its frames are framed at least `baseline` apart (still_extent).
+  // pinned 0.5 aside.
   const int n = 70;
   const double baseline = 0.05, anchor = 1e-3;
   Trajectory2 z(n, 2);
@@ -285,7 +291,7 @@ TEST(Separation, ItsEnergyIsThePathEditors) {
   sp.starts << 0, n;
   sp.rigid = {{32, 38}};
   sp.anchor_weight = anchor;
-  sp.still_extent = baseline;
+  sp.min_baseline = baseline;
   RowBuilder b;
   b.Add(1, 0, px, 0, 0, {{pin, 1.0}});
   b.Add(0, 1, py, 0, 0, {{pin, 1.0}});
