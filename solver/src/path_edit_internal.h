@@ -106,7 +106,7 @@ struct Rows {
   template <typename Entries>
   void Add(const Entries& entries, TargetKind kind, int index, double weight) {
     const long double s = weight == 1.0 ? 1.0L : std::sqrt(static_cast<long double>(weight));
-    for (const auto& e : entries) Entry(e.first, weight == 1.0 ? e.second : e.second * s);
+    for (const auto& e : entries) Entry(e.first, weight == 1.0 ? LCplx(e.second) : LCplx(e.second) * s);
     Close(kind, index, s);
   }
   void Add(std::initializer_list<std::pair<int, LCplx>> entries, TargetKind kind, int index, double weight) {
@@ -122,7 +122,7 @@ struct Rows {
     Close(kind, index, 1.0L);
   }
   // A shape term of unit weight (its row, Row(term), without the weighting).
-  void AddShape(const ShapeTerm& term, int index) {
+  void AddShape(const ShapeTerm<long double>& term, int index) {
     for (const auto& e : Row(term)) Entry(e.first, e.second);
     Close(TargetKind::kZero, index, 1.0L);
   }

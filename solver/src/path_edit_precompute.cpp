@@ -172,7 +172,7 @@ void Step1Rows(const PathEditProblem& p, const Eigen::VectorXd& tw, PathEditStat
       throw InvalidInput(kWhere, s.str());
     }
     if (tw[t] == 0 || InOneRange(range_of, {i, j, k})) continue;
-    const ShapeTerm term = MakeShapeTerm(i, j, k, d.zl(i), d.zl(j), d.zl(k));
+    const ShapeTerm<long double> term = MakeShapeTerm(i, j, k, d.zl(i), d.zl(j), d.zl(k));
     if (tw[t] == 1.0)
       d.rows1.AddShape(term, static_cast<int>(t));
     else

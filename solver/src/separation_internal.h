@@ -1,6 +1,7 @@
 // Internals of the separation solve (separation.h) shared by its source files: each
 // agent's factored steps, the maps from its vertices to its unknowns, and the precomputed
-// state behind SeparationData.
+// state behind SeparationData. The energy's terms come from energy/two_step_energy.h, as
+// the path editor's do; here they are accumulated per agent through the maps.
 //
 //   separation_precompute.cpp  validation, each agent's unknowns and factored steps
 //   separation.cpp             rows by agent, Schur blocks, the row forces, both steps
@@ -196,10 +197,9 @@ struct Normal {
 
   // A term's row (energy/two_step_energy.h) of local vertices; map(v) gives v's Map.
   template <size_t N, typename MapFn>
-  void Add(const TermRow<N>& term, const MapFn& map, Complex beta, double weight) {
+  void Add(const TermRow<double, N>& term, const MapFn& map, Complex beta, double weight) {
     row.clear();
-    for (const auto& [v, coeff] : term) {
-      const Complex c(coeff);
+    for (const auto& [v, c] : term) {
       const Map m = map(v);
       row.emplace_back(m.j0, c * m.a0);
       if (m.j1 >= 0) row.emplace_back(m.j1, c * m.a1);

@@ -99,7 +99,7 @@ void FactorShape(const SeparationState& data, double baseline, Agent& ag) {
   Normal one(ag.n1);
   const auto map = [&](int i) { return ag.Map1(i); };
   const auto range_of = [&](int i) { return ag.RangeOf(i); };
-  const auto z = [&](int i) { return LCplx(C(data.rest, ag.first + i)); };
+  const auto z = [&](int i) { return C(data.rest, ag.first + i); };
   ChainFrames(data.rest, ag.first, ag.count, baseline, [&](int i, int a, int b) {
     if (!InOneRange(range_of, {i, a, b})) one.Add(Row(MakeShapeTerm(i, a, b, z(i), z(a), z(b))), map, 0.0, 1.0);
   });

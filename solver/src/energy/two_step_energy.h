@@ -28,8 +28,8 @@
 //                   carry a rotation: it moves as a point in step 1 and turns with the
 //                   step-1 edges entering and leaving it (BoundaryTurn).
 //
-// Coefficients are in extended precision (the path editor refines its solve with residuals
-// in extended precision; the separation solver rounds them to double).
+// Shape terms are built in the caller's precision: extended for the path editor (it refines
+// its solve with residuals in extended precision), double for the separation solver.
 #pragma once
 
 #include <Eigen/Core>
@@ -49,24 +49,31 @@ namespace mocapedit::detail {
 using LCplx = std::complex<long double>;
 
 // A row of a term: (vertex, coefficient) pairs, sum coeff * x_vertex = target.
-template <size_t N>
-using TermRow = std::array<std::pair<int, LCplx>, N>;
+template <typename T, size_t N>
+using TermRow = std::array<std::pair<int, std::complex<T>>, N>;
 
 // ---------------------------------------------------------------------------------------
 // Step 1.
 
-// Vertex i in the local frame of j -> k (vertex indices of the caller's numbering).
+// Vertex i in the local frame of j -> k (vertex indices of the caller's numbering), its
+// coefficient in precision T (double or long double).
+template <typename T>
 struct ShapeTerm {
   int i, j, k;
-  LCplx c;  // (z_i - z_j) / (z_k - z_j)
+  std::complex<T> c;  // (z_i - z_j) / (z_k - z_j)
 };
 
-inline ShapeTerm MakeShapeTerm(int i, int j, int k, const LCplx& zi, const LCplx& zj, const LCplx& zk) {
+template <typename T>
+ShapeTerm<T> MakeShapeTerm(int i, int j, int k, const std::complex<T>& zi, const std::complex<T>& zj,
+                           const std::complex<T>& zk) {
   return {i, j, k, (zi - zj) / (zk - zj)};
 }
 
 // Its row, of zero target: x_i + (c - 1) x_j - c x_k.
-inline TermRow<3> Row(const ShapeTerm& t) { return {{{t.i, 1.0L}, {t.j, t.c - 1.0L}, {t.k, -t.c}}}; }
+template <typename T>
+TermRow<T, 3> Row(const ShapeTerm<T>& t) {
+  return {{{t.i, T(1)}, {t.j, t.c - T(1)}, {t.k, -t.c}}};
+}
 
 // The frames of one agent's shape terms. Calls frame(i, a, b) for each inner frame i of
 // the chain rest[first .. first+count-1] (indices local to the chain, a < i < b) with a, b
@@ -100,7 +107,7 @@ struct EdgeTerm {
   int j, k;
 };
 
-inline TermRow<2> Row(const EdgeTerm& e) { return {{{e.k, 1.0L}, {e.j, -1.0L}}}; }
+inline TermRow<double, 2> Row(const EdgeTerm& e) { return {{{e.k, 1.0}, {e.j, -1.0}}}; }
 
 // The target of an edge: its rest length along its step-1 vector, or its rest vector when
 // step 1 collapsed it.
@@ -120,7 +127,7 @@ void ChainEdges(int count, Edge edge) {
 // ---------------------------------------------------------------------------------------
 // Anchors: x_v = z_v.
 
-inline TermRow<1> AnchorRow(int v) { return {{{v, 1.0L}}}; }
+inline TermRow<double, 1> AnchorRow(int v) { return {{{v, 1.0}}}; }
 
 // ---------------------------------------------------------------------------------------
 // Rigid ranges.
