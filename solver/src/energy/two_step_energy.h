@@ -25,8 +25,9 @@
 //                   similarity in step 1 and one translation of its rest shape turned by
 //                   step 1's rotation in step 2 (RangeTurn). A range whose rest positions
 //                   lie within a small extent of each other (RangeMasters) is too small to
-//                   carry a rotation: it moves as a point in step 1 and turns with the
-//                   step-1 edges entering and leaving it (BoundaryTurn).
+//                   carry a rotation: it moves as a point in step 1 and, in path editing,
+//                   turns with the step-1 edges entering and leaving it (BoundaryTurn); in
+//                   avoidance it keeps its source facing (separation.h says why).
 //
 // Shape terms are built in the caller's precision: extended for the path editor (it refines
 // its solve with residuals in extended precision), double for the separation solver.
