@@ -16,13 +16,14 @@ class SeparationSolver {
  public:
   SeparationSolver(const Eigen::Ref<const Trajectory2>& rest, const Eigen::VectorXi& starts,
                    const std::vector<mocapedit::FrameRange>& rigid, double anchor_weight, double still_extent,
-                   int threads) {
+                   double min_baseline, int threads) {
     mocapedit::SeparationProblem problem;
     problem.rest = rest;
     problem.starts = starts;
     problem.rigid = rigid;
     problem.anchor_weight = anchor_weight;
     problem.still_extent = still_extent;
+    problem.min_baseline = min_baseline;
     problem.threads = threads;
     py::gil_scoped_release release;
     mocapedit::SeparationPrecompute(problem, data_);
@@ -92,11 +93,14 @@ MOCAPEDIT_BINDINGS(BindSeparation) {
       "rest: (V, 2) agents' paths concatenated; starts: (A+1,) first vertex of each agent, then V;\n"
       "rigid: inclusive global vertex ranges that move rigidly (stationary ranges);\n"
       "anchor_weight: pull of every frame towards its rest position, relative to the shape terms;\n"
-      "still_extent: ranges whose rest positions lie this close (stage units) only translate.")
+      "still_extent: ranges whose rest positions lie this close (stage units) only translate;\n"
+      "min_baseline: each frame's shape term is framed by the nearest frames at least this far\n"
+      "apart (stage units), as path_edit's chain terms.")
       .def(py::init<const Eigen::Ref<const Trajectory2>&, const Eigen::VectorXi&,
-                    const std::vector<mocapedit::FrameRange>&, double, double, int>(),
+                    const std::vector<mocapedit::FrameRange>&, double, double, double, int>(),
            py::kw_only(), py::arg("rest"), py::arg("starts"), py::arg("rigid") = std::vector<mocapedit::FrameRange>{},
-           py::arg("anchor_weight") = 1e-3, py::arg("still_extent") = 1e-9, py::arg("threads") = 0)
+           py::arg("anchor_weight") = 1e-3, py::arg("still_extent") = 1e-9,
+           py::arg("min_baseline") = 0.0, py::arg("threads") = 0)
       .def("solve", &SeparationSolver::Solve, py::kw_only(), py::arg("direction"), py::arg("rhs"), py::arg("softness"),
            py::arg("term_row"), py::arg("term_vertex"), py::arg("term_weight"),
            py::arg("kind") = Eigen::VectorXi(), py::arg("initial_forces") = Eigen::VectorXd(),

@@ -438,16 +438,8 @@ void ScaleBlocks(const SeparationState& data, const Gathered& g, int threads, Se
       result.shape(ag.first + i, 1) = z1[static_cast<size_t>(i)].imag();
     }
     auto& turn = turns[static_cast<size_t>(q)];
-    turn.assign(ag.ranges.size(), 1.0);
-    for (size_t k = 0; k < ag.ranges.size(); ++k)
-      if (ag.ranges[k].m1 >= 0 && std::abs(y1[ag.ranges[k].m1]) > 0.0)
-        turn[k] = y1[ag.ranges[k].m1] / std::abs(y1[ag.ranges[k].m1]);
-    std::vector<Complex> edges(static_cast<size_t>(std::max(ag.count - 1, 0)));
-    for (int i = 0; i + 1 < ag.count; ++i) {
-      const Complex rest_edge = C(data.rest, ag.first + i + 1) - C(data.rest, ag.first + i);
-      const Complex e = z1[static_cast<size_t>(i + 1)] - z1[static_cast<size_t>(i)];
-      edges[static_cast<size_t>(i)] = std::abs(e) > 0.0 ? e / std::abs(e) * std::abs(rest_edge) : rest_edge;
-    }
+    std::vector<Complex> edges;
+    data.Step2Targets(ag, y1, z1, edges, turn);
     ar->y0 = ag.step2.Solve(data.Step2Rhs(ag, edges, turn)).col(0);
     AgentBlock(ag.step2, ag.n2, [&](int i) { return ag.Map2(i, turn); },
                &cache.step2[static_cast<size_t>(g.involved[static_cast<size_t>(q)])], ar);

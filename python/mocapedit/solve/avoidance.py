@@ -56,6 +56,7 @@ import numpy as np
 
 from mocapedit import _solver
 from mocapedit.solve import collisions
+from mocapedit.solve.path_edit import MIN_BASELINE_M
 from mocapedit.model import report
 
 STRATEGIES = ("relinearize", "accumulate")
@@ -514,10 +515,12 @@ class _Run:
         return out
 
     def factor(self, rest, starts, rigid, anchor_weight: float, still_extent: float):
-        """A SeparationSolver for the paths (rest, starts) and their rigid ranges, timed."""
+        """A SeparationSolver for the paths (rest, starts) and their rigid ranges, timed. Its
+        shape terms are framed as the path editor's (``MIN_BASELINE_M``)."""
         t = time.perf_counter()
         solver = _solver.SeparationSolver(rest=rest, starts=starts, rigid=rigid, anchor_weight=anchor_weight,
-                                          still_extent=still_extent, threads=0)
+                                          still_extent=still_extent,
+                                          min_baseline=MIN_BASELINE_M / self.state.s.meters_per_unit, threads=0)
         self.seconds["factor"] += time.perf_counter() - t
         return solver
 
