@@ -627,16 +627,18 @@ class _Candidates:
 
     def add(self, a, b, k) -> None:
         keys = np.unique((k * self.n + a) * self.n + b)
-        new = keys[~np.isin(keys, self.keys)]
+        at = np.searchsorted(self.keys, keys)
+        known = at < len(self.keys)
+        known[known] = self.keys[at[known]] == keys[known]
+        new, at = keys[~known], at[~known]
         if len(new) == 0:
             return
-        merged = np.concatenate([self.keys, new])
-        order = np.argsort(merged, kind="stable")
-        self.keys = merged[order]
-        self.force = np.concatenate([self.force, np.zeros(len(new))])[order]
-        self.force1 = np.concatenate([self.force1, np.zeros(len(new))])[order]
-        self.blocked = np.concatenate([self.blocked, np.zeros(len(new), bool)])[order]
-        self.normal = np.concatenate([self.normal, np.full((len(new), 2), np.nan)])[order]
+        # Both sorted: each new key goes in before the first kept key above it.
+        self.keys = np.insert(self.keys, at, new)
+        self.force = np.insert(self.force, at, 0.0)
+        self.force1 = np.insert(self.force1, at, 0.0)
+        self.blocked = np.insert(self.blocked, at, False)
+        self.normal = np.insert(self.normal, at, np.nan, axis=0)
 
     def linearise(self, fresh: np.ndarray, keep_cos: float) -> np.ndarray:
         """The rows' directions for the next solve, given the directions at the latest result.
@@ -769,26 +771,25 @@ class _Forward:
     def __init__(self, state: _State, keep: float = 0.5, chord_s: float = 0.25, moving_m_s: float = 0.2):
         s, p = state.s, state.p
         self.keep = keep
-        firsts, seconds, dirs, lengths = [], [], [], []
-        for a in range(len(p.names)):
-            lo, hi = int(state.starts[a]), int(state.starts[a + 1])
-            if hi - lo < 2:
-                continue
-            dt = float(np.median(np.diff(p.frame_times[a]))) / s.time_codes_per_second   # seconds per frame
-            h = max(1, int(round(chord_s / max(dt, 1e-9))))
-            if hi - lo <= h:
-                continue
-            v = np.arange(lo, hi - h)
-            c = state.rest[v + h] - state.rest[v]
-            n = np.linalg.norm(c, axis=1)
-            moving = n > moving_m_s / s.meters_per_unit * h * dt
-            firsts.append(v[moving])
-            seconds.append(v[moving] + h)
-            dirs.append(c[moving] / n[moving, None])
-            lengths.append(n[moving])
-        cat = lambda parts, shape: np.concatenate(parts) if parts else np.zeros(shape)  # noqa: E731
-        self.v, self.u = cat(firsts, 0).astype(np.int64), cat(seconds, 0).astype(np.int64)
-        self.d, self.length = cat(dirs, (0, 2)), cat(lengths, 0)
+        starts = state.starts.astype(np.int64)
+        counts = np.diff(starts)
+        # Seconds per frame of each agent (the median interval; agents of one length at once).
+        dt = np.zeros(len(counts))
+        for count in np.unique(counts[counts >= 2]):
+            group = np.flatnonzero(counts == count)
+            times = np.stack([p.frame_times[a] for a in group])
+            dt[group] = np.median(np.diff(times, axis=1), axis=1) / s.time_codes_per_second
+        h = np.maximum(1, np.round(chord_s / np.maximum(dt, 1e-9))).astype(np.int64)
+        # The chords of every agent longer than its chord: frames lo .. hi - h - 1.
+        chords = np.where((counts >= 2) & (counts > h), counts - h, 0)
+        owner = np.repeat(np.arange(len(counts)), chords)
+        v = np.arange(int(chords.sum()), dtype=np.int64) - np.repeat(np.cumsum(chords) - chords, chords) + starts[:-1][owner]
+        hv = h[owner]
+        c = state.rest[v + hv] - state.rest[v]
+        n = np.linalg.norm(c, axis=1)
+        moving = n > moving_m_s / s.meters_per_unit * hv * dt[owner]
+        self.v, self.u = v[moving], (v + hv)[moving]
+        self.d, self.length = c[moving] / n[moving, None], n[moving]
         self.on = np.zeros(len(self.v), bool)
         self.force = np.zeros(len(self.v))
         self.force1 = np.zeros(len(self.v))
