@@ -252,6 +252,14 @@ struct RowSlots {
 // change, as each agent's part u = S_a lambda_a (a row's value is the sum of its agents'
 // parts), so a force change is one contiguous column update per agent. Returns the
 // sweeps used (0 without one-sided rows, which need none).
+//
+// A row is only worked out again when it may have something to do. S_a is positive
+// semidefinite, so |S_a(l, c)| <= sqrt(S_a(l, l) S_a(c, c)): a force change delta on
+// column c moves any u_a(l) by at most sqrt(S_a(l, l)) sqrt(S_a(c, c)) |delta|. Each agent
+// sums sqrt(S_a(c, c)) |delta| over its changes (`moved`); a row keeps its residual from
+// when it was last worked out, and while that residual, grown by what its agents moved
+// since, leaves it within the tolerance (or, a one-sided row without force, pulling), the
+// row would change nothing and is passed over: the same forces as visiting every row.
 int SweepRows(const std::vector<AgentRows*>& blocks, const RowSlots& slots, const SeparationRows& in,
               const SeparationSettings& settings, const Eigen::VectorXd& q, const Eigen::VectorXd& diag,
               Eigen::VectorXd& forces, bool* converged, int64_t* updates) {
@@ -277,22 +285,58 @@ int SweepRows(const std::vector<AgentRows*>& blocks, const RowSlots& slots, cons
     *converged = true;
     return 0;
   }
+  // Per slot (as slots.items): sqrt of the row's diagonal entry in that agent's block, and
+  // the agent's `moved` when the row was last worked out; per row, its residual then.
+  std::vector<double> root(slots.items.size()), then(slots.items.size(), 0.0);
+  for (size_t i = 0; i < slots.items.size(); ++i) {
+    const RowSlot& sl = slots.items[i];
+    root[i] = std::sqrt(std::max(blocks[static_cast<size_t>(sl.agent)]->s(sl.local, sl.local), 0.0));
+  }
+  std::vector<double> moved(blocks.size(), 0.0), residual(static_cast<size_t>(nr), 0.0);
+  std::vector<char> known(static_cast<size_t>(nr), 0);
+  const double relax = settings.relaxation, tol = settings.tolerance;
   for (sweep = 1; sweep <= settings.max_sweeps; ++sweep) {
     double change = 0.0;
     for (int r = 0; r < nr; ++r) {
       if (!(diag[r] > 0.0)) continue;
-      double f = forces[r] + settings.relaxation * (q[r] - value(r) - in.softness[r] * forces[r]) / diag[r];
+      const int s0 = slots.start[static_cast<size_t>(r)], s1 = slots.start[static_cast<size_t>(r) + 1];
+      if (known[static_cast<size_t>(r)]) {
+        double reach = 0.0;
+        for (int i = s0; i < s1; ++i)
+          reach += root[static_cast<size_t>(i)] *
+                   (moved[static_cast<size_t>(slots.items[static_cast<size_t>(i)].agent)] - then[static_cast<size_t>(i)]);
+        const double res = residual[static_cast<size_t>(r)];
+        // Far above the rounding of the values compared, far below the tolerance.
+        const double margin = 1e-9 * (tol + std::abs(q[r]) + std::abs(res) + reach);
+        const bool idle = unilateral(r) && forces[r] == 0.0 ? relax * (res + reach) <= tol - margin
+                                                              : relax * (std::abs(res) + reach) <= tol - margin;
+        if (idle) continue;
+      }
+      const double res = q[r] - value(r) - in.softness[r] * forces[r];
+      double f = forces[r] + relax * res / diag[r];
       if (unilateral(r)) f = std::max(f, 0.0);
       const double delta = f - forces[r];
+      known[static_cast<size_t>(r)] = 1;
       // A change below the tolerance is not worth passing on to the other rows.
-      if (std::abs(delta) * diag[r] <= settings.tolerance) continue;
+      if (std::abs(delta) * diag[r] <= tol) {
+        residual[static_cast<size_t>(r)] = res;
+        for (int i = s0; i < s1; ++i)
+          then[static_cast<size_t>(i)] = moved[static_cast<size_t>(slots.items[static_cast<size_t>(i)].agent)];
+        continue;
+      }
       forces[r] = f;
       ++*updates;
       change = std::max(change, std::abs(delta) * diag[r]);
-      for (const RowSlot& sl : slots.row(r))
+      for (int i = s0; i < s1; ++i) {
+        const RowSlot& sl = slots.items[static_cast<size_t>(i)];
         u[static_cast<size_t>(sl.agent)].noalias() += blocks[static_cast<size_t>(sl.agent)]->s.col(sl.local) * delta;
+        moved[static_cast<size_t>(sl.agent)] += root[static_cast<size_t>(i)] * std::abs(delta);
+      }
+      residual[static_cast<size_t>(r)] = res - diag[r] * delta;
+      for (int i = s0; i < s1; ++i)
+        then[static_cast<size_t>(i)] = moved[static_cast<size_t>(slots.items[static_cast<size_t>(i)].agent)];
     }
-    if (change <= settings.tolerance) {
+    if (change <= tol) {
       *converged = true;
       break;
     }
@@ -407,8 +451,8 @@ void ValidateRows(const SeparationState& data, const SeparationRows& in, const S
       !in.initial_forces.allFinite() || !in.initial_shape_forces.allFinite())
     throw InvalidInput(kWhere, "rows must be finite");
   if (nr && in.softness.minCoeff() < 0.0) throw InvalidInput(kWhere, "softness must not be negative");
-  if (!(settings.tolerance > 0.0) || settings.max_sweeps < 1)
-    throw InvalidInput(kWhere, "tolerance must be positive and max_sweeps at least 1");
+  if (!(settings.tolerance > 0.0) || settings.max_sweeps < 1 || !(settings.relaxation > 0.0 && settings.relaxation < 2.0))
+    throw InvalidInput(kWhere, "tolerance must be positive, max_sweeps at least 1 and relaxation in (0, 2)");
   std::vector<char> has_term(static_cast<size_t>(nr), 0);
   for (Eigen::Index t = 0; t < nt; ++t) {
     if (in.term_row[t] < 0 || in.term_row[t] >= nr) throw InvalidInput(kWhere, "term row out of range");
