@@ -767,7 +767,10 @@ class _RegionCandidates:
             inside = near.distance < c
             if inside.any():
                 t = _path_tangents(state, flat, v[inside])
-                moving = np.linalg.norm(t, axis=1) > 1e-12
+                speed = np.linalg.norm(t, axis=1)
+                moving = speed > 1e-12
+                # Unit: _exit walks its rays by distance.
+                t = t / np.where(moving, speed, 1.0)[:, None]
                 left = np.stack([-t[:, 1], t[:, 0]], axis=1)
                 centre = _centre(region.footprint)
                 cross = np.sum(left * (centre - pts[inside]), axis=1)   # > 0: centre on the left
