@@ -746,11 +746,14 @@ class _RegionCandidates:
         """(normal (N,2), rhs (N,)) of one-sided rows n . x >= rhs keeping frames out.
 
         A frame outside the region grown by its clearance keeps to the tangent line at its
-        nearest point. A frame inside goes round the region: sideways to the agent's
-        motion, on the side of the region's centre its path already passes, to where that
-        sideways line leaves the grown region (the tangent line there). Pushing each frame
-        to its nearest boundary point would instead hold a walker back before the middle
-        of the region and throw it forward after it.
+        nearest point. A frame inside whose source frame (the solve's rest) lies inside too
+        goes round the region: sideways to the agent's motion, on the side of the region's
+        centre its path already passes, to where that sideways line leaves the grown region
+        (the tangent line there). Pushing each frame to its nearest boundary point would
+        instead hold a walker back before the middle of the region and throw it forward
+        after it. A frame that others pushed in (its source frame lies outside: a walker
+        squeezed against a wall) goes back out the nearest way; sideways to a walk along a
+        wall lies the wall's far side.
         """
         normal = np.zeros((len(self.vertex), 2))
         rhs = np.zeros(len(self.vertex))
@@ -765,6 +768,9 @@ class _RegionCandidates:
             nrm = near.normal.copy()
             target = near.boundary + nrm * c[:, None]
             inside = near.distance < c
+            if inside.any():
+                own = _solver.nearest_on_region(region.footprint, np.ascontiguousarray(state.rest[v[inside]]))
+                inside[np.flatnonzero(inside)[own.distance >= c[inside]]] = False
             if inside.any():
                 t = _path_tangents(state, flat, v[inside])
                 speed = np.linalg.norm(t, axis=1)
