@@ -8,13 +8,15 @@
 #include <functional>
 #include <optional>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "mocapedit/two_threads.h"
+#include "view_checks.h"
 
 namespace mocapedit {
 namespace {
+
+using detail::BytesOverlap;
 
 using Vec = Eigen::Vector3d;
 using Quat = Eigen::Quaterniond;
@@ -65,13 +67,6 @@ double Ramp(double frame, double first, double last, double in, double out) {
 bool Sized(Span<const double> s, std::size_t n) { return s.size == n && (n == 0 || s.data); }
 template <typename T>
 bool SizedOut(Span<T> s, std::size_t n) { return s.size == n && (n == 0 || s.data); }
-
-bool Overlap(const void* a, std::size_t na, const void* b, std::size_t nb) {
-  if (na == 0 || nb == 0) return false;
-  std::less<const char*> lt;
-  const char *ca = static_cast<const char*>(a), *cb = static_cast<const char*>(b);
-  return lt(ca, cb + nb) && lt(cb, ca + na);
-}
 
 bool Finite(Span<const double> s) {
   for (double v : s)
@@ -665,7 +660,7 @@ void FootPlantJob::Validate() const {
       {steps.data, steps.size * sizeof(std::int64_t), "steps"}};
   for (std::size_t i = 0; i < 5; ++i) {
     for (const auto& in : inputs)
-      if (Overlap(outputs[i].data, outputs[i].bytes, in.s.data, in.s.size * sizeof(double)))
+      if (BytesOverlap(outputs[i].data, outputs[i].bytes, in.s.data, in.s.size * sizeof(double)))
         throw InvalidInput(job, std::string(outputs[i].name) + " overlaps the input " + in.name);
     const struct { const void* data; std::size_t bytes; const char* name; } others[] = {
         {stationary.data, stationary.size, "stationary"},
@@ -673,37 +668,23 @@ void FootPlantJob::Validate() const {
         {contact_offsets.data, contact_offsets.size * sizeof(std::int64_t), "contact_offsets"},
         {offsets.data, offsets.size * sizeof(std::int64_t), "offsets"}};
     for (const auto& in : others)
-      if (Overlap(outputs[i].data, outputs[i].bytes, in.data, in.bytes))
+      if (BytesOverlap(outputs[i].data, outputs[i].bytes, in.data, in.bytes))
         throw InvalidInput(job, std::string(outputs[i].name) + " overlaps the input " + in.name);
     for (std::size_t j = i + 1; j < 5; ++j)
-      if (Overlap(outputs[i].data, outputs[i].bytes, outputs[j].data, outputs[j].bytes))
+      if (BytesOverlap(outputs[i].data, outputs[i].bytes, outputs[j].data, outputs[j].bytes))
         throw InvalidInput(job, std::string(outputs[i].name) + " overlaps " + outputs[j].name);
   }
 }
 
 void FootPlantJob::Run() const {
   Validate();
-  const std::size_t agents = offsets.size - 1;
-  const std::size_t n = static_cast<std::size_t>(offsets[agents]);
   const int up_axis = up[2] == 1 ? 2 : 1;
-  int count = threads > 0 ? threads : static_cast<int>(std::min(2u, std::max(1u, std::thread::hardware_concurrency())));
-  count = static_cast<int>(std::min<std::size_t>(static_cast<std::size_t>(count), std::max<std::size_t>(agents, 1)));
-  // Contiguous runs of agents with about the same number of poses per thread.
-  std::vector<std::size_t> split(static_cast<std::size_t>(count) + 1, agents);
-  split[0] = 0;
-  for (int t = 1; t < count; ++t) {
-    const auto goal = static_cast<std::int64_t>(n * static_cast<std::size_t>(t) / static_cast<std::size_t>(count));
-    split[static_cast<std::size_t>(t)] = static_cast<std::size_t>(
-        std::lower_bound(offsets.begin(), offsets.end() - 1, goal) - offsets.begin());
-  }
-  OnThreads(count, [&](int t) {
-    for (std::size_t a = split[static_cast<std::size_t>(t)]; a < split[static_cast<std::size_t>(t) + 1]; ++a) {
-      Agent agent{*this, static_cast<std::size_t>(offsets[a]), static_cast<std::size_t>(offsets[a + 1]), a, up_axis,
-                  up_axis == 2 ? Vec(0, 0, 1) : Vec(0, 1, 0), {}};
-      agent.Contacts(0);
-      agent.Contacts(1);
-      agent.Plan();
-    }
+  OnAgentRuns(offsets.data, offsets.size - 1, threads, [&](std::size_t a) {
+    Agent agent{*this, static_cast<std::size_t>(offsets[a]), static_cast<std::size_t>(offsets[a + 1]), a, up_axis,
+                up_axis == 2 ? Vec(0, 0, 1) : Vec(0, 1, 0), {}};
+    agent.Contacts(0);
+    agent.Contacts(1);
+    agent.Plan();
   });
 }
 

@@ -4,14 +4,12 @@
 #include <functional>
 #include <string>
 
+#include "view_checks.h"
+
 namespace mocapedit {
 namespace {
 
-bool Overlap(const double* a, std::size_t na, const double* b, std::size_t nb) {
-  if (na == 0 || nb == 0) return false;
-  std::less<const double*> lt;
-  return lt(a, b + nb) && lt(b, a + na);
-}
+using detail::Overlap;
 
 // p * m for a row-vector 4x4 m: the rotation rows summed in order, then the translation row.
 void Transform(const double* p, const double* m, double* out) {

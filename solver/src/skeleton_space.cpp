@@ -6,15 +6,12 @@
 #include <string>
 #include <vector>
 
+#include "view_checks.h"
+
 namespace mocapedit {
 namespace {
 
-bool Overlap(const void* a, std::size_t na, const void* b, std::size_t nb) {
-  if (na == 0 || nb == 0) return false;
-  std::less<const char*> lt;
-  const char *ca = static_cast<const char*>(a), *cb = static_cast<const char*>(b);
-  return lt(ca, cb + nb) && lt(cb, ca + na);
-}
+using detail::BytesOverlap;
 
 // The local matrix of one transform: scale, then rotate (the quaternion normalised), then
 // translate; terms in the order of mocapedit.geometry.kinematics.compose_trs.
@@ -100,7 +97,7 @@ void SkeletonSpaceJob::Validate() const {
     throw InvalidInput(job, "matrices must hold " + std::to_string(poses * joints.size * 16) + " values");
   if (rotations.size != 0 && (rotations.size != poses * joints.size * 4 || !rotations.data))
     throw InvalidInput(job, "rotations must be empty or hold " + std::to_string(poses * joints.size * 4) + " values");
-  if (Overlap(matrices.data, matrices.size * sizeof(double), rotations.data, rotations.size * sizeof(double)))
+  if (BytesOverlap(matrices.data, matrices.size * sizeof(double), rotations.data, rotations.size * sizeof(double)))
     throw InvalidInput(job, "rotations overlaps matrices");
   const struct { const void* data; std::size_t bytes; const char* name; } inputs[] = {
       {parents.data, parents.size * sizeof(std::int64_t), "parents"},
@@ -111,9 +108,9 @@ void SkeletonSpaceJob::Validate() const {
       {pose.scales.data, pose.scales.size * sizeof(float), "scales"},
       {joints.data, joints.size * sizeof(std::int64_t), "joints"}};
   for (const auto& in : inputs) {
-    if (Overlap(matrices.data, matrices.size * sizeof(double), in.data, in.bytes))
+    if (BytesOverlap(matrices.data, matrices.size * sizeof(double), in.data, in.bytes))
       throw InvalidInput(job, std::string("matrices overlaps the input ") + in.name);
-    if (Overlap(rotations.data, rotations.size * sizeof(double), in.data, in.bytes))
+    if (BytesOverlap(rotations.data, rotations.size * sizeof(double), in.data, in.bytes))
       throw InvalidInput(job, std::string("rotations overlaps the input ") + in.name);
   }
 }
