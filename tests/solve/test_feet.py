@@ -2,6 +2,7 @@
 and the locked feet measured on the composed stage by UsdSkel forward kinematics."""
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -712,3 +713,13 @@ def test_the_solvers_plant_placement_and_kinematics_jobs_match_numpy(tmp_path, m
         if isinstance(fast, tuple):
             rot = trs_from_matrices(slow)[1]
             np.testing.assert_allclose(fast[1], rot, atol=1e-6)
+    # Bad arrays are named.
+    inputs = calls["plan"][0][0][0]
+    with pytest.raises(ValueError, match="stretch"):
+        footplant.plan_feet(dataclasses.replace(inputs, stretch=np.zeros_like(inputs.stretch)))
+    args = calls["place"][0][0]
+    with pytest.raises(ValueError, match="up must be a unit vector"):
+        footplant.place(*args[:4], 2.0 * args[4], *args[5:])
+    args = calls["fk"][0][0]
+    with pytest.raises(ValueError, match="parent must precede"):
+        kinematics.skeleton_space(np.arange(len(args[0])), *args[1:7])
