@@ -14,6 +14,7 @@ __all__: list[str] = [
     'CollisionResult',
     'ContradictionError',
     'FootLockResult',
+    'FootPlantResult',
     'GroundRegion',
     'InvalidInput',
     'NumericalError',
@@ -54,9 +55,12 @@ __all__: list[str] = [
     'path_edit_precompute',
     'path_edit_solve',
     'path_length',
+    'place',
+    'plan_feet',
     'push_out_of_region',
     'region_signed_distance',
     'sample_clip',
+    'skeleton_space',
     'smooth_delay',
     'subtree_joint_weights',
     'tangent_headings',
@@ -407,6 +411,35 @@ class FootLockResult:
         """
         (N, 2, 3) world ankle positions after locking
         """
+class FootPlantResult:
+    """
+    Result of plan_feet.
+    """
+    @property
+    def stepping(self) -> numpy.typing.NDArray[numpy.bool]:
+        """
+        (N, 2) the foot is stepping (in the air)
+        """
+    @property
+    def steps(self) -> numpy.typing.NDArray[numpy.int64]:
+        """
+        (A,) steps each agent takes
+        """
+    @property
+    def target(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        (N, 2, 3) planted ankle positions (the edited ankle where weight is 0)
+        """
+    @property
+    def target_rot(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        (N, 2, 4) planted ankle rotations (x, y, z, w)
+        """
+    @property
+    def weight(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        (N, 2) how much of the plant each leg reaches, in [0, 1]
+        """
 class CollisionIntervals:
     """
     Collision intervals, one entry per interval, sorted by (agent_a, agent_b, first).
@@ -708,6 +741,24 @@ def path_length(points: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[
     """
     Polyline length of a (N, 2) ground trajectory.
     """
+def place(*, placement: typing.Any, placement_rotation: typing.Any, motion: typing.Any, turn: typing.Any, up: typing.Any, points: typing.Any, rotations: typing.Any) -> tuple[numpy.typing.NDArray[numpy.float64], numpy.typing.NDArray[numpy.float64], numpy.typing.NDArray[numpy.float64], numpy.typing.NDArray[numpy.float64]]:
+    """
+    Skeleton-space points (N, P, 3) and rotations (N, Q, 4) (x, y, z, w) carried into the world by each pose's
+    placement (N, 4, 4) row-vector and its rotation (N, 4), then by the edit's ground motion (N, 4, 4) and
+    its turn (N,) radians about the unit up (3,) (the C++ PlacementJob). Returns (source_points,
+    edited_points, source_rotations, edited_rotations). Keyword arguments only.
+    """
+def plan_feet(*, offsets: typing.Any, frames: typing.Any, seconds: typing.Any, stationary: typing.Any, turn: typing.Any, hip: typing.Any, knee: typing.Any, ankle: typing.Any, ankle_rot: typing.Any, source_hip: typing.Any, source_ankle: typing.Any, source_hip_rot: typing.Any, source_knee_rot: typing.Any, source_ankle_rot: typing.Any, contact_offsets: typing.Any, contacts: typing.Any, blend: typing.Any, stretch: typing.Any, up: typing.Any, meters_per_unit: typing.SupportsFloat | typing.SupportsIndex, leash_m: typing.SupportsFloat | typing.SupportsIndex, max_leash_m: typing.SupportsFloat | typing.SupportsIndex, max_drop_m: typing.SupportsFloat | typing.SupportsIndex, leash_degrees: typing.SupportsFloat | typing.SupportsIndex, soft_reach: typing.SupportsFloat | typing.SupportsIndex, step_slide_m: typing.SupportsFloat | typing.SupportsIndex, step_slide_degrees: typing.SupportsFloat | typing.SupportsIndex, step_seconds: typing.SupportsFloat | typing.SupportsIndex, step_longest_seconds: typing.SupportsFloat | typing.SupportsIndex, step_height_m: typing.SupportsFloat | typing.SupportsIndex, threads: typing.SupportsInt | typing.SupportsIndex = 0) -> FootPlantResult:
+    """
+    Where planted feet go while an edit drags the body (the C++ FootPlantJob), for many agents.
+    
+    offsets (A+1,) int64 pose offsets per agent; frames, seconds, turn (N,) source frame, time in seconds
+    and the edit's turn about up; stationary (N,) uint8; hip, knee, ankle (N,2,3) and ankle_rot (N,2,4)
+    world, as edited; source_hip, source_ankle (N,2,3) and source_hip_rot, source_knee_rot,
+    source_ankle_rot (N,2,4) world, posed before the edit's ground motion; contact_offsets (2A+1,) int64
+    and contacts (R,2) inclusive source frame ranges per agent and leg; blend (A,) frames; stretch (A,2);
+    up (3,) +Y or +Z; lengths named _m in metres. Returns a FootPlantResult. Keyword arguments only.
+    """
 def push_out_of_region(region: GroundRegion, points: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], clearance: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"]) -> RegionPush:
     """
     RegionPush: the points of (N, 2) closer to the region than their clearance ((N,) or (1,)),
@@ -722,6 +773,14 @@ def sample_clip(translations: typing.Annotated[numpy.typing.ArrayLike, numpy.flo
     A clip (F, J, 3/4/3 float32 translations, (x, y, z, w) rotations, scales) sampled at
     (T,) fractional frames: ((T, J, 3), (T, J, 4), (T, J, 3)) float32. Linear translations and
     scales, normalised shortest-arc slerp rotations; whole frames are copied bit for bit.
+    """
+def skeleton_space(*, parents: typing.Any, columns: typing.Any, rest: typing.Any, translations: typing.Any, rotations: typing.Any, scales: typing.Any, joints: typing.Any, with_rotations: bool = False) -> typing.Any:
+    """
+    Forward kinematics (the C++ SkeletonSpaceJob): (T, K, 4, 4) skeleton-space row-vector matrices of the
+    wanted joints (K,) of (T, C, 3/4/3) float32 local transforms. parents (J,) -1 for roots, parents first;
+    columns (J,) the pose column of each joint, -1 for its rest transform; rest (J, 4, 4). with_rotations: also
+    (T, K, 4) each matrix's rotation (x, y, z, w; w >= 0) once its scales are divided out, as
+    mocapedit.solve.layering.trs_from_matrices finds it; returns (matrices, rotations). Keyword arguments only.
     """
 def smooth_delay(times: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"], start: typing.SupportsFloat | typing.SupportsIndex, end: typing.SupportsFloat | typing.SupportsIndex, delay: typing.SupportsFloat | typing.SupportsIndex) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
     """

@@ -5,13 +5,15 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
-#include <thread>
 #include <vector>
 
 #include "mocapedit/two_threads.h"
+#include "view_checks.h"
 
 namespace mocapedit {
 namespace {
+
+using detail::Overlap;
 
 using Vec = Eigen::Vector3d;
 using Quat = Eigen::Quaterniond;
@@ -89,12 +91,6 @@ double RequiredDrop(const Vec& hip, const Vec& target, double reach, const Vec& 
 
 bool Sized(Span<const double> s, std::size_t n) { return s.size == n && (n == 0 || s.data); }
 bool Sized(Span<double> s, std::size_t n) { return s.size == n && (n == 0 || s.data); }
-
-bool Overlap(const double* a, std::size_t na, const double* b, std::size_t nb) {
-  if (na == 0 || nb == 0) return false;
-  std::less<const double*> lt;
-  return lt(a, b + nb) && lt(b, a + na);
-}
 
 }  // namespace
 
@@ -261,26 +257,12 @@ struct Agent {
 
 void FootLockJob::Run() const {
   Validate();
-  const std::size_t agents = offsets.size - 1;
-  const std::size_t n = static_cast<std::size_t>(offsets[agents]);
   const Vec up_v = V(up.data);
-  int count = threads > 0 ? threads : static_cast<int>(std::min(2u, std::max(1u, std::thread::hardware_concurrency())));
-  count = static_cast<int>(std::min<std::size_t>(static_cast<std::size_t>(count), std::max<std::size_t>(agents, 1)));
-  // Contiguous runs of agents with about the same number of poses per thread.
-  std::vector<std::size_t> split(static_cast<std::size_t>(count) + 1, agents);
-  split[0] = 0;
-  for (int t = 1; t < count; ++t) {
-    const auto goal = static_cast<std::int64_t>(n * static_cast<std::size_t>(t) / static_cast<std::size_t>(count));
-    split[static_cast<std::size_t>(t)] = static_cast<std::size_t>(
-        std::lower_bound(offsets.begin(), offsets.end() - 1, goal) - offsets.begin());
-  }
-  OnThreads(count, [&](int t) {
-    for (std::size_t a = split[static_cast<std::size_t>(t)]; a < split[static_cast<std::size_t>(t) + 1]; ++a) {
-      Agent agent{*this, static_cast<std::size_t>(offsets[a]), static_cast<std::size_t>(offsets[a + 1]), a};
-      agent.LowerPelvis(up_v);
-      for (std::size_t p = agent.lo; p < agent.hi; ++p)
-        for (std::size_t leg = 0; leg < 2; ++leg) agent.SolveLeg(p, leg, up_v);
-    }
+  OnAgentRuns(offsets.data, offsets.size - 1, threads, [&](std::size_t a) {
+    Agent agent{*this, static_cast<std::size_t>(offsets[a]), static_cast<std::size_t>(offsets[a + 1]), a};
+    agent.LowerPelvis(up_v);
+    for (std::size_t p = agent.lo; p < agent.hi; ++p)
+      for (std::size_t leg = 0; leg < 2; ++leg) agent.SolveLeg(p, leg, up_v);
   });
 }
 

@@ -1,4 +1,4 @@
-// Size and aliasing checks shared by the jobs that take pose views (internal).
+// Size and aliasing checks shared by the jobs (internal).
 #pragma once
 
 #include <cstddef>
@@ -27,6 +27,20 @@ inline bool ViewsPartiallyOverlap(const PoseStreamView& out, const ConstPoseStre
   return PartialOverlap(out.translations.data, in.translations.data, in.translations.size) ||
          PartialOverlap(out.rotations.data, in.rotations.data, in.rotations.size) ||
          PartialOverlap(out.scales.data, in.scales.data, in.scales.size);
+}
+
+// True when the `na` bytes at a and the `nb` bytes at b share memory.
+inline bool BytesOverlap(const void* a, std::size_t na, const void* b, std::size_t nb) {
+  if (na == 0 || nb == 0) return false;
+  std::less<const char*> lt;
+  const char *ca = static_cast<const char*>(a), *cb = static_cast<const char*>(b);
+  return lt(ca, cb + nb) && lt(cb, ca + na);
+}
+
+// The same for `na` values at a and `nb` at b.
+template <typename A, typename B>
+bool Overlap(const A* a, std::size_t na, const B* b, std::size_t nb) {
+  return BytesOverlap(a, na * sizeof(A), b, nb * sizeof(B));
 }
 
 }  // namespace mocapedit::detail

@@ -2,6 +2,7 @@
 and the locked feet measured on the composed stage by UsdSkel forward kinematics."""
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -669,3 +670,56 @@ def test_two_real_walkers_crossing_with_avoidance_keep_their_feet(tmp_path):
         assert entry["footSkateEdited"] <= entry["footSkateSource"] + 0.5       # cm/s
         bones, flips, speed = _leg_quality(stage, out, a, times, CC_LEGS, 60.0, unlocked=free)
         assert bones < 1e-4 and flips == 0 and speed < 1.5
+
+
+def test_the_solvers_plant_placement_and_kinematics_jobs_match_numpy(tmp_path, monkeypatch, walk_clip):
+    """Every call foot locking makes to the solver's FootPlantJob, PlacementJob and
+    SkeletonSpaceJob, on a dragged stand (steps) and a bent walk,
+    gives what their numpy versions give."""
+    calls = {"plan": [], "place": [], "fk": []}
+
+    def spy(kind, fn):
+        def wrapped(*args, **kwargs):
+            out = fn(*args, **kwargs)
+            calls[kind].append((args, kwargs, out))
+            return out
+        return wrapped
+
+    from mocapedit.geometry import kinematics
+    monkeypatch.setattr(footplant, "plan_feet", spy("plan", footplant.plan_feet))
+    monkeypatch.setattr(footplant, "place", spy("place", footplant.place))
+    monkeypatch.setattr(kinematics, "skeleton_space", spy("fk", kinematics.skeleton_space))
+    _dragged_stand(tmp_path)
+    assert _solve(tmp_path, "stand")[0].report.stats["footSteps"] >= 4
+    bent = tmp_path / "bent"
+    bent.mkdir()
+    _bent_path_stage(bent, walk_clip)
+    _solve(bent)
+    assert len(calls["plan"]) >= 2 and calls["place"] and len(calls["fk"]) >= 2
+    for (inputs,), _, fast in calls["plan"]:
+        slow = footplant.plan_feet_numpy(inputs)
+        for name in ("target", "target_rot", "weight"):
+            np.testing.assert_allclose(getattr(fast, name), getattr(slow, name), atol=1e-9, err_msg=name)
+        np.testing.assert_array_equal(fast.stepping, slow.stepping)
+        np.testing.assert_array_equal(fast.steps, slow.steps)
+    assert any(fast.steps.sum() for _, _, fast in calls["plan"])
+    for args, _, fast in calls["place"]:
+        for a, b in zip(fast, footplant.place_numpy(*args)):
+            np.testing.assert_allclose(a, b, atol=1e-12)
+    for args, _, fast in calls["fk"]:
+        matrices = fast[0] if isinstance(fast, tuple) else fast
+        slow = kinematics.skeleton_space_numpy(*args[:7])
+        np.testing.assert_allclose(matrices, slow, atol=1e-12)
+        if isinstance(fast, tuple):
+            rot = trs_from_matrices(slow)[1]
+            np.testing.assert_allclose(fast[1], rot, atol=1e-6)
+    # Bad arrays are named.
+    inputs = calls["plan"][0][0][0]
+    with pytest.raises(ValueError, match="stretch"):
+        footplant.plan_feet(dataclasses.replace(inputs, stretch=np.zeros_like(inputs.stretch)))
+    args = calls["place"][0][0]
+    with pytest.raises(ValueError, match="up must be a unit vector"):
+        footplant.place(*args[:4], 2.0 * args[4], *args[5:])
+    args = calls["fk"][0][0]
+    with pytest.raises(ValueError, match="parent must precede"):
+        kinematics.skeleton_space(np.arange(len(args[0])), *args[1:7])

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from mocapedit import _solver
+
 
 def quat_to_matrix3(q: np.ndarray) -> np.ndarray:
     """(...,4) unit quaternions -> (...,3,3) row-vector rotation matrices (p @ R)."""
@@ -45,6 +47,45 @@ def compose_trs(translations: np.ndarray, rotations: np.ndarray,
     m[..., 3, :3] = t
     m[..., 3, 3] = 1.0
     return m
+
+
+def transform_points(points: np.ndarray, matrices: np.ndarray) -> np.ndarray:
+    """(...,3) points moved by (...,4,4) row-vector matrices (``p @ M``, broadcast): their rotation
+    and scale rows summed in order, then the translation row."""
+    r = matrices[..., :3, :3]
+    return (points[..., 0, None] * r[..., 0, :] + points[..., 1, None] * r[..., 1, :]
+            + points[..., 2, None] * r[..., 2, :] + matrices[..., 3, :3])
+
+
+def skeleton_space(parents: np.ndarray, columns: np.ndarray, rest: np.ndarray, translations: np.ndarray,
+                   rotations: np.ndarray, scales: np.ndarray, joints, with_rotations: bool = False):
+    """(T,K,4,4) skeleton-space matrices of the wanted ``joints`` (K,) of (T,C,3/4/3) joint-local
+    poses, by the solver's SkeletonSpaceJob: ``parents`` (J,) (-1 for a root, parents first),
+    ``columns`` (J,) the pose column of each joint (-1: its ``rest`` (J,4,4) transform).
+    ``with_rotations``: (matrices, (T,K,4) their rotations once their scales are divided out, as
+    ``mocapedit.solve.layering.trs_from_matrices`` finds them, in float64)."""
+    return _solver.skeleton_space(parents=parents, columns=columns, rest=rest, translations=translations,
+                                  rotations=rotations, scales=scales, joints=np.asarray(joints, dtype=np.int64),
+                                  with_rotations=with_rotations)
+
+
+def skeleton_space_numpy(parents: np.ndarray, columns: np.ndarray, rest: np.ndarray, translations: np.ndarray,
+                         rotations: np.ndarray, scales: np.ndarray, joints) -> np.ndarray:
+    """:func:`skeleton_space` in numpy (:func:`compose_trs` and matrix products, joint by joint):
+    the same results to within rounding."""
+    count = np.shape(translations)[0]
+    skel: dict[int, np.ndarray] = {}
+
+    def world(j: int) -> np.ndarray:
+        if j not in skel:
+            c = int(columns[j])
+            local = (compose_trs(translations[:, c], rotations[:, c], scales[:, c]) if c >= 0
+                     else np.broadcast_to(rest[j], (count, 4, 4)))
+            p = int(parents[j])
+            skel[j] = local if p < 0 else local @ world(p)
+        return skel[j]
+
+    return np.stack([world(int(j)) for j in joints], axis=1).reshape(count, len(joints), 4, 4)
 
 
 def chain_to_skel(local: np.ndarray, parents: np.ndarray, joint: int) -> np.ndarray:

@@ -128,16 +128,16 @@ def _twist(axis, a, b):
 
 
 def knee_hinge(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, knee_rot: np.ndarray) -> np.ndarray:
-    """(3,) a leg's knee hinge axis in the knee joint's own frame, learned from (T,3) positions and
-    (T,4) world rotations of a clip: the normals of the bend planes, weighted by the square of the
-    bend, so the clearly bent poses decide."""
+    """(...,3) a leg's knee hinge axis in the knee joint's own frame, learned from (T,...,3)
+    positions and (T,...,4) world rotations of a clip (legs along the axes after the first): the
+    normals of the bend planes, weighted by the square of the bend, so the clearly bent poses
+    decide."""
     cross = np.cross(knee - hip, ankle - hip)
     local = _rotate(_conj(np.asarray(knee_rot, dtype=np.float64)), cross)
-    axis = local.sum(axis=0) if len(local) else np.zeros(3)
     weight = np.linalg.norm(cross, axis=-1) / np.maximum(
         np.linalg.norm(knee - hip, axis=-1) * np.linalg.norm(ankle - knee, axis=-1), 1e-30)
-    axis = np.sum(local * weight[:, None], axis=0) if len(local) else axis
-    return normalize(axis) if np.linalg.norm(axis) > 0 else np.array([1.0, 0.0, 0.0])
+    axis = np.sum(local * weight[..., None], axis=0)
+    return np.where(np.linalg.norm(axis, axis=-1, keepdims=True) > 0, normalize(axis), np.array([1.0, 0.0, 0.0]))
 
 
 def world_hinge(knee_rot: np.ndarray, local: np.ndarray) -> np.ndarray:

@@ -19,12 +19,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from mocapedit import _solver
 from mocapedit.geometry import kinematics
 from mocapedit.solve.footlock import normalize
 from mocapedit.solve.layering import quat_multiply
 
 __all__ = ["follow", "leash", "leash_rows", "Replant", "replant", "step_profile", "step_frames", "lift_bend",
-           "PlantInputs", "PlantOutputs", "plan_feet_numpy", "reach", "turn_speed", "yaw_quat"]
+           "PlantInputs", "PlantOutputs", "plan_feet", "plan_feet_numpy", "place", "place_numpy", "reach", "turn_speed", "yaw_quat"]
 
 
 def follow(offset: np.ndarray, radius: np.ndarray, run: np.ndarray, start: np.ndarray, out: np.ndarray) -> float:
@@ -317,8 +318,13 @@ class PlantOutputs:
     target_rot: np.ndarray   # (N,2,4) how it is turned
     weight: np.ndarray       # (N,2) in [0, 1]: how much of the plant to reach
     stepping: np.ndarray     # (N,2) bool: the foot is stepping (in the air)
-    contacts: np.ndarray     # (A,2) int64: contacts on the agent's poses, per leg
     steps: np.ndarray        # (A,) int64: steps taken
+
+
+def plan_feet(inputs: PlantInputs, threads: int = 0) -> PlantOutputs:
+    """Runs the solver's FootPlantJob: the plants of all agents' feet at once."""
+    out = _solver.plan_feet(**vars(inputs), threads=threads)
+    return PlantOutputs(out.target, out.target_rot, out.weight, out.stepping, out.steps)
 
 
 def _ramp(frames: np.ndarray, first, last, blend, blend_out=None) -> np.ndarray:
@@ -341,6 +347,25 @@ def turn_speed(q: np.ndarray, seconds: np.ndarray) -> np.ndarray:
     dot = np.abs(np.sum(q[1:] * q[:-1], axis=-1)) / np.maximum(
         np.linalg.norm(q[1:], axis=-1) * np.linalg.norm(q[:-1], axis=-1), 1e-300)
     return 2.0 * np.arccos(np.clip(dot, 0.0, 1.0)) / np.maximum(np.diff(seconds), 1e-300)
+
+
+def place(placement: np.ndarray, placement_rotation: np.ndarray, motion: np.ndarray, turn: np.ndarray,
+          up: np.ndarray, points: np.ndarray, rotations: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Skeleton-space points (N,P,3) and rotations (N,Q,4) of #N poses carried into the world by
+    each pose's placement (N,4,4) and its rotation (N,4), then on by an edit's ground motion
+    (N,4,4), which turns by ``turn`` (N,) radians about the unit ``up``: (source points, edited
+    points, source rotations, edited rotations), by the solver's PlacementJob."""
+    return _solver.place(placement=placement, placement_rotation=placement_rotation, motion=motion, turn=turn,
+                         up=up, points=points, rotations=rotations)
+
+
+def place_numpy(placement: np.ndarray, placement_rotation: np.ndarray, motion: np.ndarray, turn: np.ndarray,
+                up: np.ndarray, points: np.ndarray, rotations: np.ndarray) -> tuple[np.ndarray, ...]:
+    """:func:`place` in numpy: the same results to within rounding."""
+    source = kinematics.transform_points(points, placement[:, None])
+    source_rot = quat_multiply(placement_rotation[:, None], rotations)
+    return (source, kinematics.transform_points(source, motion[:, None]), source_rot,
+            quat_multiply(yaw_quat(turn, up)[:, None], source_rot))
 
 
 _CONJUGATE = np.array([-1.0, -1.0, -1.0, 1.0])
@@ -409,7 +434,6 @@ class _AgentPlan:
         self.up = int(np.argmax(np.abs(self.up_vector)))
         self.up_axis = "YZ"[self.up - 1]
         self.blend = float(p.blend[a])
-        self.contacts = np.zeros(2, dtype=np.int64)
         self.rows = [self._contacts(k, p.contacts[p.contact_offsets[2 * a + k]:p.contact_offsets[2 * a + k + 1]])
                      for k in range(2)]
 
@@ -428,7 +452,6 @@ class _AgentPlan:
         ranges, inside = ranges[used], inside[used]
         if not len(ranges):
             return None
-        self.contacts[k] = len(ranges)
         reached = _ramp(self.frames, ranges[:, :1], ranges[:, 1:], blend * p.max_leash_m / p.leash_m) > 0  # (C,T)
         lo = reached.argmax(axis=1)
         width = int((reached.sum(axis=1)).max())
@@ -564,12 +587,9 @@ def plan_feet_numpy(inputs: PlantInputs) -> PlantOutputs:
     agents = len(inputs.offsets) - 1
     n = int(inputs.offsets[-1])
     out = PlantOutputs(target=np.zeros((n, 2, 3)), target_rot=np.zeros((n, 2, 4)), weight=np.zeros((n, 2)),
-                       stepping=np.zeros((n, 2), dtype=bool), contacts=np.zeros((agents, 2), dtype=np.int64),
-                       steps=np.zeros(agents, dtype=np.int64))
+                       stepping=np.zeros((n, 2), dtype=bool), steps=np.zeros(agents, dtype=np.int64))
     for a in range(agents):
         lo, hi = int(inputs.offsets[a]), int(inputs.offsets[a + 1])
-        agent = _AgentPlan(inputs, a)
         (out.target[lo:hi], out.target_rot[lo:hi], out.weight[lo:hi], out.stepping[lo:hi],
-         out.steps[a]) = agent.plan(inputs.stretch[a])
-        out.contacts[a] = agent.contacts
+         out.steps[a]) = _AgentPlan(inputs, a).plan(inputs.stretch[a])
     return out

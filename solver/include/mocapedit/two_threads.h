@@ -3,6 +3,9 @@
 // one of them is rethrown: the first piece's, as if they had run in turn.
 #pragma once
 
+#include <algorithm>
+#include <cstddef>
+#include <cstdint>
 #include <exception>
 #include <system_error>
 #include <thread>
@@ -63,6 +66,26 @@ void OnThreads(int threads, Work&& work) {
   for (auto& th : pool) th.join();
   for (const auto& e : errors)
     if (e) std::rethrow_exception(e);
+}
+
+// agent(a) for the #A agents of `offsets` (#A + 1 increasing pose offsets, agent a owning poses
+// offsets[a] .. offsets[a + 1] - 1): contiguous runs of agents with about as many poses each,
+// one run per thread (`threads`; 0: up to two, as the machine allows), agents in turn within a run.
+template <typename Agent>
+void OnAgentRuns(const std::int64_t* offsets, std::size_t agents, int threads, Agent&& agent) {
+  const auto n = static_cast<std::size_t>(offsets[agents]);
+  int count = threads > 0 ? threads : static_cast<int>(std::min(2u, std::max(1u, std::thread::hardware_concurrency())));
+  count = static_cast<int>(std::min<std::size_t>(static_cast<std::size_t>(count), std::max<std::size_t>(agents, 1)));
+  std::vector<std::size_t> split(static_cast<std::size_t>(count) + 1, agents);
+  split[0] = 0;
+  for (int t = 1; t < count; ++t) {
+    const auto goal = static_cast<std::int64_t>(n * static_cast<std::size_t>(t) / static_cast<std::size_t>(count));
+    split[static_cast<std::size_t>(t)] =
+        static_cast<std::size_t>(std::lower_bound(offsets, offsets + agents, goal) - offsets);
+  }
+  OnThreads(count, [&](int t) {
+    for (std::size_t a = split[static_cast<std::size_t>(t)]; a < split[static_cast<std::size_t>(t) + 1]; ++a) agent(a);
+  });
 }
 
 }  // namespace mocapedit

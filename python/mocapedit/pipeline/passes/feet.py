@@ -77,69 +77,40 @@ SKATE_TOLERANCE_M = 0.005
 STILL_M = 0.002
 
 
-def _skel_space(agent: Agent, pose: animation.Pose, joints: list[int], base: "_Chains | None" = None,
-                changed: frozenset = frozenset()) -> "_Chains":
-    """(T,4,4) joint-local and skeleton-space matrices of the given joints and their ancestors,
-    from a pose whose joint order may differ from the skeleton's (joints it lacks take the rest
-    pose). ``base``: the matrices of a pose that differs from this one only in the joints
-    ``changed``; the other joints take theirs from it."""
+def _skeleton(agent: Agent, pose: animation.Pose, joints: list[int], with_rotations: bool = False):
+    """(T,K,4,4) skeleton-space matrices of the given joints of a pose (or of the poses of agents of
+    one skeleton, one after another) whose joint order may differ from the skeleton's (joints it
+    lacks take the rest pose); ``with_rotations``: and their rotations (T,K,4), see
+    :func:`kinematics.skeleton_space`."""
     column = {name: k for k, name in enumerate(pose.joints)}
-    count = pose.translations.shape[0]
-    chain: list[int] = []
-    seen: set[int] = set()
-    for j in joints:
-        up: list[int] = []
-        while j >= 0 and j not in seen:
-            seen.add(j)
-            up.append(j)
-            j = int(agent.parents[j])
-        chain.extend(reversed(up))           # parents before children
-    local: dict[int, np.ndarray] = {}
-    todo = []
-    for j in chain:
-        if base is not None and j not in changed and j in base.local:
-            local[j] = base.local[j]
-        elif agent.joints[j] not in column:
-            local[j] = np.broadcast_to(agent.rest_transforms[j], (count, 4, 4))
-        else:
-            todo.append(j)
-    if todo:
-        # All joints' local matrices in one call, one contiguous (T,4,4) block each.
-        cols = [column[agent.joints[j]] for j in todo]
-        blocks = kinematics.compose_trs(*(np.swapaxes(a[:, cols], 0, 1)
-                                          for a in (pose.translations, pose.rotations, pose.scales)))
-        local.update(zip(todo, blocks))
-    skel: dict[int, np.ndarray] = {}
-    moved: set[int] = set()
-    for j in chain:
-        p = int(agent.parents[j])
-        if base is None or j in changed or p in moved or j not in base.skel:
-            moved.add(j)
-            skel[j] = local[j] if p < 0 else local[j] @ skel[p]
-        else:
-            skel[j] = base.skel[j]
-    return _Chains(local, skel)
-
-
-@dataclass
-class _Chains:
-    """Joint-local and skeleton-space (T,4,4) matrices of some joints of one pose, by joint."""
-    local: dict
-    skel: dict
+    columns = np.array([column.get(name, -1) for name in agent.joints], dtype=np.int64)
+    return kinematics.skeleton_space(agent.parents, columns, agent.rest_transforms, pose.translations,
+                                     pose.rotations, pose.scales, joints, with_rotations)
 
 
 @dataclass
 class _Posed:
-    """An agent's pose after the earlier passes at its output frames, and its forward kinematics:
-    the leg joints, the hips' parents and the feet (``chains``); skeleton-space positions (T,K,3)
-    and rotations (T,K,4) of the K leg joints and hips' parents (``needed``, in that order), and
-    each leg's knee hinge in the knee's frame (2,3)."""
+    """An agent's pose after the earlier passes at its output frames and its pose columns by
+    joint name, and its forward kinematics: skeleton-space positions (T,8,3) and rotations
+    (T,8,4) of both legs' hips, knees, ankles and the hips' parents (``legs``: columns 0-1, 2-3,
+    4-5, 6-7; a hip without parent repeats the hip, and ``parented`` (2,) says which have one),
+    each leg's knee hinge in the knee's frame (2,3) and the feet's positions (T,F,3)."""
     pose: animation.Pose
-    chains: _Chains
-    needed: list
+    columns: dict
     pos: np.ndarray
     rot: np.ndarray
+    parented: np.ndarray
     hinge: np.ndarray
+    feet: np.ndarray
+
+
+def _foot_joints(agent: Agent, cache: dict) -> list[int]:
+    """The joints :func:`mocapedit.tools.measure.foot_skate` measures (named like feet); agents of
+    one skeleton share them."""
+    key = ("feet", tuple(agent.joints))
+    if key not in cache:
+        cache[key] = metrics.default_foot_joints(agent.joints)
+    return cache[key]
 
 
 def _posed_legs(ctx, path: str, frames: np.ndarray, times: np.ndarray, shared: dict) -> _Posed:
@@ -147,23 +118,24 @@ def _posed_legs(ctx, path: str, frames: np.ndarray, times: np.ndarray, shared: d
     at the same frames without pose edits share them."""
     agent = ctx.data.agents[path]
     edits = ctx.pose_edits.get(path, [])
-    needed = sorted({j for leg in agent.legs for j in (leg.hip, leg.knee, leg.ankle, int(agent.parents[leg.hip]))
-                     if j >= 0})
-    feet = metrics.default_foot_joints(agent.joints)
+    legs = [j for key in ("hip", "knee", "ankle") for leg in agent.legs for j in [getattr(leg, key)]]
+    parents = [int(agent.parents[leg.hip]) for leg in agent.legs]
+    feet = _foot_joints(agent, shared)
     key = None if edits else (agent.clip_key, tuple(agent.joints), agent.rest_transforms.tobytes(),
-                              tuple(needed), frames.tobytes())
+                              tuple(legs), frames.tobytes())
     hit = shared.get(key) if key is not None else None
     if hit is None:
         pose = animation.sample_pose(ctx.data.clip_of(agent), frames)
         for edit in edits:
             pose = edit.apply(pose, times, frames)
-        chains = _skel_space(agent, pose, needed + feet)
-        matrices = np.stack([chains.skel[j] for j in needed], axis=1)
-        pos, rot = matrices[..., 3, :3], trs_from_matrices(matrices)[1].astype(np.float64)
-        column = {j: i for i, j in enumerate(needed)}
-        hinge = np.stack([footlock.knee_hinge(*(pos[:, column[j]] for j in (leg.hip, leg.knee, leg.ankle)),
-                                              rot[:, column[leg.knee]]) for leg in agent.legs])
-        hit = _Posed(pose, chains, needed, pos, rot, hinge)
+        rows = legs + [p if p >= 0 else hip for p, hip in zip(parents, legs[:2])]
+        matrices, rot = _skeleton(agent, pose, rows + feet, with_rotations=True)
+        # Rotations as trs_from_matrices gives them (float32).
+        pos, rot = matrices[:, :8, 3, :3], rot[:, :8].astype(np.float32).astype(np.float64)
+        hinge = footlock.knee_hinge(pos[:, 0:2], pos[:, 2:4], pos[:, 4:6], rot[:, 2:4])
+        feet_pos = matrices[:, 8:, 3, :3] if feet else None
+        hit = _Posed(pose, {name: k for k, name in enumerate(pose.joints)}, pos, rot,
+                     np.array([p >= 0 for p in parents]), hinge, feet_pos)
         if key is not None:
             shared[key] = hit
     return hit
@@ -176,105 +148,70 @@ def _top(agent: Agent, joint: int) -> int:
 
 
 class _AgentLock:
-    """One agent's side of the jobs: what it needs, and what it gets back."""
+    """One agent's side of the jobs: what it needs, and (through its :class:`_Run`) what it gets back."""
 
     def __init__(self, ctx: SolveContext, path: str, source_contacts: list, shared: dict):
-        data = ctx.data
-        info = data.info
+        info = ctx.data.info
         self.path = path
-        agent = self.agent = data.agents[path]
+        agent = self.agent = ctx.data.agents[path]
         self.legs = agent.legs
         # Locked legs are a pose edit, and a pose edit bakes the animation: lock on its frames.
         self.times, self.frames = ctx.output_frames(path, baked=True)
         self.root = _top(agent, self.legs[0].hip)
         posed = self.posed = _posed_legs(ctx, path, self.frames, self.times, shared)
-        self.pose = posed.pose
-        self.columns = {name: k for k, name in enumerate(self.pose.joints)}
-        # Contacts on these frames.
+        self.pose, self.columns = posed.pose, posed.columns
+        # The contacts on these frames.
         self.contacts = []
         for ranges in source_contacts:
             ranges = np.array(ranges, dtype=np.float64).reshape(-1, 2)
             inside = (self.frames >= ranges[:, :1] - 1e-9) & (self.frames <= ranges[:, 1:] + 1e-9)
             self.contacts.append(ranges[inside.any(axis=1)])
         self.locked = sum(len(c) for c in self.contacts)
-        if not self.locked:
+        if not self.locked or self.writable():
             return
         to_world = agent.skel_to_world
         if to_world.shape[0] > 1:
             to_world = animation.interp_frames(to_world, self.frames)
         self.to_world = to_world
-        count = len(self.times)
-        up_vector = np.zeros(3)
-        up_vector[ground.up_index(info.up_axis)] = 1.0
-        # The edited ground motion (identity without a path edit): a turn about up, then a shift.
+        # The edit's ground motion (none without a path edit): source and edited ground and heading.
         edited = ctx.paths.get(path)
-        if edited is None:
-            motion = np.broadcast_to(np.eye(4), (count, 4, 4))
-            turn = np.zeros(count)
-        else:
+        self.ground = None
+        if edited is not None:
             traj = ctx.trajectories[path]
-            src_h = animation.interp_frames(traj.heading, self.frames)
-            new_h = animation.interp_frames(edited.heading, self.frames)
-            motion = trajectory.ground_motion(
-                animation.interp_frames(traj.ground, self.frames), src_h,
-                animation.interp_frames(edited.ground, self.frames), new_h, info.up_axis)
-            turn = new_h - src_h
-        self.motion = motion
-        turn_q = footplant.yaw_quat(turn, up_vector)
-        world_q = trs_from_matrices(to_world)[1].astype(np.float64)        # (1 or T, 4)
-        # World, before the ground motion (the posed source) and as edited; (T,K,...) by needed joint.
-        source = np.einsum("tki,tij->tkj", posed.pos, to_world[:, :3, :3]) + to_world[:, None, 3, :3]
-        pos = np.einsum("tki,tij->tkj", source, motion[:, :3, :3]) + motion[:, None, 3, :3]
-        source_rot = quat_multiply(world_q[:, None], posed.rot)
-        rot = quat_multiply(turn_q[:, None], source_rot)
-        column = {j: i for i, j in enumerate(posed.needed)}
-
-        def per_leg(key):
-            return [column[getattr(leg, key)] for leg in self.legs]
-
-        hip, knee, ankle = per_leg("hip"), per_leg("knee"), per_leg("ankle")
-        self.hip, self.knee, self.ankle = pos[:, hip], pos[:, knee], pos[:, ankle]
-        self.hip_rot, self.knee_rot, self.ankle_rot = rot[:, hip], rot[:, knee], rot[:, ankle]
-        parent_rot = []
-        for leg in self.legs:
-            p = int(agent.parents[leg.hip])
-            parent_rot.append(rot[:, column[p]] if p >= 0
-                              else quat_multiply(turn_q, np.broadcast_to(world_q, turn_q.shape)))
-        self.parent_rot = np.stack(parent_rot, axis=1)
-        self.hinge = footlock.world_hinge(self.knee_rot, posed.hinge)
-
-        # Plants: per contact, the source foot carried by one turn and one ground translation.
-        fps = info.time_codes_per_second
-        step = np.median(np.diff(agent.sample_times)) if agent.frame_count > 1 else 1.0
-        self.blend = max(2.0, BLEND_SECONDS * fps / max(step, 1e-9))
+            self.ground = tuple(animation.interp_frames(values, self.frames)
+                                for values in (traj.ground, traj.heading, edited.ground, edited.heading))
+        fps = self.agent_fps = info.time_codes_per_second
+        key = ("step", agent.sample_times.tobytes())
+        if key not in shared:
+            shared[key] = np.median(np.diff(agent.sample_times)) if agent.frame_count > 1 else 1.0
+        self.blend = max(2.0, BLEND_SECONDS * fps / max(shared[key], 1e-9))
         self.blend_frames = int(np.ceil(self.blend))
-        self.agent_fps = fps
-        stationary = self.keep = np.zeros(count, dtype=bool)
+        self.keep = np.zeros(len(self.times), dtype=bool)
         for _, first, last in agent.stationary:
-            stationary |= (self.frames >= first - 1e-9) & (self.frames <= last + 1e-9)
-        self.plant_inputs = dict(
-            frames=self.frames, seconds=self.times / fps, stationary=stationary, turn=turn, hip=self.hip,
-            knee=self.knee, ankle=self.ankle, ankle_rot=self.ankle_rot, source_hip=source[:, hip],
-            source_ankle=source[:, ankle], source_hip_rot=source_rot[:, hip], source_knee_rot=source_rot[:, knee],
-            source_ankle_rot=source_rot[:, ankle])
+            self.keep |= (self.frames >= first - 1e-9) & (self.frames <= last + 1e-9)
 
-    def planned(self, out: footplant.PlantOutputs, a: int, lo: int, hi: int) -> None:
-        """Takes the plants of agent ``a`` of a plant job, its poses lo:hi."""
-        self.target, self.target_rot = out.target[lo:hi], out.target_rot[lo:hi]
-        self.weight, self.stepping, self.steps = out.weight[lo:hi], out.stepping[lo:hi], int(out.steps[a])
+    def writable(self) -> str | None:
+        """Why the legs cannot be baked into this agent's pose, or None."""
+        for leg in self.legs:
+            for j in (leg.hip, leg.knee, leg.ankle):
+                if self.agent.joints[j] not in self.columns:
+                    return f"leg joint '{self.agent.joints[j]}' is not animated by the clip"
+        return None
 
-    def step_speed(self, out: footlock.LegOutputs, lo: int, hi: int) -> np.ndarray:
+    def step_speed(self, run: "_Run", a: int) -> np.ndarray:
         """(legs,) the largest angular speed of a leg's hip, knee or ankle around its steps, against
         the largest the joint turns at in the pose before locking (1 when it steps no faster)."""
         seconds = self.times / self.agent_fps
         out_ratio = np.ones(len(self.legs))
-        if not self.steps or len(seconds) < 2:
+        if not run.steps[a] or len(seconds) < 2:
             return out_ratio
-
-        near = self.stepping.copy()
+        lo, hi = run.span(a)
+        stepping = run.stepping[lo:hi]
+        near = stepping.copy()
         for shift_by in (1, 2):
-            near[shift_by:] |= self.stepping[:-shift_by]
-            near[:-shift_by] |= self.stepping[shift_by:]
+            near[shift_by:] |= stepping[:-shift_by]
+            near[:-shift_by] |= stepping[shift_by:]
+        out = run.legs
         for k, leg in enumerate(self.legs):
             if not near[:, k].any():
                 continue
@@ -285,48 +222,254 @@ class _AgentLock:
                 out_ratio[k] = max(out_ratio[k], locked / max(source, 1e-9))
         return out_ratio
 
-    def inputs(self) -> dict:
-        return {"hip": self.hip, "knee": self.knee, "ankle": self.ankle, "parent_rot": self.parent_rot,
-                "hip_rot": self.hip_rot, "knee_rot": self.knee_rot, "ankle_rot": self.ankle_rot,
-                "target": self.target, "target_rot": self.target_rot, "weight": self.weight, "hinge": self.hinge, "keep": self.keep}
 
-    def writable(self) -> str | None:
-        """Why the legs cannot be baked into this agent's pose, or None."""
-        for leg in self.legs:
-            for j in (leg.hip, leg.knee, leg.ankle):
-                if self.agent.joints[j] not in self.columns:
-                    return f"leg joint '{self.agent.joints[j]}' is not animated by the clip"
-        return None
+class _Run:
+    """A run of agents for the jobs, their output frames one after another (#N poses): the legs
+    before and after the edits' ground motion, the plants and the locked legs, as flat arrays,
+    agent ``a`` owning poses ``offsets[a]:offsets[a + 1]``. Each pose is computed alone, so an
+    agent's results do not depend on the others in its run."""
 
-    def apply(self, out: footlock.LegOutputs, lo: int, hi: int, up: np.ndarray,
-              meters_per_unit: float) -> "LockedLegs | None":
-        """The locked legs, or None when locking leaves them as they are."""
-        columns = [self.columns[self.agent.joints[j]] for leg in self.legs for j in (leg.hip, leg.knee, leg.ankle)]
-        rotations = np.stack([new[lo:hi, k] for k in range(len(self.legs))
-                              for new in (out.hip_local, out.knee_local, out.ankle_local)], axis=1)
+    def __init__(self, ctx: SolveContext, locks: list[_AgentLock]):
+        info = ctx.data.info
+        self.ctx, self.locks = ctx, locks
+        self.offsets = np.cumsum([0] + [len(lock.times) for lock in locks]).astype(np.int64)
+        self.up = np.zeros(3)
+        self.up[ground.up_index(info.up_axis)] = 1.0
+
+        def flat(values) -> np.ndarray:
+            return np.concatenate([np.broadcast_to(v, (len(lock.times),) + np.shape(v)[1:])
+                                   for lock, v in zip(locks, values)])
+
+        # Each agent's placement and its rotation (agents placed once, in one call).
+        world_q: list = [None] * len(locks)
+        static = [a for a, lock in enumerate(locks) if lock.to_world.shape[0] == 1]
+        if static:
+            quats = trs_from_matrices(np.concatenate([locks[a].to_world for a in static]))[1].astype(np.float64)
+            for a, q in zip(static, quats):
+                world_q[a] = q[None]
+        for a, lock in enumerate(locks):
+            if world_q[a] is None:
+                world_q[a] = trs_from_matrices(lock.to_world)[1].astype(np.float64)
+        self.to_world = flat([lock.to_world for lock in locks])
+        world_q = flat(world_q)
+        # The edits' ground motion: a turn about up, then a shift (the identity without a path edit).
+        self.motion = np.broadcast_to(np.eye(4), (len(self.to_world), 4, 4)).copy()
+        self.turn = np.zeros(len(self.to_world))
+        moved = [a for a, lock in enumerate(locks) if lock.ground is not None]
+        if moved:
+            at = np.concatenate([np.arange(*self.span(a)) for a in moved])
+            src_uv, src_h, new_uv, new_h = (np.concatenate([locks[a].ground[i] for a in moved]) for i in range(4))
+            self.motion[at] = trajectory.ground_motion(src_uv, src_h, new_uv, new_h, info.up_axis)
+            self.turn[at] = new_h - src_h
+        # The legs in the world, before the ground motion (the posed source) and as edited.
+        source, pos, source_rot, rot = footplant.place(
+            self.to_world, world_q, self.motion, self.turn, self.up, flat([lock.posed.pos[:, :6] for lock in locks]),
+            flat([lock.posed.rot for lock in locks]))
+        self.hip, self.knee, self.ankle = pos[:, 0:2], pos[:, 2:4], pos[:, 4:6]
+        self.hip_rot, self.knee_rot, self.ankle_rot = rot[:, 0:2], rot[:, 2:4], rot[:, 4:6]
+        parented = flat([lock.posed.parented[None] for lock in locks])
+        self.parent_rot = np.where(parented[..., None], rot[:, 6:8],
+                                   quat_multiply(footplant.yaw_quat(self.turn, self.up), world_q)[:, None])
+        self.hinge = footlock.world_hinge(self.knee_rot, flat([lock.posed.hinge[None] for lock in locks]))
+        self.source = dict(source_hip=source[:, 0:2], source_ankle=source[:, 4:6], source_hip_rot=source_rot[:, 0:2],
+                           source_knee_rot=source_rot[:, 2:4], source_ankle_rot=source_rot[:, 4:6])
+        self.frames = np.concatenate([lock.frames for lock in locks])
+        self.times = np.concatenate([lock.times for lock in locks])
+        self.keep = np.concatenate([lock.keep for lock in locks])
+        self.stretch = np.ones((len(locks), 2))
+
+    def span(self, a: int) -> tuple[int, int]:
+        return int(self.offsets[a]), int(self.offsets[a + 1])
+
+    def _pick(self, values: np.ndarray, agents: list[int] | None) -> np.ndarray:
+        """The poses of these agents (all: None), one after another."""
+        if agents is None:
+            return values
+        return np.concatenate([values[slice(*self.span(a))] for a in agents])
+
+    def _offsets(self, agents: list[int] | None) -> np.ndarray:
+        if agents is None:
+            return self.offsets
+        return np.cumsum([0] + [len(self.locks[a].times) for a in agents]).astype(np.int64)
+
+    def plan(self, agents: list[int] | None = None) -> None:
+        """The plants of these agents' feet (all: None), each leg's steps ``stretch`` times as long
+        as they would be: the solver's plant job on all of them at once."""
+        info = self.ctx.data.info
+        chosen = range(len(self.locks)) if agents is None else agents
+        contacts = [c for a in chosen for c in self.locks[a].contacts]
+        inputs = footplant.PlantInputs(
+            offsets=self._offsets(agents), contact_offsets=np.cumsum([0] + [len(c) for c in contacts]).astype(np.int64),
+            contacts=np.concatenate(contacts).reshape(-1, 2), blend=np.array([self.locks[a].blend for a in chosen]),
+            stretch=self.stretch[list(chosen)], up=self.up, meters_per_unit=info.meters_per_unit,
+            leash_m=LEASH_M, max_leash_m=MAX_LEASH_M, max_drop_m=MAX_DROP_M, leash_degrees=LEASH_DEGREES,
+            soft_reach=footlock.SOFT_REACH, step_slide_m=STEP_SLIDE_M, step_slide_degrees=STEP_SLIDE_DEGREES,
+            step_seconds=STEP_SECONDS, step_longest_seconds=STEP_LONGEST_SECONDS, step_height_m=STEP_HEIGHT_M,
+            frames=self._pick(self.frames, agents), seconds=self._pick(self.times, agents) / info.time_codes_per_second,
+            stationary=self._pick(self.keep, agents), turn=self._pick(self.turn, agents),
+            hip=self._pick(self.hip, agents), knee=self._pick(self.knee, agents), ankle=self._pick(self.ankle, agents),
+            ankle_rot=self._pick(self.ankle_rot, agents),
+            **{k: self._pick(v, agents) for k, v in self.source.items()})
+        out = footplant.plan_feet(inputs)
+        if agents is None:
+            self.target, self.target_rot, self.weight, self.stepping, self.steps = (
+                out.target, out.target_rot, out.weight, out.stepping, out.steps)
+            return
+        for i, a in enumerate(agents):
+            lo, hi = self.span(a)
+            at = slice(int(inputs.offsets[i]), int(inputs.offsets[i + 1]))
+            self.target[lo:hi], self.target_rot[lo:hi] = out.target[at], out.target_rot[at]
+            self.weight[lo:hi], self.stepping[lo:hi], self.steps[a] = out.weight[at], out.stepping[at], out.steps[i]
+
+    def solve(self, agents: list[int] | None = None) -> None:
+        """The solver's IK job on these agents' legs (all: None) at once."""
+        inputs = footlock.LegInputs(
+            offsets=self._offsets(agents), up=self.up,
+            smooth=np.array([self.locks[a].blend_frames for a in (range(len(self.locks)) if agents is None else agents)],
+                            dtype=np.int64),
+            **{k: self._pick(getattr(self, k), agents) for k in (
+                "hip", "knee", "ankle", "parent_rot", "hip_rot", "knee_rot", "ankle_rot", "target", "target_rot",
+                "weight", "hinge", "keep")})
+        out = footlock.lock_feet(inputs)
+        if agents is None:
+            self.legs = out
+            return
+        for i, a in enumerate(agents):
+            lo, hi = self.span(a)
+            at = slice(int(inputs.offsets[i]), int(inputs.offsets[i + 1]))
+            for k in ("hip_local", "knee_local", "ankle_local", "drop", "reached"):
+                getattr(self.legs, k)[lo:hi] = getattr(out, k)[at]
+
+    def locked_legs(self, a: int, meters_per_unit: float) -> "LockedLegs | None":
+        """Agent ``a``'s locked legs, or None when locking leaves them as they are; sets its largest
+        pelvis drop and foot correction."""
+        lock, out = self.locks[a], self.legs
+        lo, hi = self.span(a)
         drop = out.drop[lo:hi]
+        # The correction of a planted foot: a stepping foot is in the air, moving to its next plant.
+        correction = np.where(self.stepping[lo:hi], 0.0, np.linalg.norm(out.reached[lo:hi] - self.ankle[lo:hi], axis=-1))
+        lock.max_correction = float(correction.max(initial=0.0))
+        lock.max_drop = float(drop.max(initial=0.0))
+        still = STILL_M / meters_per_unit
+        if lock.max_correction <= still and lock.max_drop <= still:
+            return None
+        columns = [lock.columns[lock.agent.joints[j]] for leg in lock.legs for j in (leg.hip, leg.knee, leg.ankle)]
+        rotations = np.stack([new[lo:hi, k] for k in range(len(lock.legs))
+                              for new in (out.hip_local, out.knee_local, out.ankle_local)], axis=1)
         root, shift = None, None
         if np.any(drop > 0):
-            root = self.columns.get(self.agent.joints[self.root])
+            root = lock.columns.get(lock.agent.joints[lock.root])
             if root is None:
                 raise MocapEditError(
-                    f"<{self.path}>: the pelvis must be lowered but the skeleton root "
-                    f"'{self.agent.joints[self.root]}' is not animated by the clip")
+                    f"<{lock.path}>: the pelvis must be lowered but the skeleton root "
+                    f"'{lock.agent.joints[lock.root]}' is not animated by the clip")
             # World offset -drop * up, in the root's parent space (the skeleton's).
-            inv = np.linalg.inv(self.to_world[:, :3, :3])
-            shift = (-drop[:, None] * up) @ inv if inv.ndim == 2 else np.einsum("ti,tij->tj", -drop[:, None] * up, inv)
-        # The correction of a planted foot: a stepping foot is in the air, moving to its next plant.
-        correction = np.where(self.stepping, 0.0, np.linalg.norm(out.reached[lo:hi] - self.ankle, axis=-1))
-        self.max_correction = float(correction.max(initial=0.0))
-        self.max_drop = float(drop.max(initial=0.0))
-        self.reached = out.reached[lo:hi]
-        still = STILL_M / meters_per_unit
-        if self.max_correction <= still and self.max_drop <= still:
-            return None
-        return LockedLegs(self.path, list(self.pose.joints), np.array(columns, dtype=np.int64),
+            shift = np.einsum("ti,tij->tj", -drop[:, None] * self.up, np.linalg.inv(lock.to_world[:, :3, :3]))
+        return LockedLegs(lock.path, list(lock.pose.joints), np.array(columns, dtype=np.int64),
                           rotations.astype(np.float32),
                           None if root is None else drop.astype(np.float64), root,
                           None if shift is None else np.asarray(shift, dtype=np.float64))
+
+    def skates(self, legs: list) -> list:
+        """Per agent, (source, after the edits, after locking) foot skate, stage units per second,
+        as :func:`mocapedit.tools.measure.foot_skate` measures it on the input and on the composed
+        stage: joints named like feet, over the frames where the source's feet are planted; None
+        for a skeleton without such joints. ``legs``: each agent's :class:`LockedLegs` or None.
+
+        A retimed agent is measured against its source as its timing plays it: the clip's poses
+        at the same clip times, per second of the shot. Against the source at its own samples, a
+        time warp alone would count as sliding what the source does between its samples (where a
+        warp falls) and its heel-toe roll played faster."""
+        ctx, info = self.ctx, self.ctx.data.info
+        units = (info.up_axis, info.meters_per_unit, info.time_codes_per_second)
+        place = self.to_world @ self.motion
+        # The feet's skeleton-space positions: of the source, before locking and after, by agent.
+        source, unlocked, locked = [None] * len(self.locks), [None] * len(self.locks), [None] * len(self.locks)
+        groups: dict = {}
+        for a, lock in enumerate(self.locks):
+            feet = lock.posed.feet
+            if feet is None:
+                continue
+            unlocked[a] = feet
+            if ctx.pose_edits.get(lock.path):
+                source[a] = _feet_of(lock.agent, animation.sample_pose(ctx.data.clip_of(lock.agent), lock.frames))
+            else:
+                # The pose locking starts from is the source's at these frames.
+                source[a] = feet
+            if legs[a] is None:
+                locked[a] = feet
+            else:
+                agent = lock.agent
+                key = (tuple(agent.joints), tuple(lock.pose.joints), agent.parents.tobytes(),
+                       agent.rest_transforms.tobytes())
+                groups.setdefault(key, []).append(a)
+        # The locked poses, agents of one skeleton at once.
+        for members in groups.values():
+            poses = [legs[a].apply(self.locks[a].pose) for a in members]
+            stacked = animation.Pose(joints=list(poses[0].joints),
+                                     translations=np.concatenate([p.translations for p in poses]),
+                                     rotations=np.concatenate([p.rotations for p in poses]),
+                                     scales=np.concatenate([p.scales for p in poses]))
+            feet = _feet_of(self.locks[members[0]].agent, stacked)
+            start = 0
+            for a in members:
+                count = len(self.locks[a].times)
+                locked[a] = feet[start:start + count]
+                start += count
+        # In the world, agents with as many feet at once.
+        worlds: list = [None] * len(self.locks)
+        by_count: dict = {}
+        for a in range(len(self.locks)):
+            if source[a] is not None:
+                by_count.setdefault(source[a].shape[1], []).append(a)
+        for members in by_count.values():
+            at = np.concatenate([np.arange(*self.span(a)) for a in members])
+            moved = [kinematics.transform_points(np.concatenate([feet[a] for a in members]), m[at, None])
+                     for feet, m in ((source, self.to_world), (unlocked, place), (locked, place))]
+            start = 0
+            for a in members:
+                count = len(self.locks[a].times)
+                worlds[a] = [w[start:start + count] for w in moved]
+                start += count
+        out = []
+        for a, lock in enumerate(self.locks):
+            if worlds[a] is None:
+                out.append(None)
+                continue
+            source_world, free_world, locked_world = worlds[a]
+            before = metrics.foot_skate_of_positions(source_world, lock.times, *units)
+
+            def skate(feet_world):
+                contact = metrics.on_ground(before.contact, source_world, feet_world, info.up_axis,
+                                            info.meters_per_unit)
+                return metrics.foot_skate_of_positions(feet_world, lock.times, *units, contact=contact).mean
+
+            free = skate(free_world)
+            out.append((before.mean, free, free if legs[a] is None else skate(locked_world)))
+        return out
+
+    def plants(self, a: int) -> tuple[np.ndarray, np.ndarray]:
+        """Where agent ``a``'s locked feet are planted: the ankle at the first fully locked frame of
+        each contact and where each step lands, blue for left feet and orange for right.
+        (points, colors)."""
+        lo, hi = self.span(a)
+        points, colors = [], []
+        for k, leg in enumerate(self.locks[a].legs):
+            full = self.weight[lo:hi, k] >= 1.0
+            starts = np.flatnonzero(full & ~np.concatenate([[False], full[:-1]]))
+            stepping = self.stepping[lo:hi, k]
+            landed = np.flatnonzero(~stepping & np.concatenate([[False], stepping[:-1]]))
+            at = np.union1d(starts, landed)
+            points.append(self.target[lo:hi][at, k])
+            colors.append(np.tile(PLANT_COLORS[0 if leg.side == "left" else 1], (len(at), 1)))
+        return np.concatenate(points), np.concatenate(colors)
+
+
+def _feet_of(agent: Agent, pose: animation.Pose) -> np.ndarray:
+    """(T,F,3) skeleton-space positions of the feet of a pose (or of the poses of agents of one
+    skeleton, one after another)."""
+    return _skeleton(agent, pose, metrics.default_foot_joints(agent.joints))[..., 3, :3]
+
 
 
 def _source(ctx, agent: Agent, cache: dict) -> tuple[list[list[tuple[int, int]]], float]:
@@ -350,59 +493,6 @@ def _source(ctx, agent: Agent, cache: dict) -> tuple[list[list[tuple[int, int]]]
             found = contacts.detect_agent(agent, clip, info)
         hit = cache[key] = found
     return hit
-
-
-def _report_skate(ctx, lock: "_AgentLock", legs: "LockedLegs | None", chains: dict) -> tuple[float, float, float] | None:
-    """(source, after the edits, after locking) foot skate of a locked agent, stage units per
-    second, as :func:`mocapedit.tools.measure.foot_skate` measures it on the input and on the composed
-    stage: joints named like feet, over the frames where the source's feet are planted.
-
-    A retimed agent is measured against its source as its timing plays it: the clip's poses at
-    the same clip times, per second of the shot. Against the source at its own samples, a time
-    warp alone would count as sliding what the source does between its samples (where a warp
-    falls) and its heel-toe roll played faster. None for a skeleton without such joints."""
-    agent, info = lock.agent, ctx.data.info
-    feet = metrics.default_foot_joints(agent.joints)
-    if not feet:
-        return None
-    units = (info.up_axis, info.meters_per_unit, info.time_codes_per_second)
-    count = len(lock.times)
-    to_world = np.broadcast_to(lock.to_world, (count, 4, 4))
-    place = to_world @ lock.motion
-
-    def world(skel, placement):
-        return np.stack([np.einsum("ti,tij->tj", skel[f][:, 3, :3], placement[:, :3, :3]) + placement[:, 3, :3]
-                         for f in feet], axis=1)
-
-    posed = lock.posed.chains
-    same = count == agent.frame_count and np.allclose(lock.times, agent.sample_times)
-    if same:
-        clip = ctx.data.clip_of(agent)
-        source = np.stack([trajectory.joint_world(agent, clip, f, chains)[:, 3, :3] for f in feet], axis=1)
-    elif not ctx.pose_edits.get(lock.path):
-        # The pose locking starts from is the source's at these frames.
-        source = world(posed.skel, to_world)
-    else:
-        source = world(_skel_space(agent, animation.sample_pose(ctx.data.clip_of(agent), lock.frames), feet).skel,
-                       to_world)
-    before = metrics.foot_skate_of_positions(source, lock.times, *units)
-
-    def skate(skel):
-        feet_world = world(skel, place)
-        contact = metrics.on_ground(before.contact, source, feet_world, info.up_axis, info.meters_per_unit)
-        return metrics.foot_skate_of_positions(feet_world, lock.times, *units, contact=contact).mean
-
-    unlocked = skate(posed.skel)
-    if legs is None:
-        return before.mean, unlocked, unlocked
-    locked = legs.apply(lock.pose)
-    base, changed = None, frozenset()
-    if lock.pose.translations.dtype == np.float32 and lock.pose.rotations.dtype == np.float32:
-        # Only the legs' joints (and the root, where lowered) differ from the pose before locking.
-        columns = set(legs.columns.tolist()) | ({legs.root} if legs.root_shift is not None else set())
-        base = posed
-        changed = frozenset(j for j, name in enumerate(agent.joints) if lock.columns.get(name) in columns)
-    return before.mean, unlocked, skate(_skel_space(agent, locked, feet, base, changed).skel)
 
 
 @dataclass
@@ -432,7 +522,6 @@ def lock_agents(ctx: SolveContext) -> list[AgentLocking]:
     data = ctx.data
     cache: dict = {}
     shared: dict = {}
-    chains: dict = {}
     out: list[AgentLocking] = []
     locks: list[tuple[_AgentLock, AgentLocking]] = []
     for path in ctx.touched():
@@ -451,80 +540,43 @@ def lock_agents(ctx: SolveContext) -> list[AgentLocking]:
             elif lock.locked:
                 locks.append((lock, result))
         if len(locks) >= LOCK_RUN:
-            _lock_run(ctx, locks, chains)
+            _lock_run(ctx, locks)
             locks = []
     if locks:
-        _lock_run(ctx, locks, chains)
+        _lock_run(ctx, locks)
     return out
 
 
-def _lock_run(ctx: SolveContext, locks: list, chains: dict) -> None:
+def _lock_run(ctx: SolveContext, locks: list) -> None:
     """Runs the plant and IK jobs on some agents' legs and fills in their results."""
     info = ctx.data.info
-    up = np.zeros(3)
-    up[ground.up_index(info.up_axis)] = 1.0
-    stretch = [np.ones(2) for _ in locks]
-    _plan(ctx, [lock for lock, _ in locks], stretch)
-    solved = _solve_legs([lock for lock, _ in locks], up)
+    run = _Run(ctx, [lock for lock, _ in locks])
+    run.plan()
+    run.solve()
     # A step that turns a leg's joint too fast against the pose is made longer, and the agent's
     # legs solved again.
     for _ in range(STEP_ROUNDS):
         again = []
-        for a, ((lock, _), (legs, lo, hi)) in enumerate(zip(locks, solved)):
-            ratio = lock.step_speed(legs, lo, hi) / STEP_SPEED_RATIO
+        for a, (lock, _) in enumerate(locks):
+            ratio = lock.step_speed(run, a) / STEP_SPEED_RATIO
             if np.any(ratio > 1.0 + 1e-6):
-                stretch[a] = stretch[a] * np.maximum(ratio * 1.05, 1.0)
+                run.stretch[a] = run.stretch[a] * np.maximum(ratio * 1.05, 1.0)
                 again.append(a)
         if not again:
             break
-        _plan(ctx, [locks[a][0] for a in again], [stretch[a] for a in again])
-        for a, done in zip(again, _solve_legs([locks[a][0] for a in again], up)):
-            solved[a] = done
+        run.plan(again)
+        run.solve(again)
     tolerance = SKATE_TOLERANCE_M / info.meters_per_unit
-    for (lock, result), (legs, lo, hi) in zip(locks, solved):
-        locked_legs = lock.apply(legs, lo, hi, up, info.meters_per_unit)
-        skate = _report_skate(ctx, lock, locked_legs, chains)
+    legs = [run.locked_legs(a, info.meters_per_unit) for a in range(len(locks))]
+    for a, ((lock, result), locked_legs, skate) in enumerate(zip(locks, legs, run.skates(legs))):
         if locked_legs is not None and skate is not None and skate[1] <= skate[0] + tolerance:
             # The edit left the feet as planted as the source's: keep the legs, bake nothing.
             locked_legs, skate = None, (skate[0], skate[1], skate[1])
             result.kept = True
         result.contacts, result.skate, result.legs = lock.locked, skate, locked_legs
-        result.steps = lock.steps if locked_legs is not None else 0
+        result.steps = int(run.steps[a]) if locked_legs is not None else 0
         result.max_drop, result.max_correction = lock.max_drop, lock.max_correction
-        result.plants = _plants(lock)
-
-
-def _plan(ctx: SolveContext, locks: list[_AgentLock], stretch: list[np.ndarray]) -> None:
-    """The plants of these agents' feet, each leg's steps ``stretch`` times as long as they would
-    be: the solver's plant job on all of them at once."""
-    info = ctx.data.info
-    up = np.zeros(3)
-    up[ground.up_index(info.up_axis)] = 1.0
-    offsets = np.cumsum([0] + [len(lock.times) for lock in locks]).astype(np.int64)
-    contacts = [c for lock in locks for c in lock.contacts]
-    inputs = footplant.PlantInputs(
-        offsets=offsets, contact_offsets=np.cumsum([0] + [len(c) for c in contacts]).astype(np.int64),
-        contacts=np.concatenate(contacts).reshape(-1, 2), blend=np.array([lock.blend for lock in locks]),
-        stretch=np.array(stretch, dtype=np.float64).reshape(-1, 2), up=up, meters_per_unit=info.meters_per_unit,
-        leash_m=LEASH_M, max_leash_m=MAX_LEASH_M, max_drop_m=MAX_DROP_M, leash_degrees=LEASH_DEGREES,
-        soft_reach=footlock.SOFT_REACH, step_slide_m=STEP_SLIDE_M, step_slide_degrees=STEP_SLIDE_DEGREES,
-        step_seconds=STEP_SECONDS, step_longest_seconds=STEP_LONGEST_SECONDS, step_height_m=STEP_HEIGHT_M,
-        **{k: np.concatenate([lock.plant_inputs[k] for lock in locks]) for k in locks[0].plant_inputs})
-    out = footplant.plan_feet_numpy(inputs)
-    for a, lock in enumerate(locks):
-        lock.planned(out, a, int(offsets[a]), int(offsets[a + 1]))
-
-
-def _solve_legs(locks: list[_AgentLock], up: np.ndarray) -> list[tuple[footlock.LegOutputs, int, int]]:
-    """The solver's job on these agents' legs at once: per agent, (the outputs, its first and
-    last + 1 pose in them)."""
-    offsets = np.cumsum([0] + [len(lock.times) for lock in locks])
-    parts = [lock.inputs() for lock in locks]
-    inputs = footlock.LegInputs(
-        offsets=offsets.astype(np.int64), smooth=np.array([lock.blend_frames for lock in locks], dtype=np.int64),
-        up=up, **{k: np.concatenate([p[k] for p in parts]) for k in parts[0]})
-    legs = footlock.lock_feet(inputs)
-    return [(legs, int(lo), int(hi)) for lo, hi in zip(offsets[:-1], offsets[1:])]
+        result.plants = run.plants(a)
 
 
 def lock_part(part: dict) -> list[AgentLocking]:
@@ -610,22 +662,6 @@ def run(ctx: SolveContext) -> None:
 
 #: Guide colours of the left and right feet's plants.
 PLANT_COLORS = np.array([[0.2, 0.5, 1.0], [1.0, 0.55, 0.1]])
-
-
-def _plants(lock: _AgentLock) -> tuple[np.ndarray, np.ndarray]:
-    """Where the agent's locked feet are planted: the ankle at the first fully locked frame of
-    each contact and where each step lands, blue for left feet and orange for right.
-    (points, colors)."""
-    points, colors = [], []
-    for k, leg in enumerate(lock.legs):
-        full = lock.weight[:, k] >= 1.0
-        starts = np.flatnonzero(full & ~np.concatenate([[False], full[:-1]]))
-        stepping = lock.stepping[:, k]
-        landed = np.flatnonzero(~stepping & np.concatenate([[False], stepping[:-1]]))
-        at = np.union1d(starts, landed)
-        points.append(lock.target[at, k])
-        colors.append(np.tile(PLANT_COLORS[0 if leg.side == "left" else 1], (len(at), 1)))
-    return np.concatenate(points), np.concatenate(colors)
 
 
 def _plant_guides(ctx, plants: list) -> None:
