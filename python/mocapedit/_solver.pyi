@@ -29,6 +29,8 @@ __all__: list[str] = [
     'TimeWarpConflict',
     'TimeWarpData',
     'TimeWarpResult',
+    'WaitDelay',
+    'WaitSearch',
     'apply_layers',
     'blas',
     'block_deformation_turns',
@@ -60,6 +62,7 @@ __all__: list[str] = [
     'push_out_of_region',
     'region_signed_distance',
     'sample_clip',
+    'smooth_delay',
     'subtree_joint_weights',
     'tangent_headings',
     'time_warp',
@@ -101,6 +104,48 @@ class TimeWarpConflict(InvalidInput):
     """
     def __init__(self, message: str, kind: str = 'cycle', time_constraints = tuple(), sync_constraints = tuple(), mismatch: float = 0.0, agent: int = -1, frames = (-1, -1), gap: float = 0.0, minimum: float = 0.0) -> None:
         ...
+class WaitDelay:
+    """
+    A delay found by WaitSearch.least_delay.
+    """
+    @property
+    def delay(self) -> float:
+        """
+        time codes
+        """
+    @property
+    def end(self) -> float:
+        """
+        shot time where it ends
+        """
+    @property
+    def start(self) -> float:
+        """
+        shot time where the slowing starts
+        """
+    @property
+    def times(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+        """
+        (F,) the walker's new time map
+        """
+class WaitSearch:
+    """
+    One round of waiting: every agent at the round's samples and their bounding boxes.
+    
+    positions: (K*A, 2) ground positions, time-major (row k*A + a is agent a at sample k);
+    times: (K,) sample times; radius: (A,) capsule radii (stage units); margin: clearance kept
+    beyond both radii; step: delays are tried in steps of it (time codes); block: samples per
+    bounding box of the broad phase.
+    """
+    def __init__(self, *, positions: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], times: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"], radius: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"], time_codes_per_second: typing.SupportsFloat | typing.SupportsIndex, sample_step: typing.SupportsFloat | typing.SupportsIndex, step: typing.SupportsFloat | typing.SupportsIndex, margin: typing.SupportsFloat | typing.SupportsIndex, slowest_pace: typing.SupportsFloat | typing.SupportsIndex, passing_cos: typing.SupportsFloat | typing.SupportsIndex, block: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    def least_delay(self, *, walker: typing.SupportsInt | typing.SupportsIndex, other: typing.SupportsInt | typing.SupportsIndex, first: typing.SupportsInt | typing.SupportsIndex, last: typing.SupportsInt | typing.SupportsIndex, room: typing.SupportsFloat | typing.SupportsIndex, guess: typing.SupportsFloat | typing.SupportsIndex, path: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], times: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"], source_times: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]) -> WaitDelay | None:
+        """
+        The least delay of `walker` (time codes, in steps from a step below `guess` up to `room`) that
+        parts it from `other` over their encounter (samples first..last) and meets nobody new but
+        walkers going its way; path (F, 2), times and source_times (F,) are the walker's path, current
+        and source time maps. None when no delay does.
+        """
 class TimeWarpResult:
     """
     Warped time maps and the figures to report (time_warp).
@@ -239,18 +284,21 @@ class SeparationSolver:
     rest: (V, 2) agents' paths concatenated; starts: (A+1,) first vertex of each agent, then V;
     rigid: inclusive global vertex ranges that move rigidly (stationary ranges);
     anchor_weight: pull of every frame towards its rest position, relative to the shape terms;
-    still_extent: ranges whose rest positions lie this close (stage units) only translate.
+    still_extent: ranges whose rest positions lie this close (stage units) only translate;
+    min_baseline: each frame's shape term is framed by the nearest frames at least this far
+    apart (stage units), as path_edit's chain terms.
     """
-    def __init__(self, *, rest: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], starts: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"], rigid: collections.abc.Sequence[tuple[typing.SupportsInt | typing.SupportsIndex, typing.SupportsInt | typing.SupportsIndex]] = [], anchor_weight: typing.SupportsFloat | typing.SupportsIndex = 0.001, still_extent: typing.SupportsFloat | typing.SupportsIndex = 1e-09, threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
+    def __init__(self, *, rest: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], starts: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"], rigid: collections.abc.Sequence[tuple[typing.SupportsInt | typing.SupportsIndex, typing.SupportsInt | typing.SupportsIndex]] = [], anchor_weight: typing.SupportsFloat | typing.SupportsIndex = 0.001, still_extent: typing.SupportsFloat | typing.SupportsIndex = 1e-09, min_baseline: typing.SupportsFloat | typing.SupportsIndex = 0.0, threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
         ...
-    def solve(self, *, direction: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], rhs: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], softness: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], term_row: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"], term_vertex: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"], term_weight: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], kind: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"] = ..., initial_forces: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"] = ..., tolerance: typing.SupportsFloat | typing.SupportsIndex = 1e-06, max_sweeps: typing.SupportsInt | typing.SupportsIndex = 500, initial_shape_forces: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"] = ...) -> SeparationResult:
+    def solve(self, *, direction: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], rhs: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], softness: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], term_row: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"], term_vertex: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"], term_weight: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], kind: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"] = ..., initial_forces: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"] = ..., tolerance: typing.SupportsFloat | typing.SupportsIndex = 1e-06, max_sweeps: typing.SupportsInt | typing.SupportsIndex = 500, initial_shape_forces: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"] = ..., relaxation: typing.SupportsFloat | typing.SupportsIndex = 1.0) -> SeparationResult:
         """
         Solves both steps under R rows, each sum_t term_weight[t] * dot(direction[row], x[term_vertex[t]])
         = rhs[row] (kind 0), or >= rhs[row] (kind 1: a one-sided row, it only pushes); softness 0 = hard,
         else 1 / weight relative to the shape terms. initial_forces and initial_shape_forces: a previous
         solve's forces and shape_forces (warm starts of step 2 and step 1; with initial_forces alone both
         steps start from it);
-        tolerance (stage units) and max_sweeps bound the Gauss-Seidel on one-sided rows.
+        tolerance (stage units) and max_sweeps bound the Gauss-Seidel on one-sided rows; relaxation: its
+        over-relaxation factor, in (0, 2).
         Returns a SeparationResult. Keyword arguments only.
         """
     @property
@@ -773,6 +821,11 @@ def sample_clip(translations: typing.Annotated[numpy.typing.ArrayLike, numpy.flo
     A clip (F, J, 3/4/3 float32 translations, (x, y, z, w) rotations, scales) sampled at
     (T,) fractional frames: ((T, J, 3), (T, J, 4), (T, J, 3)) float32. Linear translations and
     scales, normalised shortest-arc slerp rotations; whole frames are copied bit for bit.
+    """
+def smooth_delay(times: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"], start: typing.SupportsFloat | typing.SupportsIndex, end: typing.SupportsFloat | typing.SupportsIndex, delay: typing.SupportsFloat | typing.SupportsIndex) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+    """
+    (F,) the time map `times` with `delay` time codes taken up between shot times start and end
+    by a smoothstep (no interval shrinks; every one after `end` is unchanged).
     """
 def subtree_joint_weights(parents: collections.abc.Sequence[typing.SupportsInt | typing.SupportsIndex], root: typing.SupportsInt | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.float32]:
     """

@@ -16,13 +16,14 @@ class SeparationSolver {
  public:
   SeparationSolver(const Eigen::Ref<const Trajectory2>& rest, const Eigen::VectorXi& starts,
                    const std::vector<mocapedit::FrameRange>& rigid, double anchor_weight, double still_extent,
-                   int threads) {
+                   double min_baseline, int threads) {
     mocapedit::SeparationProblem problem;
     problem.rest = rest;
     problem.starts = starts;
     problem.rigid = rigid;
     problem.anchor_weight = anchor_weight;
     problem.still_extent = still_extent;
+    problem.min_baseline = min_baseline;
     problem.threads = threads;
     py::gil_scoped_release release;
     mocapedit::SeparationPrecompute(problem, data_);
@@ -33,7 +34,7 @@ class SeparationSolver {
                  const Eigen::VectorXd& softness, const Eigen::VectorXi& term_row, const Eigen::VectorXi& term_vertex,
                  const Eigen::VectorXd& term_weight, const Eigen::VectorXi& kind,
                  const Eigen::VectorXd& initial_forces, double tolerance, int max_sweeps,
-                 const Eigen::VectorXd& initial_shape_forces) {
+                 const Eigen::VectorXd& initial_shape_forces, double relaxation) {
     mocapedit::SeparationRows rows;
     rows.direction = direction;
     rows.rhs = rhs;
@@ -44,6 +45,7 @@ class SeparationSolver {
     mocapedit::SeparationSettings settings;
     settings.tolerance = tolerance;
     settings.max_sweeps = max_sweeps;
+    settings.relaxation = relaxation;
     rows.term_row = term_row;
     rows.term_vertex = term_vertex;
     rows.term_weight = term_weight;
@@ -92,22 +94,26 @@ MOCAPEDIT_BINDINGS(BindSeparation) {
       "rest: (V, 2) agents' paths concatenated; starts: (A+1,) first vertex of each agent, then V;\n"
       "rigid: inclusive global vertex ranges that move rigidly (stationary ranges);\n"
       "anchor_weight: pull of every frame towards its rest position, relative to the shape terms;\n"
-      "still_extent: ranges whose rest positions lie this close (stage units) only translate.")
+      "still_extent: ranges whose rest positions lie this close (stage units) only translate;\n"
+      "min_baseline: each frame's shape term is framed by the nearest frames at least this far\n"
+      "apart (stage units), as path_edit's chain terms.")
       .def(py::init<const Eigen::Ref<const Trajectory2>&, const Eigen::VectorXi&,
-                    const std::vector<mocapedit::FrameRange>&, double, double, int>(),
+                    const std::vector<mocapedit::FrameRange>&, double, double, double, int>(),
            py::kw_only(), py::arg("rest"), py::arg("starts"), py::arg("rigid") = std::vector<mocapedit::FrameRange>{},
-           py::arg("anchor_weight") = 1e-3, py::arg("still_extent") = 1e-9, py::arg("threads") = 0)
+           py::arg("anchor_weight") = 1e-3, py::arg("still_extent") = 1e-9,
+           py::arg("min_baseline") = 0.0, py::arg("threads") = 0)
       .def("solve", &SeparationSolver::Solve, py::kw_only(), py::arg("direction"), py::arg("rhs"), py::arg("softness"),
            py::arg("term_row"), py::arg("term_vertex"), py::arg("term_weight"),
            py::arg("kind") = Eigen::VectorXi(), py::arg("initial_forces") = Eigen::VectorXd(),
            py::arg("tolerance") = 1e-6, py::arg("max_sweeps") = 500,
-           py::arg("initial_shape_forces") = Eigen::VectorXd(),
+           py::arg("initial_shape_forces") = Eigen::VectorXd(), py::arg("relaxation") = 1.0,
            "Solves both steps under R rows, each sum_t term_weight[t] * dot(direction[row], x[term_vertex[t]])\n"
            "= rhs[row] (kind 0), or >= rhs[row] (kind 1: a one-sided row, it only pushes); softness 0 = hard,\n"
            "else 1 / weight relative to the shape terms. initial_forces and initial_shape_forces: a previous\n"
            "solve's forces and shape_forces (warm starts of step 2 and step 1; with initial_forces alone both\n"
            "steps start from it);\n"
-           "tolerance (stage units) and max_sweeps bound the Gauss-Seidel on one-sided rows.\n"
+           "tolerance (stage units) and max_sweeps bound the Gauss-Seidel on one-sided rows; relaxation: its\n"
+           "over-relaxation factor, in (0, 2).\n"
            "Returns a SeparationResult. Keyword arguments only.")
       .def_property_readonly("agents", &SeparationSolver::agents)
       .def_property_readonly("vertices", &SeparationSolver::vertices);

@@ -27,13 +27,13 @@
 #include "mocapedit/blas_lock.h"
 #include "mocapedit/errors.h"
 #include "mocapedit/path_edit.h"
+#include "energy/two_step_energy.h"
 #include "mocapedit/skyline_ldlt.h"
 #include "supernodal_cholesky.h"
 
 namespace mocapedit::detail {
 
 using Cplx = std::complex<double>;
-using LCplx = std::complex<long double>;
 using CVec = Eigen::VectorXcd;
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
@@ -102,10 +102,15 @@ struct Rows {
   }
   void Finish() { Resize(static_cast<size_t>(rows_), static_cast<size_t>(entries_)); }
   LCplx Extended(int p) const { return LCplx(coeff[p]) + LCplx(coeff_low[p]); }
-  void Add(std::initializer_list<std::pair<int, LCplx>> entries, TargetKind kind, int index, double weight) {
+  // A row of the energy (energy/two_step_energy.h) or any list of (vertex, coefficient).
+  template <typename Entries>
+  void Add(const Entries& entries, TargetKind kind, int index, double weight) {
     const long double s = weight == 1.0 ? 1.0L : std::sqrt(static_cast<long double>(weight));
-    for (const auto& e : entries) Entry(e.first, weight == 1.0 ? e.second : e.second * s);
+    for (const auto& e : entries) Entry(e.first, weight == 1.0 ? LCplx(e.second) : LCplx(e.second) * s);
     Close(kind, index, s);
+  }
+  void Add(std::initializer_list<std::pair<int, LCplx>> entries, TargetKind kind, int index, double weight) {
+    Add<std::initializer_list<std::pair<int, LCplx>>>(entries, kind, index, weight);
   }
   // A row of unit weight whose coefficients are exact in double precision.
   void AddExact(std::initializer_list<std::pair<int, double>> entries, TargetKind kind, int index) {
@@ -116,13 +121,9 @@ struct Rows {
     }
     Close(kind, index, 1.0L);
   }
-  // The shape row of a triangle of unit weight: x_i + (c - 1) x_j - c x_k.
-  void AddTriangle(int i, int j, int k, const LCplx& c, int index) {
-    vertex[entries_] = i;
-    coeff[entries_] = 1.0;
-    coeff_low[entries_++] = 0.0;
-    Entry(j, c - 1.0L);
-    Entry(k, -c);
+  // A shape term of unit weight (its row, Row(term), without the weighting).
+  void AddShape(const ShapeTerm<long double>& term, int index) {
+    for (const auto& e : Row(term)) Entry(e.first, e.second);
     Close(TargetKind::kZero, index, 1.0L);
   }
 

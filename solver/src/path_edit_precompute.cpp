@@ -2,6 +2,7 @@
 #include "path_edit_internal.h"
 
 #include <array>
+#include <tuple>
 
 #include "mocapedit/two_threads.h"
 
@@ -60,24 +61,12 @@ void ChooseMasters(const PathEditProblem& p, PathEditState& d, const std::vector
                                    " vertices; it can hold at most two: " + Describe(refs),
                                refs, 0.0);
     }
-    int m1 = hard.empty() ? vs.front() : hard[0];
-    int m2 = -1;
-    if (hard.size() >= 2) {
-      m2 = hard[1];
-    } else {
-      // The farthest vertex from m1 (from the farthest from the first, if m1 is free).
-      auto farthest = [&](int from) {
-        int best = from;
-        double bd = -1;
-        for (int v : vs) {
-          const double dd = std::abs(d.z[v] - d.z[from]);
-          if (dd > bd) bd = dd, best = v;
-        }
-        return best;
-      };
-      if (hard.empty()) m1 = farthest(vs.front());
-      m2 = farthest(m1);
-    }
+    // The masters are its hard vertices, else those farthest apart.
+    int m1 = -1, m2 = -1;
+    if (hard.size() >= 2)
+      m1 = hard[0], m2 = hard[1];
+    else
+      std::tie(m1, m2) = RangeMasters(vs, [&](int v) { return d.z[v]; }, hard.empty() ? -1 : hard[0]);
     d.master1[r] = m1;
     d.master2[r] = m2;
     if (rotate) {
@@ -169,17 +158,9 @@ void SetRigidRanges(const PathEditProblem& p, PathEditState& d) {
   d.boundary_edges.assign(d.rigid.size(), {});
 }
 
-// True when every vertex lies in one rigid range (terms inside one are dropped).
-bool SameRange(const PathEditState& d, std::initializer_list<int> vs) {
-  const int r = d.rigid_of[*vs.begin()];
-  if (r < 0) return false;
-  for (int v : vs)
-    if (d.rigid_of[v] != r) return false;
-  return true;
-}
-
 // Step 1 rows: triangles, then soft handles and links.
 void Step1Rows(const PathEditProblem& p, const Eigen::VectorXd& tw, PathEditState& d) {
+  const auto range_of = [&](int v) { return d.rigid_of[v]; };
   d.rows1.Reserve(p.triangles.rows() + p.handles.size() + p.links.rows(),
                   3 * p.triangles.rows() + p.handles.size() + 2 * p.links.rows());
   for (Eigen::Index t = 0; t < p.triangles.rows(); ++t) {
@@ -190,12 +171,12 @@ void Step1Rows(const PathEditProblem& p, const Eigen::VectorXd& tw, PathEditStat
       s << "triangle " << t << ": its frame vertices " << j << " and " << k << " share a rest position";
       throw InvalidInput(kWhere, s.str());
     }
-    if (tw[t] == 0 || SameRange(d, {i, j, k})) continue;
-    const LCplx c = (d.zl(i) - d.zl(j)) / (d.zl(k) - d.zl(j));
+    if (tw[t] == 0 || InOneRange(range_of, {i, j, k})) continue;
+    const ShapeTerm<long double> term = MakeShapeTerm(i, j, k, d.zl(i), d.zl(j), d.zl(k));
     if (tw[t] == 1.0)
-      d.rows1.AddTriangle(i, j, k, c, static_cast<int>(t));
+      d.rows1.AddShape(term, static_cast<int>(t));
     else
-      d.rows1.Add({{i, 1.0L}, {j, c - 1.0L}, {k, -c}}, TargetKind::kZero, static_cast<int>(t), tw[t]);
+      d.rows1.Add(Row(term), TargetKind::kZero, static_cast<int>(t), tw[t]);
   }
   AddSoftRows(p, d, d.rows1);
   d.rows1.Finish();
@@ -204,6 +185,7 @@ void Step1Rows(const PathEditProblem& p, const Eigen::VectorXd& tw, PathEditStat
 // Step 2 rows: edges, then soft handles and links. Also lists each rigid range's boundary
 // edges.
 void Step2Rows(const PathEditProblem& p, const Eigen::VectorXd& ew, PathEditState& d) {
+  const auto range_of = [&](int v) { return d.rigid_of[v]; };
   d.rows2.Reserve(p.edges.rows() + p.handles.size() + p.links.rows(),
                   2 * p.edges.rows() + p.handles.size() + 2 * p.links.rows());
   for (Eigen::Index e = 0; e < p.edges.rows(); ++e) {
@@ -213,11 +195,11 @@ void Step2Rows(const PathEditProblem& p, const Eigen::VectorXd& ew, PathEditStat
       if (rj >= 0) d.boundary_edges[rj].push_back(static_cast<int>(e));
       if (rk >= 0) d.boundary_edges[rk].push_back(static_cast<int>(e));
     }
-    if (ew[e] == 0 || j == k || SameRange(d, {j, k})) continue;
+    if (ew[e] == 0 || j == k || InOneRange(range_of, {j, k})) continue;
     if (ew[e] == 1.0)
       d.rows2.AddExact({{k, 1.0}, {j, -1.0}}, TargetKind::kEdge, static_cast<int>(e));
     else
-      d.rows2.Add({{k, 1.0L}, {j, -1.0L}}, TargetKind::kEdge, static_cast<int>(e), ew[e]);
+      d.rows2.Add(Row(EdgeTerm{j, k}), TargetKind::kEdge, static_cast<int>(e), ew[e]);
   }
   AddSoftRows(p, d, d.rows2);
   d.rows2.Finish();
@@ -295,28 +277,15 @@ void AppendChainTerms(const Eigen::Ref<const Trajectory2>& rest, int first, int 
                   "min_baseline must be a finite value >= 0");
   std::vector<std::array<int, 3>> tri;
   tri.reserve(static_cast<size_t>(std::max(count - 2, 0)));
-  for (int i = 1; i + 1 < count; ++i) {
-    int a = i - 1, b = i + 1;
-    const auto at = [&](int k) { return rest.row(first + k); };
-    // Widen the frame symmetrically until its ends are min_baseline apart.
-    while ((at(b) - at(a)).norm() < min_baseline || (at(b) - at(a)).norm() == 0.0) {
-      if (a > 0 && (b + 1 >= count || i - a <= b - i))
-        --a;
-      else if (b + 1 < count)
-        ++b;
-      else
-        break;
-    }
-    if ((at(b) - at(a)).norm() >= min_baseline && (at(b) - at(a)).norm() > 0.0)
-      tri.push_back({first + i, first + a, first + b});
-  }
+  detail::ChainFrames(rest, first, count, min_baseline,
+                      [&](int i, int a, int b) { tri.push_back({first + i, first + a, first + b}); });
   const Eigen::Index t0 = triangles.rows(), e0 = edges.rows();
   triangles.conservativeResize(t0 + static_cast<Eigen::Index>(tri.size()), 3);
   for (size_t k = 0; k < tri.size(); ++k)
     triangles.row(t0 + static_cast<Eigen::Index>(k)) << tri[k][0], tri[k][1], tri[k][2];
   const int ne = std::max(count - 1, 0);
   edges.conservativeResize(e0 + ne, 2);
-  for (int k = 0; k < ne; ++k) edges.row(e0 + k) << first + k, first + k + 1;
+  detail::ChainEdges(count, [&](int j, int k) { edges.row(e0 + j) << first + j, first + k; });
 }
 
 PathEditData::PathEditData() = default;

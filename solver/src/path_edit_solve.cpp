@@ -211,11 +211,10 @@ void RangeRotations(const PathEditState& d, const std::vector<Cplx>& x1, std::ve
     } else {
       for (int e : d.boundary_edges[r]) {
         const int j = d.edges(e, 0), k = d.edges(e, 1);
-        q += (LCplx(x1[k]) - LCplx(x1[j])) * std::conj(d.zl(k) - d.zl(j));
+        q += BoundaryTurn(LCplx(x1[k]) - LCplx(x1[j]), d.zl(k) - d.zl(j));
       }
     }
-    const long double len = std::sqrt(std::norm(q));
-    range_rot[r] = len > 0 ? q / len : LCplx(1.0L);
+    range_rot[r] = RangeTurn(q);
     angles[r] = std::atan2(static_cast<double>(range_rot[r].imag()), static_cast<double>(range_rot[r].real()));
   }
 }
@@ -227,9 +226,7 @@ void SolveScale(const PathEditState& d, const Eigen::Ref<const Trajectory2>& han
   std::vector<Cplx> edge_targets(d.edges.rows());
   for (Eigen::Index e = 0; e < d.edges.rows(); ++e) {
     const int j = d.edges(e, 0), k = d.edges(e, 1);
-    const Cplx dir = x1[k] - x1[j];
-    const double dl = std::sqrt(std::norm(dir));
-    edge_targets[e] = dl > 0 ? dir * (d.edge_length[e] / dl) : d.z[k] - d.z[j];
+    edge_targets[e] = EdgeTarget(x1[k] - x1[j], d.edge_length[e], d.z[k] - d.z[j]);
   }
   auto offset2 = [&](int t) -> LCplx {
     const Tie& tie = d.elim2.ties[t];

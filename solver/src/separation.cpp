@@ -2,6 +2,9 @@
 // Schur complement, the row forces, and both steps' positions.
 #include "separation_internal.h"
 
+#include <cstdint>
+#include <cstring>
+
 namespace mocapedit {
 namespace detail {
 namespace {
@@ -28,6 +31,25 @@ struct RowLists {
     items.clear();
   }
   void CloseRow() { start.push_back(static_cast<int>(items.size())); }
+  bool SameRow(size_t k, const RowLists& other, size_t l) const {
+    return start[k + 1] - start[k] == other.start[l + 1] - other.start[l] &&
+           std::equal(items.begin() + start[k], items.begin() + start[k + 1], other.items.begin() + other.start[l]);
+  }
+  // A hash of row k's items (equal rows hash alike).
+  uint64_t Hash(size_t k) const {
+    uint64_t h = 1469598103934665603ull;
+    auto mix = [&](uint64_t v) { h = (h ^ v) * 1099511628211ull; };
+    for (const auto& [i, c] : row(k)) {
+      uint64_t re, im;
+      const double parts[2] = {c.real(), c.imag()};
+      std::memcpy(&re, &parts[0], sizeof re);
+      std::memcpy(&im, &parts[1], sizeof im);
+      mix(static_cast<uint64_t>(i));
+      mix(re);
+      mix(im);
+    }
+    return h;
+  }
   bool operator==(const RowLists& other) const { return start == other.start && items == other.items; }
 };
 
@@ -35,7 +57,9 @@ struct RowLists {
 struct InverseBlock {
   std::vector<int> unknowns;      // cached unknowns, in the order of `inverse`
   std::vector<int> slot;          // per unknown of the step: index into `unknowns`, -1 if absent
-  Eigen::MatrixXcd inverse;       // K^-1 restricted to `unknowns`
+  // K^-1 restricted to `unknowns`: its top left corner of that size (the rest is room to
+  // grow into without copying what is cached).
+  Eigen::MatrixXcd inverse;
 
   // The last solve's rows of the agent (their terms), and their G and Schur block.
   RowLists terms, g;
@@ -44,9 +68,13 @@ struct InverseBlock {
 
   Complex At(int i, int j) const { return inverse(slot[static_cast<size_t>(i)], slot[static_cast<size_t>(j)]); }
 
+  // Makes sure the entries between `needed` unknowns are cached. Returns false when the
+  // entries cached before were dropped (and those needed worked out again).
   template <typename Solver>
-  void Ensure(const Solver& solver, int n, const std::vector<int>& needed) {
+  bool Ensure(const Solver& solver, int n, const std::vector<int>& needed) {
+    bool kept = true;
     if (static_cast<int>(slot.size()) != n) {
+      kept = false;
       slot.assign(static_cast<size_t>(n), -1);
       unknowns.clear();
       inverse.resize(0, 0);
@@ -58,18 +86,23 @@ struct InverseBlock {
     if (static_cast<int>(unknowns.size()) + static_cast<int>(missing.size()) > 2 * static_cast<int>(needed.size()) + 32) {
       for (int j : unknowns) slot[static_cast<size_t>(j)] = -1;
       unknowns.clear();
-      inverse.resize(0, 0);
+      // (the storage stays for the entries worked out again)
       missing = needed;
+      kept = false;
     }
-    if (missing.empty()) return;
+    if (missing.empty()) return kept;
     int lowest = n;  // of the unknowns cached already
     for (int j : unknowns) lowest = std::min(lowest, j);
     const Eigen::MatrixXcd x = solver.InverseColumns(missing, lowest);
     columns += static_cast<int64_t>(missing.size());
     const Eigen::Index old = static_cast<Eigen::Index>(unknowns.size());
     const Eigen::Index total = old + static_cast<Eigen::Index>(missing.size());
-    Eigen::MatrixXcd grown(total, total);
-    grown.topLeftCorner(old, old) = inverse;
+    if (total > inverse.rows()) {
+      Eigen::MatrixXcd room(std::max(total, 2 * inverse.rows()), std::max(total, 2 * inverse.rows()));
+      room.topLeftCorner(old, old) = inverse.topLeftCorner(old, old);
+      inverse = std::move(room);
+    }
+    Eigen::MatrixXcd& grown = inverse;
     for (int j : missing) {
       slot[static_cast<size_t>(j)] = static_cast<int>(unknowns.size());
       unknowns.push_back(j);
@@ -84,7 +117,7 @@ struct InverseBlock {
         grown(old + c, i) = std::conj(grown(i, old + c));
       }
     }
-    inverse = std::move(grown);
+    return kept;
   }
 };
 
@@ -149,10 +182,32 @@ void AgentBlock(const Solver& solver, int n, MapFn map, InverseBlock* cache, Age
   if (same) return;
   std::sort(needed.begin(), needed.end());
   needed.erase(std::unique(needed.begin(), needed.end()), needed.end());
-  cache->Ensure(solver, n, needed);
+  const bool kept = cache->Ensure(solver, n, needed);
+  // Rows sent again unchanged keep their entries of the last solve's block, as long as
+  // the cached entries of K^-1 they came from were kept (the same values either way).
+  std::vector<int> old(static_cast<size_t>(r), -1);
+  if (kept && cache->s.rows() == static_cast<Eigen::Index>(cache->terms.rows())) {
+    std::vector<std::pair<uint64_t, int>> known(cache->terms.rows());
+    for (size_t l = 0; l < known.size(); ++l) known[l] = {cache->terms.Hash(l), static_cast<int>(l)};
+    std::sort(known.begin(), known.end());
+    for (int k = 0; k < r; ++k) {
+      const uint64_t h = ar->terms.Hash(static_cast<size_t>(k));
+      for (auto it = std::lower_bound(known.begin(), known.end(), std::make_pair(h, -1));
+           it != known.end() && it->first == h; ++it)
+        if (ar->terms.SameRow(static_cast<size_t>(k), cache->terms, static_cast<size_t>(it->second))) {
+          old[static_cast<size_t>(k)] = it->second;
+          break;
+        }
+    }
+  }
   ar->s.resize(r, r);
   for (int k = 0; k < r; ++k)
     for (int l = k; l < r; ++l) {
+      const int ok = old[static_cast<size_t>(k)], ol = old[static_cast<size_t>(l)];
+      if (ok >= 0 && ol >= 0) {
+        ar->s(k, l) = ar->s(l, k) = cache->s(ok, ol);
+        continue;
+      }
       Complex v = 0.0;
       for (const auto& [i, gi] : ar->g.row(static_cast<size_t>(k)))
         for (const auto& [j, gj] : ar->g.row(static_cast<size_t>(l))) v += std::conj(gi) * gj * cache->At(i, j);
@@ -197,6 +252,14 @@ struct RowSlots {
 // change, as each agent's part u = S_a lambda_a (a row's value is the sum of its agents'
 // parts), so a force change is one contiguous column update per agent. Returns the
 // sweeps used (0 without one-sided rows, which need none).
+//
+// A row is only worked out again when it may have something to do. S_a is positive
+// semidefinite, so |S_a(l, c)| <= sqrt(S_a(l, l) S_a(c, c)): a force change delta on
+// column c moves any u_a(l) by at most sqrt(S_a(l, l)) sqrt(S_a(c, c)) |delta|. Each agent
+// sums sqrt(S_a(c, c)) |delta| over its changes (`moved`); a row keeps its residual from
+// when it was last worked out, and while that residual, grown by what its agents moved
+// since, leaves it within the tolerance (or, a one-sided row without force, pulling), the
+// row would change nothing and is passed over: the same forces as visiting every row.
 int SweepRows(const std::vector<AgentRows*>& blocks, const RowSlots& slots, const SeparationRows& in,
               const SeparationSettings& settings, const Eigen::VectorXd& q, const Eigen::VectorXd& diag,
               Eigen::VectorXd& forces, bool* converged, int64_t* updates) {
@@ -222,22 +285,58 @@ int SweepRows(const std::vector<AgentRows*>& blocks, const RowSlots& slots, cons
     *converged = true;
     return 0;
   }
+  // Per slot (as slots.items): sqrt of the row's diagonal entry in that agent's block, and
+  // the agent's `moved` when the row was last worked out; per row, its residual then.
+  std::vector<double> root(slots.items.size()), then(slots.items.size(), 0.0);
+  for (size_t i = 0; i < slots.items.size(); ++i) {
+    const RowSlot& sl = slots.items[i];
+    root[i] = std::sqrt(std::max(blocks[static_cast<size_t>(sl.agent)]->s(sl.local, sl.local), 0.0));
+  }
+  std::vector<double> moved(blocks.size(), 0.0), residual(static_cast<size_t>(nr), 0.0);
+  std::vector<char> known(static_cast<size_t>(nr), 0);
+  const double relax = settings.relaxation, tol = settings.tolerance;
   for (sweep = 1; sweep <= settings.max_sweeps; ++sweep) {
     double change = 0.0;
     for (int r = 0; r < nr; ++r) {
       if (!(diag[r] > 0.0)) continue;
-      double f = forces[r] + settings.relaxation * (q[r] - value(r) - in.softness[r] * forces[r]) / diag[r];
+      const int s0 = slots.start[static_cast<size_t>(r)], s1 = slots.start[static_cast<size_t>(r) + 1];
+      if (known[static_cast<size_t>(r)]) {
+        double reach = 0.0;
+        for (int i = s0; i < s1; ++i)
+          reach += root[static_cast<size_t>(i)] *
+                   (moved[static_cast<size_t>(slots.items[static_cast<size_t>(i)].agent)] - then[static_cast<size_t>(i)]);
+        const double res = residual[static_cast<size_t>(r)];
+        // Far above the rounding of the values compared, far below the tolerance.
+        const double margin = 1e-9 * (tol + std::abs(q[r]) + std::abs(res) + reach);
+        const bool idle = unilateral(r) && forces[r] == 0.0 ? relax * (res + reach) <= tol - margin
+                                                              : relax * (std::abs(res) + reach) <= tol - margin;
+        if (idle) continue;
+      }
+      const double res = q[r] - value(r) - in.softness[r] * forces[r];
+      double f = forces[r] + relax * res / diag[r];
       if (unilateral(r)) f = std::max(f, 0.0);
       const double delta = f - forces[r];
+      known[static_cast<size_t>(r)] = 1;
       // A change below the tolerance is not worth passing on to the other rows.
-      if (std::abs(delta) * diag[r] <= settings.tolerance) continue;
+      if (std::abs(delta) * diag[r] <= tol) {
+        residual[static_cast<size_t>(r)] = res;
+        for (int i = s0; i < s1; ++i)
+          then[static_cast<size_t>(i)] = moved[static_cast<size_t>(slots.items[static_cast<size_t>(i)].agent)];
+        continue;
+      }
       forces[r] = f;
       ++*updates;
       change = std::max(change, std::abs(delta) * diag[r]);
-      for (const RowSlot& sl : slots.row(r))
+      for (int i = s0; i < s1; ++i) {
+        const RowSlot& sl = slots.items[static_cast<size_t>(i)];
         u[static_cast<size_t>(sl.agent)].noalias() += blocks[static_cast<size_t>(sl.agent)]->s.col(sl.local) * delta;
+        moved[static_cast<size_t>(sl.agent)] += root[static_cast<size_t>(i)] * std::abs(delta);
+      }
+      residual[static_cast<size_t>(r)] = res - diag[r] * delta;
+      for (int i = s0; i < s1; ++i)
+        then[static_cast<size_t>(i)] = moved[static_cast<size_t>(slots.items[static_cast<size_t>(i)].agent)];
     }
-    if (change <= settings.tolerance) {
+    if (change <= tol) {
       *converged = true;
       break;
     }
@@ -352,8 +451,8 @@ void ValidateRows(const SeparationState& data, const SeparationRows& in, const S
       !in.initial_forces.allFinite() || !in.initial_shape_forces.allFinite())
     throw InvalidInput(kWhere, "rows must be finite");
   if (nr && in.softness.minCoeff() < 0.0) throw InvalidInput(kWhere, "softness must not be negative");
-  if (!(settings.tolerance > 0.0) || settings.max_sweeps < 1)
-    throw InvalidInput(kWhere, "tolerance must be positive and max_sweeps at least 1");
+  if (!(settings.tolerance > 0.0) || settings.max_sweeps < 1 || !(settings.relaxation > 0.0 && settings.relaxation < 2.0))
+    throw InvalidInput(kWhere, "tolerance must be positive, max_sweeps at least 1 and relaxation in (0, 2)");
   std::vector<char> has_term(static_cast<size_t>(nr), 0);
   for (Eigen::Index t = 0; t < nt; ++t) {
     if (in.term_row[t] < 0 || in.term_row[t] >= nr) throw InvalidInput(kWhere, "term row out of range");
@@ -438,16 +537,8 @@ void ScaleBlocks(const SeparationState& data, const Gathered& g, int threads, Se
       result.shape(ag.first + i, 1) = z1[static_cast<size_t>(i)].imag();
     }
     auto& turn = turns[static_cast<size_t>(q)];
-    turn.assign(ag.ranges.size(), 1.0);
-    for (size_t k = 0; k < ag.ranges.size(); ++k)
-      if (ag.ranges[k].m1 >= 0 && std::abs(y1[ag.ranges[k].m1]) > 0.0)
-        turn[k] = y1[ag.ranges[k].m1] / std::abs(y1[ag.ranges[k].m1]);
-    std::vector<Complex> edges(static_cast<size_t>(std::max(ag.count - 1, 0)));
-    for (int i = 0; i + 1 < ag.count; ++i) {
-      const Complex rest_edge = C(data.rest, ag.first + i + 1) - C(data.rest, ag.first + i);
-      const Complex e = z1[static_cast<size_t>(i + 1)] - z1[static_cast<size_t>(i)];
-      edges[static_cast<size_t>(i)] = std::abs(e) > 0.0 ? e / std::abs(e) * std::abs(rest_edge) : rest_edge;
-    }
+    std::vector<Complex> edges;
+    data.Step2Targets(ag, y1, z1, edges, turn);
     ar->y0 = ag.step2.Solve(data.Step2Rhs(ag, edges, turn)).col(0);
     AgentBlock(ag.step2, ag.n2, [&](int i) { return ag.Map2(i, turn); },
                &cache.step2[static_cast<size_t>(g.involved[static_cast<size_t>(q)])], ar);

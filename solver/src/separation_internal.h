@@ -1,6 +1,7 @@
 // Internals of the separation solve (separation.h) shared by its source files: each
 // agent's factored steps, the maps from its vertices to its unknowns, and the precomputed
-// state behind SeparationData.
+// state behind SeparationData. The energy's terms come from energy/two_step_energy.h, as
+// the path editor's do; here they are accumulated per agent through the maps.
 //
 //   separation_precompute.cpp  validation, each agent's unknowns and factored steps
 //   separation.cpp             rows by agent, Schur blocks, the row forces, both steps
@@ -19,6 +20,7 @@
 #include <utility>
 #include <vector>
 
+#include "energy/two_step_energy.h"
 #include "mocapedit/errors.h"
 #include "mocapedit/separation.h"
 #include "mocapedit/skyline_ldlt.h"
@@ -120,6 +122,9 @@ class StepSolver {
 // coordinates alike.
 inline Complex C(const Trajectory2& p, Eigen::Index i) { return {p(i, 0), p(i, 1)}; }
 
+// A rigid range of an agent: one similarity z -> t1 + m1 (z - centroid) in step 1 (a
+// translation alone when it is too small to carry a rotation), one translation t2 of its
+// rest shape turned by step 1's rotation in step 2 (energy/two_step_energy.h).
 struct Range {
   int first = 0, last = 0;   // local vertices, inclusive
   int t1 = -1, m1 = -1;      // step-1 unknowns: translation, similarity factor (-1: none)
@@ -144,9 +149,8 @@ struct Agent {
   StepSolver<Complex> step1;
   StepSolver<double> step2;
   Eigen::VectorXcd y1_rest;
-  // Step-1 triangles: vertex i = (1 - mu) z_{i-1} + mu z_{i+1}.
-  std::vector<int> tri;
-  std::vector<Complex> mu;
+
+  int RangeOf(int i) const { return range[static_cast<size_t>(i)]; }
 
   Map Map1(int i) const {
     Map m;
@@ -180,7 +184,8 @@ struct Agent {
   }
 };
 
-// Accumulates sum |sum_i c_i z_i - beta|^2 over residuals into K (triplets) and b.
+// Accumulates sum weight |sum_v c_v z_v - beta|^2 over the energy's terms into K
+// (triplets) and b, each vertex z_v replaced by its map to the unknowns.
 struct Normal {
   std::vector<Eigen::Triplet<Complex>> triplets;
   Eigen::VectorXcd b;
@@ -190,10 +195,12 @@ struct Normal {
 
   explicit Normal(int n, bool with_matrix = true) : b(Eigen::VectorXcd::Zero(n)), matrix(with_matrix) {}
 
-  // Residual given as (map, coefficient) pairs; `beta` on the right-hand side.
-  void Add(const std::vector<std::pair<Map, Complex>>& terms, Complex beta, double weight) {
+  // A term's row (energy/two_step_energy.h) of local vertices; map(v) gives v's Map.
+  template <size_t N, typename MapFn>
+  void Add(const TermRow<double, N>& term, const MapFn& map, Complex beta, double weight) {
     row.clear();
-    for (const auto& [m, c] : terms) {
+    for (const auto& [v, c] : term) {
+      const Map m = map(v);
       row.emplace_back(m.j0, c * m.a0);
       if (m.j1 >= 0) row.emplace_back(m.j1, c * m.a1);
       beta -= c * m.k;
@@ -233,20 +240,47 @@ struct SeparationState {
   std::vector<Agent> agents;
   std::vector<int> agent_of;  // global vertex -> agent
 
+  // Step 2's terms of one agent into `normal`: each step j -> j+1 between frames (not
+  // inside one range) at its target edges[j] (0 when `edges` is empty: for the matrix
+  // alone), and the anchors at the rest positions; each range's shape turned by
+  // turn[range].
+  void Step2Terms(const Agent& ag, const std::vector<Complex>& edges, const std::vector<Complex>& turn,
+                  Normal& normal) const {
+    const auto map = [&](int i) { return ag.Map2(i, turn); };
+    const auto range_of = [&](int i) { return ag.RangeOf(i); };
+    ChainEdges(ag.count, [&](int j, int k) {
+      if (!InOneRange(range_of, {j, k}))
+        normal.Add(Row(EdgeTerm{j, k}), map, edges.empty() ? 0.0 : edges[static_cast<size_t>(j)], 1.0);
+    });
+    for (int i = 0; i < ag.count; ++i)
+      normal.Add(AnchorRow(i), map, C(rest, ag.first + i), anchor_weight);
+  }
+
+  // Step 2's targets from step 1's result (unknowns y1, positions z1) of one agent: each
+  // step's edge (EdgeTarget) and each range's turn, the rotation of its similarity. A
+  // range too small to carry a rotation keeps its source facing here, where the path
+  // editor turns it with the step-1 edges entering and leaving it: avoidance moves a
+  // standing agent within a detour whose turns in and out cancel, and the edges next to a
+  // stand (a walker slowing down, tens of micrometres) turn by noise in step 1; on stages
+  // of agents that stop in crossing flows, turning them so spun their bodies.
+  void Step2Targets(const Agent& ag, const Eigen::VectorXcd& y1, const std::vector<Complex>& z1,
+                    std::vector<Complex>& edges, std::vector<Complex>& turn) const {
+    edges.resize(static_cast<size_t>(std::max(ag.count - 1, 0)));
+    ChainEdges(ag.count, [&](int j, int k) {
+      const Complex rest_edge = C(rest, ag.first + k) - C(rest, ag.first + j);
+      edges[static_cast<size_t>(j)] =
+          EdgeTarget(z1[static_cast<size_t>(k)] - z1[static_cast<size_t>(j)], std::sqrt(std::norm(rest_edge)), rest_edge);
+    });
+    turn.assign(ag.ranges.size(), 1.0);
+    for (size_t r = 0; r < ag.ranges.size(); ++r)
+      if (ag.ranges[r].m1 >= 0) turn[r] = RangeTurn(y1[ag.ranges[r].m1]);
+  }
+
   // Step-2 right-hand side of one agent for given edge vectors and range turns.
   Eigen::VectorXcd Step2Rhs(const Agent& ag, const std::vector<Complex>& edges,
                             const std::vector<Complex>& turn) const {
     Normal normal(ag.n2, false);
-    std::vector<std::pair<Map, Complex>> terms;
-    for (int i = 0; i + 1 < ag.count; ++i) {
-      if (ag.range[i] >= 0 && ag.range[i] == ag.range[i + 1]) continue;
-      terms = {{ag.Map2(i + 1, turn), 1.0}, {ag.Map2(i, turn), -1.0}};
-      normal.Add(terms, edges[static_cast<size_t>(i)], 1.0);
-    }
-    for (int i = 0; i < ag.count; ++i) {
-      terms = {{ag.Map2(i, turn), 1.0}};
-      normal.Add(terms, C(rest, ag.first + i), anchor_weight);
-    }
+    Step2Terms(ag, edges, turn, normal);
     return normal.b;
   }
 };

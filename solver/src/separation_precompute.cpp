@@ -1,6 +1,8 @@
 // Validation, each agent's unknowns and its two factored steps (separation_internal.h).
 #include "separation_internal.h"
 
+#include <numeric>
+
 namespace mocapedit {
 namespace detail {
 namespace {
@@ -23,6 +25,8 @@ void Validate(const SeparationProblem& problem) {
   if (!(problem.anchor_weight > 0.0) || !std::isfinite(problem.anchor_weight))
     throw InvalidInput(kWhere, "anchor_weight must be positive");
   if (!(problem.still_extent >= 0.0)) throw InvalidInput(kWhere, "still_extent must not be negative");
+  if (!(problem.min_baseline >= 0.0) || !std::isfinite(problem.min_baseline))
+    throw InvalidInput(kWhere, "min_baseline must be a finite value >= 0");
 }
 
 // Each agent's vertices, and the rigid ranges inside it.
@@ -58,80 +62,56 @@ void SetUpAgents(const SeparationProblem& problem, SeparationState& data) {
   }
 }
 
-// Unknowns: free vertices in frame order, then each range's translation (and factor).
-void NumberUnknowns(const Trajectory2& p, double still_extent, Agent& ag) {
+// Unknowns: free vertices in frame order, then each range's translation (and factor, when
+// its extent is above `small`).
+void NumberUnknowns(const Trajectory2& p, double small, Agent& ag) {
   ag.free1.assign(static_cast<size_t>(ag.count), -1);
   ag.free2.assign(static_cast<size_t>(ag.count), -1);
   int n = 0;
   for (int i = 0; i < ag.count; ++i)
     if (ag.range[i] < 0) ag.free1[i] = ag.free2[i] = n++;
   ag.n1 = ag.n2 = n;
+  const auto z = [&](int i) { return C(p, ag.first + i); };
   for (Range& r : ag.ranges) {
     Complex sum = 0.0;
-    for (int i = r.first; i <= r.last; ++i) sum += C(p, ag.first + i);
+    for (int i = r.first; i <= r.last; ++i) sum += z(i);
     r.centroid = sum / double(r.last - r.first + 1);
-    double extent = 0.0;
-    for (int i = r.first; i <= r.last; ++i) {
-      ag.s[i] = C(p, ag.first + i) - r.centroid;
-      extent = std::max(extent, std::abs(ag.s[i]));
-    }
+    for (int i = r.first; i <= r.last; ++i) ag.s[i] = z(i) - r.centroid;
+    std::vector<int> members(static_cast<size_t>(r.last - r.first + 1));
+    std::iota(members.begin(), members.end(), r.first);
+    const auto [m1, m2] = RangeMasters(members, z);
     r.t1 = ag.n1++;
     r.t2 = ag.n2++;
-    if (extent > still_extent) r.m1 = ag.n1++;
+    if (std::abs(z(m2) - z(m1)) > small) r.m1 = ag.n1++;
   }
   ag.y1_rest.resize(ag.n1);
   for (int i = 0; i < ag.count; ++i)
-    if (ag.free1[i] >= 0) ag.y1_rest[ag.free1[i]] = C(p, ag.first + i);
+    if (ag.free1[i] >= 0) ag.y1_rest[ag.free1[i]] = z(i);
   for (const Range& r : ag.ranges) {
     ag.y1_rest[r.t1] = r.centroid;
     if (r.m1 >= 0) ag.y1_rest[r.m1] = 1.0;
   }
 }
 
-// Step 1: each inner frame in the frame of its two neighbours, and the anchors. `tiny`:
-// neighbours closer than this frame nothing.
-void FactorShape(const Trajectory2& p, double anchor_weight, double tiny, Agent& ag) {
+// Step 1: each inner frame in the frame of the frames around it at least `baseline` apart,
+// and the anchors.
+void FactorShape(const SeparationState& data, double baseline, Agent& ag) {
   Normal one(ag.n1);
-  std::vector<std::pair<Map, Complex>> terms;
-  for (int i = 1; i + 1 < ag.count; ++i) {
-    if (ag.range[i] >= 0 && ag.range[i - 1] == ag.range[i] && ag.range[i + 1] == ag.range[i]) continue;
-    const Complex e = C(p, ag.first + i + 1) - C(p, ag.first + i - 1);
-    const Complex d = C(p, ag.first + i) - C(p, ag.first + i - 1);
-    Complex mu;
-    if (std::abs(e) > tiny) {
-      mu = d / e;
-    } else if (std::abs(d) <= tiny) {
-      mu = 0.5;  // standing still: the frame stays between its neighbours
-    } else {
-      continue;  // turns back on itself: no frame to express it in
-    }
-    ag.tri.push_back(i);
-    ag.mu.push_back(mu);
-    terms = {{ag.Map1(i), 1.0}, {ag.Map1(i - 1), -(1.0 - mu)}, {ag.Map1(i + 1), -mu}};
-    one.Add(terms, 0.0, 1.0);
-  }
-  for (int i = 0; i < ag.count; ++i) {
-    terms = {{ag.Map1(i), 1.0}};
-    one.Add(terms, C(p, ag.first + i), anchor_weight);
-  }
+  const auto map = [&](int i) { return ag.Map1(i); };
+  const auto range_of = [&](int i) { return ag.RangeOf(i); };
+  const auto z = [&](int i) { return C(data.rest, ag.first + i); };
+  ChainFrames(data.rest, ag.first, ag.count, baseline, [&](int i, int a, int b) {
+    if (!InOneRange(range_of, {i, a, b})) one.Add(Row(MakeShapeTerm(i, a, b, z(i), z(a), z(b))), map, 0.0, 1.0);
+  });
+  for (int i = 0; i < ag.count; ++i) one.Add(AnchorRow(i), map, C(data.rest, ag.first + i), data.anchor_weight);
   Factor(ag.step1, ag.n1, one.triplets);
 }
 
 // Step 2: each step between frames, and the anchors. Its matrix does not depend on step 1
 // (only its right-hand side does).
-void FactorScale(double anchor_weight, Agent& ag) {
-  const std::vector<Complex> no_turn(ag.ranges.size(), 1.0);
+void FactorScale(const SeparationState& data, Agent& ag) {
   Normal two(ag.n2);
-  std::vector<std::pair<Map, Complex>> terms;
-  for (int i = 0; i + 1 < ag.count; ++i) {
-    if (ag.range[i] >= 0 && ag.range[i] == ag.range[i + 1]) continue;
-    terms = {{ag.Map2(i + 1, no_turn), 1.0}, {ag.Map2(i, no_turn), -1.0}};
-    two.Add(terms, 0.0, 1.0);
-  }
-  for (int i = 0; i < ag.count; ++i) {
-    terms = {{ag.Map2(i, no_turn), 1.0}};
-    two.Add(terms, 0.0, anchor_weight);
-  }
+  data.Step2Terms(ag, {}, std::vector<Complex>(ag.ranges.size(), 1.0), two);
   Factor(ag.step2, ag.n2, two.triplets);
 }
 
@@ -159,14 +139,15 @@ void SeparationPrecompute(const SeparationProblem& problem, SeparationData& out)
   data->threads = ThreadCount(problem.threads, nv);
   SetUpAgents(problem, *data);
   const double scale = 1.0 + (nv ? problem.rest.cwiseAbs().maxCoeff() : 0.0);
-  const double tiny = std::max(problem.still_extent, 1e-12 * scale);
+  // Frames closer than still_extent stand still: they never frame a shape term.
+  const double baseline = std::max({problem.min_baseline, problem.still_extent, 1e-12 * scale});
   const int na = static_cast<int>(data->agents.size());
   ParallelFor(na, data->threads, [&](int a) {
     Agent& ag = data->agents[static_cast<size_t>(a)];
     if (ag.count == 0) return;
     NumberUnknowns(data->rest, problem.still_extent, ag);
-    FactorShape(data->rest, problem.anchor_weight, tiny, ag);
-    FactorScale(problem.anchor_weight, ag);
+    FactorShape(*data, baseline, ag);
+    FactorScale(*data, ag);
   });
   out.state = std::move(data);
 }

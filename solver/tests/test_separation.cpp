@@ -1,7 +1,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 
+#include "mocapedit/path_edit.h"
 #include "mocapedit/separation.h"
 
 using mocapedit::SeparationProblem;
@@ -84,6 +86,12 @@ TEST(Separation, ValidityRejectsBadInput) {
   {
     SeparationProblem p = HeadOn();
     p.anchor_weight = 0.0;
+    mocapedit::SeparationData data;
+    EXPECT_THROW(mocapedit::SeparationPrecompute(p, data), mocapedit::InvalidInput);
+  }
+  {
+    SeparationProblem p = HeadOn();
+    p.min_baseline = -0.1;
     mocapedit::SeparationData data;
     EXPECT_THROW(mocapedit::SeparationPrecompute(p, data), mocapedit::InvalidInput);
   }
@@ -258,4 +266,63 @@ TEST(Separation, WarmStartsOfBothStepsResumeTheSolve) {
   mocapedit::SeparationSolve(data, rows, settings, *cache, mixed);
   EXPECT_GT(mixed.updates, 0);
   EXPECT_NEAR((mixed.positions - cold.positions).cwiseAbs().maxCoeff(), 0.0, 1e-6);
+}
+
+TEST(Separation, ItsEnergyIsThePathEditors) {
+  // An agent walks along x, slows to a sway of millimetres (steps much shorter than the
+  // baseline), turns in place along an arc (a stationary range) and walks on; frame 45 is
+  // pinned 0.5 aside.
+  const int n = 70;
+  const double baseline = 0.05, anchor = 1e-3;
+  Trajectory2 z(n, 2);
+  double x = 0.0;
+  for (int i = 0; i < n; ++i) {
+    const bool slow = i >= 15 && i < 30;
+    x += slow ? 0.001 : 0.1;
+    z.row(i) << x, slow ? 0.004 * ((i % 2) ? 1.0 : -1.0) : 0.0;
+  }
+  for (int i = 32; i <= 38; ++i) z.row(i) << x - 1.6 + 0.2 * std::sin(0.2 * (i - 32)), 0.2 - 0.2 * std::cos(0.2 * (i - 32));
+  const int pin = 45;
+  const double px = z(pin, 0), py = z(pin, 1) + 0.5;
+
+  SeparationProblem sp;
+  sp.rest = z;
+  sp.starts.resize(2);
+  sp.starts << 0, n;
+  sp.rigid = {{32, 38}};
+  sp.anchor_weight = anchor;
+  sp.min_baseline = baseline;
+  RowBuilder b;
+  b.Add(1, 0, px, 0, 0, {{pin, 1.0}});
+  b.Add(0, 1, py, 0, 0, {{pin, 1.0}});
+  const SeparationResult sr = Solve(sp, b.Build());
+
+  // The path editor on the same energy: the agent's chain terms at the baseline, a soft
+  // handle at every frame's rest position as its anchor, a hard handle for the pin.
+  mocapedit::PathEditProblem pp;
+  pp.rest = z;
+  pp.triangles.resize(0, 3);
+  pp.edges.resize(0, 2);
+  mocapedit::AppendChainTerms(z, 0, n, baseline, pp.triangles, pp.edges);
+  pp.rigid = {{{32, 33, 34, 35, 36, 37, 38}, mocapedit::RigidMode::kRotate}};
+  pp.handles.resize(n + 1);
+  pp.handle_weights.resize(n + 1);
+  Trajectory2 handles(n + 1, 2);
+  for (int i = 0; i < n; ++i) {
+    pp.handles[i] = i;
+    pp.handle_weights[i] = anchor;
+    handles.row(i) = z.row(i);
+  }
+  pp.handles[n] = pin;
+  pp.handle_weights[n] = std::numeric_limits<double>::infinity();
+  handles.row(n) << px, py;
+  mocapedit::PathEditData data;
+  mocapedit::PathEditPrecompute(pp, data);
+  mocapedit::PathEditResult pr;
+  mocapedit::PathEditSolve(data, handles, Trajectory2(0, 2), pr);
+
+  EXPECT_GT((sr.positions - z).rowwise().norm().maxCoeff(), 0.4);
+  EXPECT_NEAR((sr.shape - pr.shape).cwiseAbs().maxCoeff(), 0.0, 1e-9);
+  EXPECT_NEAR((sr.positions - pr.positions).cwiseAbs().maxCoeff(), 0.0, 1e-9);
+  EXPECT_NEAR(sr.rigid_angles[0], pr.rigid_angles[0], 1e-9);
 }

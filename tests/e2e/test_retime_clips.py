@@ -13,6 +13,7 @@ from pxr import Sdf, Usd, UsdSkel
 from mocapedit.usd import bvh_usd
 from mocapedit.data import examples, walker
 from mocapedit.pipeline.processor import solve
+from mocapedit.tools import measure
 
 from conftest import SHARED_MOCAP, world_joints
 
@@ -237,3 +238,10 @@ def test_locked_legs_are_baked_as_rotations_over_the_retimed_source(tmp_path):
         assert apart < (5e-3 if agent == "a" else BETWEEN_SAMPLES), agent
         # The locked legs did change the pose: the source carried along plays otherwise.
         assert np.abs(_world(src, path, times) - a).max() > 1e-2
+        # Measured on the stages by FK, the agent pairs with its source by the frame it plays
+        # (the value clip's times), and its figures are the report's.
+        fk = measure.plausibility(src, out, path)
+        entry = clips.report.agent(path).plausibility
+        assert np.allclose(fk.time_warp, entry.time_warp, atol=1e-6), agent
+        assert abs(fk.length_ratio - entry.length_ratio) < 1e-4, agent
+        assert abs(fk.max_direction_deviation - entry.max_direction_deviation) < 0.5, agent

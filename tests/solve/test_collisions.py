@@ -781,7 +781,10 @@ def test_region_footprints_follow_the_transform(tmp_path):
 def test_a_standing_agent_pushed_aside_does_not_spin(tmp_path):
     """A walker crosses the spot where another stands for 4 s with a jittering root (60 fps, Z-up,
     cm; no waiting, so the stander is pushed). The stander's body turns with the push, never by
-    the tangent of its jitter: with the tangent rule it turned 28 degrees in one frame, 14 times."""
+    the tangent of its jitter: with the tangent rule it turned 28 degrees in one frame, 14 times.
+    Its shape terms are framed by frames at least path_edit.MIN_BASELINE_M apart, as the path
+    editor's: framed by its jittering neighbours, it turned 2.3 degrees in one frame beyond its
+    source."""
     clip, (first, last) = _stage_module("stages_path").long_stand_clip()
     middle = (first + last) // 2
     spot = clip.translations[middle, 0].astype(np.float64)
@@ -802,4 +805,4 @@ def test_a_standing_agent_pushed_aside_does_not_spin(tmp_path):
     assert result.report.agents[stander]["edited"]
     measured = measure.plausibility(Usd.Stage.Open(str(tmp_path / "shot.usda")), out, stander)
     assert measured.spin_frames == 0
-    assert measured.max_extra_facing_rate < 5.0 * 60.0     # under 5 degrees per frame at 60 fps
+    assert measured.max_extra_facing_rate < 1.0 * 60.0     # under 1 degree per frame at 60 fps

@@ -56,6 +56,7 @@ import numpy as np
 
 from mocapedit import _solver
 from mocapedit.solve import collisions
+from mocapedit.solve.path_edit import MIN_BASELINE_M
 from mocapedit.model import report
 
 STRATEGIES = ("relinearize", "accumulate")
@@ -127,6 +128,7 @@ class Settings:
     keep_degrees: float = 5.0           # relinearize keeps a row's direction while it turns less
     sweeps: int = 20                    # Gauss-Seidel sweeps per solve step at least (warm-started)
     sweep_budget: float = 1e6           # rows x sweeps per step allowed beyond that (up to 10x sweeps)
+    relaxation: float = 1.0             # over-relaxation of the Gauss-Seidel sweeps, in (0, 2)
     tolerance: float = 1e-3             # of the clearance: Gauss-Seidel stops when no row moves more
     patience: int = 6                   # stop after this many iterations without progress
     stiffen_after: int = 3              # relinearize: from this iteration on, the anchor is
@@ -222,7 +224,7 @@ class _Rows:
         self.count += r
         return idx
 
-    def solve(self, solver, tolerance: float = 1e-6, max_sweeps: int = 500):
+    def solve(self, solver, tolerance: float = 1e-6, max_sweeps: int = 500, relaxation: float = 1.0):
         cat = lambda parts, shape, dtype: (np.concatenate(parts) if parts else np.zeros(shape)).astype(dtype)  # noqa: E731
         return solver.solve(direction=cat(self.direction, (0, 2), np.float64).reshape(-1, 2),
                             rhs=cat(self.rhs, 0, np.float64), softness=cat(self.softness, 0, np.float64),
@@ -230,7 +232,8 @@ class _Rows:
                             term_vertex=cat(self.term_vertex, 0, np.int32),
                             term_weight=cat(self.term_weight, 0, np.float64), kind=cat(self.kind, 0, np.int32),
                             initial_forces=cat(self.force, 0, np.float64), tolerance=tolerance,
-                            max_sweeps=max_sweeps, initial_shape_forces=cat(self.force1, 0, np.float64))
+                            max_sweeps=max_sweeps, initial_shape_forces=cat(self.force1, 0, np.float64),
+                            relaxation=relaxation)
 
 
 class _State:
@@ -514,10 +517,12 @@ class _Run:
         return out
 
     def factor(self, rest, starts, rigid, anchor_weight: float, still_extent: float):
-        """A SeparationSolver for the paths (rest, starts) and their rigid ranges, timed."""
+        """A SeparationSolver for the paths (rest, starts) and their rigid ranges, timed. Its
+        shape terms are framed as the path editor's (``MIN_BASELINE_M``)."""
         t = time.perf_counter()
         solver = _solver.SeparationSolver(rest=rest, starts=starts, rigid=rigid, anchor_weight=anchor_weight,
-                                          still_extent=still_extent, threads=0)
+                                          still_extent=still_extent,
+                                          min_baseline=MIN_BASELINE_M / self.state.s.meters_per_unit, threads=0)
         self.seconds["factor"] += time.perf_counter() - t
         return solver
 
@@ -627,16 +632,18 @@ class _Candidates:
 
     def add(self, a, b, k) -> None:
         keys = np.unique((k * self.n + a) * self.n + b)
-        new = keys[~np.isin(keys, self.keys)]
+        at = np.searchsorted(self.keys, keys)
+        known = at < len(self.keys)
+        known[known] = self.keys[at[known]] == keys[known]
+        new, at = keys[~known], at[~known]
         if len(new) == 0:
             return
-        merged = np.concatenate([self.keys, new])
-        order = np.argsort(merged, kind="stable")
-        self.keys = merged[order]
-        self.force = np.concatenate([self.force, np.zeros(len(new))])[order]
-        self.force1 = np.concatenate([self.force1, np.zeros(len(new))])[order]
-        self.blocked = np.concatenate([self.blocked, np.zeros(len(new), bool)])[order]
-        self.normal = np.concatenate([self.normal, np.full((len(new), 2), np.nan)])[order]
+        # Both sorted: each new key goes in before the first kept key above it.
+        self.keys = np.insert(self.keys, at, new)
+        self.force = np.insert(self.force, at, 0.0)
+        self.force1 = np.insert(self.force1, at, 0.0)
+        self.blocked = np.insert(self.blocked, at, False)
+        self.normal = np.insert(self.normal, at, np.nan, axis=0)
 
     def linearise(self, fresh: np.ndarray, keep_cos: float) -> np.ndarray:
         """The rows' directions for the next solve, given the directions at the latest result.
@@ -769,26 +776,25 @@ class _Forward:
     def __init__(self, state: _State, keep: float = 0.5, chord_s: float = 0.25, moving_m_s: float = 0.2):
         s, p = state.s, state.p
         self.keep = keep
-        firsts, seconds, dirs, lengths = [], [], [], []
-        for a in range(len(p.names)):
-            lo, hi = int(state.starts[a]), int(state.starts[a + 1])
-            if hi - lo < 2:
-                continue
-            dt = float(np.median(np.diff(p.frame_times[a]))) / s.time_codes_per_second   # seconds per frame
-            h = max(1, int(round(chord_s / max(dt, 1e-9))))
-            if hi - lo <= h:
-                continue
-            v = np.arange(lo, hi - h)
-            c = state.rest[v + h] - state.rest[v]
-            n = np.linalg.norm(c, axis=1)
-            moving = n > moving_m_s / s.meters_per_unit * h * dt
-            firsts.append(v[moving])
-            seconds.append(v[moving] + h)
-            dirs.append(c[moving] / n[moving, None])
-            lengths.append(n[moving])
-        cat = lambda parts, shape: np.concatenate(parts) if parts else np.zeros(shape)  # noqa: E731
-        self.v, self.u = cat(firsts, 0).astype(np.int64), cat(seconds, 0).astype(np.int64)
-        self.d, self.length = cat(dirs, (0, 2)), cat(lengths, 0)
+        starts = state.starts.astype(np.int64)
+        counts = np.diff(starts)
+        # Seconds per frame of each agent (the median interval; agents of one length at once).
+        dt = np.zeros(len(counts))
+        for count in np.unique(counts[counts >= 2]):
+            group = np.flatnonzero(counts == count)
+            times = np.stack([p.frame_times[a] for a in group])
+            dt[group] = np.median(np.diff(times, axis=1), axis=1) / s.time_codes_per_second
+        h = np.maximum(1, np.round(chord_s / np.maximum(dt, 1e-9))).astype(np.int64)
+        # The chords of every agent longer than its chord: frames lo .. hi - h - 1.
+        chords = np.where((counts >= 2) & (counts > h), counts - h, 0)
+        owner = np.repeat(np.arange(len(counts)), chords)
+        v = np.arange(int(chords.sum()), dtype=np.int64) - np.repeat(np.cumsum(chords) - chords, chords) + starts[:-1][owner]
+        hv = h[owner]
+        c = state.rest[v + hv] - state.rest[v]
+        n = np.linalg.norm(c, axis=1)
+        moving = n > moving_m_s / s.meters_per_unit * hv * dt[owner]
+        self.v, self.u = v[moving], (v + hv)[moving]
+        self.d, self.length = c[moving] / n[moving, None], n[moving]
         self.on = np.zeros(len(self.v), bool)
         self.force = np.zeros(len(self.v))
         self.force1 = np.zeros(len(self.v))
@@ -869,7 +875,8 @@ def _relinearize(state: _State, run: _Run):
         # Small problems afford a converged Gauss-Seidel; big ones carry it on from iteration
         # to iteration (warm start) within a budget of row updates.
         sweeps = int(np.clip(s.sweep_budget / max(rows.count, 1), s.sweeps, 10 * s.sweeps))
-        out = rows.solve(solver, tolerance=s.tolerance * float(np.min(need, initial=1.0)), max_sweeps=sweeps)
+        out = rows.solve(solver, tolerance=s.tolerance * float(np.min(need, initial=1.0)), max_sweeps=sweeps,
+                         relaxation=s.relaxation)
         run.solved(rows, out)
         force, force1 = out.forces, out.shape_forces
         fixed_force, fixed_force1 = force[:fixed], force1[:fixed]
@@ -917,90 +924,7 @@ def smooth_delay(times: np.ndarray, start: float, end: float, delay: float) -> n
     """(F,) the time map ``times`` with ``delay`` time codes taken up between shot times
     ``start`` and ``end`` (a smoothstep: no interval shrinks, every one after ``end`` is
     unchanged, the pace is continuous)."""
-    u = np.clip((np.asarray(times) - start) / max(end - start, 1e-12), 0.0, 1.0)
-    return np.asarray(times) + delay * u * u * (3.0 - 2.0 * u)
-
-
-@dataclass
-class _Boxes:
-    """Ground bounding boxes of every agent over blocks of ``size`` samples."""
-    low: np.ndarray               # (B,A,2)
-    high: np.ndarray              # (B,A,2)
-    size: int
-
-    @classmethod
-    def of(cls, positions: np.ndarray, size: int) -> "_Boxes":
-        k = len(positions)
-        blocks = -(-k // size)
-        padded = np.concatenate([positions, np.repeat(positions[-1:], blocks * size - k, axis=0)])
-        shaped = padded.reshape(blocks, size, *positions.shape[1:])
-        return cls(shaped.min(axis=1), shaped.max(axis=1), size)
-
-
-def _least_delay(problem: Problem, settings: Settings, paths, times: np.ndarray, w: int, o: int,
-                 pos: np.ndarray, st: np.ndarray, boxes: _Boxes, first: int, last: int, room: float,
-                 step: float, guess: float):
-    """(time map, delay) of the least delay of agent w, near ``guess`` (time codes), that
-    parts it from agent o over their encounter (samples first..last at the sampling
-    ``pos``, ``st``) and meets no agent it did not meet already, but for those walking its
-    way; None when no delay up to ``room`` does."""
-    fps = settings.time_codes_per_second
-    # The encounter: from a second before the overlap to a second past it, plus the room.
-    lo = max(first - int(np.ceil(fps / problem.sample_step)), 0)
-    hi = min(last + int(np.ceil((room + fps) / problem.sample_step)), len(st) - 1)
-    window = st[lo:hi + 1]
-    # Whatever the delay, w walks the part of its path it walked from `room` before the
-    # window to its end: only the agents whose blocks come near that part can meet it.
-    reach = pos[max(lo - int(np.ceil(room / problem.sample_step)), 0):hi + 1, w]
-    grow = problem.radius[w] + problem.radius + problem.margin * (1.0 + settings.overshoot)
-    b0, b1 = lo // boxes.size, hi // boxes.size + 1
-    low, high = boxes.low[b0:b1].min(axis=0), boxes.high[b0:b1].max(axis=0)     # (A,2)
-    r_lo, r_hi = reach.min(axis=0), reach.max(axis=0)
-    near = ((low[:, 0] - grow <= r_hi[0]) & (low[:, 1] - grow <= r_hi[1])
-            & (high[:, 0] + grow >= r_lo[0]) & (high[:, 1] + grow >= r_lo[1]))
-    near[w] = False
-    near[o] = True
-    cand = np.flatnonzero(near)
-    at_o = int(np.searchsorted(cand, o))
-    others = pos[lo:hi + 1][:, cand]                                 # (K,N,2)
-    need2 = grow[cand] ** 2
-    frames = np.arange(len(times), dtype=np.float64)
-
-    def overlapped(maps):
-        """(M,N) for each of M time maps of w, which candidates it overlaps in the window."""
-        at = np.stack([np.interp(window, m, frames) for m in maps])   # (M,K) fractional frames
-        pw = collisions.positions_at(paths[w], at.ravel()).reshape(*at.shape, 2)
-        d = others[None] - pw[:, :, None]
-        return (d[..., 0] ** 2 + d[..., 1] ** 2 - need2).min(axis=1) < 0.0
-
-    before = overlapped([times])[0]
-    # Walkers going the same way may be caught up with: they wait in their turn (the next
-    # round), as a queue does. A new encounter with anyone else is not worth a wait.
-    motion = others[-1] - others[0]
-    mine = pos[hi, w] - pos[lo, w]
-    cos = motion @ mine / np.maximum(np.linalg.norm(motion, axis=1) * np.linalg.norm(mine), 1e-300)
-    queue = cos >= PASSING_COS
-    # A smoothstep's steepest slope is 1.5 times its mean: the pace stays at or above
-    # SLOWEST_PACE. It starts after the clip does: a walker never stands frozen in its
-    # first pose waiting for its clip to begin.
-    t_end = st[first] - 0.1 * fps
-    # Delays from a step below the first guess (rounded to steps) up to three steps above it.
-    lowest = max(step, step * (np.ceil(guess / step) - 1.0)) if np.isfinite(guess) else step
-    delays = np.arange(lowest, min(room, lowest + 4.0 * step) + 1e-9, step)
-    t_start = t_end - np.maximum(1.5 * delays / (1.0 / SLOWEST_PACE - 1.0), fps)
-    delays, t_start = delays[t_start >= times[0]], t_start[t_start >= times[0]]
-    if len(delays) == 0:
-        return None
-    trials = [smooth_delay(times, a, t_end, d) for a, d in zip(t_start, delays)]
-    # Delays taken up over overlapping spans add their slowing: the pace stays at or above
-    # SLOWEST_PACE of the source's all the same.
-    source = np.diff(problem.frame_times[w])
-    paced = np.array([np.all(np.diff(m) * SLOWEST_PACE <= source * (1.0 + 1e-9)) for m in trials])
-    after = overlapped(trials)
-    good = np.flatnonzero(paced & ~after[:, at_o] & ~np.any(after & ~before & ~queue, axis=1))
-    if len(good) == 0:
-        return None
-    return trials[good[0]], delays[good[0]]
+    return _solver.smooth_delay(np.ascontiguousarray(times, dtype=np.float64), float(start), float(end), float(delay))
 
 
 @dataclass
@@ -1043,7 +967,8 @@ def _waits(problem: Problem, settings: Settings, fixed: np.ndarray) -> _Waits:
     if budget <= 0 or not problem.collide_agents or not times:
         return out
     step = max(settings.wait_step_s * fps, problem.sample_step)
-    paths = {i: g for i, g in enumerate(problem.paths)}
+    paths = {i: np.ascontiguousarray(g, dtype=np.float64) for i, g in enumerate(problem.paths)}
+    source = [np.ascontiguousarray(t, dtype=np.float64) for t in problem.frame_times]
     # What plays after the last frame of the shot as it was (a delayed walker's last steps)
     # is not compared: nobody else walks there then.
     span = problem.span or (min(float(t[0]) for t in times), max(float(t[-1]) for t in times))
@@ -1090,7 +1015,14 @@ def _waits(problem: Problem, settings: Settings, fixed: np.ndarray) -> _Waits:
         gap = np.linalg.norm(pos[k, a] - pos[k, b], axis=1)
         guess = np.where(following, (need - gap) / np.maximum(sw, 1e-300), cross_guess) * problem.sample_step
         taken = set()
-        boxes = _Boxes.of(pos, max(1, int(round(fps / problem.sample_step))))
+        # The least delay of each walker (C++): in steps, from a step below the first guess
+        # (rounded to steps) up to three steps above it, that parts it from the other over
+        # their encounter and meets nobody new but walkers going its way; it starts after
+        # the clip does and keeps the pace at or above SLOWEST_PACE of the source's.
+        search = _solver.WaitSearch(positions=pos.reshape(-1, 2), times=st, radius=problem.radius.astype(np.float64),
+                                    time_codes_per_second=fps, sample_step=problem.sample_step, step=step,
+                                    margin=problem.margin * (1.0 + settings.overshoot), slowest_pace=SLOWEST_PACE,
+                                    passing_cos=PASSING_COS, block=max(1, int(round(fps / problem.sample_step))))
         order = np.argsort(found.first, kind="stable")
         for m in order[ok[order]]:
             w, o = int(who[m]), int(other[m])
@@ -1098,11 +1030,11 @@ def _waits(problem: Problem, settings: Settings, fixed: np.ndarray) -> _Waits:
             if w in taken or budget - delay[w] < step or tried.get((w, o)) == (delay[w], delay[o]):
                 continue
             tried[(w, o)] = (delay[w], delay[o])
-            found_delay = _least_delay(problem, settings, paths, times[w], w, o, pos, st, boxes,
-                                       int(found.first[m]), int(found.last[m]), budget - delay[w], step,
-                                       float(guess[m]))
+            found_delay = search.least_delay(walker=w, other=o, first=int(found.first[m]), last=int(found.last[m]),
+                                             room=float(budget - delay[w]), guess=float(guess[m]), path=paths[w],
+                                             times=times[w], source_times=source[w])
             if found_delay is not None:
-                times[w], delay[w] = found_delay[0], delay[w] + found_delay[1]
+                times[w], delay[w] = found_delay.times, delay[w] + found_delay.delay
                 taken.add(w)
         if not taken:
             break

@@ -61,6 +61,10 @@ GAUGE_WEIGHT = 0.01
 #: Target-space links: re-solve until the target headings change less than this (radians).
 HEADING_TOLERANCE = 1e-12
 MAX_HEADING_ITERATIONS = 30
+#: Metres: the local frames of the shape terms along an agent's path are at least this long
+#: (the frame of a frame that stands still or sways widens to the walk around it), in path
+#: editing and in collision avoidance alike (solver/src/energy/two_step_energy.h).
+MIN_BASELINE_M = 0.01
 
 
 @dataclass

@@ -25,9 +25,9 @@ import numpy as np
 from mocapedit import _solver
 from mocapedit.geometry import ground, trajectory
 from mocapedit.solve import path_edit
+from mocapedit.solve.path_edit import MIN_BASELINE_M
 
 #: Defaults in metres, as the path pass uses them.
-MIN_BASELINE_M = 0.01
 RIGID_MIN_EXTENT_M = 0.02
 STILL_M = 1e-5
 

@@ -45,19 +45,32 @@ def plausibility(source_stage, edited_stage, agent_path, joint: Union[int, str, 
                  foot_joints=None) -> Plausibility:
     """Plausibility of one agent: its edited motion on ``edited_stage`` (the input with the edits
     layer on top) against its source on ``source_stage``, both by UsdSkel FK at their own composed
-    samples, paired by frame. Its foot skate is measured over the source's planted samples, less
-    those where the edited foot is lifted more than 2 cm above the source's (a step,
-    :func:`~mocapedit.inspect.metrics.on_ground`). ``joint``: the facing joint (default
-    :func:`~mocapedit.model.names.default_facing_joint`)."""
+    samples. An agent whose animation re-times its clip by a value clip (time edits, locked legs:
+    :func:`~mocapedit.usd.evaluate.played_frames`) is paired with its source by the frame it plays
+    at each time, and its feet are measured against the source played on that timing, per second
+    of the shot, as the solve's report measures them; others pair by frame. Foot skate is measured
+    over the source's planted samples, less those where the edited foot is lifted more than 2 cm
+    above the source's (a step, :func:`~mocapedit.inspect.metrics.on_ground`). ``joint``: the
+    facing joint (default :func:`~mocapedit.model.names.default_facing_joint`)."""
     ts, ms = evaluate.joint_world_matrices(source_stage, agent_path, None, joint)
     te, me = evaluate.joint_world_matrices(edited_stage, agent_path, None, joint)
     feet_s = evaluate.foot_positions(source_stage, agent_path, None, foot_joints)
     source, edited = evaluate.stage_units(source_stage), evaluate.stage_units(edited_stage)
-    skate_s = metrics.foot_skate_of_positions(feet_s.positions, feet_s.times, *source, feet_s.joints, feet_s.in_clip)
+    frames = evaluate.played_frames(edited_stage, agent_path, te)
+    played = feet_s
+    if frames is not None and len(feet_s.times) > 1:
+        # The source's feet as the edited timing plays them (between two of its samples, where
+        # the timing falls, as USD interpolates a clip's joints: near enough for skate).
+        x = np.arange(len(feet_s.times), dtype=np.float64)
+        flat = feet_s.positions.reshape(len(x), -1)
+        at = np.stack([np.interp(frames, x, flat[:, c]) for c in range(flat.shape[1])], axis=1)
+        played = evaluate.FootSamples(te, at.reshape((len(te),) + feet_s.positions.shape[1:]), feet_s.joints,
+                                      np.ones(len(te), dtype=bool))
+    skate_s = metrics.foot_skate_of_positions(played.positions, played.times, *source, played.joints, played.in_clip)
     if len(skate_s.times) == len(te):
         # Over the source's contacts, less where the edited foot is lifted (a step).
         feet_e = evaluate.foot_positions(edited_stage, agent_path, te, foot_joints)
-        contact = metrics.on_ground(skate_s.contact, feet_s.positions, feet_e.positions, source.up_axis,
+        contact = metrics.on_ground(skate_s.contact, played.positions, feet_e.positions, source.up_axis,
                                     source.meters_per_unit)
         skate_e = metrics.foot_skate_of_positions(feet_e.positions, feet_e.times, *edited, feet_e.joints,
                                                   feet_e.in_clip, contact=contact)
@@ -65,7 +78,7 @@ def plausibility(source_stage, edited_stage, agent_path, joint: Union[int, str, 
         skate_e = foot_skate(edited_stage, agent_path, foot_joints=foot_joints)
     return metrics.plausibility_of(str(agent_path), ts / source.time_codes_per_second, ms,
                                    te / edited.time_codes_per_second, me, source.up_axis,
-                                   source.meters_per_unit, skate_s.mean, skate_e.mean)
+                                   source.meters_per_unit, skate_s.mean, skate_e.mean, edited_frames=frames)
 
 
 def shot_plausibility(source_stage, edited_stage, agent_paths: Iterable, joint=None,

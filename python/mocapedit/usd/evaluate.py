@@ -194,6 +194,34 @@ def joint_world_matrices(stage: Usd.Stage, agent_path: PathLike, times: Iterable
     return t, out
 
 
+def played_frames(stage: Usd.Stage, agent_path: PathLike, times: Iterable) -> np.ndarray | None:
+    """(T,) the (fractional) frame of its source clip the agent plays at each of ``times``, when
+    its animation re-times the clip by a USD value clip (what an edits layer writes for time edits
+    and locked legs); None when the animation plays its own samples. Frame k is the clip's k-th
+    authored sample, as the source stage numbers them."""
+    skel = _Skel(stage, agent_path)
+    anim_query = skel.query.GetAnimQuery()
+    if not anim_query:
+        return None
+    anim = anim_query.GetPrim()
+    api = Usd.ClipsAPI(anim)
+    clips = api.GetClips().get("default")
+    if not clips or "times" not in clips or "primPath" not in clips:
+        return None
+    assets = api.ComputeClipAssetPaths("default")
+    layer = Sdf.Layer.FindOrOpen(assets[0].resolvedPath) if len(assets) == 1 else None
+    if layer is None:
+        return None
+    spec = Sdf.Path(clips["primPath"])
+    own = np.unique(np.concatenate([np.asarray(layer.ListTimeSamplesForPath(spec.AppendProperty(c)), dtype=np.float64)
+                                    for c in ("translations", "rotations", "scales")]))
+    if own.size == 0:
+        return None
+    pairs = np.asarray(clips["times"], dtype=np.float64).reshape(-1, 2)
+    clip_times = np.interp(_times(times), pairs[:, 0], pairs[:, 1])
+    return np.interp(clip_times, own, np.arange(own.size, dtype=np.float64))
+
+
 @dataclass(frozen=True)
 class FootSamples:
     """World positions of an agent's feet by UsdSkel FK (:func:`foot_positions`).

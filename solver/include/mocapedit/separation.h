@@ -1,9 +1,11 @@
 // The solve behind collision avoidance: many agents' paths, each kept close to its rest
 // path by the two-step Laplacian energy of the deliverable (section 5.2: step 1 keeps the
-// local shape of every frame in the frame of its neighbours, step 2 the length of every
-// step), coupled by linear equality rows on the ground positions (section 6.2: the
+// local shape of every frame in the frame of the frames around it, step 2 the length of
+// every step), coupled by linear equality rows on the ground positions (section 6.2: the
 // constraints joining colliding points; also artist pins and links, and the push-out of
-// avoid regions).
+// avoid regions). The energy's terms are the path editor's (path_edit.h: an agent's chain
+// terms as AppendChainTerms gives them, at min_baseline), built by the same code; every
+// frame is also anchored (below).
 //
 // Each agent's energy is factored once (SeparationPrecompute). The rows change from solve
 // to solve (collision avoidance adds, re-linearises and drops them), so they are not part
@@ -26,7 +28,9 @@
 // Stationary ranges move rigidly in both steps (section 5.4.2.5): the range's frames are
 // replaced by one similarity in step 1 (translation and a complex scale) and by one
 // translation turned by step 1's rotation in step 2. Ranges whose rest positions stand
-// within still_extent of each other only translate.
+// within still_extent of each other only translate, and keep their source facing (the
+// path editor turns such ranges with the edges around them: a push moves a stand
+// sideways, and the edges next to it are too short to carry a direction).
 //
 // Positions are ground-plane coordinates in stage units; agents' paths are concatenated
 // into one #V by 2 list, agent a owning vertices starts[a] .. starts[a+1]-1 (one per frame).
@@ -48,6 +52,10 @@ struct SeparationProblem {
   std::vector<FrameRange> rigid;  // inclusive global vertex ranges, each inside one agent, disjoint
   double anchor_weight = 1e-3;    // > 0
   double still_extent = 1e-9;     // stage units, >= 0
+  // Stage units, >= 0: each frame's shape term is framed by the nearest frames around it
+  // at least this far apart (AppendChainTerms), so a frame that stands still or sways is
+  // framed by the walk around it. Frames closer than still_extent never frame a term.
+  double min_baseline = 0;
   int threads = 0;                // 0: hardware, at most 2
 };
 
@@ -114,8 +122,8 @@ struct SeparationData {
 //   problem  as documented on SeparationProblem
 // Outputs:
 //   data     replaced; reuse it for every SeparationSolve on the same agents
-// Throws InvalidInput on bad shapes, starts or ranges, non-finite rest positions, or a
-// non-positive anchor weight; NumericalError when an agent's energy cannot be factored.
+// Throws InvalidInput on bad shapes, starts or ranges, non-finite rest positions, a
+// non-positive anchor weight or a negative min_baseline; NumericalError when an agent's energy cannot be factored.
 void SeparationPrecompute(const SeparationProblem& problem, SeparationData& data);
 
 // Solves both steps under the rows. Const on data; may run from several threads.

@@ -23,18 +23,18 @@ from mocapedit.geometry import curves, ground
 from mocapedit.geometry.components import UnionFind
 from mocapedit.inspect import metrics
 from mocapedit.solve import path_edit
+from mocapedit.solve.path_edit import MIN_BASELINE_M
 from mocapedit.model.errors import MocapEditError, prim_error
 from mocapedit.model.report import ConstraintEntry
 from mocapedit.pipeline.context import EditedPath, SolveContext, consecutive_runs
 
 MET = 1e-6  # stage units: a hard constraint's residual within this is met
 
-#: Lengths that set the solve's tolerances, in metres.
-MIN_BASELINE_M = 0.01      # local frames of the shape terms are at least this long
 #: A path curve holds its agent on the remapped path by soft handles this far apart (s),
 #: so other constraints bend the path away from the curve only where they act.
 CURVE_ANCHOR_S = 0.5
 CURVE_ANCHOR_WEIGHT = 0.05
+#: Lengths that set the solve's tolerances, in metres (and path_edit.MIN_BASELINE_M).
 RIGID_MIN_EXTENT_M = 0.02  # smaller stationary ranges turn with the path around them
 STILL_M = 1e-5             # as trajectory.headings: tangents shorter than this stand still
 #: A group's mesh joins its members this often (seconds); the frames between follow.
