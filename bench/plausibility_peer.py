@@ -18,17 +18,11 @@ from mocapedit.geometry.shape import length_ratio
 from mocapedit.inspect import metrics
 from mocapedit.inspect.metrics import (EDIT_TURN_SECONDS, CHORD_SECONDS, WALKING_SPEED_M, FootSkate, Plausibility,
                                        spins)
-from mocapedit.model.report import AgentPlausibility, ShotPlausibility
+from mocapedit.model.report import ShotPlausibility
+from mocapedit.pipeline import processor
 
 
 def facing(rotations: np.ndarray, up_axis: str) -> np.ndarray:
-    """(F,) heading of a joint's facing, radians counter-clockwise about up.
-
-    ``rotations`` is (F,3,3) or (F,4,4) world matrices (row-vector convention: row k is
-    the joint's local axis k in world space). The local axis that stays the most
-    horizontal over the clip stands for the facing; any joint convention works, and a
-    constant angle between that axis and the true forward does not change turning rates.
-    """
     axes = np.asarray(rotations, dtype=np.float64)[:, :3, :3]
     up = ground.up_index(up_axis)
     k = int(np.argmin(np.mean(np.abs(axes[:, :, up]), axis=0)))
@@ -40,9 +34,6 @@ def foot_skate_of_positions(pos: np.ndarray, t: np.ndarray, up, meters_per_unit:
                             time_codes_per_second: float, joints: tuple[str, ...] = (),
                             in_clip: np.ndarray | None = None, contact_height: float | None = None,
                             contact: np.ndarray | None = None) -> FootSkate:
-    """Foot skate (:func:`mocapedit.tools.measure.foot_skate`) of feet whose world positions are
-    known: ``pos`` (T, F, 3) stage units at increasing time codes ``t`` (T,); ``in_clip`` (T,) marks the samples inside
-    the clip (default: all). The other arguments are :func:`mocapedit.tools.measure.foot_skate`'s."""
     t = np.asarray(t, dtype=np.float64)
     if contact_height is None:
         contact_height = 0.02 / meters_per_unit
@@ -74,17 +65,10 @@ def foot_skate_of_positions(pos: np.ndarray, t: np.ndarray, up, meters_per_unit:
 
 
 def body_facing(matrices, up_axis) -> np.ndarray:
-    """(T,) facing of a body from its hip (or root) joint's world matrices ``(T, 4, 4)``:
-    the horizontal projection of the joint's local axis that stays the most horizontal over the
-    clip (any joint convention works), radians counter-clockwise about up, unwrapped. Taken from
-    the skeleton, never from the path: a side step or a turn on the spot faces where the body
-    faces. Two clips of the same joint that differ by a yaw pick the same axis."""
     return np.unwrap(facing(np.asarray(matrices, dtype=np.float64), _up_token(up_axis)))
 
 
 def facing_change_per_second(facing, seconds) -> np.ndarray:
-    """(T-1,) unsigned turning rate of a facing between consecutive samples, degrees per second.
-    ``facing`` (T,) radians; ``seconds`` (T,) increasing sample times in seconds."""
     f = np.unwrap(np.asarray(facing, dtype=np.float64))
     s = np.asarray(seconds, dtype=np.float64)
     if f.shape != s.shape or f.ndim != 1:
@@ -97,14 +81,6 @@ def facing_change_per_second(facing, seconds) -> np.ndarray:
 
 def direction_deviation(source_ground, edited_ground, seconds, min_speed: float,
                         chord: float = CHORD_SECONDS, turn=None) -> np.ndarray:
-    """(T,) angle (degrees, 0..180) between the edited and the source walking direction.
-
-    The walking direction at frame i is the chord from i to the first frame at least ``chord``
-    seconds later (``seconds``: (T,) source sample times). Frames where the source chord is
-    slower than ``min_speed`` (stage units per second), and frames without a full chord, are NaN:
-    the source does not walk there. Paths are ``(T, 2)`` ground points paired by frame.
-    ``turn`` (T,) radians, counter-clockwise: the source direction at each chord's first frame
-    is turned by it before comparing (:func:`edit_turn` gives the turn an edit means to make)."""
     s = _points(source_ground, "source_ground", dims=(2,))
     e = _points(edited_ground, "edited_ground", dims=(2,))
     t = np.asarray(seconds, dtype=np.float64)
@@ -135,13 +111,6 @@ def direction_deviation(source_ground, edited_ground, seconds, min_speed: float,
 
 def edit_turn(source_ground, edited_ground, seconds, min_speed: float,
               span: float = EDIT_TURN_SECONDS) -> np.ndarray:
-    """(T,) the turn (radians, counter-clockwise, unwrapped) an edit gives a walk at each frame:
-    the angle from the source's chord to the edited chord over ``span`` seconds centred on the
-    frame (cut at the clip's ends). This is the turn the artist asks for (a group turned round a
-    corner turns by 90 degrees); a walk that goes back against it over a short chord
-    (:func:`direction_deviation` with ``turn``) hooks, zig-zags or loops. Where the source does
-    not walk over the span (slower than ``min_speed``) the turn is interpolated from the frames
-    around it where it does (held at the ends); 0 everywhere when it never does. Paths ``(T, 2)``, paired by frame."""
     s = _points(source_ground, "source_ground", dims=(2,))
     e = _points(edited_ground, "edited_ground", dims=(2,))
     t = np.asarray(seconds, dtype=np.float64)
@@ -162,7 +131,6 @@ def edit_turn(source_ground, edited_ground, seconds, min_speed: float,
 
 
 def _resample(values: np.ndarray, at: np.ndarray) -> np.ndarray:
-    """Per-sample ``values`` ``(N, ...)`` linearly interpolated at fractional sample indices."""
     values = np.asarray(values, dtype=np.float64)
     x = np.arange(len(values), dtype=np.float64)
     flat = values.reshape(len(values), -1)
@@ -171,8 +139,6 @@ def _resample(values: np.ndarray, at: np.ndarray) -> np.ndarray:
 
 
 def _pair(source: np.ndarray, count: int) -> np.ndarray:
-    """Source samples paired with ``count`` edited samples: the same ones when the counts agree,
-    else resampled over the clip by frame fraction (an edit that re-sampled the time)."""
     if len(source) == count:
         return source
     return _resample(source, np.linspace(0.0, len(source) - 1.0, count))
@@ -189,14 +155,6 @@ def _ratio(edited: float, source: float) -> float:
 def plausibility_of(agent: str, source_seconds, source_hip, edited_seconds, edited_hip, up_axis,
                     meters_per_unit: float, foot_skate_source: float = float("nan"),
                     foot_skate_edited: float = float("nan"), edited_frames=None) -> Plausibility:
-    """:class:`Plausibility` from the facing joint's world matrices of the source ``(T, 4, 4)``
-    at ``source_seconds`` ``(T,)`` and of the edited agent ``(T', 4, 4)`` at ``edited_seconds``,
-    and the two foot skate means (stage units per second). ``edited_frames`` ``(T',)``: the
-    (fractional) source frame each edited sample plays, as a time warp knows it; the source is
-    then compared at those frames and the time warp is shot time per source time. Without it,
-    edited samples pair with source samples by frame (resampled by frame fraction when T'
-    differs) and the time warp is the ratio of their intervals.
-    :func:`mocapedit.tools.measure.plausibility` measures these on stages by FK."""
     ss, se = np.asarray(source_seconds, np.float64), np.asarray(edited_seconds, np.float64)
     ms, me = np.asarray(source_hip, np.float64), np.asarray(edited_hip, np.float64)
     fs, fe = body_facing(ms, up_axis), body_facing(me, up_axis)
@@ -250,11 +208,6 @@ def plausibility_of(agent: str, source_seconds, source_hip, edited_seconds, edit
 
 
 def measure_plausibility(ctx: SolveContext) -> None:
-    """Per edited agent, and for the shot (``stats.plausibility``), the figures of
-    :func:`metrics.plausibility_of`: the facing and walking direction of the edited body against
-    its source, path length, time warp and foot skate. They come from the same motions the edits
-    layer authors, by numpy forward kinematics of the hip and the feet (the composed stage plays
-    the same, so FK on it gives the same figures); layered poses are left out."""
     info = ctx.data.info
     up, chains, figures = info.up_axis, {}, []
     for path in sorted(ctx.edits):
@@ -293,20 +246,6 @@ def measure_plausibility(ctx: SolveContext) -> None:
         p = plausibility_of(path, agent.sample_times * seconds, source[:, 0], times * seconds, edited[:, 0],
                                     up, info.meters_per_unit, *skate, edited_frames=frames)
         figures.append(p)
-        if np.isfinite(skate).all():
-            # Mean foot speed while in contact (stage units per second), over the source's contacts.
-            if entry.foot_skate_source is None:
-                entry.foot_skate_source = skate[0]
-            if entry.foot_skate_edited is None:
-                entry.foot_skate_edited = skate[1]
-        entry.plausibility = AgentPlausibility(
-            max_facing_rate=p.max_facing_rate, source_max_facing_rate=p.source_max_facing_rate,
-            max_extra_facing_rate=p.max_extra_facing_rate, spin_frames=p.spin_frames,
-            max_direction_deviation=p.max_direction_deviation,
-            max_turned_direction_deviation=p.max_turned_deviation, max_edit_turn=p.max_edit_turn,
-            reverses=p.reverses, length_ratio=p.length_ratio,
-            time_warp=list(p.time_warp), foot_skate_ratio=p.foot_skate_ratio,
-            worst_turn_frame=int(round(frames[max(p.worst_turn_frame, 0)])),
-            worst_direction_frame=int(round(frames[p.worst_direction_frame])) if p.worst_direction_frame >= 0 else -1)
+        processor.record_plausibility(entry, p, skate, frames)
     if figures:
         ctx.report.stats.plausibility = ShotPlausibility.from_dict(metrics.worst_plausibility(figures))

@@ -153,26 +153,31 @@ def measure_plausibility(ctx: SolveContext) -> None:
         for first in range(0, len(items), PLAUSIBILITY_BATCH):
             figures.update(_measure_plausibility(ctx, items[first:first + PLAUSIBILITY_BATCH]))
     for path in sorted(figures):
-        p, skate, frames = figures[path]
-        entry = ctx.report.agent(path)
-        if np.isfinite(skate).all():
-            # Mean foot speed while in contact (stage units per second), over the source's contacts.
-            if entry.foot_skate_source is None:
-                entry.foot_skate_source = skate[0]
-            if entry.foot_skate_edited is None:
-                entry.foot_skate_edited = skate[1]
-        entry.plausibility = AgentPlausibility(
-            max_facing_rate=p.max_facing_rate, source_max_facing_rate=p.source_max_facing_rate,
-            max_extra_facing_rate=p.max_extra_facing_rate, spin_frames=p.spin_frames,
-            max_direction_deviation=p.max_direction_deviation,
-            max_turned_direction_deviation=p.max_turned_deviation, max_edit_turn=p.max_edit_turn,
-            reverses=p.reverses, length_ratio=p.length_ratio,
-            time_warp=list(p.time_warp), foot_skate_ratio=p.foot_skate_ratio,
-            worst_turn_frame=int(round(frames[max(p.worst_turn_frame, 0)])),
-            worst_direction_frame=int(round(frames[p.worst_direction_frame])) if p.worst_direction_frame >= 0 else -1)
+        record_plausibility(ctx.report.agent(path), *figures[path])
     if figures:
         ordered = [figures[path][0] for path in sorted(figures)]
         ctx.report.stats.plausibility = ShotPlausibility.from_dict(metrics.worst_plausibility(ordered))
+
+
+def record_plausibility(entry, p: metrics.Plausibility, skate, frames: np.ndarray) -> None:
+    """An agent's report entry gets its figures ``p``, its foot skate [source, edited] when
+    measured (and not measured before) and its worst frames as source frames (``frames``: the
+    source frame each edited sample plays)."""
+    if np.isfinite(skate).all():
+        # Mean foot speed while in contact (stage units per second), over the source's contacts.
+        if entry.foot_skate_source is None:
+            entry.foot_skate_source = skate[0]
+        if entry.foot_skate_edited is None:
+            entry.foot_skate_edited = skate[1]
+    entry.plausibility = AgentPlausibility(
+        max_facing_rate=p.max_facing_rate, source_max_facing_rate=p.source_max_facing_rate,
+        max_extra_facing_rate=p.max_extra_facing_rate, spin_frames=p.spin_frames,
+        max_direction_deviation=p.max_direction_deviation,
+        max_turned_direction_deviation=p.max_turned_deviation, max_edit_turn=p.max_edit_turn,
+        reverses=p.reverses, length_ratio=p.length_ratio,
+        time_warp=list(p.time_warp), foot_skate_ratio=p.foot_skate_ratio,
+        worst_turn_frame=int(round(frames[max(p.worst_turn_frame, 0)])),
+        worst_direction_frame=int(round(frames[p.worst_direction_frame])) if p.worst_direction_frame >= 0 else -1)
 
 
 def _measure_plausibility(ctx: SolveContext, items: list[_Measured]) -> dict:
@@ -187,8 +192,9 @@ def _measure_plausibility(ctx: SolveContext, items: list[_Measured]) -> dict:
     source = np.stack([item.chain for item in items]) @ np.stack(parents)[:, :, None]   # (A, F, J, 4, 4)
     times = np.stack([item.times for item in items])
     frames = np.stack([item.frames for item in items])
-    # An agent that plays its source frame by frame is its source there (interpolating at whole
-    # frames gives the same values); the others are interpolated at their frames.
+    # A moved agent that plays its source frame by frame is carried from the source samples
+    # themselves when all of the batch do (interpolating at whole frames gives the same values
+    # but for the sign of zeros); the others are interpolated at their frames, as the layer plays them.
     whole = (frames == np.arange(frames.shape[1])).all(axis=1) & (frames.shape[1] == frame_count)
     moved = np.array([item.path in ctx.paths for item in items])
     edited = source.copy() if whole.all() else animation.interp_frames(source, frames)
@@ -213,11 +219,11 @@ def _measure_plausibility(ctx: SolveContext, items: list[_Measured]) -> dict:
         # A retimed agent against its source as its timing plays it (see the feet pass).
         same = np.array([times.shape[1] == len(agent.sample_times) and np.allclose(item.times, agent.sample_times)
                          for item, agent in zip(items, agents)])
-        played = animation.interp_frames(source, frames)
-        if same.any():
-            played = np.where(same[:, None, None, None, None], source, played)
-        feet = played[:, :, 1:, 3, :3]
-        before = metrics.foot_skate_of_positions(feet, times, *units)
+        feet = source[:, :, 1:, 3, :3]
+        played = feet if same.all() else animation.interp_frames(feet, frames)
+        if same.any() and not same.all():
+            played[same] = feet[same]
+        before = metrics.foot_skate_of_positions(played, times, *units)
         after = metrics.foot_skate_of_positions(edited[:, :, 1:, 3, :3], times, *units, contact=before.contact)
         skate = np.stack([before.mean, after.mean], axis=1)
     figures = metrics.plausibilities_of(
