@@ -105,7 +105,7 @@ def compose_edits(ctx: SolveContext) -> None:
 
 
 #: Agents whose plausibility is measured together (bounds the memory of a large crowd's arrays).
-PLAUSIBILITY_BATCH = 512
+PLAUSIBILITY_BATCH = 64
 
 
 @dataclass
