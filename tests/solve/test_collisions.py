@@ -504,6 +504,12 @@ def test_a_pair_that_walks_into_each_other_after_a_close_handshake_is_still_part
     times = np.arange(held + 1.0, 150.0)
     sep = metrics.min_separation(_ground_roots(out, agents, times), 0.3, 1.8, "Y")
     assert sep.clearance >= -1e-3
+    # Parted by stepping aside as they walk off, not by walking sideways: where the source
+    # starts to walk, the push must not turn a chord more than 90 degrees off the source's way
+    # (a projection on the way alone let a big lateral push count as progress: 94 degrees).
+    source = Usd.Stage.Open(str(tmp_path / "path_handshake.usda"))
+    for agent in agents:
+        assert measure.plausibility(source, out, agent).max_direction_deviation < 90.0, agent
 
 
 def test_collide_false_agents_are_neither_moved_nor_obstacles(tmp_path):

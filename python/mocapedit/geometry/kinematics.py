@@ -13,28 +13,35 @@ import numpy as np
 def quat_to_matrix3(q: np.ndarray) -> np.ndarray:
     """(...,4) unit quaternions -> (...,3,3) row-vector rotation matrices (p @ R)."""
     q = np.asarray(q, dtype=np.float64)
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    x, y, z, w = np.moveaxis(q, -1, 0)
+    return _rotation_rows(q / np.linalg.norm(q, axis=-1, keepdims=True), np.empty(q.shape[:-1] + (3, 3)))
+
+
+def _rotation_rows(q: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """Writes the row-vector rotation matrices of (...,4) unit quaternions into the top left
+    3x3 of ``m`` (...,3 or 4,3 or 4) and returns ``m``: the transpose of the column-vector matrix."""
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz, wx, wy, wz = x * y, x * z, y * z, w * x, w * y, w * z
-    # Column-vector matrix, then transposed for the row-vector convention.
-    m = np.stack([
-        np.stack([1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy)], -1),
-        np.stack([2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx)], -1),
-        np.stack([2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy)], -1),
-    ], -2)
-    return np.swapaxes(m, -1, -2)
+    m[..., 0, 0] = 1 - 2 * (yy + zz)
+    m[..., 1, 0] = 2 * (xy - wz)
+    m[..., 2, 0] = 2 * (xz + wy)
+    m[..., 0, 1] = 2 * (xy + wz)
+    m[..., 1, 1] = 1 - 2 * (xx + zz)
+    m[..., 2, 1] = 2 * (yz - wx)
+    m[..., 0, 2] = 2 * (xz - wy)
+    m[..., 1, 2] = 2 * (yz + wx)
+    m[..., 2, 2] = 1 - 2 * (xx + yy)
+    return m
 
 
 def compose_trs(translations: np.ndarray, rotations: np.ndarray,
                 scales: np.ndarray | None = None) -> np.ndarray:
     """(...,3), (...,4), (...,3) -> (...,4,4) matrices that scale, then rotate, then translate."""
     t = np.asarray(translations, dtype=np.float64)
-    r = quat_to_matrix3(rotations)
+    q = np.asarray(rotations, dtype=np.float64)
+    m = _rotation_rows(q / np.linalg.norm(q, axis=-1, keepdims=True), np.zeros(t.shape[:-1] + (4, 4)))
     if scales is not None:
-        r = r * np.asarray(scales, dtype=np.float64)[..., :, None]
-    m = np.zeros(t.shape[:-1] + (4, 4))
-    m[..., :3, :3] = r
+        m[..., :3, :3] *= np.asarray(scales, dtype=np.float64)[..., :, None]
     m[..., 3, :3] = t
     m[..., 3, 3] = 1.0
     return m

@@ -135,6 +135,7 @@ class Settings:
     stiffen: float = 10.0               # this many times stiffer
     forward_keep: float | None = 0.5    # relinearize: least projection of an edited 0.25 s chord on
                                         # the source's direction, in source chord lengths (None: none)
+    forward_cone_degrees: float = 45.0  # relinearize: largest angle of such a chord off that direction
     max_wait_s: float = 3.0             # most delay waiting may add to one agent, seconds (0: none)
     wait_step_s: float = 0.25           # delays are tried in steps of this, seconds
     wait_rounds: int = 8                # rounds of waiting at most
@@ -770,12 +771,14 @@ class _Forward:
     """One-sided rows that keep walkers going their way: for a chord of ``chord_s`` seconds
     of an agent's path where the source moves faster than ``moving_m_s``, the edited chord's
     projection on the source chord's direction stays at least ``keep`` times the source
-    chord's length (a push never sends a walker back the way it came, nor across its way).
-    Only the chords an iterate broke are rows, kept from then on."""
+    chord's length, and the edited chord stays within ``cone_degrees`` of that direction (a
+    push never sends a walker back the way it came, nor across its way: a projection alone
+    lets a push far enough sideways pass for progress). Only the rows an iterate broke are
+    solved, kept from then on."""
 
-    def __init__(self, state: _State, keep: float = 0.5, chord_s: float = 0.25, moving_m_s: float = 0.2):
+    def __init__(self, state: _State, keep: float = 0.5, chord_s: float = 0.25, moving_m_s: float = 0.2,
+                 cone_degrees: float = 45.0):
         s, p = state.s, state.p
-        self.keep = keep
         starts = state.starts.astype(np.int64)
         counts = np.diff(starts)
         # Seconds per frame of each agent (the median interval; agents of one length at once).
@@ -794,27 +797,33 @@ class _Forward:
         n = np.linalg.norm(c, axis=1)
         moving = n > moving_m_s / s.meters_per_unit * hv * dt[owner]
         self.v, self.u = v[moving], (v + hv)[moving]
-        self.d, self.length = c[moving] / n[moving, None], n[moving]
-        self.on = np.zeros(len(self.v), bool)
-        self.force = np.zeros(len(self.v))
-        self.force1 = np.zeros(len(self.v))
+        d, length = c[moving] / n[moving, None], n[moving]
+        # Three rows per chord: d.c >= keep |c_source|, and the cone's two edges n.c >= 0.
+        across = np.stack((-d[:, 1], d[:, 0]), axis=1)
+        sin, cos = np.sin(np.radians(cone_degrees)), np.cos(np.radians(cone_degrees))
+        self.normal = np.stack((d, sin * d - cos * across, sin * d + cos * across), axis=1)   # (C, 3, 2)
+        self.rhs = np.zeros((len(d), 3))
+        self.rhs[:, 0] = keep * length
+        self.on = np.zeros((len(d), 3), bool)
+        self.force = np.zeros((len(d), 3))
+        self.force1 = np.zeros((len(d), 3))
 
     def watch(self, flat: np.ndarray) -> int:
         """Turns on the rows of the chords ``flat`` breaks; returns how many were new."""
-        proj = np.sum((flat[self.u] - flat[self.v]) * self.d, axis=1)
-        fresh = ~self.on & (proj < self.keep * self.length)
+        chord = flat[self.u] - flat[self.v]
+        fresh = ~self.on & (np.einsum("ckj,cj->ck", self.normal, chord) < self.rhs)
         self.on |= fresh
         return int(fresh.sum())
 
     def add(self, rows: "_Rows") -> np.ndarray:
-        on = np.flatnonzero(self.on)
-        return rows.add(self.d[on], self.keep * self.length[on], SEPARATION_SOFTNESS,
-                        np.stack([self.u[on], self.v[on]], axis=1), np.tile([1.0, -1.0], (len(on), 1)),
-                        at_least=True, force=self.force[on], force1=self.force1[on])
+        c, k = np.nonzero(self.on)
+        return rows.add(self.normal[c, k], self.rhs[c, k], SEPARATION_SOFTNESS,
+                        np.stack([self.u[c], self.v[c]], axis=1), np.tile([1.0, -1.0], (len(c), 1)),
+                        at_least=True, force=self.force[c, k], force1=self.force1[c, k])
 
     def solved(self, force: np.ndarray, force1: np.ndarray) -> None:
-        on = np.flatnonzero(self.on)
-        self.force[on], self.force1[on] = force, force1
+        c, k = np.nonzero(self.on)
+        self.force[c, k], self.force1[c, k] = force, force1
 
 
 def _relinearize(state: _State, run: _Run):
@@ -826,7 +835,8 @@ def _relinearize(state: _State, run: _Run):
     watched = _RegionCandidates()
     buffer = s.buffer_m / s.meters_per_unit
     fixed_force, fixed_force1 = np.zeros(0), np.zeros(0)
-    forward = _Forward(state, s.forward_keep if s.forward_keep is not None else -np.inf)
+    forward = _Forward(state, s.forward_keep or 0.0, cone_degrees=s.forward_cone_degrees,
+                       moving_m_s=0.2 if s.forward_keep is not None else np.inf)
     for it in range(s.max_iterations + 1):
         # A result that sends someone back the way it came is solved again, with the chords
         # it broke held, even when nothing collides any more.

@@ -15,11 +15,16 @@ Offsets, plants and radii are in stage units, turns in radians; frames are the a
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-__all__ = ["follow", "leash", "leash_rows", "Replant", "replant", "step_profile", "step_frames", "lift_bend"]
+from mocapedit.geometry import kinematics
+from mocapedit.solve.footlock import normalize
+from mocapedit.solve.layering import quat_multiply
+
+__all__ = ["follow", "leash", "leash_rows", "Replant", "replant", "step_profile", "step_frames", "lift_bend",
+           "PlantInputs", "PlantOutputs", "plan_feet_numpy", "reach", "turn_speed", "yaw_quat"]
 
 
 def follow(offset: np.ndarray, radius: np.ndarray, run: np.ndarray, start: np.ndarray, out: np.ndarray) -> float:
@@ -263,3 +268,308 @@ def replant(contact: np.ndarray, movable: np.ndarray, offset: np.ndarray, radius
                 s["yaw"] += a - np.sign(a) * turn_radius
             shift[t, k], yaw[t, k] = s["plant"], s["yaw"]
     return Replant(shift, yaw, lift, steps)
+
+
+# ---- the plants of many agents: the solver's FootPlantJob, and the same in numpy -------------
+
+
+@dataclass
+class PlantInputs:
+    """The inputs of the plant job for #N poses of #A agents (their output frames, agent after
+    agent), two legs each, and #R contacts. Positions (N,2,3) and rotations (N,2,4) are world
+    space; "source" ones are the pose before the edit's ground motion (the posed source), the
+    others as edited. Lengths are stage units unless named in metres."""
+    offsets: np.ndarray          # (A+1,) int64: agent a owns poses offsets[a]:offsets[a+1]
+    frames: np.ndarray           # (N,) the source frame each pose plays
+    seconds: np.ndarray          # (N,) the pose's time, seconds
+    stationary: np.ndarray       # (N,) bool: inside a stationary range of the source
+    turn: np.ndarray             # (N,) the edit's turn of the body about up (radians)
+    hip: np.ndarray              # (N,2,3) edited
+    knee: np.ndarray
+    ankle: np.ndarray
+    ankle_rot: np.ndarray        # (N,2,4) edited
+    source_hip: np.ndarray       # (N,2,3) posed source
+    source_ankle: np.ndarray
+    source_hip_rot: np.ndarray   # (N,2,4) posed source
+    source_knee_rot: np.ndarray
+    source_ankle_rot: np.ndarray
+    contact_offsets: np.ndarray  # (2A+1,) int64: leg k of agent a owns contacts [2a+k]:[2a+k+1]
+    contacts: np.ndarray         # (R,2) inclusive source frame ranges of the foot contacts
+    blend: np.ndarray            # (A,) frames a lock eases in and out over (at least)
+    stretch: np.ndarray          # (A,2) how much longer each leg's steps are made
+    up: np.ndarray               # (3,) +Y or +Z
+    meters_per_unit: float
+    leash_m: float               # the least leash
+    max_leash_m: float           # the longest leash
+    max_drop_m: float            # how far the pelvis may be lowered for the leash
+    leash_degrees: float         # the turn a plant may lag its foot by
+    soft_reach: float            # fraction of a leg's length it reaches comfortably
+    step_slide_m: float          # a foot steps through contacts that slide further
+    step_slide_degrees: float    # ... or turn further
+    step_seconds: float          # the shortest step
+    step_longest_seconds: float  # the longest step
+    step_height_m: float         # how far a stepping foot lifts
+
+
+@dataclass
+class PlantOutputs:
+    target: np.ndarray       # (N,2,3) where each ankle is planted (the edited ankle where weight is 0)
+    target_rot: np.ndarray   # (N,2,4) how it is turned
+    weight: np.ndarray       # (N,2) in [0, 1]: how much of the plant to reach
+    stepping: np.ndarray     # (N,2) bool: the foot is stepping (in the air)
+    contacts: np.ndarray     # (A,2) int64: contacts on the agent's poses, per leg
+    steps: np.ndarray        # (A,) int64: steps taken
+
+
+def _ramp(frames: np.ndarray, first, last, blend, blend_out=None) -> np.ndarray:
+    """1 inside [first, last], easing to 0 over ``blend`` frames before and ``blend_out`` (default
+    ``blend``) after (smoothstep)."""
+    blend_out = blend if blend_out is None else blend_out
+    x = np.clip(1.0 - np.maximum(first - frames, 0.0) / blend - np.maximum(frames - last, 0.0) / blend_out, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def yaw_quat(angle: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """(T,4) quaternions turning by ``angle`` (radians, counter-clockwise) about the unit ``up``."""
+    half = 0.5 * np.asarray(angle, dtype=np.float64)[:, None]
+    return np.concatenate([np.sin(half) * up, np.cos(half)], axis=1)
+
+
+def turn_speed(q: np.ndarray, seconds: np.ndarray) -> np.ndarray:
+    """(T-1,) how fast (T,4) rotations turn between samples ``seconds`` apart, radians per second."""
+    q = np.asarray(q, dtype=np.float64)
+    dot = np.abs(np.sum(q[1:] * q[:-1], axis=-1)) / np.maximum(
+        np.linalg.norm(q[1:], axis=-1) * np.linalg.norm(q[:-1], axis=-1), 1e-300)
+    return 2.0 * np.arccos(np.clip(dot, 0.0, 1.0)) / np.maximum(np.diff(seconds), 1e-300)
+
+
+_CONJUGATE = np.array([-1.0, -1.0, -1.0, 1.0])
+
+
+@dataclass
+class _Contacts:
+    """The contacts of one foot, one row each (C) over the W frames ``at`` its ramp reaches."""
+    ranges: np.ndarray      # (C,2) source frames, inclusive
+    at: np.ndarray          # (C,W) output frames
+    valid: np.ndarray       # (C,W) frames the ramp reaches
+    inside: np.ndarray      # (C,W) frames inside the contact
+    rigid: np.ndarray       # (C,W) ... and inside a stationary range
+    turn: np.ndarray        # (C,W) the edit's turn of the body (radians)
+    yaw: np.ndarray         # (C,W) the plant's turn
+    foot: np.ndarray        # (C,W,3) the posed source ankle
+    pivot: np.ndarray       # (C,3) its mean over the contact, which the plant turns about
+    base: np.ndarray        # (C,3) where the pivot goes
+    radius: np.ndarray      # (C,W) the leash
+    up_axis: str
+    offset: np.ndarray | None = None   # (C,W,3) the edited ankle against the carried source foot
+    shift: np.ndarray | None = None    # (C,W,3) the plant's ground shift
+    lift: np.ndarray | None = None     # (C,W) how far a stepping foot is up (0 to 1 of the step height)
+
+    @property
+    def carried(self) -> np.ndarray:
+        """(C,W,3) the source foot turned by the plant's turn about the pivot, pivot at ``base``."""
+        spin = kinematics.yaw_matrix(self.yaw, self.up_axis)[..., :3, :3]
+        return np.einsum("cti,ctij->ctj", self.foot - self.pivot[:, None], spin) + self.base[:, None]
+
+    def sliding(self, distance: float, angle: float) -> np.ndarray:
+        """(C,) contacts whose leashed plant slides further than ``distance`` or turns further
+        than ``angle`` (radians) inside them."""
+        both = self.inside[:, 1:] & self.inside[:, :-1]
+        slide = np.where(both, np.linalg.norm(np.diff(self.shift, axis=1), axis=-1), 0.0).sum(axis=1)
+        turn = np.where(both, np.abs(np.diff(self.yaw, axis=1)), 0.0).sum(axis=1)
+        return (slide > distance) | (turn > angle)
+
+
+def reach(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, up: np.ndarray, drop: float,
+          soft_reach: float) -> np.ndarray:
+    """(T,) how far (stage units, over the ground) an ankle may move from ``ankle`` in any
+    direction and still lie within the leg's soft reach (``soft_reach`` of its length) from
+    ``hip`` lowered by ``drop``: the leg's soft length over the ground at that height, less the
+    ankle's ground distance from the hip. (T,3) world positions of one leg."""
+    length = np.linalg.norm(knee - hip, axis=-1) + np.linalg.norm(ankle - knee, axis=-1)
+    apart = hip - ankle
+    height = np.maximum(apart @ up - drop, 0.0)
+    over = np.linalg.norm(apart - np.outer(apart @ up, up), axis=-1)
+    return np.sqrt(np.maximum((soft_reach * length) ** 2 - height ** 2, 0.0)) - over
+
+
+class _AgentPlan:
+    """One agent of :func:`plan_feet_numpy`: its poses' slice of the inputs, per leg."""
+
+    def __init__(self, inputs: PlantInputs, a: int):
+        lo, hi = int(inputs.offsets[a]), int(inputs.offsets[a + 1])
+        self.inputs = p = inputs
+        self.frames, self.seconds, self.turn = p.frames[lo:hi], p.seconds[lo:hi], p.turn[lo:hi]
+        self.stationary = np.asarray(p.stationary[lo:hi], dtype=bool)
+        self.hip, self.knee, self.ankle, self.ankle_rot = p.hip[lo:hi], p.knee[lo:hi], p.ankle[lo:hi], p.ankle_rot[lo:hi]
+        self.source_hip, self.source_ankle = p.source_hip[lo:hi], p.source_ankle[lo:hi]
+        self.source_hip_rot, self.source_knee_rot = p.source_hip_rot[lo:hi], p.source_knee_rot[lo:hi]
+        self.source_ankle_rot = p.source_ankle_rot[lo:hi]
+        self.up_vector = np.asarray(p.up, dtype=np.float64)
+        self.up = int(np.argmax(np.abs(self.up_vector)))
+        self.up_axis = "YZ"[self.up - 1]
+        self.blend = float(p.blend[a])
+        self.contacts = np.zeros(2, dtype=np.int64)
+        self.rows = [self._contacts(k, p.contacts[p.contact_offsets[2 * a + k]:p.contact_offsets[2 * a + k + 1]])
+                     for k in range(2)]
+
+    def _contacts(self, k: int, ranges) -> _Contacts | None:
+        """The contacts of one foot at once, one row each over the frames its ramp reaches, with
+        their leashed plants; None without contacts on these poses."""
+        p, count, blend = self.inputs, len(self.frames), self.blend
+        # The leash: as far as the leg reaches with the pelvis lowered a little, from the
+        # least leash to the longest.
+        radius = np.clip(reach(self.hip[:, k], self.knee[:, k], self.ankle[:, k], self.up_vector,
+                               p.max_drop_m / p.meters_per_unit, p.soft_reach),
+                         p.leash_m / p.meters_per_unit, p.max_leash_m / p.meters_per_unit)
+        ranges = np.array(ranges, dtype=np.float64).reshape(-1, 2)
+        inside = (self.frames >= ranges[:, :1] - 1e-9) & (self.frames <= ranges[:, 1:] + 1e-9)   # (C,T)
+        used = inside.any(axis=1)
+        ranges, inside = ranges[used], inside[used]
+        if not len(ranges):
+            return None
+        self.contacts[k] = len(ranges)
+        reached = _ramp(self.frames, ranges[:, :1], ranges[:, 1:], blend * p.max_leash_m / p.leash_m) > 0  # (C,T)
+        lo = reached.argmax(axis=1)
+        width = int((reached.sum(axis=1)).max())
+        at = lo[:, None] + np.arange(width)                                                      # (C,W)
+        valid = at < count
+        at = np.minimum(at, count - 1)
+        valid &= np.take_along_axis(reached, at, axis=1)
+        inside = np.take_along_axis(inside, at, axis=1) & valid
+        # Where a contact meets a stationary range, the body moves rigidly there: the plant
+        # is that motion, so the range keeps its shape (no correction inside it).
+        rigid = inside & self.stationary[at]
+        chosen = np.where(rigid.any(axis=1, keepdims=True), rigid, inside)
+        n_chosen = chosen.sum(axis=1)[:, None]
+        turn_c = self.turn[at]
+        yaw0 = np.arctan2((np.sin(turn_c) * chosen).sum(1), (np.cos(turn_c) * chosen).sum(1))[:, None]
+        # An edit that turns the body far during a contact turns the plant too.
+        apart = np.angle(np.exp(1j * (turn_c - yaw0)))
+        yaw = yaw0 + leash_rows(apart[..., None], np.zeros((len(at), 1)), inside, rigid,
+                                np.radians(p.leash_degrees))[..., 0]
+        # Turned about the planted foot itself, so a plant that turns along does not slide.
+        foot = self.source_ankle[:, k][at]                                                        # (C,W,3)
+        pivot = (foot * chosen[..., None]).sum(1) / n_chosen
+        base = np.einsum("ci,cij->cj", pivot, kinematics.yaw_matrix((yaw * chosen).sum(1) / n_chosen[:, 0],
+                                                                    self.up_axis)[:, :3, :3])
+        out = _Contacts(ranges=ranges, at=at, valid=valid, inside=inside, rigid=rigid, turn=turn_c, yaw=yaw,
+                        foot=foot, pivot=pivot, base=base, radius=radius[at], up_axis=self.up_axis)
+        out.offset = self.ankle[:, k][at] - out.carried
+        out.offset[..., self.up] = 0.0  # feet stay at their source height: never below their ground
+        out.shift = leash_rows(out.offset, (out.offset * chosen[..., None]).sum(1) / n_chosen, inside,
+                               rigid, out.radius)
+        out.lift = np.zeros(at.shape)
+        return out
+
+    def plan(self, stretch) -> tuple:
+        """(target, target_rot, weight, stepping, steps) of the legs from the contacts' plants,
+        where feet step (their steps ``stretch`` times as long as :func:`replant` would make
+        them)."""
+        p, count, blend = self.inputs, len(self.frames), self.blend
+        up_vector = self.up_vector
+        rows = [None if r is None else replace(r, shift=r.shift.copy(), yaw=r.yaw.copy(), lift=r.lift.copy())
+                for r in self.rows]
+        steps = self._replant(rows, stretch) if all(r is not None for r in rows) else 0
+        stepping = np.zeros((count, 2), dtype=bool)
+        target = self.ankle.copy()
+        target_rot = self.ankle_rot.copy()
+        weight = np.zeros((count, 2))
+        pos_sum = np.zeros((count, 2, 3))
+        rot_sum = np.zeros((count, 2, 4))
+        w_sum = np.zeros((count, 2))
+        for k, r in enumerate(rows):
+            if r is None:
+                continue
+            stepping[r.at[r.lift > 0], k] = True
+            # The lock eases in and out over longer where the plant lies far from the edited foot
+            # (within the frames reached above).
+            far = np.linalg.norm(r.shift - r.offset, axis=-1) / (p.leash_m / p.meters_per_unit)    # (C,W)
+            rows_c = np.arange(len(r.at))
+            ends = r.inside.argmax(axis=1), r.at.shape[1] - 1 - r.inside[:, ::-1].argmax(axis=1)
+            blend_in, blend_out = (blend * np.clip(far[rows_c, e], 1.0, p.max_leash_m / p.leash_m)[:, None]
+                                   for e in ends)
+            w = np.where(r.valid, _ramp(self.frames[r.at], r.ranges[:, :1], r.ranges[:, 1:], blend_in, blend_out), 0.0)
+            valid = r.valid & (w > 0)
+            plant_rot = quat_multiply(yaw_quat(r.yaw.reshape(-1), up_vector).reshape(r.yaw.shape + (4,)),
+                                      self.source_ankle_rot[:, k][r.at])
+            plant_rot *= np.where(np.sum(plant_rot * self.ankle_rot[:, k][r.at], -1) < 0, -1.0, 1.0)[..., None]
+            plant = r.carried + r.shift + (r.lift * (p.step_height_m / p.meters_per_unit))[..., None] * up_vector
+            # Where the ramps of two contacts meet, their plants blend by weight: no jump.
+            at = r.at[valid]
+            np.add.at(pos_sum[:, k], at, (w[..., None] * plant)[valid])
+            np.add.at(rot_sum[:, k], at, (w[..., None] * plant_rot)[valid])
+            np.add.at(w_sum[:, k], at, w[valid])
+            np.maximum.at(weight[:, k], at, w[valid])
+        some = w_sum > 0
+        target[some] = pos_sum[some] / w_sum[some][:, None]
+        target_rot[some] = normalize(rot_sum[some])
+        return target, target_rot, weight, stepping, steps
+
+    def _replant(self, rows: list[_Contacts], stretch) -> int:
+        """Where the leash lets a foot slide through a contact and the other foot bears the
+        weight, the foot steps instead (:func:`replant`), no faster than the source moves and
+        turns that foot; returns the steps taken."""
+        p, count = self.inputs, len(self.frames)
+        sliding = [r.sliding(p.step_slide_m / p.meters_per_unit, np.radians(p.step_slide_degrees)) for r in rows]
+        if not any(s.any() for s in sliding) or count < 3:
+            return 0
+        contact = np.full((count, 2), -1)
+        movable = np.zeros((count, 2), dtype=bool)
+        offset = np.zeros((count, 2, 3))
+        shift = np.zeros((count, 2, 3))
+        radius = np.zeros((count, 2))
+        turn = np.zeros((count, 2))
+        yaw = np.zeros((count, 2))
+        for k, (r, s) in enumerate(zip(rows, sliding)):
+            c, w = np.nonzero(r.inside)
+            t = r.at[c, w]
+            contact[t, k] = c
+            movable[t, k] = s[c] & ~r.rigid[c, w]
+            offset[t, k], shift[t, k], radius[t, k] = r.offset[c, w], r.shift[c, w], r.radius[c, w]
+            turn[t, k], yaw[t, k] = r.turn[c, w], r.yaw[c, w]
+        seconds = self.seconds
+        # The fastest the source moves each foot against its hip, turns it, and bends its knee.
+        speed = [float(np.linalg.norm(np.gradient(self.source_ankle[:, k] - self.source_hip[:, k], seconds, axis=0),
+                                      axis=-1).max()) for k in range(2)]
+        spin = [float(turn_speed(self.source_ankle_rot[:, k], seconds).max()) for k in range(2)]
+        knee_spin = [float(turn_speed(quat_multiply(self.source_hip_rot[:, k] * _CONJUGATE, self.source_knee_rot[:, k]),
+                                      seconds).max()) for k in range(2)]
+        height = p.step_height_m / p.meters_per_unit
+        bend = lift_bend(np.linalg.norm(self.knee - self.hip, axis=-1), np.linalg.norm(self.ankle - self.knee, axis=-1),
+                         np.linalg.norm(self.ankle - self.hip, axis=-1), height)
+        frame = float(np.median(np.diff(seconds)))
+        out = replant(contact, movable, offset, radius, turn, shift, yaw, np.radians(p.leash_degrees),
+                      seconds=frame, shortest=max(2, int(round(p.step_seconds / frame))),
+                      longest=max(2, int(round(p.step_longest_seconds / frame))),
+                      height=height, bend=bend, speed=np.array(speed), spin=np.array(spin),
+                      knee_spin=np.array(knee_spin), stretch=np.asarray(stretch, dtype=np.float64))
+        if not out.steps:
+            return 0
+        for k, (r, s) in enumerate(zip(rows, sliding)):
+            for c in np.flatnonzero(s):
+                w = np.flatnonzero(r.inside[c])
+                t = r.at[c, w]
+                for values, new in ((r.shift, out.shift), (r.yaw, out.yaw), (r.lift, out.lift)):
+                    values[c, w] = new[t, k]
+                    values[c, :w[0]] = values[c, w[0]]
+                    values[c, w[-1] + 1:] = values[c, w[-1]]
+                r.lift[c, :w[0]] = r.lift[c, w[-1] + 1:] = 0.0
+        return out.steps
+
+
+def plan_feet_numpy(inputs: PlantInputs) -> PlantOutputs:
+    """The plant job in numpy, agent after agent: the peer of :func:`plan_feet` (the same results
+    to within rounding)."""
+    agents = len(inputs.offsets) - 1
+    n = int(inputs.offsets[-1])
+    out = PlantOutputs(target=np.zeros((n, 2, 3)), target_rot=np.zeros((n, 2, 4)), weight=np.zeros((n, 2)),
+                       stepping=np.zeros((n, 2), dtype=bool), contacts=np.zeros((agents, 2), dtype=np.int64),
+                       steps=np.zeros(agents, dtype=np.int64))
+    for a in range(agents):
+        lo, hi = int(inputs.offsets[a]), int(inputs.offsets[a + 1])
+        agent = _AgentPlan(inputs, a)
+        (out.target[lo:hi], out.target_rot[lo:hi], out.weight[lo:hi], out.stepping[lo:hi],
+         out.steps[a]) = agent.plan(inputs.stretch[a])
+        out.contacts[a] = agent.contacts
+    return out

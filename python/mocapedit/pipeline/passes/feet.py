@@ -42,7 +42,7 @@ from mocapedit.model.report import Report
 #: contact's end, so the leg catches up no faster than from ``LEASH_M``.
 BLEND_SECONDS = 0.1
 #: Metres a plant may always lie from where the edit puts the foot before it is dragged along;
-#: further where the leg reaches it (:func:`_reach`).
+#: further where the leg reaches it (:func:`footplant.reach`).
 LEASH_M = 0.08
 #: Metres the pelvis may be lowered for a leg to reach a plant further than ``LEASH_M``.
 MAX_DROP_M = 0.08
@@ -77,43 +77,79 @@ SKATE_TOLERANCE_M = 0.005
 STILL_M = 0.002
 
 
-def _skel_space(agent: Agent, pose: animation.Pose, joints: list[int]) -> dict[int, np.ndarray]:
-    """(T,4,4) skeleton-space matrices of the given joints and their ancestors, from a pose
-    whose joint order may differ from the skeleton's (joints it lacks take the rest pose)."""
+def _skel_space(agent: Agent, pose: animation.Pose, joints: list[int], base: "_Chains | None" = None,
+                changed: frozenset = frozenset()) -> "_Chains":
+    """(T,4,4) joint-local and skeleton-space matrices of the given joints and their ancestors,
+    from a pose whose joint order may differ from the skeleton's (joints it lacks take the rest
+    pose). ``base``: the matrices of a pose that differs from this one only in the joints
+    ``changed``; the other joints take theirs from it."""
     column = {name: k for k, name in enumerate(pose.joints)}
     count = pose.translations.shape[0]
-    out: dict[int, np.ndarray] = {}
-
-    def world(j: int) -> np.ndarray:
-        if j not in out:
-            k = column.get(agent.joints[j])
-            if k is None:
-                local = np.broadcast_to(agent.rest_transforms[j], (count, 4, 4))
-            else:
-                local = kinematics.compose_trs(pose.translations[:, k], pose.rotations[:, k], pose.scales[:, k])
-            p = int(agent.parents[j])
-            out[j] = local if p < 0 else local @ world(p)
-        return out[j]
-
+    chain: list[int] = []
+    seen: set[int] = set()
     for j in joints:
-        world(j)
-    return out
+        up: list[int] = []
+        while j >= 0 and j not in seen:
+            seen.add(j)
+            up.append(j)
+            j = int(agent.parents[j])
+        chain.extend(reversed(up))           # parents before children
+    local: dict[int, np.ndarray] = {}
+    todo = []
+    for j in chain:
+        if base is not None and j not in changed and j in base.local:
+            local[j] = base.local[j]
+        elif agent.joints[j] not in column:
+            local[j] = np.broadcast_to(agent.rest_transforms[j], (count, 4, 4))
+        else:
+            todo.append(j)
+    if todo:
+        # All joints' local matrices in one call, one contiguous (T,4,4) block each.
+        cols = [column[agent.joints[j]] for j in todo]
+        blocks = kinematics.compose_trs(*(np.swapaxes(a[:, cols], 0, 1)
+                                          for a in (pose.translations, pose.rotations, pose.scales)))
+        local.update(zip(todo, blocks))
+    skel: dict[int, np.ndarray] = {}
+    moved: set[int] = set()
+    for j in chain:
+        p = int(agent.parents[j])
+        if base is None or j in changed or p in moved or j not in base.skel:
+            moved.add(j)
+            skel[j] = local[j] if p < 0 else local[j] @ skel[p]
+        else:
+            skel[j] = base.skel[j]
+    return _Chains(local, skel)
 
 
-def _yaw_quat(angle: np.ndarray, up: np.ndarray) -> np.ndarray:
-    """(T,4) quaternions turning by ``angle`` (radians, counter-clockwise) about the unit ``up``."""
-    half = 0.5 * np.asarray(angle, dtype=np.float64)[:, None]
-    return np.concatenate([np.sin(half) * up, np.cos(half)], axis=1)
+@dataclass
+class _Chains:
+    """Joint-local and skeleton-space (T,4,4) matrices of some joints of one pose, by joint."""
+    local: dict
+    skel: dict
 
 
-def _posed_legs(ctx, path: str, frames: np.ndarray, times: np.ndarray, shared: dict):
-    """(pose after the earlier passes, skeleton-space positions (T,3) and rotations (T,4) of the
-    leg joints and the hips' parents). Agents that play one clip at the same frames without
-    pose edits share them."""
+@dataclass
+class _Posed:
+    """An agent's pose after the earlier passes at its output frames, and its forward kinematics:
+    the leg joints, the hips' parents and the feet (``chains``); skeleton-space positions (T,K,3)
+    and rotations (T,K,4) of the K leg joints and hips' parents (``needed``, in that order), and
+    each leg's knee hinge in the knee's frame (2,3)."""
+    pose: animation.Pose
+    chains: _Chains
+    needed: list
+    pos: np.ndarray
+    rot: np.ndarray
+    hinge: np.ndarray
+
+
+def _posed_legs(ctx, path: str, frames: np.ndarray, times: np.ndarray, shared: dict) -> _Posed:
+    """The pose after the earlier passes and its forward kinematics. Agents that play one clip
+    at the same frames without pose edits share them."""
     agent = ctx.data.agents[path]
     edits = ctx.pose_edits.get(path, [])
     needed = sorted({j for leg in agent.legs for j in (leg.hip, leg.knee, leg.ankle, int(agent.parents[leg.hip]))
                      if j >= 0})
+    feet = metrics.default_foot_joints(agent.joints)
     key = None if edits else (agent.clip_key, tuple(agent.joints), agent.rest_transforms.tobytes(),
                               tuple(needed), frames.tobytes())
     hit = shared.get(key) if key is not None else None
@@ -121,9 +157,13 @@ def _posed_legs(ctx, path: str, frames: np.ndarray, times: np.ndarray, shared: d
         pose = animation.sample_pose(ctx.data.clip_of(agent), frames)
         for edit in edits:
             pose = edit.apply(pose, times, frames)
-        skel = _skel_space(agent, pose, needed)
-        hit = (pose, {j: skel[j][:, 3, :3] for j in needed},
-               {j: trs_from_matrices(skel[j])[1].astype(np.float64) for j in needed})
+        chains = _skel_space(agent, pose, needed + feet)
+        matrices = np.stack([chains.skel[j] for j in needed], axis=1)
+        pos, rot = matrices[..., 3, :3], trs_from_matrices(matrices)[1].astype(np.float64)
+        column = {j: i for i, j in enumerate(needed)}
+        hinge = np.stack([footlock.knee_hinge(*(pos[:, column[j]] for j in (leg.hip, leg.knee, leg.ankle)),
+                                              rot[:, column[leg.knee]]) for leg in agent.legs])
+        hit = _Posed(pose, chains, needed, pos, rot, hinge)
         if key is not None:
             shared[key] = hit
     return hit
@@ -135,73 +175,8 @@ def _top(agent: Agent, joint: int) -> int:
     return joint
 
 
-def _reach(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, up: np.ndarray, drop: float) -> np.ndarray:
-    """(T,) how far (stage units, over the ground) an ankle may move from ``ankle`` in any
-    direction and still lie within the leg's soft reach from ``hip`` lowered by ``drop``: the
-    leg's soft length over the ground at that height, less the ankle's ground distance from the
-    hip. (T,3) world positions of one leg."""
-    length = np.linalg.norm(knee - hip, axis=-1) + np.linalg.norm(ankle - knee, axis=-1)
-    apart = hip - ankle
-    height = np.maximum(apart @ up - drop, 0.0)
-    over = np.linalg.norm(apart - np.outer(apart @ up, up), axis=-1)
-    return np.sqrt(np.maximum((footlock.SOFT_REACH * length) ** 2 - height ** 2, 0.0)) - over
-
-
-_CONJUGATE = np.array([-1.0, -1.0, -1.0, 1.0])
-
-
-def _turn_speed(q: np.ndarray, seconds: np.ndarray) -> np.ndarray:
-    """(T-1,) how fast (T,4) rotations turn between samples ``seconds`` apart, radians per second."""
-    q = np.asarray(q, dtype=np.float64)
-    dot = np.abs(np.sum(q[1:] * q[:-1], axis=-1)) / np.maximum(
-        np.linalg.norm(q[1:], axis=-1) * np.linalg.norm(q[:-1], axis=-1), 1e-300)
-    return 2.0 * np.arccos(np.clip(dot, 0.0, 1.0)) / np.maximum(np.diff(seconds), 1e-300)
-
-
-def _ramp(frames: np.ndarray, first, last, blend, blend_out=None) -> np.ndarray:
-    """1 inside [first, last], easing to 0 over ``blend`` frames before and ``blend_out`` (default
-    ``blend``) after (smoothstep)."""
-    blend_out = blend if blend_out is None else blend_out
-    x = np.clip(1.0 - np.maximum(first - frames, 0.0) / blend - np.maximum(frames - last, 0.0) / blend_out, 0.0, 1.0)
-    return x * x * (3.0 - 2.0 * x)
-
-
-@dataclass
-class _Contacts:
-    """The contacts of one foot, one row each (C) over the W frames ``at`` its ramp reaches."""
-    ranges: np.ndarray      # (C,2) source frames, inclusive
-    at: np.ndarray          # (C,W) output frames
-    valid: np.ndarray       # (C,W) frames the ramp reaches
-    inside: np.ndarray      # (C,W) frames inside the contact
-    rigid: np.ndarray       # (C,W) ... and inside a stationary range
-    turn: np.ndarray        # (C,W) the edit's turn of the body (radians)
-    yaw: np.ndarray         # (C,W) the plant's turn
-    foot: np.ndarray        # (C,W,3) the posed source ankle
-    pivot: np.ndarray       # (C,3) its mean over the contact, which the plant turns about
-    base: np.ndarray        # (C,3) where the pivot goes
-    radius: np.ndarray      # (C,W) the leash
-    up_axis: str
-    offset: np.ndarray | None = None   # (C,W,3) the edited ankle against the carried source foot
-    shift: np.ndarray | None = None    # (C,W,3) the plant's ground shift
-    lift: np.ndarray | None = None     # (C,W) how far a stepping foot is up (0 to 1 of STEP_HEIGHT_M)
-
-    @property
-    def carried(self) -> np.ndarray:
-        """(C,W,3) the source foot turned by the plant's turn about the pivot, pivot at ``base``."""
-        spin = kinematics.yaw_matrix(self.yaw, self.up_axis)[..., :3, :3]
-        return np.einsum("cti,ctij->ctj", self.foot - self.pivot[:, None], spin) + self.base[:, None]
-
-    def sliding(self, distance: float, angle: float) -> np.ndarray:
-        """(C,) contacts whose leashed plant slides further than ``distance`` or turns further
-        than ``angle`` (radians) inside them."""
-        both = self.inside[:, 1:] & self.inside[:, :-1]
-        slide = np.where(both, np.linalg.norm(np.diff(self.shift, axis=1), axis=-1), 0.0).sum(axis=1)
-        turn = np.where(both, np.abs(np.diff(self.yaw, axis=1)), 0.0).sum(axis=1)
-        return (slide > distance) | (turn > angle)
-
-
 class _AgentLock:
-    """One agent's side of the job: what it needs, and what it gets back."""
+    """One agent's side of the jobs: what it needs, and what it gets back."""
 
     def __init__(self, ctx: SolveContext, path: str, source_contacts: list, shared: dict):
         data = ctx.data
@@ -212,9 +187,18 @@ class _AgentLock:
         # Locked legs are a pose edit, and a pose edit bakes the animation: lock on its frames.
         self.times, self.frames = ctx.output_frames(path, baked=True)
         self.root = _top(agent, self.legs[0].hip)
-        pose, skel_pos, skel_rot = _posed_legs(ctx, path, self.frames, self.times, shared)
-        self.pose = pose
-        self.columns = {name: k for k, name in enumerate(pose.joints)}
+        posed = self.posed = _posed_legs(ctx, path, self.frames, self.times, shared)
+        self.pose = posed.pose
+        self.columns = {name: k for k, name in enumerate(self.pose.joints)}
+        # Contacts on these frames.
+        self.contacts = []
+        for ranges in source_contacts:
+            ranges = np.array(ranges, dtype=np.float64).reshape(-1, 2)
+            inside = (self.frames >= ranges[:, :1] - 1e-9) & (self.frames <= ranges[:, 1:] + 1e-9)
+            self.contacts.append(ranges[inside.any(axis=1)])
+        self.locked = sum(len(c) for c in self.contacts)
+        if not self.locked:
+            return
         to_world = agent.skel_to_world
         if to_world.shape[0] > 1:
             to_world = animation.interp_frames(to_world, self.frames)
@@ -236,85 +220,48 @@ class _AgentLock:
                 animation.interp_frames(edited.ground, self.frames), new_h, info.up_axis)
             turn = new_h - src_h
         self.motion = motion
-        turn_q = _yaw_quat(turn, up_vector)
+        turn_q = footplant.yaw_quat(turn, up_vector)
         world_q = trs_from_matrices(to_world)[1].astype(np.float64)        # (1 or T, 4)
-        # World, before the ground motion (the posed source) and as edited.
-        posed = {j: np.einsum("ti,tij->tj", p, to_world[:, :3, :3]) + to_world[:, 3, :3] for j, p in skel_pos.items()}
-        pos = {j: np.einsum("ti,tij->tj", p, motion[:, :3, :3]) + motion[:, 3, :3] for j, p in posed.items()}
-        posed_rot = {j: quat_multiply(world_q, q) for j, q in skel_rot.items()}
-        rot = {j: quat_multiply(turn_q, q) for j, q in posed_rot.items()}
+        # World, before the ground motion (the posed source) and as edited; (T,K,...) by needed joint.
+        source = np.einsum("tki,tij->tkj", posed.pos, to_world[:, :3, :3]) + to_world[:, None, 3, :3]
+        pos = np.einsum("tki,tij->tkj", source, motion[:, :3, :3]) + motion[:, None, 3, :3]
+        source_rot = quat_multiply(world_q[:, None], posed.rot)
+        rot = quat_multiply(turn_q[:, None], source_rot)
+        column = {j: i for i, j in enumerate(posed.needed)}
 
-        def per_leg(values, key):
-            return np.stack([values[getattr(leg, key)] for leg in self.legs], axis=1)
+        def per_leg(key):
+            return [column[getattr(leg, key)] for leg in self.legs]
 
-        self.hip, self.knee, self.ankle = (per_leg(pos, k) for k in ("hip", "knee", "ankle"))
-        self.hip_rot, self.knee_rot, self.ankle_rot = (per_leg(rot, k) for k in ("hip", "knee", "ankle"))
+        hip, knee, ankle = per_leg("hip"), per_leg("knee"), per_leg("ankle")
+        self.hip, self.knee, self.ankle = pos[:, hip], pos[:, knee], pos[:, ankle]
+        self.hip_rot, self.knee_rot, self.ankle_rot = rot[:, hip], rot[:, knee], rot[:, ankle]
         parent_rot = []
         for leg in self.legs:
             p = int(agent.parents[leg.hip])
-            parent_rot.append(rot[p] if p >= 0 else quat_multiply(turn_q, np.broadcast_to(world_q, turn_q.shape)))
+            parent_rot.append(rot[:, column[p]] if p >= 0
+                              else quat_multiply(turn_q, np.broadcast_to(world_q, turn_q.shape)))
         self.parent_rot = np.stack(parent_rot, axis=1)
-        self.hinge = np.stack([footlock.world_hinge(rot[leg.knee], footlock.knee_hinge(
-            skel_pos[leg.hip], skel_pos[leg.knee], skel_pos[leg.ankle], skel_rot[leg.knee])) for leg in self.legs], 1)
+        self.hinge = footlock.world_hinge(self.knee_rot, posed.hinge)
 
         # Plants: per contact, the source foot carried by one turn and one ground translation.
         fps = info.time_codes_per_second
         step = np.median(np.diff(agent.sample_times)) if agent.frame_count > 1 else 1.0
-        blend = max(2.0, BLEND_SECONDS * fps / max(step, 1e-9))
-        self.blend_frames = int(np.ceil(blend))
+        self.blend = max(2.0, BLEND_SECONDS * fps / max(step, 1e-9))
+        self.blend_frames = int(np.ceil(self.blend))
         self.agent_fps = fps
-        self.contact = np.zeros((count, len(self.legs)), dtype=bool)
-        self.locked = 0
         stationary = self.keep = np.zeros(count, dtype=bool)
         for _, first, last in agent.stationary:
             stationary |= (self.frames >= first - 1e-9) & (self.frames <= last + 1e-9)
-        self.up_vector = up_vector
-        self._rows = [self._contacts(k, leg, source_contacts[k], info, turn, posed, pos, stationary, blend)
-                      for k, leg in enumerate(self.legs)]
-        self._plan_data = (info, blend, posed, posed_rot, rot)
-        self.plan()
+        self.plant_inputs = dict(
+            frames=self.frames, seconds=self.times / fps, stationary=stationary, turn=turn, hip=self.hip,
+            knee=self.knee, ankle=self.ankle, ankle_rot=self.ankle_rot, source_hip=source[:, hip],
+            source_ankle=source[:, ankle], source_hip_rot=source_rot[:, hip], source_knee_rot=source_rot[:, knee],
+            source_ankle_rot=source_rot[:, ankle])
 
-    def plan(self, stretch=(1.0, 1.0)) -> None:
-        """The targets, turns and weights of the legs from the contacts' plants, where feet step
-        (their steps ``stretch`` times as long as :func:`footplant.replant` would make them)."""
-        info, blend, posed, posed_rot, rot = self._plan_data
-        count = len(self.times)
-        up_vector = self.up_vector
-        rows = [None if r is None else dataclasses.replace(r, shift=r.shift.copy(), yaw=r.yaw.copy(),
-                                                           lift=r.lift.copy()) for r in self._rows]
-        self.steps = self._replant(rows, info, posed, posed_rot, stretch) if all(r is not None for r in rows) else 0
-        self.stepping = np.zeros((count, len(self.legs)), dtype=bool)
-        self.target = self.ankle.copy()
-        self.target_rot = self.ankle_rot.copy()
-        self.weight = np.zeros((count, len(self.legs)))
-        pos_sum = np.zeros((count, len(self.legs), 3))
-        rot_sum = np.zeros((count, len(self.legs), 4))
-        w_sum = np.zeros((count, len(self.legs)))
-        for k, (leg, r) in enumerate(zip(self.legs, rows)):
-            if r is None:
-                continue
-            self.stepping[r.at[r.lift > 0], k] = True
-            # The lock eases in and out over longer where the plant lies far from the edited foot
-            # (within the frames reached above).
-            far = np.linalg.norm(r.shift - r.offset, axis=-1) / (LEASH_M / info.meters_per_unit)    # (C,W)
-            rows_c = np.arange(len(r.at))
-            ends = r.inside.argmax(axis=1), r.at.shape[1] - 1 - r.inside[:, ::-1].argmax(axis=1)
-            blend_in, blend_out = (blend * np.clip(far[rows_c, e], 1.0, MAX_LEASH_M / LEASH_M)[:, None] for e in ends)
-            w = np.where(r.valid, _ramp(self.frames[r.at], r.ranges[:, :1], r.ranges[:, 1:], blend_in, blend_out), 0.0)
-            valid = r.valid & (w > 0)
-            plant_rot = quat_multiply(_yaw_quat(r.yaw.reshape(-1), up_vector).reshape(r.yaw.shape + (4,)),
-                                      posed_rot[leg.ankle][r.at])
-            plant_rot *= np.where(np.sum(plant_rot * rot[leg.ankle][r.at], -1) < 0, -1.0, 1.0)[..., None]
-            plant = r.carried + r.shift + (r.lift * (STEP_HEIGHT_M / info.meters_per_unit))[..., None] * up_vector
-            # Where the ramps of two contacts meet, their plants blend by weight: no jump.
-            at = r.at[valid]
-            np.add.at(pos_sum[:, k], at, (w[..., None] * plant)[valid])
-            np.add.at(rot_sum[:, k], at, (w[..., None] * plant_rot)[valid])
-            np.add.at(w_sum[:, k], at, w[valid])
-            np.maximum.at(self.weight[:, k], at, w[valid])
-        some = w_sum > 0
-        self.target[some] = pos_sum[some] / w_sum[some][:, None]
-        self.target_rot[some] = footlock.normalize(rot_sum[some])
+    def planned(self, out: footplant.PlantOutputs, a: int, lo: int, hi: int) -> None:
+        """Takes the plants of agent ``a`` of a plant job, its poses lo:hi."""
+        self.target, self.target_rot = out.target[lo:hi], out.target_rot[lo:hi]
+        self.weight, self.stepping, self.steps = out.weight[lo:hi], out.stepping[lo:hi], int(out.steps[a])
 
     def step_speed(self, out: footlock.LegOutputs, lo: int, hi: int) -> np.ndarray:
         """(legs,) the largest angular speed of a leg's hip, knee or ankle around its steps, against
@@ -333,113 +280,10 @@ class _AgentLock:
                 continue
             around = near[1:, k] | near[:-1, k]
             for j, new in ((leg.hip, out.hip_local), (leg.knee, out.knee_local), (leg.ankle, out.ankle_local)):
-                source = _turn_speed(self.pose.rotations[:, self.columns[self.agent.joints[j]]], seconds).max()
-                locked = _turn_speed(new[lo:hi, k], seconds)[around].max()
+                source = footplant.turn_speed(self.pose.rotations[:, self.columns[self.agent.joints[j]]], seconds).max()
+                locked = footplant.turn_speed(new[lo:hi, k], seconds)[around].max()
                 out_ratio[k] = max(out_ratio[k], locked / max(source, 1e-9))
         return out_ratio
-
-    def _contacts(self, k: int, leg, ranges, info, turn, posed, pos, stationary, blend) -> "_Contacts | None":
-        """The contacts of one foot at once, one row each over the frames its ramp reaches, with
-        their leashed plants; None without contacts on the output frames."""
-        count = len(self.times)
-        up = ground.up_index(info.up_axis)
-        # The leash: as far as the leg reaches with the pelvis lowered a little, from LEASH_M
-        # to MAX_LEASH_M.
-        radius = np.clip(_reach(self.hip[:, k], self.knee[:, k], self.ankle[:, k], self.up_vector,
-                                MAX_DROP_M / info.meters_per_unit),
-                         LEASH_M / info.meters_per_unit, MAX_LEASH_M / info.meters_per_unit)
-        ranges = np.array(ranges, dtype=np.float64).reshape(-1, 2)
-        inside = (self.frames >= ranges[:, :1] - 1e-9) & (self.frames <= ranges[:, 1:] + 1e-9)   # (C,T)
-        used = inside.any(axis=1)
-        ranges, inside = ranges[used], inside[used]
-        if not len(ranges):
-            return None
-        self.locked += len(ranges)
-        self.contact[:, k] = inside.any(axis=0)
-        reached = _ramp(self.frames, ranges[:, :1], ranges[:, 1:], blend * MAX_LEASH_M / LEASH_M) > 0  # (C,T)
-        lo = reached.argmax(axis=1)
-        width = int((reached.sum(axis=1)).max())
-        at = lo[:, None] + np.arange(width)                                                      # (C,W)
-        valid = at < count
-        at = np.minimum(at, count - 1)
-        valid &= np.take_along_axis(reached, at, axis=1)
-        inside = np.take_along_axis(inside, at, axis=1) & valid
-        # Where a contact meets a stationary range, the body moves rigidly there: the plant
-        # is that motion, so the range keeps its shape (no correction inside it).
-        rigid = inside & stationary[at]
-        chosen = np.where(rigid.any(axis=1, keepdims=True), rigid, inside)
-        n_chosen = chosen.sum(axis=1)[:, None]
-        turn_c = turn[at]
-        yaw0 = np.arctan2((np.sin(turn_c) * chosen).sum(1), (np.cos(turn_c) * chosen).sum(1))[:, None]
-        # An edit that turns the body far during a contact turns the plant too.
-        apart = np.angle(np.exp(1j * (turn_c - yaw0)))
-        yaw = yaw0 + footplant.leash_rows(apart[..., None], np.zeros((len(at), 1)), inside, rigid,
-                                          np.radians(LEASH_DEGREES))[..., 0]
-        # Turned about the planted foot itself, so a plant that turns along does not slide.
-        foot = posed[leg.ankle][at]                                                               # (C,W,3)
-        pivot = (foot * chosen[..., None]).sum(1) / n_chosen
-        base = np.einsum("ci,cij->cj", pivot, kinematics.yaw_matrix((yaw * chosen).sum(1) / n_chosen[:, 0],
-                                                                    info.up_axis)[:, :3, :3])
-        out = _Contacts(ranges=ranges, at=at, valid=valid, inside=inside, rigid=rigid, turn=turn_c, yaw=yaw,
-                        foot=foot, pivot=pivot, base=base, radius=radius[at], up_axis=info.up_axis)
-        out.offset = pos[leg.ankle][at] - out.carried
-        out.offset[..., up] = 0.0  # feet stay at their source height: never below their ground
-        out.shift = footplant.leash_rows(out.offset, (out.offset * chosen[..., None]).sum(1) / n_chosen, inside,
-                                         rigid, out.radius)
-        out.lift = np.zeros(at.shape)
-        return out
-
-    def _replant(self, rows: list["_Contacts"], info, posed: dict, posed_rot: dict, stretch) -> int:
-        """Where the leash lets a foot slide through a contact and the other foot bears the
-        weight, the foot steps instead (:func:`footplant.replant`), no faster than the source
-        moves and turns that foot; returns the steps taken."""
-        count = len(self.times)
-        sliding = [r.sliding(STEP_SLIDE_M / info.meters_per_unit, np.radians(STEP_SLIDE_DEGREES)) for r in rows]
-        if not any(s.any() for s in sliding) or count < 3:
-            return 0
-        contact = np.full((count, 2), -1)
-        movable = np.zeros((count, 2), dtype=bool)
-        offset = np.zeros((count, 2, 3))
-        shift = np.zeros((count, 2, 3))
-        radius = np.zeros((count, 2))
-        turn = np.zeros((count, 2))
-        yaw = np.zeros((count, 2))
-        for k, (r, s) in enumerate(zip(rows, sliding)):
-            c, w = np.nonzero(r.inside)
-            t = r.at[c, w]
-            contact[t, k] = c
-            movable[t, k] = s[c] & ~r.rigid[c, w]
-            offset[t, k], shift[t, k], radius[t, k] = r.offset[c, w], r.shift[c, w], r.radius[c, w]
-            turn[t, k], yaw[t, k] = r.turn[c, w], r.yaw[c, w]
-        seconds = self.times / info.time_codes_per_second
-        # The fastest the source moves each foot against its hip, turns it, and bends its knee.
-        speed = [float(np.linalg.norm(np.gradient(posed[leg.ankle] - posed[leg.hip], seconds, axis=0), axis=-1).max())
-                 for leg in self.legs]
-        spin = [float(_turn_speed(posed_rot[leg.ankle], seconds).max()) for leg in self.legs]
-        knee_spin = [float(_turn_speed(quat_multiply(posed_rot[leg.hip] * _CONJUGATE, posed_rot[leg.knee]),
-                                       seconds).max()) for leg in self.legs]
-        height = STEP_HEIGHT_M / info.meters_per_unit
-        bend = footplant.lift_bend(np.linalg.norm(self.knee - self.hip, axis=-1),
-                                   np.linalg.norm(self.ankle - self.knee, axis=-1),
-                                   np.linalg.norm(self.ankle - self.hip, axis=-1), height)
-        frame = float(np.median(np.diff(seconds)))
-        out = footplant.replant(contact, movable, offset, radius, turn, shift, yaw, np.radians(LEASH_DEGREES),
-                                seconds=frame, shortest=max(2, int(round(STEP_SECONDS / frame))),
-                                longest=max(2, int(round(STEP_LONGEST_SECONDS / frame))),
-                                height=height, bend=bend, speed=np.array(speed), spin=np.array(spin),
-                                knee_spin=np.array(knee_spin), stretch=np.asarray(stretch, dtype=np.float64))
-        if not out.steps:
-            return 0
-        for k, (r, s) in enumerate(zip(rows, sliding)):
-            for c in np.flatnonzero(s):
-                w = np.flatnonzero(r.inside[c])
-                t = r.at[c, w]
-                for values, new in ((r.shift, out.shift), (r.yaw, out.yaw), (r.lift, out.lift)):
-                    values[c, w] = new[t, k]
-                    values[c, :w[0]] = values[c, w[0]]
-                    values[c, w[-1] + 1:] = values[c, w[-1]]
-                r.lift[c, :w[0]] = r.lift[c, w[-1] + 1:] = 0.0
-        return out.steps
 
     def inputs(self) -> dict:
         return {"hip": self.hip, "knee": self.knee, "ankle": self.ankle, "parent_rot": self.parent_rot,
@@ -526,26 +370,39 @@ def _report_skate(ctx, lock: "_AgentLock", legs: "LockedLegs | None", chains: di
     to_world = np.broadcast_to(lock.to_world, (count, 4, 4))
     place = to_world @ lock.motion
 
-    def world(pose, placement):
-        skel = _skel_space(agent, pose, feet)
+    def world(skel, placement):
         return np.stack([np.einsum("ti,tij->tj", skel[f][:, 3, :3], placement[:, :3, :3]) + placement[:, 3, :3]
                          for f in feet], axis=1)
 
+    posed = lock.posed.chains
     same = count == agent.frame_count and np.allclose(lock.times, agent.sample_times)
     if same:
         clip = ctx.data.clip_of(agent)
         source = np.stack([trajectory.joint_world(agent, clip, f, chains)[:, 3, :3] for f in feet], axis=1)
+    elif not ctx.pose_edits.get(lock.path):
+        # The pose locking starts from is the source's at these frames.
+        source = world(posed.skel, to_world)
     else:
-        source = world(animation.sample_pose(ctx.data.clip_of(agent), lock.frames), to_world)
+        source = world(_skel_space(agent, animation.sample_pose(ctx.data.clip_of(agent), lock.frames), feet).skel,
+                       to_world)
     before = metrics.foot_skate_of_positions(source, lock.times, *units)
 
-    def skate(pose):
-        feet_world = world(pose, place)
+    def skate(skel):
+        feet_world = world(skel, place)
         contact = metrics.on_ground(before.contact, source, feet_world, info.up_axis, info.meters_per_unit)
         return metrics.foot_skate_of_positions(feet_world, lock.times, *units, contact=contact).mean
 
-    unlocked = skate(lock.pose)
-    return before.mean, unlocked, skate(legs.apply(lock.pose)) if legs is not None else unlocked
+    unlocked = skate(posed.skel)
+    if legs is None:
+        return before.mean, unlocked, unlocked
+    locked = legs.apply(lock.pose)
+    base, changed = None, frozenset()
+    if lock.pose.translations.dtype == np.float32 and lock.pose.rotations.dtype == np.float32:
+        # Only the legs' joints (and the root, where lowered) differ from the pose before locking.
+        columns = set(legs.columns.tolist()) | ({legs.root} if legs.root_shift is not None else set())
+        base = posed
+        changed = frozenset(j for j, name in enumerate(agent.joints) if lock.columns.get(name) in columns)
+    return before.mean, unlocked, skate(_skel_space(agent, locked, feet, base, changed).skel)
 
 
 @dataclass
@@ -602,24 +459,25 @@ def lock_agents(ctx: SolveContext) -> list[AgentLocking]:
 
 
 def _lock_run(ctx: SolveContext, locks: list, chains: dict) -> None:
-    """Runs the IK job on some agents' legs and fills in their results."""
+    """Runs the plant and IK jobs on some agents' legs and fills in their results."""
     info = ctx.data.info
     up = np.zeros(3)
     up[ground.up_index(info.up_axis)] = 1.0
+    stretch = [np.ones(2) for _ in locks]
+    _plan(ctx, [lock for lock, _ in locks], stretch)
     solved = _solve_legs([lock for lock, _ in locks], up)
     # A step that turns a leg's joint too fast against the pose is made longer, and the agent's
     # legs solved again.
-    stretch = {a: np.ones(2) for a in range(len(locks))}
     for _ in range(STEP_ROUNDS):
         again = []
         for a, ((lock, _), (legs, lo, hi)) in enumerate(zip(locks, solved)):
             ratio = lock.step_speed(legs, lo, hi) / STEP_SPEED_RATIO
             if np.any(ratio > 1.0 + 1e-6):
                 stretch[a] = stretch[a] * np.maximum(ratio * 1.05, 1.0)
-                lock.plan(stretch[a])
                 again.append(a)
         if not again:
             break
+        _plan(ctx, [locks[a][0] for a in again], [stretch[a] for a in again])
         for a, done in zip(again, _solve_legs([locks[a][0] for a in again], up)):
             solved[a] = done
     tolerance = SKATE_TOLERANCE_M / info.meters_per_unit
@@ -634,6 +492,27 @@ def _lock_run(ctx: SolveContext, locks: list, chains: dict) -> None:
         result.steps = lock.steps if locked_legs is not None else 0
         result.max_drop, result.max_correction = lock.max_drop, lock.max_correction
         result.plants = _plants(lock)
+
+
+def _plan(ctx: SolveContext, locks: list[_AgentLock], stretch: list[np.ndarray]) -> None:
+    """The plants of these agents' feet, each leg's steps ``stretch`` times as long as they would
+    be: the solver's plant job on all of them at once."""
+    info = ctx.data.info
+    up = np.zeros(3)
+    up[ground.up_index(info.up_axis)] = 1.0
+    offsets = np.cumsum([0] + [len(lock.times) for lock in locks]).astype(np.int64)
+    contacts = [c for lock in locks for c in lock.contacts]
+    inputs = footplant.PlantInputs(
+        offsets=offsets, contact_offsets=np.cumsum([0] + [len(c) for c in contacts]).astype(np.int64),
+        contacts=np.concatenate(contacts).reshape(-1, 2), blend=np.array([lock.blend for lock in locks]),
+        stretch=np.array(stretch, dtype=np.float64).reshape(-1, 2), up=up, meters_per_unit=info.meters_per_unit,
+        leash_m=LEASH_M, max_leash_m=MAX_LEASH_M, max_drop_m=MAX_DROP_M, leash_degrees=LEASH_DEGREES,
+        soft_reach=footlock.SOFT_REACH, step_slide_m=STEP_SLIDE_M, step_slide_degrees=STEP_SLIDE_DEGREES,
+        step_seconds=STEP_SECONDS, step_longest_seconds=STEP_LONGEST_SECONDS, step_height_m=STEP_HEIGHT_M,
+        **{k: np.concatenate([lock.plant_inputs[k] for lock in locks]) for k in locks[0].plant_inputs})
+    out = footplant.plan_feet_numpy(inputs)
+    for a, lock in enumerate(locks):
+        lock.planned(out, a, int(offsets[a]), int(offsets[a + 1]))
 
 
 def _solve_legs(locks: list[_AgentLock], up: np.ndarray) -> list[tuple[footlock.LegOutputs, int, int]]:
