@@ -20,6 +20,7 @@ __all__: list[str] = [
     'NumericalError',
     'PathEditData',
     'PathEditResult',
+    'PlausibilityResult',
     'RegionNearest',
     'RegionPush',
     'SeparationResult',
@@ -42,11 +43,14 @@ __all__: list[str] = [
     'cumulative_arc_length',
     'deformation_turns',
     'detect_collisions',
+    'direction_deviation',
+    'edit_turn',
     'expand_key_frames',
     'frame_partners',
     'frames_at_times',
     'group_mesh_terms',
     'group_sample_frames',
+    'joint_facing',
     'key_frames',
     'lock_feet',
     'nearest_on_region',
@@ -57,6 +61,7 @@ __all__: list[str] = [
     'path_length',
     'place',
     'plan_feet',
+    'plausibility',
     'push_out_of_region',
     'region_signed_distance',
     'sample_clip',
@@ -66,6 +71,7 @@ __all__: list[str] = [
     'tangent_headings',
     'time_warp',
     'time_warp_precompute',
+    'turning_rates',
 ]
 class SolverError(Exception):
     """
@@ -305,6 +311,70 @@ class SeparationSolver:
     @property
     def vertices(self) -> int:
         ...
+class PlausibilityResult:
+    """
+    Result of plausibility: one value per agent.
+    """
+    @property
+    def length_ratio(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        (A,) edited over source path length
+        """
+    @property
+    def max_direction_deviation(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        (A,) degrees
+        """
+    @property
+    def max_edit_turn(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        (A,) degrees
+        """
+    @property
+    def max_extra_facing_rate(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        (A,) edited rate less the source's
+        """
+    @property
+    def max_facing_rate(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        (A,) degrees per second, edited
+        """
+    @property
+    def max_turned_deviation(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        (A,) degrees
+        """
+    @property
+    def source_max_facing_rate(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        (A,) degrees per second, source
+        """
+    @property
+    def spin_frames(self) -> numpy.typing.NDArray[numpy.int64]:
+        """
+        (A,) intervals that spin
+        """
+    @property
+    def time_warp_max(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        (A,) largest time warp
+        """
+    @property
+    def time_warp_min(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        (A,) smallest time warp
+        """
+    @property
+    def worst_direction_frame(self) -> numpy.typing.NDArray[numpy.int64]:
+        """
+        (A,) edited sample, -1: none
+        """
+    @property
+    def worst_turn_frame(self) -> numpy.typing.NDArray[numpy.int64]:
+        """
+        (A,) edited sample of the largest extra rate
+        """
 class PathEditData:
     """
     Factored path-editing problem from path_edit_precompute; pass it to path_edit_solve.
@@ -664,6 +734,19 @@ def detect_collisions(*, positions: typing.Annotated[numpy.typing.NDArray[numpy.
     
     Returns a CollisionResult. Keyword arguments only.
     """
+def direction_deviation(*, source: typing.Any, edited: typing.Any, seconds: typing.Any, min_speed: typing.SupportsFloat | typing.SupportsIndex, chord: typing.SupportsFloat | typing.SupportsIndex, turn: typing.Any = None) -> numpy.typing.NDArray[numpy.float64]:
+    """
+    Angle (degrees) between the edited and the source walking direction over chords of `chord`
+    seconds: ground paths source, edited (..., T, 2) at seconds (..., T); NaN where the source is
+    slower than min_speed or has no full chord; turn (..., T) radians turns the source chord
+    first. Returns (..., T).
+    """
+def edit_turn(*, source: typing.Any, edited: typing.Any, seconds: typing.Any, min_speed: typing.SupportsFloat | typing.SupportsIndex, span: typing.SupportsFloat | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.float64]:
+    """
+    The turn (radians, counter-clockwise, unwrapped) an edit gives a walk at each sample: source
+    chord to edited chord over `span` seconds centred on it, interpolated where the source is
+    slower than min_speed. Paths (..., T, 2), seconds (..., T). Returns (..., T).
+    """
 def expand_key_frames(rest: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], keys: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 1]"], positions: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"]) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]"]:
     """
     (V,2) every frame from the (K,2) solved positions of the keys (K,) int32: frames between
@@ -688,6 +771,12 @@ def group_sample_frames(sample_times: typing.Annotated[numpy.typing.NDArray[nump
     """
     (M,T) int32 frame of each member at each sampled time, -1 where it has none (within 1e-6):
     sample_times (F,) concatenated, offsets (M+1,) int32, times (T,).
+    """
+def joint_facing(*, matrices: typing.Any, up_axis: typing.SupportsInt | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.float64]:
+    """
+    Heading of a joint's facing (radians, counter-clockwise about up, not unwrapped) at each
+    sample of its world matrices (..., T, 4, 4): the ground projection of its most horizontal
+    local axis. up_axis 1 (Y) or 2 (Z). Returns (..., T).
     """
 def key_frames(*, rest: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], offsets: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 1]"], keyed: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 1]"], forced: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 1]"], min_baseline: typing.SupportsFloat | typing.SupportsIndex) -> tuple[typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 1]"], typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 1]"]]:
     """
@@ -758,6 +847,16 @@ def plan_feet(*, offsets: typing.Any, frames: typing.Any, seconds: typing.Any, s
     source_ankle_rot (N,2,4) world, posed before the edit's ground motion; contact_offsets (2A+1,) int64
     and contacts (R,2) inclusive source frame ranges per agent and leg; blend (A,) frames; stretch (A,2);
     up (3,) +Y or +Z; lengths named _m in metres. Returns a FootPlantResult. Keyword arguments only.
+    """
+def plausibility(*, source_offsets: typing.Any, edited_offsets: typing.Any, source_seconds: typing.Any, source_hip: typing.Any, edited_seconds: typing.Any, edited_hip: typing.Any, edited_frames: typing.Any = None, up_axis: typing.SupportsInt | typing.SupportsIndex, walking_speed: typing.SupportsFloat | typing.SupportsIndex, chord: typing.SupportsFloat | typing.SupportsIndex, edit_turn_span: typing.SupportsFloat | typing.SupportsIndex, spin_rate: typing.SupportsFloat | typing.SupportsIndex) -> PlausibilityResult:
+    """
+    Plausibility figures of many agents (the C++ PlausibilityJob).
+    
+    source_offsets, edited_offsets (A+1,) int64 sample offsets per agent; source_seconds (S,),
+    source_hip (S,4,4) facing joint world matrices; edited_seconds (E,), edited_hip (E,4,4);
+    edited_frames (E,) source frame each edited sample plays, or None; up_axis 1 (Y) or 2 (Z);
+    walking_speed stage units per second; chord and edit_turn_span seconds; spin_rate degrees
+    per second. Returns a PlausibilityResult. Keyword arguments only.
     """
 def push_out_of_region(region: GroundRegion, points: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], clearance: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"]) -> RegionPush:
     """
@@ -830,4 +929,9 @@ def time_warp_precompute(*, rest_times: collections.abc.Sequence[typing.Annotate
     min_interval_fraction: smallest warped interval as a fraction of the rest interval, in (0, 1];
     min_intervals: optional list of (F_a - 1,) smallest intervals per agent (overrides the fraction).
     stretch_weight, anchor_weight: the regularisers (see solver/include/mocapedit/time_warp.h).
+    """
+def turning_rates(*, facing: typing.Any, seconds: typing.Any) -> numpy.typing.NDArray[numpy.float64]:
+    """
+    Unsigned turning rate (degrees per second) of a facing (..., T) radians between samples at
+    increasing seconds (..., T): (..., T-1).
     """

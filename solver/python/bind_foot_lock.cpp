@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "mocapedit/foot_lock.h"
+#include "arrays.h"
 #include "mocapedit/foot_plant.h"
 #include "registry.h"
 
@@ -14,12 +15,10 @@ namespace py = pybind11;
 
 namespace {
 
-using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
-using IndexArray = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>;
 using mocapedit::Span;
-
-Span<const double> View(const DoubleArray& a) { return Span<const double>(a.data(), static_cast<std::size_t>(a.size())); }
-Span<double> View(DoubleArray& a) { return Span<double>(a.mutable_data(), static_cast<std::size_t>(a.size())); }
+using mocapedit::python::DoubleArray;
+using mocapedit::python::IndexArray;
+using mocapedit::python::View;
 
 // An (N, 2, width) input as a C-contiguous double array; its shape is checked here so the
 // message names the argument.

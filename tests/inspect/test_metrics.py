@@ -1,6 +1,7 @@
 """Tests for mocapedit.inspect.metrics: analytic cases and brute-force references."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -434,3 +435,40 @@ def test_default_facing_joint():
     assert M.default_facing_joint(["Root", "Root/Spine"]) == 0
 
 
+
+
+def _hips(headings, points, height=0.9):
+    """(T, 4, 4) Y-up facing joint matrices: local axis 0 along each heading, at ground points."""
+    c, s = np.cos(headings), np.sin(headings)
+    m = np.zeros((len(headings), 4, 4))
+    m[:, 0, 0], m[:, 0, 2], m[:, 1, 1], m[:, 2, 0], m[:, 2, 2], m[:, 3, 3] = c, -s, 1.0, s, c, 1.0
+    m[:, 3, 0], m[:, 3, 1], m[:, 3, 2] = points[:, 0], height, -points[:, 1]
+    return m
+
+
+def test_many_agents_measured_together_equal_each_measured_alone():
+    """plausibilities_of: agents of different lengths in one call (one re-timed with held ends,
+    one too short to turn) get the figures plausibility_of gives each alone."""
+    rng = np.random.default_rng(4)
+    agents = []
+    for count, edited_count in ((48, 48), (30, 41), (2, 1), (60, 60)):
+        t = np.arange(count) / 24.0
+        heading = np.cumsum(rng.normal(0.0, 0.05, count))
+        ground = np.cumsum(1.3 / 24.0 * np.stack([np.cos(heading), np.sin(heading)], axis=1), axis=0)
+        frames = np.clip(np.linspace(-3.0, count + 2.0, edited_count), 0, count - 1)  # held ends
+        bend = np.interp(frames, np.arange(count), np.linspace(0.0, 1.2, count))
+        at = np.stack([np.interp(frames, np.arange(count), ground[:, k]) for k in range(2)], axis=1)
+        edited = _hips(np.interp(frames, np.arange(count), heading) + bend + rng.normal(0.0, 0.02, edited_count),
+                       at + rng.normal(0.0, 0.01, at.shape))
+        agents.append((t, _hips(heading, ground), np.arange(edited_count) / 24.0, edited, frames))
+    names = [f"a{k}" for k in range(len(agents))]
+    skate = rng.uniform(0.0, 0.1, (2, len(agents)))
+    together = M.plausibilities_of(names, *[[a[k] for a in agents] for k in range(4)], "Y", 1.0, *skate,
+                                   edited_frames=[a[4] for a in agents])
+    for name, a, s, e, p in zip(names, agents, *skate, together):
+        alone = M.plausibility_of(name, *a[:4], "Y", 1.0, s, e, edited_frames=a[4])
+        for field in dataclasses.fields(alone):
+            x, y = getattr(alone, field.name), getattr(p, field.name)
+            assert x == y or (np.isnan(x).all() and np.isnan(y).all()), (name, field.name, x, y)
+    assert len({p.max_facing_rate for p in together}) == len(agents) and together[1].time_warp[0] > 1.0
+    assert together[2].max_facing_rate == 0.0 and together[2].worst_turn_frame == -1

@@ -79,7 +79,16 @@ def sample_pose_numpy(clip: Clip, frames: np.ndarray) -> Pose:
 
 
 def interp_frames(values: np.ndarray, frames: np.ndarray) -> np.ndarray:
-    """Linear interpolation of per-frame (F,...) values at fractional frames (clamped)."""
+    """Linear interpolation of per-frame (F,...) values at fractional frames (clamped).
+    Frames (A, T) interpolate the values (A, F, ...) of A agents, each at its own frames."""
+    if np.ndim(frames) == 2:
+        n = values.shape[1]
+        f = np.clip(np.asarray(frames, dtype=np.float64), 0, n - 1)
+        i0 = np.floor(f).astype(np.int64)
+        i1 = np.minimum(i0 + 1, n - 1)
+        a = (f - i0).reshape(f.shape + (1,) * (values.ndim - 2))
+        rows = np.arange(len(values))[:, None]
+        return values[rows, i0] * (1 - a) + values[rows, i1] * a
     n = values.shape[0]
     f = np.clip(np.asarray(frames, dtype=np.float64), 0, n - 1)
     i0 = np.floor(f).astype(np.int64)

@@ -127,7 +127,7 @@ def yaw_matrix(angle: np.ndarray, up_axis: str) -> np.ndarray:
 
 def translation_matrix(t: np.ndarray) -> np.ndarray:
     t = np.asarray(t, dtype=np.float64)
-    m = np.zeros(t.shape[:-1] + (4, 4))
-    m[..., 0, 0] = m[..., 1, 1] = m[..., 2, 2] = m[..., 3, 3] = 1.0
+    m = np.empty(t.shape[:-1] + (4, 4))
+    m[...] = np.eye(4)
     m[..., 3, :3] = t
     return m

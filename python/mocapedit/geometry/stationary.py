@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mocapedit import _solver
 from mocapedit.geometry import ground
 
 
@@ -58,12 +59,14 @@ def facing(rotations: np.ndarray, up_axis: str) -> np.ndarray:
     the joint's local axis k in world space). The local axis that stays the most
     horizontal over the clip stands for the facing; any joint convention works, and a
     constant angle between that axis and the true forward does not change turning rates.
+    Leading axes (..., F, 4, 4) are clips measured each on its own: (..., F). Measured by
+    the solver (``_solver.joint_facing``).
     """
-    axes = np.asarray(rotations, dtype=np.float64)[:, :3, :3]
-    up = ground.up_index(up_axis)
-    k = int(np.argmin(np.mean(np.abs(axes[:, :, up]), axis=0)))
-    uv = ground.to_ground(axes[:, k, :], up_axis)
-    return np.arctan2(uv[:, 1], uv[:, 0])
+    m = np.asarray(rotations, dtype=np.float64)
+    if m.shape[-2:] == (3, 3):
+        m = np.concatenate([np.concatenate([m, np.zeros(m.shape[:-1] + (1,))], axis=-1),
+                            np.broadcast_to([0.0, 0.0, 0.0, 1.0], m.shape[:-2] + (1, 4))], axis=-2)
+    return _solver.joint_facing(matrices=m, up_axis=ground.up_index(ground.up_token(up_axis)))
 
 
 def _window_ends(seconds: np.ndarray, window: float) -> tuple[np.ndarray, np.ndarray]:

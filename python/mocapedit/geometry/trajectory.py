@@ -158,9 +158,10 @@ def ground_motion(src_uv: np.ndarray, src_heading: np.ndarray, new_uv: np.ndarra
 
     A world point ``p`` of the agent at frame ``i`` moves to ``p @ M[i]``: it is turned
     about the up axis through the source root by the change of heading, then carried
-    from the source root position to the edited one.
+    from the source root position to the edited one. Leading axes (ground poses (..., F, 2)
+    and headings (..., F)) give (..., F, 4, 4).
     """
-    zero = np.zeros(len(src_uv))
+    zero = np.zeros(np.shape(src_uv)[:-1])
     to_origin = kinematics.translation_matrix(-ground.from_ground(src_uv, zero, up_axis))
     turn = kinematics.yaw_matrix(np.asarray(new_heading) - np.asarray(src_heading), up_axis)
     to_new = kinematics.translation_matrix(ground.from_ground(new_uv, zero, up_axis))

@@ -25,6 +25,7 @@ from mocapedit.geometry.ground import from_ground, ground_axes, to_ground
 from mocapedit.geometry.ground import up_token as _up_token
 from mocapedit.geometry import stationary as _stationary
 from mocapedit.solve import collisions
+from mocapedit.solve import plausibility as _plausibility
 from mocapedit.geometry.shape import as_points as _points
 from mocapedit.geometry.shape import length_ratio, local_coordinates, path_length, shape_change
 from mocapedit.model.names import default_facing_joint, default_foot_joints
@@ -38,7 +39,7 @@ __all__ = [
     "default_foot_joints", "FootSkate", "on_ground",
     "SPIN_DEGREES_AT_60FPS", "CHORD_SECONDS", "default_facing_joint",
     "body_facing", "facing_change_per_second", "spin_threshold", "spins", "direction_deviation",
-    "Plausibility", "plausibility_of", "foot_skate_of_positions", "worst_plausibility",
+    "Plausibility", "plausibility_of", "plausibilities_of", "foot_skate_of_positions", "worst_plausibility",
 ]
 
 # ---------------------------------------------------------------------------------------------
@@ -262,35 +263,36 @@ def foot_skate_of_positions(pos: np.ndarray, t: np.ndarray, up, meters_per_unit:
                             contact: np.ndarray | None = None) -> FootSkate:
     """Foot skate (:func:`mocapedit.tools.measure.foot_skate`) of feet whose world positions are
     known: ``pos`` (T, F, 3) stage units at increasing time codes ``t`` (T,); ``in_clip`` (T,) marks the samples inside
-    the clip (default: all). The other arguments are :func:`mocapedit.tools.measure.foot_skate`'s."""
+    the clip (default: all). The other arguments are :func:`mocapedit.tools.measure.foot_skate`'s.
+    Leading axes (``pos`` (..., T, F, 3), ``t`` and ``in_clip`` (..., T), ``contact`` (..., T, F))
+    measure many agents at once, each on its own: the result's fields get the same leading
+    axes, ``mean`` too (an array)."""
     t = np.asarray(t, dtype=np.float64)
     if contact_height is None:
         contact_height = 0.02 / meters_per_unit
     seconds_per_code = 1.0 / time_codes_per_second
-    in_clip = np.ones(len(t), dtype=bool) if in_clip is None else np.asarray(in_clip, dtype=bool)
+    in_clip = np.ones(t.shape, dtype=bool) if in_clip is None else np.asarray(in_clip, dtype=bool)
     height = pos[..., ground_axes(up)[0]]
     if contact is not None:
         contact = np.asarray(contact, dtype=bool)
         if contact.shape != height.shape:
             raise ValueError(f"contact mask has shape {contact.shape}; expected {height.shape} "
                              "(times, feet)")
-    elif in_clip.any():
-        contact = np.zeros(height.shape, dtype=bool)
-        lowest = height[in_clip].min(axis=0)
-        contact = in_clip[:, None] & (height - lowest <= contact_height)
     else:
-        contact = np.zeros(height.shape, dtype=bool)
+        # Within contact_height of the lowest height inside the clip (no contact without samples).
+        lowest = np.where(in_clip[..., None], height, np.inf).min(axis=-2, keepdims=True, initial=np.inf)
+        contact = in_clip[..., None] & (height - lowest <= contact_height)
 
     ground = to_ground(pos, up)
-    step = np.linalg.norm(np.diff(ground, axis=0), axis=2)          # (T-1, F)
-    dt = (np.diff(t) * seconds_per_code)[:, None]                    # (T-1, 1)
-    both = contact[1:] & contact[:-1]
-    slide = np.where(both, step, 0.0).sum(axis=0)
-    duration = np.where(both, dt, 0.0).sum(axis=0)
+    step = np.linalg.norm(np.diff(ground, axis=-3), axis=-1)        # (..., T-1, F)
+    dt = (np.diff(t, axis=-1) * seconds_per_code)[..., None]         # (..., T-1, 1)
+    both = contact[..., 1:, :] & contact[..., :-1, :]
+    slide = np.where(both, step, 0.0).sum(axis=-2)
+    duration = np.where(both, dt, 0.0).sum(axis=-2)
     speeds = np.where(duration > 0, slide / np.where(duration > 0, duration, 1.0), np.nan)
-    total = float(duration.sum())
-    mean = float(slide.sum() / total) if total > 0 else float("nan")
-    return FootSkate(tuple(joints), speeds, duration, contact, t, mean)
+    total = duration.sum(axis=-1)
+    mean = np.where(total > 0, slide.sum(axis=-1) / np.where(total > 0, total, 1.0), np.nan)
+    return FootSkate(tuple(joints), speeds, duration, contact, t, float(mean) if mean.ndim == 0 else mean)
 
 
 def on_ground(contact: np.ndarray, source: np.ndarray, edited: np.ndarray, up, meters_per_unit: float,
@@ -329,21 +331,19 @@ def body_facing(matrices, up_axis) -> np.ndarray:
     the horizontal projection of the joint's local axis that stays the most horizontal over the
     clip (any joint convention works), radians counter-clockwise about up, unwrapped. Taken from
     the skeleton, never from the path: a side step or a turn on the spot faces where the body
-    faces. Two clips of the same joint that differ by a yaw pick the same axis."""
-    return np.unwrap(_stationary.facing(np.asarray(matrices, dtype=np.float64), _up_token(up_axis)))
+    faces. Two clips of the same joint that differ by a yaw pick the same axis. Leading axes
+    (..., T, 4, 4) are bodies measured each on its own: (..., T)."""
+    return np.unwrap(_stationary.facing(np.asarray(matrices, dtype=np.float64), _up_token(up_axis)), axis=-1)
 
 
 def facing_change_per_second(facing, seconds) -> np.ndarray:
     """(T-1,) unsigned turning rate of a facing between consecutive samples, degrees per second.
-    ``facing`` (T,) radians; ``seconds`` (T,) increasing sample times in seconds."""
-    f = np.unwrap(np.asarray(facing, dtype=np.float64))
-    s = np.asarray(seconds, dtype=np.float64)
-    if f.shape != s.shape or f.ndim != 1:
+    ``facing`` (T,) radians; ``seconds`` (T,) increasing sample times in seconds. Leading axes:
+    (..., T) -> (..., T-1)."""
+    f, s = np.asarray(facing, dtype=np.float64), np.asarray(seconds, dtype=np.float64)
+    if f.shape != s.shape or f.ndim < 1:
         raise ValueError(f"facing {f.shape} and seconds {s.shape} must both be (T,)")
-    dt = np.diff(s)
-    if np.any(dt <= 0):
-        raise ValueError("sample times must increase")
-    return np.degrees(np.abs(np.diff(f))) / dt
+    return _plausibility.turning_rates(f, s)
 
 
 def spin_threshold() -> float:
@@ -362,6 +362,20 @@ def spins(source_rate, edited_rate) -> np.ndarray:
     return (e > limit) & (s <= limit)
 
 
+def _paths(source_ground, edited_ground, seconds) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Two ground paths ``(..., T, 2)`` and their sample times ``(..., T)``, paired by frame."""
+    if np.ndim(source_ground) <= 2:
+        s = _points(source_ground, "source_ground", dims=(2,))
+        e = _points(edited_ground, "edited_ground", dims=(2,))
+    else:
+        s = np.asarray(source_ground, dtype=np.float64)
+        e = np.asarray(edited_ground, dtype=np.float64)
+    t = np.asarray(seconds, dtype=np.float64)
+    if s.shape != e.shape or s.shape[-1] != 2 or t.shape != s.shape[:-1]:
+        raise ValueError(f"source {s.shape}, edited {e.shape} and seconds {t.shape} must pair by frame")
+    return s, e, t
+
+
 def direction_deviation(source_ground, edited_ground, seconds, min_speed: float,
                         chord: float = CHORD_SECONDS, turn=None) -> np.ndarray:
     """(T,) angle (degrees, 0..180) between the edited and the source walking direction.
@@ -371,33 +385,12 @@ def direction_deviation(source_ground, edited_ground, seconds, min_speed: float,
     slower than ``min_speed`` (stage units per second), and frames without a full chord, are NaN:
     the source does not walk there. Paths are ``(T, 2)`` ground points paired by frame.
     ``turn`` (T,) radians, counter-clockwise: the source direction at each chord's first frame
-    is turned by it before comparing (:func:`edit_turn` gives the turn an edit means to make)."""
-    s = _points(source_ground, "source_ground", dims=(2,))
-    e = _points(edited_ground, "edited_ground", dims=(2,))
-    t = np.asarray(seconds, dtype=np.float64)
-    if s.shape != e.shape or t.shape != (len(s),):
-        raise ValueError(f"source {s.shape}, edited {e.shape} and seconds {t.shape} must pair by frame")
-    out = np.full(len(s), np.nan)
-    if len(s) < 2:
-        return out
-    end = np.searchsorted(t, t + chord - 1e-9, side="left")
-    ok = end < len(s)
-    i = np.flatnonzero(ok)
-    j = end[ok]
-    ds, de = s[j] - s[i], e[j] - e[i]
-    speed = np.linalg.norm(ds, axis=1) / (t[j] - t[i])
-    walk = speed >= min_speed
-    if turn is not None:
-        a = np.asarray(turn, dtype=np.float64)
-        if a.shape != t.shape:
-            raise ValueError(f"turn {a.shape} must pair with seconds {t.shape}")
-        c, n = np.cos(a[i]), np.sin(a[i])
-        ds = np.stack((c * ds[:, 0] - n * ds[:, 1], n * ds[:, 0] + c * ds[:, 1]), axis=1)
-    cross = ds[:, 0] * de[:, 1] - ds[:, 1] * de[:, 0]
-    dot = np.einsum("ij,ij->i", ds, de)
-    angle = np.degrees(np.abs(np.arctan2(cross, dot)))
-    out[i[walk]] = angle[walk]
-    return out
+    is turned by it before comparing (:func:`edit_turn` gives the turn an edit means to make).
+    Leading axes (paths (..., T, 2), times and turns (..., T)) are agents measured each on its own."""
+    s, e, t = _paths(source_ground, edited_ground, seconds)
+    if turn is not None and np.shape(turn) != t.shape:
+        raise ValueError(f"turn {np.shape(turn)} must pair with seconds {t.shape}")
+    return _plausibility.direction_deviation(s, e, t, min_speed, chord, turn)
 
 
 def edit_turn(source_ground, edited_ground, seconds, min_speed: float,
@@ -408,24 +401,10 @@ def edit_turn(source_ground, edited_ground, seconds, min_speed: float,
     corner turns by 90 degrees); a walk that goes back against it over a short chord
     (:func:`direction_deviation` with ``turn``) hooks, zig-zags or loops. Where the source does
     not walk over the span (slower than ``min_speed``) the turn is interpolated from the frames
-    around it where it does (held at the ends); 0 everywhere when it never does. Paths ``(T, 2)``, paired by frame."""
-    s = _points(source_ground, "source_ground", dims=(2,))
-    e = _points(edited_ground, "edited_ground", dims=(2,))
-    t = np.asarray(seconds, dtype=np.float64)
-    if s.shape != e.shape or t.shape != (len(s),):
-        raise ValueError(f"source {s.shape}, edited {e.shape} and seconds {t.shape} must pair by frame")
-    if len(s) < 2:
-        return np.zeros(len(s))
-    a = np.searchsorted(t, t - 0.5 * span, side="left")
-    b = np.minimum(np.searchsorted(t, t + 0.5 * span, side="right") - 1, len(s) - 1)
-    ds, de = s[b] - s[a], e[b] - e[a]
-    dt = np.maximum(t[b] - t[a], 1e-12)
-    walk = (b > a) & (np.linalg.norm(ds, axis=1) / dt >= min_speed) & (np.linalg.norm(de, axis=1) > 0)
-    if not walk.any():
-        return np.zeros(len(s))
-    angle = np.unwrap(np.arctan2(ds[walk, 0] * de[walk, 1] - ds[walk, 1] * de[walk, 0],
-                                 np.einsum("ij,ij->i", ds[walk], de[walk])))
-    return np.interp(np.arange(len(s)), np.flatnonzero(walk), angle)
+    around it where it does (held at the ends); 0 everywhere when it never does. Paths ``(T, 2)``,
+    paired by frame; leading axes (..., T, 2) are agents measured each on its own."""
+    s, e, t = _paths(source_ground, edited_ground, seconds)
+    return _plausibility.edit_turn(s, e, t, min_speed, span)
 
 
 @dataclass(frozen=True)
@@ -479,29 +458,11 @@ class Plausibility:
         return bool(self.max_turned_deviation > 90.0 or self.max_edit_turn > REVERSE_TURN_DEGREES)
 
 
-def _resample(values: np.ndarray, at: np.ndarray) -> np.ndarray:
-    """Per-sample ``values`` ``(N, ...)`` linearly interpolated at fractional sample indices."""
-    values = np.asarray(values, dtype=np.float64)
-    x = np.arange(len(values), dtype=np.float64)
-    flat = values.reshape(len(values), -1)
-    out = np.stack([np.interp(at, x, flat[:, c]) for c in range(flat.shape[1])], axis=1)
-    return out.reshape((len(at),) + values.shape[1:])
-
-
-def _pair(source: np.ndarray, count: int) -> np.ndarray:
-    """Source samples paired with ``count`` edited samples: the same ones when the counts agree,
-    else resampled over the clip by frame fraction (an edit that re-sampled the time)."""
-    if len(source) == count:
-        return source
-    return _resample(source, np.linspace(0.0, len(source) - 1.0, count))
-
-
-def _ratio(edited: float, source: float) -> float:
-    if not (np.isfinite(edited) and np.isfinite(source)):
-        return float("nan")
-    if source > 0:
-        return edited / source
-    return 1.0 if edited == 0 else float("inf")
+def _ratio(edited, source):
+    """Edited over source foot skate (arrays): NaN unless both are finite; 1 when both are 0."""
+    edited, source = np.asarray(edited, dtype=np.float64), np.asarray(source, dtype=np.float64)
+    ratio = np.where(source > 0, edited / np.where(source > 0, source, 1.0), np.where(edited == 0, 1.0, np.inf))
+    return np.where(np.isfinite(edited) & np.isfinite(source), ratio, np.nan)
 
 
 def plausibility_of(agent: str, source_seconds, source_hip, edited_seconds, edited_hip, up_axis,
@@ -514,57 +475,76 @@ def plausibility_of(agent: str, source_seconds, source_hip, edited_seconds, edit
     then compared at those frames and the time warp is shot time per source time. Without it,
     edited samples pair with source samples by frame (resampled by frame fraction when T'
     differs) and the time warp is the ratio of their intervals.
-    :func:`mocapedit.tools.measure.plausibility` measures these on stages by FK."""
-    ss, se = np.asarray(source_seconds, np.float64), np.asarray(edited_seconds, np.float64)
-    ms, me = np.asarray(source_hip, np.float64), np.asarray(edited_hip, np.float64)
-    fs, fe = body_facing(ms, up_axis), body_facing(me, up_axis)
-    gs, ge = to_ground(ms[:, 3, :3], up_axis), to_ground(me[:, 3, :3], up_axis)
-    if len(se) >= 2 and len(ss) >= 2:
-        rate_e = facing_change_per_second(fe, se)
-        if edited_frames is None:
-            rate_s = _pair(facing_change_per_second(fs, ss), len(rate_e))
-            warp = np.diff(se) / _pair(np.diff(ss), len(se) - 1)
-            gs_at, ss_at = _pair(gs, len(ge)), _pair(ss, len(se))
-        else:
-            f = np.asarray(edited_frames, dtype=np.float64)
-            if f.shape != se.shape:
-                raise ValueError(f"edited_frames {f.shape} must pair with edited_seconds {se.shape}")
-            # The source's turn over each edited interval, per second of the source.
-            d_frames = np.diff(f)
-            moving = d_frames > 1e-9
-            src_turn = np.abs(np.diff(_resample(fs, f)))
-            src_dt = np.diff(_resample(ss, f))
-            rate_s = np.where(moving, np.degrees(src_turn) / np.where(moving, src_dt, 1.0), 0.0)
-            warp = (np.diff(se) / np.where(moving, src_dt, 1.0))[moving] if moving.any() else np.ones(1)
-            gs_at, ss_at = _resample(gs, f), _resample(ss, f)
-        turn_frame = int(np.argmax(rate_e - rate_s))
-        extra = float(rate_e[turn_frame] - rate_s[turn_frame])
-        spin = int(np.count_nonzero(spins(rate_s, rate_e)))
-        # Held ends of a warped clip: measure on the frames that advance.
-        keep = np.r_[True, np.diff(ss_at) > 0]
-        walking = WALKING_SPEED_M / meters_per_unit
-        dev, turned = np.full(len(ge), np.nan), np.full(len(ge), np.nan)
-        turn = edit_turn(gs_at[keep], ge[keep], ss_at[keep], walking)
-        dev[keep] = direction_deviation(gs_at[keep], ge[keep], ss_at[keep], walking)
-        turned[keep] = direction_deviation(gs_at[keep], ge[keep], ss_at[keep], walking, turn=turn)
-        dev_frame = int(np.nanargmax(dev)) if np.isfinite(dev).any() else -1
-        max_dev = float(dev[dev_frame]) if dev_frame >= 0 else float("nan")
-        max_turned = float(np.nanmax(turned)) if np.isfinite(turned).any() else float("nan")
-        max_turn = float(np.degrees(np.abs(turn).max(initial=0.0)))
-        rates = (float(rate_e.max()), float(rate_s.max()))
-        warp_range = (float(warp.min()), float(warp.max()))
+    :func:`mocapedit.tools.measure.plausibility` measures these on stages by FK;
+    :func:`plausibilities_of` measures many agents at once."""
+    def one(values):
+        return None if values is None else np.asarray(values, dtype=np.float64)[None]
+    return plausibilities_of([agent], one(source_seconds), one(source_hip), one(edited_seconds), one(edited_hip),
+                             up_axis, meters_per_unit, one(foot_skate_source), one(foot_skate_edited),
+                             one(edited_frames))[0]
+
+
+def _runs(values, count: int, tail: tuple, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """Per-agent arrays ``(T_a,) + tail`` (a sequence, or one array ``(A, T) + tail``) as one
+    array of them all, agent after agent, and the (A+1,) offsets of each agent's run."""
+    if isinstance(values, np.ndarray) and values.ndim == 2 + len(tail):
+        values = np.asarray(values, dtype=np.float64)
+        if values.shape[2:] != tail:
+            raise ValueError(f"{name}: each agent's must have shape (T,{''.join(f' {d},' for d in tail)})")
+        runs = [values.shape[1]] * len(values)
+        joined = values.reshape((-1,) + tail)
     else:
-        rates, extra, spin, max_dev, warp_range = (0.0, 0.0), 0.0, 0, float("nan"), (1.0, 1.0)
-        max_turned, max_turn = float("nan"), 0.0
-        turn_frame, dev_frame = -1, -1
-    return Plausibility(agent=str(agent), max_facing_rate=rates[0], source_max_facing_rate=rates[1],
-                        max_extra_facing_rate=extra, spin_frames=spin, max_direction_deviation=max_dev,
-                        length_ratio=length_ratio(ge, gs),
-                        time_warp=warp_range, foot_skate_source=float(foot_skate_source),
-                        foot_skate_edited=float(foot_skate_edited),
-                        foot_skate_ratio=_ratio(float(foot_skate_edited), float(foot_skate_source)),
-                        worst_turn_frame=turn_frame, worst_direction_frame=dev_frame,
-                        max_turned_deviation=max_turned, max_edit_turn=max_turn)
+        values = [np.asarray(v, dtype=np.float64) for v in values]
+        runs = [len(v) for v in values]
+        joined = np.concatenate(values).reshape((-1,) + tail) if values else np.zeros((0,) + tail)
+        if any(v.shape != (n,) + tail for v, n in zip(values, runs)):
+            raise ValueError(f"{name}: each agent's must have shape (T,{''.join(f' {d},' for d in tail)})")
+    if len(runs) != count:
+        raise ValueError(f"{name}: {len(runs)} agents' values for {count} agents")
+    return joined, np.r_[0, np.cumsum(runs, dtype=np.int64)]
+
+
+def plausibilities_of(agents: Sequence[str], source_seconds, source_hip, edited_seconds, edited_hip, up_axis,
+                      meters_per_unit: float, foot_skate_source=None, foot_skate_edited=None,
+                      edited_frames=None) -> list[Plausibility]:
+    """:func:`plausibility_of` of A agents at once: the arguments of :func:`plausibility_of`,
+    one per agent (``source_seconds`` a sequence of (T,) arrays, ``source_hip`` of (T, 4, 4),
+    ...; or arrays with a leading axis A when the agents have as many samples), the foot skate
+    means (A,) (NaN by default). The figures, in the order of ``agents``, are those of each agent
+    measured on its own, by one call of the solver's job
+    (:func:`mocapedit.solve.plausibility.plausibility`)."""
+    count = len(agents)
+    ss, source_runs = _runs(source_seconds, count, (), "source_seconds")
+    ms, hip_runs = _runs(source_hip, count, (4, 4), "source_hip")
+    se, edited_runs = _runs(edited_seconds, count, (), "edited_seconds")
+    me, edited_hip_runs = _runs(edited_hip, count, (4, 4), "edited_hip")
+    if not (np.array_equal(source_runs, hip_runs) and np.array_equal(edited_runs, edited_hip_runs)):
+        raise ValueError("each agent's seconds and facing joint matrices must pair sample by sample")
+    frames = None
+    if edited_frames is not None:
+        frames, frame_runs = _runs(edited_frames, count, (), "edited_frames")
+        if not np.array_equal(frame_runs, edited_runs):
+            raise ValueError("each agent's edited_frames must pair with its edited_seconds")
+    nan = np.full(count, np.nan)
+    skate_s = nan if foot_skate_source is None else np.asarray(foot_skate_source, np.float64).reshape(count)
+    skate_e = nan if foot_skate_edited is None else np.asarray(foot_skate_edited, np.float64).reshape(count)
+    f = _plausibility.plausibility(
+        source_runs, edited_runs, ss, ms, se, me, up_axis,
+        _plausibility.Thresholds(walking_speed=WALKING_SPEED_M / meters_per_unit, chord=CHORD_SECONDS,
+                                 edit_turn_span=EDIT_TURN_SECONDS, spin_rate=spin_threshold()),
+        edited_frames=frames)
+    skate_ratio = _ratio(skate_e, skate_s)
+    return [Plausibility(agent=str(name), max_facing_rate=float(f.max_facing_rate[k]),
+                         source_max_facing_rate=float(f.source_max_facing_rate[k]),
+                         max_extra_facing_rate=float(f.max_extra_facing_rate[k]), spin_frames=int(f.spin_frames[k]),
+                         max_direction_deviation=float(f.max_direction_deviation[k]),
+                         length_ratio=float(f.length_ratio[k]),
+                         time_warp=(float(f.time_warp_min[k]), float(f.time_warp_max[k])),
+                         foot_skate_source=float(skate_s[k]), foot_skate_edited=float(skate_e[k]),
+                         foot_skate_ratio=float(skate_ratio[k]), worst_turn_frame=int(f.worst_turn_frame[k]),
+                         worst_direction_frame=int(f.worst_direction_frame[k]),
+                         max_turned_deviation=float(f.max_turned_deviation[k]), max_edit_turn=float(f.max_edit_turn[k]))
+            for k, name in enumerate(agents)]
 
 
 def worst_plausibility(figures: Sequence[Plausibility]) -> dict:

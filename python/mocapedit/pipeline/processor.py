@@ -104,67 +104,133 @@ def compose_edits(ctx: SolveContext) -> None:
             ctx.edits[path] = edit
 
 
+#: Agents whose plausibility is measured together (bounds the memory of a large crowd's arrays).
+PLAUSIBILITY_BATCH = 64
+
+
+@dataclass
+class _Measured:
+    """One agent of :func:`measure_plausibility`: what its figures are measured from."""
+    path: str
+    chain: np.ndarray            # (F, J, 4, 4) skeleton-space facing joint, then the feet if measured here
+    times: np.ndarray            # (T,) stage times of the edited samples
+    frames: np.ndarray           # (T,) source frame each plays
+    skate: list                  # [source, edited] foot skate, NaN when measured here or without feet
+
+
 def measure_plausibility(ctx: SolveContext) -> None:
     """Per edited agent, and for the shot (``stats.plausibility``), the figures of
     :func:`metrics.plausibility_of`: the facing and walking direction of the edited body against
     its source, path length, time warp and foot skate. They come from the same motions the edits
     layer authors, by numpy forward kinematics of the hip and the feet (the composed stage plays
-    the same, so FK on it gives the same figures); layered poses are left out."""
-    info = ctx.data.info
-    up, chains, figures = info.up_axis, {}, []
+    the same, so FK on it gives the same figures); layered poses are left out. Agents with as
+    many source and edited samples are measured together (:func:`metrics.plausibilities_of`)."""
+    chains, groups = {}, {}
+
+    def chain(agent, feet: bool) -> np.ndarray:
+        """(F, J, 4, 4) skeleton-space facing joint, then the feet when asked, of a clip and skeleton."""
+        key = (agent.clip_key, tuple(agent.joints), feet)
+        if key not in chains:
+            joints = [metrics.default_facing_joint(agent.joints)]
+            joints += metrics.default_foot_joints(agent.joints) if feet else []
+            clip = ctx.data.clip_of(agent)
+            chains[key] = np.stack([trajectory.joint_skel_space(agent, clip, j) for j in joints], axis=1)
+        return chains[key]
+
     for path in sorted(ctx.edits):
         if path not in ctx.paths and path not in ctx.time_maps:
             continue
-        agent, traj = ctx.data.agents[path], ctx.trajectories[path]
-        clip = ctx.data.clip_of(agent)
-        hip = metrics.default_facing_joint(agent.joints)
-        feet = metrics.default_foot_joints(agent.joints)
-        joints = [hip] + feet
-        key = (agent.clip_key, tuple(agent.joints))
-        if key not in chains:
-            chains[key] = np.stack([trajectory.joint_skel_space(agent, clip, j) for j in joints], axis=1)
-        source = chains[key] @ agent.skel_to_world[:, None]               # (F, 1 + feet, 4, 4)
-        times, frames = ctx.output_frames(path)
-        edited = animation.interp_frames(source, frames)
-        moved = ctx.paths.get(path)
-        if moved is not None:
-            edited = edited @ trajectory.ground_motion(
-                animation.interp_frames(traj.ground, frames), animation.interp_frames(traj.heading, frames),
-                animation.interp_frames(moved.ground, frames), animation.interp_frames(moved.heading, frames),
-                up)[:, None]
-        seconds = 1.0 / info.time_codes_per_second
-        skate = [float("nan"), float("nan")]
-        if feet:
-            units = (up, info.meters_per_unit, info.time_codes_per_second)
-            # A retimed agent against its source as its timing plays it (see the feet pass).
-            same = len(times) == len(agent.sample_times) and np.allclose(times, agent.sample_times)
-            played = source if same else animation.interp_frames(source, frames)
-            before = metrics.foot_skate_of_positions(played[:, 1:, 3, :3], times, *units)
-            skate = [before.mean, metrics.foot_skate_of_positions(edited[:, 1:, 3, :3], times, *units,
-                                                                  contact=before.contact).mean]
+        agent = ctx.data.agents[path]
         entry = ctx.report.agent(path)
+        skate = [float("nan"), float("nan")]
         if entry.foot_skate_unlocked is not None:  # foot locking measured the legs as the layer plays them
             skate = [entry.foot_skate_source, entry.foot_skate_edited]
-        p = metrics.plausibility_of(path, agent.sample_times * seconds, source[:, 0], times * seconds, edited[:, 0],
-                                    up, info.meters_per_unit, *skate, edited_frames=frames)
-        figures.append(p)
-        if np.isfinite(skate).all():
-            # Mean foot speed while in contact (stage units per second), over the source's contacts.
-            if entry.foot_skate_source is None:
-                entry.foot_skate_source = skate[0]
-            if entry.foot_skate_edited is None:
-                entry.foot_skate_edited = skate[1]
-        entry.plausibility = AgentPlausibility(
-            max_facing_rate=p.max_facing_rate, source_max_facing_rate=p.source_max_facing_rate,
-            max_extra_facing_rate=p.max_extra_facing_rate, spin_frames=p.spin_frames,
-            max_direction_deviation=p.max_direction_deviation,
-            max_turned_direction_deviation=p.max_turned_deviation, max_edit_turn=p.max_edit_turn,
-            reverses=p.reverses, length_ratio=p.length_ratio,
-            time_warp=list(p.time_warp), foot_skate_ratio=p.foot_skate_ratio,
-            worst_turn_frame=int(round(frames[max(p.worst_turn_frame, 0)])),
-            worst_direction_frame=int(round(frames[p.worst_direction_frame])) if p.worst_direction_frame >= 0 else -1)
+        times, frames = ctx.output_frames(path)
+        item = _Measured(path, chain(agent, entry.foot_skate_unlocked is None), times, frames, skate)
+        groups.setdefault((item.chain.shape, len(times)), []).append(item)
+    figures = {}
+    for items in groups.values():
+        for first in range(0, len(items), PLAUSIBILITY_BATCH):
+            figures.update(_measure_plausibility(ctx, items[first:first + PLAUSIBILITY_BATCH]))
+    for path in sorted(figures):
+        record_plausibility(ctx.report.agent(path), *figures[path])
     if figures:
-        ctx.report.stats.plausibility = ShotPlausibility.from_dict(metrics.worst_plausibility(figures))
+        ordered = [figures[path][0] for path in sorted(figures)]
+        ctx.report.stats.plausibility = ShotPlausibility.from_dict(metrics.worst_plausibility(ordered))
+
+
+def record_plausibility(entry, p: metrics.Plausibility, skate, frames: np.ndarray) -> None:
+    """An agent's report entry gets its figures ``p``, its foot skate [source, edited] when
+    measured (and not measured before) and its worst frames as source frames (``frames``: the
+    source frame each edited sample plays)."""
+    if np.isfinite(skate).all():
+        # Mean foot speed while in contact (stage units per second), over the source's contacts.
+        if entry.foot_skate_source is None:
+            entry.foot_skate_source = skate[0]
+        if entry.foot_skate_edited is None:
+            entry.foot_skate_edited = skate[1]
+    entry.plausibility = AgentPlausibility(
+        max_facing_rate=p.max_facing_rate, source_max_facing_rate=p.source_max_facing_rate,
+        max_extra_facing_rate=p.max_extra_facing_rate, spin_frames=p.spin_frames,
+        max_direction_deviation=p.max_direction_deviation,
+        max_turned_direction_deviation=p.max_turned_deviation, max_edit_turn=p.max_edit_turn,
+        reverses=p.reverses, length_ratio=p.length_ratio,
+        time_warp=list(p.time_warp), foot_skate_ratio=p.foot_skate_ratio,
+        worst_turn_frame=int(round(frames[max(p.worst_turn_frame, 0)])),
+        worst_direction_frame=int(round(frames[p.worst_direction_frame])) if p.worst_direction_frame >= 0 else -1)
+
+
+def _measure_plausibility(ctx: SolveContext, items: list[_Measured]) -> dict:
+    """{path: (Plausibility, [source, edited] foot skate, frames)} of agents whose chains and
+    edited samples have the same shapes, by forward kinematics of them all at once."""
+    info = ctx.data.info
+    up, agents = info.up_axis, [ctx.data.agents[item.path] for item in items]
+    parents = [agent.skel_to_world for agent in agents]
+    frame_count = items[0].chain.shape[0]
+    if any(len(parent) > 1 for parent in parents):  # a moving parent, per source frame
+        parents = [np.broadcast_to(parent, (frame_count, 4, 4)) for parent in parents]
+    source = np.stack([item.chain for item in items]) @ np.stack(parents)[:, :, None]   # (A, F, J, 4, 4)
+    times = np.stack([item.times for item in items])
+    frames = np.stack([item.frames for item in items])
+    # A moved agent that plays its source frame by frame is carried from the source samples
+    # themselves when all of the batch do (interpolating at whole frames gives the same values
+    # but for the sign of zeros); the others are interpolated at their frames, as the layer plays them.
+    whole = (frames == np.arange(frames.shape[1])).all(axis=1) & (frames.shape[1] == frame_count)
+    moved = np.array([item.path in ctx.paths for item in items])
+    edited = source.copy() if whole.all() else animation.interp_frames(source, frames)
+    if whole.all() and not moved.all():   # the agents not moved: as the layer's timing plays them
+        rows = np.flatnonzero(~moved)
+        edited[rows] = animation.interp_frames(source[rows], frames[rows])
+    if moved.any():
+        rows = np.flatnonzero(moved) if not moved.all() else slice(None)
+        carried = [items[k].path for k in np.flatnonzero(moved)]
+        trajs, paths = [ctx.trajectories[p] for p in carried], [ctx.paths[p] for p in carried]
+
+        def at(values):
+            values = np.stack(values)
+            return values if whole[rows].all() else animation.interp_frames(values, frames[rows])
+        edited[rows] = edited[rows] @ trajectory.ground_motion(
+            at([t.ground for t in trajs]), at([t.heading for t in trajs]),
+            at([p.ground for p in paths]), at([p.heading for p in paths]), up)[:, :, None]
+    seconds = 1.0 / info.time_codes_per_second
+    skate = np.array([item.skate for item in items], dtype=np.float64)       # (A, 2)
+    if source.shape[2] > 1:
+        units = (up, info.meters_per_unit, info.time_codes_per_second)
+        # A retimed agent against its source as its timing plays it (see the feet pass).
+        same = np.array([times.shape[1] == len(agent.sample_times) and np.allclose(item.times, agent.sample_times)
+                         for item, agent in zip(items, agents)])
+        feet = source[:, :, 1:, 3, :3]
+        played = feet if same.all() else animation.interp_frames(feet, frames)
+        if same.any() and not same.all():
+            played[same] = feet[same]
+        before = metrics.foot_skate_of_positions(played, times, *units)
+        after = metrics.foot_skate_of_positions(edited[:, :, 1:, 3, :3], times, *units, contact=before.contact)
+        skate = np.stack([before.mean, after.mean], axis=1)
+    figures = metrics.plausibilities_of(
+        [item.path for item in items], np.stack([agent.sample_times for agent in agents]) * seconds,
+        source[:, :, 0], times * seconds, edited[:, :, 0], up, info.meters_per_unit, skate[:, 0], skate[:, 1],
+        edited_frames=frames)
+    return {item.path: (p, [float(v) for v in s], item.frames) for item, p, s in zip(items, figures, skate)}
 
 
 def _with_parent(agent, parent_to_world):
