@@ -678,11 +678,12 @@ def blas() -> BlasInfo:
     """
     The BLAS that CHOLMOD and SPQR call in this process (BlasInfo).
     """
-def block_deformation_turns(*, source: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], edited: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], blocks: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 2]", "flags.c_contiguous"], fixed: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 3]", "flags.c_contiguous"], fixed_turn: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"], window: typing.SupportsInt | typing.SupportsIndex, min_travel: typing.SupportsFloat | typing.SupportsIndex) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+def block_deformation_turns(*, source: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], edited: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], blocks: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 2]", "flags.c_contiguous"], fixed: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 3]", "flags.c_contiguous"], fixed_turn: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"], window: typing.SupportsInt | typing.SupportsIndex, min_travel: typing.SupportsFloat | typing.SupportsIndex, max_step: typing.SupportsFloat | typing.SupportsIndex = 0.0) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
     """
     (V,) turn of each frame's heading from source to edited paths (V,2), block by block: blocks (B,2)
     int32 [begin, end), fixed (R,3) int32 (block, first, last) grouped by block, fixed_turn (R,),
-    window (frames), min_travel (stage units); see DeformationTurns in trajectory.h.
+    window (frames), min_travel (stage units), max_step (stage units per frame, 0: none); see
+    DeformationTurns in trajectory.h.
     """
 def build_additive_clip(reference: tuple, clip: tuple) -> tuple:
     """
@@ -714,12 +715,13 @@ def cumulative_arc_length(points: typing.Annotated[numpy.typing.NDArray[numpy.fl
     """
     (N,) arc length along a (N, 2) trajectory, starting at 0.
     """
-def deformation_turns(*, source: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], edited: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], fixed: collections.abc.Sequence[tuple[typing.SupportsInt | typing.SupportsIndex, typing.SupportsInt | typing.SupportsIndex]] = [], fixed_turn: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"] = ..., window: typing.SupportsInt | typing.SupportsIndex = 2, min_travel: typing.SupportsFloat | typing.SupportsIndex = 0.0) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+def deformation_turns(*, source: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], edited: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], fixed: collections.abc.Sequence[tuple[typing.SupportsInt | typing.SupportsIndex, typing.SupportsInt | typing.SupportsIndex]] = [], fixed_turn: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"] = ..., window: typing.SupportsInt | typing.SupportsIndex = 2, min_travel: typing.SupportsFloat | typing.SupportsIndex = 0.0, max_step: typing.SupportsFloat | typing.SupportsIndex = 0.0) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
     """
     (N,) turn (radians, CCW) of each frame's heading when the path goes from source to edited (N,2):
     the least-squares rotation of the source steps onto the edited ones within two nested windows of
     `window` frames each side; frames whose source moves less than `min_travel` across the window take
-    it from the moving frames around them; `fixed` inclusive ranges turn by their `fixed_turn`.
+    it from the moving frames around them; `fixed` inclusive ranges turn by their `fixed_turn`;
+    source steps longer than `max_step` (0: none) are cuts and count for nothing.
     """
 def detect_collisions(*, positions: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], samples: typing.SupportsInt | typing.SupportsIndex, radius: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], height: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], base: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"] | None = None, active: collections.abc.Sequence[bool] | None = None, margin: typing.SupportsFloat | typing.SupportsIndex = 0.0, report_distance: typing.SupportsFloat | typing.SupportsIndex = 0.0, threads: typing.SupportsInt | typing.SupportsIndex = 0, brute_force: bool = False, watch_distance: typing.SupportsFloat | typing.SupportsIndex = 0.0) -> CollisionResult:
     """

@@ -87,16 +87,17 @@ MOCAPEDIT_BINDINGS(BindPathTerms) {
       "block_deformation_turns",
       [](const Eigen::Ref<const Trajectory2>& source, const Eigen::Ref<const Trajectory2>& edited,
          const Eigen::Ref<const mocapedit::IndexPairs>& blocks, const Eigen::Ref<const mocapedit::IndexTriples>& fixed,
-         const Eigen::Ref<const Eigen::VectorXd>& fixed_turn, int window, double min_travel) {
+         const Eigen::Ref<const Eigen::VectorXd>& fixed_turn, int window, double min_travel, double max_step) {
         Eigen::VectorXd out;
-        mocapedit::BlockDeformationTurns(source, edited, blocks, fixed, fixed_turn, window, min_travel, out);
+        mocapedit::BlockDeformationTurns(source, edited, blocks, fixed, fixed_turn, window, min_travel, max_step, out);
         return out;
       },
       kReleaseGil, py::kw_only(), py::arg("source"), py::arg("edited"), py::arg("blocks"), py::arg("fixed"), py::arg("fixed_turn"),
-      py::arg("window"), py::arg("min_travel"),
+      py::arg("window"), py::arg("min_travel"), py::arg("max_step") = 0.0,
       "(V,) turn of each frame's heading from source to edited paths (V,2), block by block: blocks (B,2)\n"
       "int32 [begin, end), fixed (R,3) int32 (block, first, last) grouped by block, fixed_turn (R,),\n"
-      "window (frames), min_travel (stage units); see DeformationTurns in trajectory.h.");
+      "window (frames), min_travel (stage units), max_step (stage units per frame, 0: none); see\n"
+      "DeformationTurns in trajectory.h.");
   m.def(
       "null_space_support",
       [](const Eigen::Ref<const Eigen::VectorXi>& rows, const Eigen::Ref<const Eigen::VectorXi>& cols,

@@ -28,14 +28,16 @@ MOCAPEDIT_BINDINGS(BindTrajectory) {
       "deformation_turns",
       [](const Eigen::Ref<const Trajectory2>& source, const Eigen::Ref<const Trajectory2>& edited,
          const std::vector<mocapedit::FrameRange>& fixed, const Eigen::VectorXd& fixed_turn, int window,
-         double min_travel) {
+         double min_travel, double max_step) {
         py::gil_scoped_release release;
-        return mocapedit::DeformationTurns(source, edited, fixed, fixed_turn, window, min_travel);
+        return mocapedit::DeformationTurns(source, edited, fixed, fixed_turn, window, min_travel, max_step);
       },
       py::kw_only(), py::arg("source"), py::arg("edited"), py::arg("fixed") = std::vector<mocapedit::FrameRange>{},
       py::arg("fixed_turn") = Eigen::VectorXd(), py::arg("window") = 2, py::arg("min_travel") = 0.0,
+      py::arg("max_step") = 0.0,
       "(N,) turn (radians, CCW) of each frame's heading when the path goes from source to edited (N,2):\n"
       "the least-squares rotation of the source steps onto the edited ones within two nested windows of\n"
       "`window` frames each side; frames whose source moves less than `min_travel` across the window take\n"
-      "it from the moving frames around them; `fixed` inclusive ranges turn by their `fixed_turn`.");
+      "it from the moving frames around them; `fixed` inclusive ranges turn by their `fixed_turn`;\n"
+      "source steps longer than `max_step` (0: none) are cuts and count for nothing.");
 }

@@ -191,7 +191,7 @@ constexpr Eigen::Index kParallelHeadingFrames = 20000;
 void BlockDeformationTurns(const Eigen::Ref<const Trajectory2>& source, const Eigen::Ref<const Trajectory2>& edited,
                            const Eigen::Ref<const IndexPairs>& blocks, const Eigen::Ref<const IndexTriples>& fixed,
                            const Eigen::Ref<const Eigen::VectorXd>& fixed_turn, int window, double min_travel,
-                           Eigen::VectorXd& turns) {
+                           double max_step, Eigen::VectorXd& turns) {
   Require(fixed.rows() == fixed_turn.size(), "BlockDeformationTurns", "one turn is needed per fixed range");
   Require(source.rows() == edited.rows(), "BlockDeformationTurns", "source and edited differ in rows");
   turns.setZero(source.rows());
@@ -219,7 +219,7 @@ void BlockDeformationTurns(const Eigen::Ref<const Trajectory2>& source, const Ei
       for (Eigen::Index k = lo; k < hi; ++k) ranges.emplace_back(fixed(k, 1), fixed(k, 2));
       turns.segment(begin, end - begin) =
           DeformationTurns(source.middleRows(begin, end - begin), edited.middleRows(begin, end - begin), ranges,
-                           fixed_turn.segment(lo, hi - lo), window, min_travel);
+                           fixed_turn.segment(lo, hi - lo), window, min_travel, max_step);
     }
   };
   if (count < 2 || frames < kParallelHeadingFrames || !disjoint) {

@@ -82,7 +82,7 @@ Eigen::VectorXd DeformationTurns(const Eigen::Ref<const Trajectory2>& source,
                                  const Eigen::Ref<const Trajectory2>& edited,
                                  const std::vector<FrameRange>& fixed,
                                  const Eigen::Ref<const Eigen::VectorXd>& fixed_turn, int window,
-                                 double min_travel) {
+                                 double min_travel, double max_step) {
   const Eigen::Index n = source.rows();
   if (edited.rows() != n) throw InvalidInput("DeformationTurns", "source and edited differ in frames");
   if (static_cast<Eigen::Index>(fixed.size()) != fixed_turn.size())
@@ -99,8 +99,9 @@ Eigen::VectorXd DeformationTurns(const Eigen::Ref<const Trajectory2>& source,
   for (Eigen::Index k = 0; k + 1 < n; ++k) {
     const Eigen::RowVector2d s = source.row(k + 1) - source.row(k);
     const Eigen::RowVector2d e = edited.row(k + 1) - edited.row(k);
-    steps(k + 1, 0) = steps(k, 0) + (s[0] * e[0] + s[1] * e[1]);
-    steps(k + 1, 1) = steps(k, 1) + (s[0] * e[1] - s[1] * e[0]);
+    const double cut = max_step > 0.0 && s.squaredNorm() > max_step * max_step ? 0.0 : 1.0;
+    steps(k + 1, 0) = steps(k, 0) + cut * (s[0] * e[0] + s[1] * e[1]);
+    steps(k + 1, 1) = steps(k, 1) + cut * (s[0] * e[1] - s[1] * e[0]);
   }
   // The first window sums the steps from i - h to i + h - 1; the second sums those over the
   // frames from i - h to i + h.

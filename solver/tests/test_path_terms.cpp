@@ -67,7 +67,7 @@ TEST(PathTerms, ValidityRejectsBadInput) {
     IndexPairs blocks(1, 2);
     blocks << 0, 31;
     Eigen::VectorXd turns;
-    EXPECT_THROW(mocapedit::BlockDeformationTurns(rest, rest, blocks, IndexTriples(0, 3), Eigen::VectorXd(), 2, 0.0,
+    EXPECT_THROW(mocapedit::BlockDeformationTurns(rest, rest, blocks, IndexTriples(0, 3), Eigen::VectorXd(), 2, 0.0, 0.0,
                                                   turns),
                  mocapedit::InvalidInput);
   }
@@ -176,7 +176,7 @@ TEST(PathTerms, BlockTurnsAreEachBlocksDeformationTurns) {
   Eigen::VectorXd fixed_turn(1);
   fixed_turn << 0.25;
   Eigen::VectorXd t;
-  mocapedit::BlockDeformationTurns(rest, edited, blocks, fixed, fixed_turn, 2, 0.01, t);
+  mocapedit::BlockDeformationTurns(rest, edited, blocks, fixed, fixed_turn, 2, 0.01, 0.0, t);
   const Eigen::VectorXd first = mocapedit::DeformationTurns(rest.middleRows(20, 20), edited.middleRows(20, 20), {},
                                                             Eigen::VectorXd(), 2, 0.01);
   const Eigen::VectorXd second = mocapedit::DeformationTurns(rest.middleRows(0, 20), edited.middleRows(0, 20),

@@ -120,3 +120,32 @@ TEST(Trajectory, AStandTurnsFromTheWalkBeforeItToTheWalkAfterIt) {
   const Eigen::VectorXd f = mocapedit::DeformationTurns(p, e, {{45, 70}}, turn, 2, 0.01);
   EXPECT_TRUE((f.segment(45, 26).array() == 0.4).all());
 }
+
+TEST(Trajectory, ACutInTheSourceCountsForNothing) {
+  // A walk along x whose first frame is a rest pose far away (a cut), bent smoothly sideways.
+  const int n = 120;
+  Trajectory2 p(n, 2), e(n, 2);
+  for (int i = 0; i < n; ++i) {
+    p.row(i) << 3.3 * i, 0.0;
+    e.row(i) << 3.3 * i, 20.0 * (1.0 - std::cos(3.14159265358979 * i / (n - 1)));
+  }
+  p.row(0) << -40.0, -300.0;
+  e.row(0) = p.row(0);
+  const int window = 12;
+  const Eigen::VectorXd with_cut = mocapedit::DeformationTurns(p, e, {}, Eigen::VectorXd(), window, 1.0);
+  const Eigen::VectorXd cut = mocapedit::DeformationTurns(p, e, {}, Eigen::VectorXd(), window, 1.0, 50.0);
+  const auto largest_step = [&](const Eigen::VectorXd& t) {
+    return (t.tail(n - 2) - t.segment(1, n - 2)).cwiseAbs().maxCoeff();
+  };
+  // Counted, the cut's 300-unit step outweighs every other step in the windows that hold it,
+  // and the turn jumps where it leaves them.
+  EXPECT_GT(largest_step(with_cut), 0.05);
+  EXPECT_LT(largest_step(cut), 0.01);
+  // Without cuts the limit changes nothing.
+  Trajectory2 q = p, f = e;
+  q.row(0) << -3.3, 0.0;
+  f.row(0) = q.row(0);
+  EXPECT_TRUE((mocapedit::DeformationTurns(q, f, {}, Eigen::VectorXd(), window, 1.0, 50.0).array() ==
+               mocapedit::DeformationTurns(q, f, {}, Eigen::VectorXd(), window, 1.0).array())
+                  .all());
+}

@@ -118,6 +118,9 @@ TURN_WINDOW_S = 0.2
 #: Source ground speed (metres per second) below which a frame's turn comes from the frames
 #: around it instead of its own steps.
 TURN_MIN_SPEED_M = 0.1
+#: Source ground speed (metres per second) beyond which a step is a cut, not a motion (a clip's
+#: first frame left at its rest pose, a teleport): faster than anyone runs.
+CUT_SPEED_M = 15.0
 
 
 def turn_window(fps: float) -> int:
@@ -126,12 +129,13 @@ def turn_window(fps: float) -> int:
 
 
 def deformation_turns(source: np.ndarray, edited: np.ndarray, offsets, fixed=(), fixed_turn=(),
-                      window: int = 2, min_travel: float = 0.0) -> np.ndarray:
+                      window: int = 2, min_travel: float = 0.0, max_step: float = 0.0) -> np.ndarray:
     """(F,) turn of each frame's heading (radians, counter-clockwise) when paths go from source
     to edited: the local rotation the edit applies to the path around the frame (the least-squares
     rotation of the source steps onto the edited ones within two nested windows of ``window``
     frames each side; where the source moves less than ``min_travel`` stage units across the
-    window, interpolated from the moving frames around it; each fixed range by its own turn). See
+    window, interpolated from the moving frames around it; each fixed range by its own turn; a source
+    step longer than ``max_step`` stage units, a cut, counts for nothing (0: none)). See
     ``DeformationTurns`` in ``solver/include/mocapedit/trajectory.h``. An unedited path turns by
     exactly 0, a rigidly turned one by its angle.
 
@@ -149,7 +153,8 @@ def deformation_turns(source: np.ndarray, edited: np.ndarray, offsets, fixed=(),
     ranges = np.ascontiguousarray(np.asarray(fixed, dtype=np.int32).reshape(-1, 3))
     turns = np.asarray(fixed_turn, dtype=np.float64).reshape(-1)
     return _solver.block_deformation_turns(source=s, edited=e, blocks=blocks, fixed=ranges, fixed_turn=turns,
-                                           window=int(window), min_travel=float(min_travel))
+                                           window=int(window), min_travel=float(min_travel),
+                                           max_step=float(max_step))
 
 
 def ground_motion(src_uv: np.ndarray, src_heading: np.ndarray, new_uv: np.ndarray,

@@ -138,15 +138,18 @@ class Settings:
     still: float                          # stage units: tangent steps below this stand still
     turn_window: int = 2                  # frames: half-width of the windows of the edit's turn
     turn_min_travel: float = 0.0          # stage units: less source travel in a window is slow
+    turn_max_step: float = 0.0            # stage units: a longer source step is a cut (0: none)
     group_step: float = 12.0              # time codes between the sampled times of a group mesh
     group_neighbours: int = 3
 
 
 def turn_settings(fps: float, meters_per_unit: float) -> dict:
-    """``turn_window`` and ``turn_min_travel`` of :class:`Settings` for a clip at ``fps``: the
-    source is slow where it walks slower than ``trajectory.TURN_MIN_SPEED_M`` over the window."""
+    """``turn_window``, ``turn_min_travel`` and ``turn_max_step`` of :class:`Settings` for a clip at
+    ``fps``: the source is slow where it walks slower than ``trajectory.TURN_MIN_SPEED_M`` over the
+    window, and a step faster than ``trajectory.CUT_SPEED_M`` is a cut."""
     h = trajectory.turn_window(fps)
-    return {"turn_window": h, "turn_min_travel": trajectory.TURN_MIN_SPEED_M / meters_per_unit * 2 * h / fps}
+    return {"turn_window": h, "turn_min_travel": trajectory.TURN_MIN_SPEED_M / meters_per_unit * 2 * h / fps,
+            "turn_max_step": trajectory.CUT_SPEED_M / meters_per_unit / fps}
 
 
 @dataclass
@@ -645,7 +648,8 @@ class ComponentProblem:
                 edited = np.concatenate([ground[b:e] for b, e in blocks])
             offsets = np.cumsum([0] + [e - b for b, e in blocks])
             h = trajectory.deformation_turns(source, edited, offsets, fixed, fixed_turn,
-                                             self.settings.turn_window, self.settings.turn_min_travel)
+                                             self.settings.turn_window, self.settings.turn_min_travel,
+                                             self.settings.turn_max_step)
             for k, i in enumerate(turned):
                 out[i] = np.asarray(self._inputs[i].source_heading, dtype=np.float64) + h[offsets[k]:offsets[k + 1]]
         return out
@@ -673,7 +677,7 @@ def edited_heading(a: AgentInput, g: np.ndarray, turn: np.ndarray, settings: Set
     stationary range by that range's rotation ``turn``, so the range stays rigid."""
     fixed = [(0, int(f), int(l)) for f, l in a.stationary]
     h = trajectory.deformation_turns(a.source, g, [0, a.frames], fixed, turn, settings.turn_window,
-                                     settings.turn_min_travel)
+                                     settings.turn_min_travel, settings.turn_max_step)
     return np.asarray(a.source_heading, dtype=np.float64) + h
 
 

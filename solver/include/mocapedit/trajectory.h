@@ -52,6 +52,9 @@ Eigen::VectorXd TangentHeadings(const Eigen::Ref<const Trajectory2>& points,
 // and last). Each fixed range turns by its own angle, as one rigid body, and the `window` frames
 // either side of it blend from that angle into the moving frames'. An unedited path turns by
 // exactly 0, a rigidly turned one by its angle; with nothing that moves and no fixed range, 0.
+// A source step longer than `max_step` is a cut, not a motion (a clip whose first frame is its
+// rest pose at the origin, a teleport): it counts for nothing, so its length cannot outweigh
+// the steps around it and make the turn jump where it leaves the windows.
 //
 // Inputs:
 //   source, edited  #N by 2 trajectories (stage units), paired by frame
@@ -59,12 +62,13 @@ Eigen::VectorXd TangentHeadings(const Eigen::Ref<const Trajectory2>& points,
 //   fixed_turn      #R turn of each fixed range
 //   window          half-width of each box window, frames (at least 1)
 //   min_travel      stage units
+//   max_step        stage units per frame (0: no step is a cut)
 // Returns #N turns, unwrapped. Throws InvalidInput on bad shapes or ranges.
 Eigen::VectorXd DeformationTurns(const Eigen::Ref<const Trajectory2>& source,
                                  const Eigen::Ref<const Trajectory2>& edited,
                                  const std::vector<FrameRange>& fixed,
                                  const Eigen::Ref<const Eigen::VectorXd>& fixed_turn, int window,
-                                 double min_travel);
+                                 double min_travel, double max_step = 0.0);
 
 // Adds multiples of 2*pi so consecutive angles differ by at most pi.
 void UnwrapAngles(Eigen::Ref<Eigen::VectorXd> angles);

@@ -228,7 +228,8 @@ def _apply(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Out
         ranges = [(0, f, l) for a, f, l in problem.rigid if a == i]
         angles = [outcome.rigid_angles[k] for k, (a, _, _) in enumerate(problem.rigid) if a == i]
         turn = trajectory.deformation_turns(problem.paths[i], outcome.paths[i], [0, len(outcome.paths[i])],
-                                            ranges, angles, window["turn_window"], window["turn_min_travel"])
+                                            ranges, angles, window["turn_window"], window["turn_min_travel"],
+                                            window["turn_max_step"])
         ctx.paths[name] = EditedPath(ground=outcome.paths[i], heading=np.asarray(heading) + turn)
 
 

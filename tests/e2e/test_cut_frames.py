@@ -1,0 +1,73 @@
+"""A clip whose first frame is its rest pose far from the walk (as many captures are exported: a
+T-pose at the origin, then the take): the jump from that frame to the next is a cut, not a motion.
+Bent by handles (one at the first frame of the take, one 0.65 s later), the body turns smoothly by the edit, with no pop where that jump would leave the
+windows that measure the edit's rotation. Measured by UsdSkel FK on the composed stage."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pxr import Usd, UsdGeom
+
+from bvhgen import walk_idle_walk, write_bvh
+from mocapedit.data import examples
+from mocapedit.geometry import trajectory
+from mocapedit.inspect import metrics
+from mocapedit.pipeline.processor import solve
+from mocapedit.usd import bvh_usd, evaluate
+
+
+def _shot(tmp_path, cut: bool):
+    """A generated walk (60 fps, centimetres, Y-up), its first frame a T-pose 3 m away when
+    ``cut``, bent by three hard handles."""
+    tmp_path.mkdir(parents=True, exist_ok=True)
+    rig, values, _ = walk_idle_walk(fps=60.0, walk1=2.0, idle=0.5, walk2=2.0)
+    if cut:
+        values[0] = 0.0
+        values[0, :3] = (200.0, 95.0, -300.0)          # the Hips position channels come first
+    write_bvh(tmp_path / "take.bvh", rig, values)
+    bvh_usd.import_bvh(str(tmp_path / "take.bvh"), str(tmp_path / "clip.usda"),
+                       bvh_usd.ImportSettings(scale=1.0, up_axis="Y", agent=True))
+    clip = Usd.Stage.Open(str(tmp_path / "clip.usda"))
+    agent = clip.GetDefaultPrim().GetPath()
+    stage = Usd.Stage.CreateNew(str(tmp_path / "shot.usda"))
+    UsdGeom.SetStageUpAxis(stage, "Y")
+    UsdGeom.SetStageMetersPerUnit(stage, 0.01)
+    stage.SetTimeCodesPerSecond(60.0)
+    stage.SetStartTimeCode(clip.GetStartTimeCode())
+    stage.SetEndTimeCode(clip.GetEndTimeCode())
+    stage.GetRootLayer().subLayerPaths.append("./clip.usda")
+    times, hips = evaluate.joint_world_matrices(clip, agent)
+    n = len(times)
+    for k, (f, move) in enumerate({1: (0.0, 0.0), 40: (50.0, 0.0), n // 2: (-60.0, 20.0), 4 * n // 5: (50.0, -30.0)}.items()):
+        at = metrics.to_ground(hips[f, 3, :3], "Y") + np.array(move)
+        p = metrics.from_ground(at, hips[f, 3, 1], "Y")
+        examples.add_position_constraint(stage, f"/Edits/handle{k}", agent, int(f), tuple(map(float, p)))
+    stage.GetRootLayer().Save()
+    return str(tmp_path / "shot.usda"), str(agent)
+
+
+def _edit_turn_steps(tmp_path, cut: bool) -> np.ndarray:
+    """Degrees the edit's turn of the body changes by from frame to frame, over the first walk
+    (frames 1 to 90, before it slows down to stand)."""
+    shot, agent = _shot(tmp_path, cut)
+    solve(shot, output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"))
+    _, ms = evaluate.joint_world_matrices(Usd.Stage.Open(shot), agent)
+    _, me = evaluate.joint_world_matrices(Usd.Stage.Open(str(tmp_path / "c.usda")), agent)
+    turn = np.degrees(metrics.body_facing(me, "Y") - metrics.body_facing(ms, "Y"))
+    return np.abs(np.diff(turn[1:91]))
+
+
+def test_a_cut_in_the_source_makes_no_pop_in_the_edit(tmp_path):
+    clean = _edit_turn_steps(tmp_path / "clean", False)
+    cut = _edit_turn_steps(tmp_path / "cut", True)
+    # The same turns as the take without the rest frame, to a tenth of a degree per frame
+    # (the handle 0.65 s in bends the walk by up to 2.1 degrees per frame either way).
+    assert np.abs(cut - clean).max() < 0.1, (int(np.argmax(np.abs(cut - clean))) + 1, float(cut.max()))
+    assert cut.max() < 3.0
+
+
+def test_the_cut_is_what_the_limit_leaves_out(tmp_path, monkeypatch):
+    """Counted as a motion, the cut's 3.6 m step outweighs the walk's steps in every window that
+    holds it, and the body turns 13 degrees in one frame where it leaves them."""
+    monkeypatch.setattr(trajectory, "CUT_SPEED_M", np.inf)
+    assert _edit_turn_steps(tmp_path, True).max() > 5.0
