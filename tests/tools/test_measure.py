@@ -52,6 +52,21 @@ def test_foot_skate_sliding_foot_known_speed(tmp_path, up, tcps):
     assert only_left.mean == pytest.approx(v, abs=1e-4)
 
 
+def test_foot_skate_counts_a_cut_for_nothing(tmp_path):
+    """A take whose first frame is its rest pose 3 m away: the jump from it is a cut (faster than
+    anyone moves), not a slide of feet that are on the ground either side of it."""
+    n, v, tcps = 24, 0.3, 24.0
+    stage = new_stage(tmp_path, "cut.usda", up="Y", tcps=tcps)
+    k = np.arange(n)
+    left = foot(n, 0.1, np.where(k == 0, -3.0, v * k / tcps), 0.0)
+    right = foot(n, -0.1, np.where(k == 0, -3.0, 0.0), 0.0)
+    build_agent(stage, "/Agent", walk(n, "Y", left, right))
+    skate = measure.foot_skate(stage, "/Agent")
+    # The feet on the ground from frame 0 on: the steps after the cut count, as fast as they
+    # slide (the 3 m step counted made the left foot slide at 3.4 units/s, the right at 3.1).
+    np.testing.assert_allclose(skate.speeds, [v, 0.0], atol=1e-4)
+
+
 def test_foot_skate_meters_per_unit_scales_default_threshold(tmp_path):
     # Centimetre stage: the foot bobs 0..1.5 cm while sliding at 30 cm/s, then lifts to 8 cm and
     # moves at 100 cm/s. The default 2 cm threshold must become 2 units.

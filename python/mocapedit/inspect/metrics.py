@@ -24,6 +24,7 @@ import numpy as np
 from mocapedit.geometry.ground import from_ground, ground_axes, to_ground
 from mocapedit.geometry.ground import up_token as _up_token
 from mocapedit.geometry import stationary as _stationary
+from mocapedit.geometry.trajectory import CUT_SPEED_M
 from mocapedit.solve import collisions
 from mocapedit.solve import plausibility as _plausibility
 from mocapedit.geometry.shape import as_points as _points
@@ -266,7 +267,8 @@ def foot_skate_of_positions(pos: np.ndarray, t: np.ndarray, up, meters_per_unit:
     the clip (default: all). The other arguments are :func:`mocapedit.tools.measure.foot_skate`'s.
     Leading axes (``pos`` (..., T, F, 3), ``t`` and ``in_clip`` (..., T), ``contact`` (..., T, F))
     measure many agents at once, each on its own: the result's fields get the same leading
-    axes, ``mean`` too (an array)."""
+    axes, ``mean`` too (an array). A step faster than ``trajectory.CUT_SPEED_M`` is a cut, not
+    a slide (a clip whose first frame is its rest pose at the origin): it counts for nothing."""
     t = np.asarray(t, dtype=np.float64)
     if contact_height is None:
         contact_height = 0.02 / meters_per_unit
@@ -286,7 +288,8 @@ def foot_skate_of_positions(pos: np.ndarray, t: np.ndarray, up, meters_per_unit:
     ground = to_ground(pos, up)
     step = np.linalg.norm(np.diff(ground, axis=-3), axis=-1)        # (..., T-1, F)
     dt = (np.diff(t, axis=-1) * seconds_per_code)[..., None]         # (..., T-1, 1)
-    both = contact[..., 1:, :] & contact[..., :-1, :]
+    cut = step > CUT_SPEED_M / meters_per_unit * dt
+    both = contact[..., 1:, :] & contact[..., :-1, :] & ~cut
     slide = np.where(both, step, 0.0).sum(axis=-2)
     duration = np.where(both, dt, 0.0).sum(axis=-2)
     speeds = np.where(duration > 0, slide / np.where(duration > 0, duration, 1.0), np.nan)
