@@ -253,3 +253,47 @@ def test_a_closed_pipe_ends_the_command_quietly(tmp_path):
                        capture_output=True, text=True)
     assert r.stdout.count("\n") == 1
     assert "Traceback" not in r.stderr and "Error" not in r.stderr, r.stderr
+
+
+_STOP_INSIDE = """
+import argparse, gc, os, signal, sys, time, weakref
+from mocapedit.cli import main as cli
+
+class Stop:
+    # Python prints and drops what a __del__ or a weakref callback raises ("Exception ignored
+    # in ..."): a signal handled there must still stop the run, and quietly.
+    def __del__(self):
+        os.kill(os.getpid(), signal.SIGTERM)
+        for _ in range(100000):
+            pass
+
+def run(args):
+    if args.where == "weakref":
+        class Thing: pass
+        thing = Thing()
+        ref = weakref.ref(thing, lambda r: Stop.__del__(None))
+        del thing
+    else:
+        Stop()
+    for _ in range(300):
+        time.sleep(0.01)
+    print("finished")
+    return 0
+
+parser = argparse.ArgumentParser()
+parser.add_argument("where")
+parser.set_defaults(run=run)
+cli.build_parser = lambda: parser
+sys.exit(cli.main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.parametrize("where", ["del", "weakref"])
+def test_a_signal_handled_where_python_drops_exceptions_still_stops_quietly(tmp_path, where):
+    script = tmp_path / "stop_inside.py"
+    script.write_text(_STOP_INSIDE)
+    proc = subprocess.run([sys.executable, str(script), where], capture_output=True, text=True, timeout=120)
+    assert "finished" not in proc.stdout
+    assert proc.returncode == 128 + signal.SIGTERM, proc.stderr
+    assert "Traceback" not in proc.stderr and "ignored" not in proc.stderr, proc.stderr
+    assert "stopped by signal 15" in proc.stderr

@@ -48,13 +48,39 @@ def _stop(signum, frame):
     f = frame
     while f is not None:
         if f.f_code.co_filename.startswith("<frozen importlib"):
-            import os
-            import threading
-            threading.Timer(0.05, os.kill, (os.getpid(), signum)).start()
+            _send_again(signum)
             return
         f = f.f_back
     from mocapedit.usd.outputs import request_stop
     request_stop(signum)
+
+
+def _send_again(signum: int) -> None:
+    """Delivers ``signum`` to this process again in a moment (a daemon thread: a run that ends
+    first is not held up by it)."""
+    import os
+    import threading
+    timer = threading.Timer(0.05, os.kill, (os.getpid(), signum))
+    timer.daemon = True
+    timer.start()
+
+
+def _quiet_unraisable(previous):
+    """A stop raised while Python runs a ``__del__``, a weakref callback or a garbage
+    collector callback is printed as "Exception ignored" and dropped, and the run would go on.
+    Such a stop is sent again, to land in the run's own code, and nothing is printed."""
+    from mocapedit.usd.outputs import Terminated
+
+    def hook(unraisable):
+        exc = unraisable.exc_value
+        if isinstance(exc, Terminated):
+            _send_again(exc.signum)
+        elif isinstance(exc, KeyboardInterrupt):
+            import signal
+            _send_again(signal.SIGINT)
+        else:
+            previous(unraisable)
+    return hook
 
 
 def _install_signal_handlers() -> None:
@@ -67,6 +93,7 @@ def _install_signal_handlers() -> None:
     for name in ("SIGTERM", "SIGHUP", "SIGINT"):
         if hasattr(signal, name):
             signal.signal(getattr(signal, name), _stop)
+    sys.unraisablehook = _quiet_unraisable(sys.unraisablehook)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -78,6 +105,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return EXIT_USAGE
     from mocapedit.usd.outputs import Terminated
+    unraisablehook = sys.unraisablehook
     _install_signal_handlers()
     try:
         import numpy as np
@@ -115,6 +143,8 @@ def main(argv: list[str] | None = None) -> int:
               + ("" if getattr(args, "debug", False) else " and the traceback that --debug prints") + ".",
               file=sys.stderr)
         return EXIT_INTERNAL
+    finally:
+        sys.unraisablehook = unraisablehook
 
 
 def _what_was_written() -> str:
