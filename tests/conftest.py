@@ -16,6 +16,18 @@ REPO = Path(__file__).resolve().parents[1]
 # The CMU clips, when present; MOCAPEDIT_MOCAP_DIR points elsewhere.
 SHARED_MOCAP = Path(os.environ.get("MOCAPEDIT_MOCAP_DIR", REPO.parent / "shared" / "mocap"))
 
+
+def shot_over_clip(path: Path, clip: Usd.Stage, up: str, meters_per_unit: float = 0.01) -> Usd.Stage:
+    """A new shot stage at ``path`` with ``clip``'s frame rate and range (the caller brings the
+    clip in, by sublayer or reference)."""
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, up)
+    UsdGeom.SetStageMetersPerUnit(stage, meters_per_unit)
+    stage.SetTimeCodesPerSecond(clip.GetTimeCodesPerSecond())
+    stage.SetStartTimeCode(clip.GetStartTimeCode())
+    stage.SetEndTimeCode(clip.GetEndTimeCode())
+    return stage
+
 TOY_JOINTS = ["Root", "Root/Hips", "Root/Hips/LeftFoot", "Root/Hips/RightFoot"]
 
 

@@ -15,7 +15,7 @@ from mocapedit.tools import measure
 from mocapedit.usd import evaluate
 from mocapedit.pipeline.processor import solve
 
-from conftest import SHARED_MOCAP
+from conftest import SHARED_MOCAP, shot_over_clip
 
 CLIPS = {"cmu131_01_start_walk_stop": ("cmu", "Y"), "cmu131_03_start_hop_stop": ("cmu", "Z"),
          "cc_cmu02_04_jump_balance": ("cm", "Y")}
@@ -32,12 +32,7 @@ def _bent(tmp_path, name, unit, up, scale):
                        bvh_usd.ImportSettings(scale=bvh.UNITS[unit] / 0.01, up_axis=up, agent=True))
     clip = Usd.Stage.Open(str(tmp_path / "clip.usda"))
     agent = clip.GetDefaultPrim().GetPath()
-    stage = Usd.Stage.CreateNew(str(tmp_path / "shot.usda"))
-    UsdGeom.SetStageUpAxis(stage, up)
-    UsdGeom.SetStageMetersPerUnit(stage, 0.01)
-    stage.SetTimeCodesPerSecond(clip.GetTimeCodesPerSecond())
-    stage.SetStartTimeCode(clip.GetStartTimeCode())
-    stage.SetEndTimeCode(clip.GetEndTimeCode())
+    stage = shot_over_clip(tmp_path / "shot.usda", clip, up)
     stage.GetRootLayer().subLayerPaths.append("./clip.usda")
     times, hips = evaluate.joint_world_matrices(clip, agent)
     n = len(times)
@@ -73,12 +68,7 @@ def test_a_group_of_real_walkers_turned_90_degrees_walks_round_the_corner(tmp_pa
     bvh_usd.import_bvh(str(SHARED_MOCAP / f"{GROUP_WALK}.bvh"), str(tmp_path / "walk.usda"),
                        bvh_usd.ImportSettings(scale=bvh.UNITS["cm"] / 0.01, up_axis="Z", agent=True))
     clip = Usd.Stage.Open(str(tmp_path / "walk.usda"))
-    stage = Usd.Stage.CreateNew(str(tmp_path / "shot.usda"))
-    UsdGeom.SetStageUpAxis(stage, "Z")
-    UsdGeom.SetStageMetersPerUnit(stage, 0.01)
-    stage.SetTimeCodesPerSecond(clip.GetTimeCodesPerSecond())
-    stage.SetStartTimeCode(clip.GetStartTimeCode())
-    stage.SetEndTimeCode(clip.GetEndTimeCode())
+    stage = shot_over_clip(tmp_path / "shot.usda", clip, "Z")
     names = [f"/World/Crowd/m{r}{c}" for r in range(3) for c in range(2)]
     for p in names:
         stage.DefinePrim(p).GetReferences().AddReference("./walk.usda")

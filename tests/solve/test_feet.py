@@ -137,6 +137,48 @@ def test_walker_contacts_alternate_and_hold_still(walk_clip):
     assert both.all()
 
 
+def test_a_cut_in_the_clip_changes_no_contact(walk_clip):
+    """Many captures keep their rest pose at the origin in the first frame. The jump from it to
+    the take is a cut: it neither raises the speeds a foot may plant at (they grow with the
+    clip's mean foot speed) nor joins that frame to a contact."""
+    world = walker.joint_world_positions(walk_clip)
+    moved = world[:1] + np.array([3.0, 0.0, -2.5])               # 3.9 m away, feet on the ground
+    cut = np.concatenate([moved, world])
+    seconds = np.arange(len(cut)) / FPS
+    for side in ("Left", "Right"):
+        ankle, toe = walk_clip.joint_index(side + "Foot"), walk_clip.joint_index(side + "Toe")
+        plain = contacts.detect_leg(seconds[:-1], world[:, ankle], world[:, toe], "Y", 1.0)
+        after = contacts.detect_leg(seconds, cut[:, ankle], cut[:, toe], "Y", 1.0)
+        assert [(a - 1, b - 1) for a, b in after] == plain, side
+
+
+def _locked_skate_over_source(tmp_path, cut: bool) -> float:
+    """A 193-frame walk at 60 fps (its first frame moved 3.9 m away when ``cut``, as a rest
+    pose left at the origin), bent 40 cm sideways at its middle by handles at its first,
+    middle and last frames; metres per second its locked feet slide more than the source's."""
+    clip = walker.walk(frames=193, fps=60.0, speed=1.25, name="take")
+    if cut:
+        clip.translations[0, 0] += np.array([3.0, 0.0, -2.5], dtype=np.float32)
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)], up_axis="Y",
+                                       fps=60.0, clips_dir=tmp_path / "clips")
+    a = f"{CROWD}/a"
+    at = evaluate.agent_root_positions(stage, a, [0.0, 96.0, 192.0])
+    for name, frame, p in zip(("first", "middle", "last"), (0, 96, 192), at):
+        examples.add_position_constraint(stage, f"/Edits/{name}", a, frame,
+                                         tuple(map(float, p + (0.4 if frame == 96 else 0.0, 0.0, 0.0))))
+    stage.GetRootLayer().Save()
+    _, out = _solve(tmp_path)
+    source = measure.foot_skate(stage, a)
+    edited = measure.foot_skate(out, a, times=source.times, contact=source.contact)
+    return edited.mean - source.mean
+
+
+def test_a_cut_in_the_clip_leaves_the_locked_feet_as_planted(tmp_path):
+    clean = _locked_skate_over_source(tmp_path / "clean", False)
+    cut = _locked_skate_over_source(tmp_path / "cut", True)
+    assert clean <= 0.005 and cut <= 0.005, (clean, cut)
+
+
 def test_a_run_has_contacts_on_both_feet_in_turn():
     clip = walker.run(frames=120, fps=60.0, speed=3.5)
     world = walker.joint_world_positions(clip)

@@ -11,7 +11,9 @@ in the clip and barely moves over the ground. The test has hysteresis (stricter 
 a contact than to stay in it; the speeds grow with a fast clip's mean foot speed) and a
 minimum duration; a contact then extends over the
 landing and the lift-off while the joint stays under the release height. Thresholds are
-in metres and seconds, converted with ``metersPerUnit`` and the clip's frame times.
+in metres and seconds, converted with ``metersPerUnit`` and the clip's frame times. A cut in
+the clip (a step faster than ``trajectory.CUT_SPEED_M``, as from a rest pose left in the
+first frame) bounds every contact, and counts in neither the lowest height nor the mean speed.
 """
 from __future__ import annotations
 
@@ -128,25 +130,48 @@ def _hysteresis(enter: np.ndarray, stay: np.ndarray) -> np.ndarray:
     return out
 
 
+def takes(seconds: np.ndarray, points: np.ndarray, up_axis: str, meters_per_unit: float) -> list[tuple[int, int]]:
+    """Half-open frame runs ``[a, b)`` of a joint's (F,3) world positions between cuts
+    (steps faster than ``trajectory.CUT_SPEED_M``: a rest pose left in a clip's first frame,
+    a teleport). Contacts are found within each run, never across a cut."""
+    uv = ground.to_ground(points, up_axis)
+    cut = trajectory.is_cut(np.linalg.norm(np.diff(uv, axis=0), axis=-1), np.diff(seconds), meters_per_unit)
+    bounds = [0, *(np.flatnonzero(cut) + 1).tolist(), len(points)]
+    return [(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
+
+
 def detect_joint(seconds: np.ndarray, points: np.ndarray, up_axis: str, meters_per_unit: float,
-                 settings: DetectSettings) -> np.ndarray:
-    """(F,) contact mask of one joint from its (F,3) world positions at the clip's frames."""
+                 settings: DetectSettings, pieces: list[tuple[int, int]] | None = None) -> np.ndarray:
+    """(F,) contact mask of one joint from its (F,3) world positions at the clip's frames, found
+    within each of ``pieces`` (default :func:`takes`). A lone frame between two cuts is never a
+    contact, and counts neither in the lowest height nor in the mean speed."""
+    if pieces is None:
+        pieces = takes(seconds, points, up_axis, meters_per_unit)
+    pieces = [(a, b) for a, b in pieces if b - a >= 2]
+    mask = np.zeros(len(points), dtype=bool)
+    if not pieces:
+        return mask
     h = ground.height(points, up_axis) * meters_per_unit
-    h = h - h.min() if len(h) else h
-    v = ground_speed(seconds, points, up_axis) * meters_per_unit
+    v = np.zeros(len(points))
+    for a, b in pieces:
+        v[a:b] = ground_speed(seconds[a:b], points[a:b], up_axis) * meters_per_unit
+    inside = mask_of([(a, b - 1) for a, b in pieces], len(points))
+    h = h - h[inside].min()
     # Speeds relative to the clip: a running foot that slips a little while planted is still planted.
-    scale = max(1.0, settings.relative_speed * float(v.mean()) / settings.speed) if len(v) else 1.0
-    mask = _hysteresis((h <= settings.height) & (v <= settings.speed * scale),
-                       (h <= settings.release_height) & (v <= settings.release_speed * scale))
-    # A contact reaches out over the landing and the lift-off, while the joint is still low:
-    # the lock carries the source foot's own motion there, and blends where the foot is in the air.
+    scale = max(1.0, settings.relative_speed * float(v[inside].mean()) / settings.speed)
     low = h <= settings.height
-    for a, b in runs(mask):
-        while a > 0 and low[a - 1]:
-            a -= 1
-        while b + 1 < len(mask) and low[b + 1]:
-            b += 1
-        mask[a:b + 1] = True
+    for a, b in pieces:
+        piece = _hysteresis((h[a:b] <= settings.height) & (v[a:b] <= settings.speed * scale),
+                            (h[a:b] <= settings.release_height) & (v[a:b] <= settings.release_speed * scale))
+        # A contact reaches out over the landing and the lift-off, while the joint is still low:
+        # the lock carries the source foot's own motion there, and blends where the foot is in the air.
+        for x, y in runs(piece):
+            while x > 0 and low[a + x - 1]:
+                x -= 1
+            while y + 1 < b - a and low[a + y + 1]:
+                y += 1
+            piece[x:y + 1] = True
+        mask[a:b] = piece
     return mask
 
 
@@ -164,12 +189,14 @@ def clean_ranges(mask: np.ndarray, seconds: np.ndarray, settings: DetectSettings
 
 def detect_leg(seconds: np.ndarray, ankle: np.ndarray, toe: np.ndarray | None, up_axis: str,
                meters_per_unit: float, settings: DetectSettings | None = None) -> list[tuple[int, int]]:
-    """Contact ranges of one foot: frames where its ankle or its toe is planted."""
+    """Contact ranges of one foot: frames where its ankle or its toe is planted. No range
+    spans a cut in the clip (:func:`takes`, of the ankle)."""
     settings = settings or DetectSettings()
-    mask = detect_joint(seconds, ankle, up_axis, meters_per_unit, settings)
+    pieces = takes(seconds, ankle, up_axis, meters_per_unit)
+    mask = detect_joint(seconds, ankle, up_axis, meters_per_unit, settings, pieces)
     if toe is not None:
-        mask |= detect_joint(seconds, toe, up_axis, meters_per_unit, settings)
-    return clean_ranges(mask, seconds, settings)
+        mask |= detect_joint(seconds, toe, up_axis, meters_per_unit, settings, pieces)
+    return [(a + x, a + y) for a, b in pieces for x, y in clean_ranges(mask[a:b], seconds[a:b], settings)]
 
 
 def detect_agent(agent: Agent, clip: Clip, info: StageInfo,
@@ -193,4 +220,4 @@ def mask_of(ranges, frame_count: int) -> np.ndarray:
 
 
 __all__ = ["Leg", "SIDES", "find_legs", "chain_problem", "DetectSettings", "detect_leg", "detect_joint", "detect_agent",
-           "clean_ranges", "mask_of", "ground_speed"]
+           "clean_ranges", "mask_of", "ground_speed", "takes"]

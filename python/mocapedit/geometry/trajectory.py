@@ -123,6 +123,12 @@ TURN_MIN_SPEED_M = 0.1
 CUT_SPEED_M = 15.0
 
 
+def is_cut(step: np.ndarray, seconds: np.ndarray, meters_per_unit: float) -> np.ndarray:
+    """Which steps are cuts: ``step`` ground lengths (stage units) taken in ``seconds``, any
+    matching shapes; faster than ``CUT_SPEED_M``."""
+    return np.asarray(step) > CUT_SPEED_M / meters_per_unit * np.asarray(seconds)
+
+
 def turn_window(fps: float) -> int:
     """Half-width in frames of the windows of :func:`deformation_turns` at ``fps``."""
     return max(1, int(round(TURN_WINDOW_S * float(fps))))

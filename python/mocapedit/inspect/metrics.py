@@ -24,7 +24,7 @@ import numpy as np
 from mocapedit.geometry.ground import from_ground, ground_axes, to_ground
 from mocapedit.geometry.ground import up_token as _up_token
 from mocapedit.geometry import stationary as _stationary
-from mocapedit.geometry.trajectory import CUT_SPEED_M
+from mocapedit.geometry.trajectory import is_cut
 from mocapedit.solve import collisions
 from mocapedit.solve import plausibility as _plausibility
 from mocapedit.geometry.shape import as_points as _points
@@ -288,7 +288,7 @@ def foot_skate_of_positions(pos: np.ndarray, t: np.ndarray, up, meters_per_unit:
     ground = to_ground(pos, up)
     step = np.linalg.norm(np.diff(ground, axis=-3), axis=-1)        # (..., T-1, F)
     dt = (np.diff(t, axis=-1) * seconds_per_code)[..., None]         # (..., T-1, 1)
-    cut = step > CUT_SPEED_M / meters_per_unit * dt
+    cut = is_cut(step, dt, meters_per_unit)
     both = contact[..., 1:, :] & contact[..., :-1, :] & ~cut
     slide = np.where(both, step, 0.0).sum(axis=-2)
     duration = np.where(both, dt, 0.0).sum(axis=-2)

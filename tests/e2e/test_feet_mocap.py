@@ -1,0 +1,55 @@
+"""Foot locking on real motion capture (../shared/mocap): CMU takes, some with a rest pose at
+the origin in their first frame, bent 40 cm sideways at their middle by hard handles at their
+first, middle and last frames. Measured by UsdSkel FK on the composed stage over the source's
+contacts: the locked feet slide at most 0.5 cm/s more than the source's (issue #17's bar)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pxr import Usd
+
+from mocapedit.data import examples
+from mocapedit.formats import bvh
+from mocapedit.inspect import metrics
+from mocapedit.pipeline.processor import solve
+from mocapedit.tools import measure
+from mocapedit.usd import bvh_usd, evaluate
+
+from conftest import SHARED_MOCAP, shot_over_clip
+
+CLIPS = {"cc_cmu07_04_slow_walk": "cm", "cc_cmu07_12_brisk_walk": "cm", "cc_cmu02_01_walk": "cm",
+         "cmu131_01_start_walk_stop": "cmu"}
+
+pytestmark = [pytest.mark.realdata,
+              pytest.mark.skipif(not all((SHARED_MOCAP / f"{n}.bvh").exists() for n in CLIPS),
+                                 reason="../shared/mocap is absent")]
+
+
+def _bent(tmp_path, name):
+    bvh_usd.import_bvh(str(SHARED_MOCAP / f"{name}.bvh"), str(tmp_path / "clip.usda"),
+                       bvh_usd.ImportSettings(scale=bvh.UNITS[CLIPS[name]] / 0.01, up_axis="Y", agent=True))
+    clip = Usd.Stage.Open(str(tmp_path / "clip.usda"))
+    agent = clip.GetDefaultPrim().GetPath()
+    stage = shot_over_clip(tmp_path / "shot.usda", clip, "Y")
+    stage.GetRootLayer().subLayerPaths.append("./clip.usda")
+    _, hips = evaluate.joint_world_matrices(clip, agent)
+    g = metrics.to_ground(hips[:, 3, :3], "Y")
+    way = (g[-1] - g[0]) / np.linalg.norm(g[-1] - g[0])
+    n = len(g)
+    for k, f in enumerate((0, n // 2, n - 1)):
+        at = g[f] + (40.0 * np.array([-way[1], way[0]]) if k == 1 else 0.0)
+        p = metrics.from_ground(at, hips[f, 3, 1], "Y")
+        examples.add_position_constraint(stage, f"/Edits/handle{k}", agent, int(f), tuple(map(float, p)))
+    stage.GetRootLayer().Save()
+    return stage, str(agent)
+
+
+@pytest.mark.parametrize("name", sorted(CLIPS))
+def test_real_takes_bent_by_handles_keep_their_feet_planted(tmp_path, name):
+    stage, agent = _bent(tmp_path, name)
+    result = solve(str(tmp_path / "shot.usda"), output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"))
+    assert all(c["residual"] < 1e-6 for c in result.report.constraints)
+    source = measure.foot_skate(stage, agent)
+    edited = measure.foot_skate(Usd.Stage.Open(str(tmp_path / "c.usda")), agent, times=source.times,
+                                contact=source.contact)
+    assert edited.mean <= source.mean + 0.5, (source.mean, edited.mean)
