@@ -617,6 +617,22 @@ def test_a_standing_body_dragged_further_than_a_leg_reaches_steps_instead_of_sli
     assert bones < 1e-6 and flips == 0 and speed < 1.5
 
 
+def test_a_stand_dragged_fast_keeps_its_feet_with_quick_steps(tmp_path):
+    """The stand dragged 50 cm in 2 s (25 cm/s, as a CMU balance take bent 40 cm by handles
+    drifts): its feet step often enough, quickly enough, to slide at most 0.5 cm/s more than
+    the source's (0.53 with steps of at least 0.3 s; the CMU take +1.81 then, +0.34 now), no
+    leg joint turning faster than 1.5 times the source's fastest."""
+    src, a, _ = _dragged_stand(tmp_path, along=0.5, idle=48)
+    _, free = _solve(tmp_path, "free", foot_locking=False)
+    result, out = _solve(tmp_path)
+    entry = result.report.agents[a]
+    assert entry["footSteps"] >= 3
+    assert entry["footSkateEdited"] <= entry["footSkateSource"] + 0.005
+    times = evaluate.sample_times(src, a)
+    bones, flips, speed = _leg_quality(src, out, a, times, LEGS, FPS, unlocked=free)
+    assert bones < 1e-6 and flips == 0 and speed < 1.5
+
+
 def test_a_retimed_walk_is_measured_against_its_source_as_its_timing_plays_it(tmp_path):
     """A walk re-timed to hurry and then slow down (time constraints alone) is played by a value
     clip; its feet are where its source put them at each clip time. Its foot skate at the shot's

@@ -55,7 +55,7 @@ LEASH_DEGREES = 15.0
 #: leash (:func:`footplant.replant`): at least STEP_SECONDS, longer so that the foot moves no
 #: faster than its source does, but no longer than STEP_LONGEST_SECONDS; and metres it lifts at
 #: the top of the step.
-STEP_SECONDS = 0.3
+STEP_SECONDS = 0.25
 STEP_LONGEST_SECONDS = 1.5
 STEP_HEIGHT_M = 0.05
 #: A foot steps only through contacts where the leash would let it slide further than this
