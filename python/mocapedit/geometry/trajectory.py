@@ -129,6 +129,14 @@ def is_cut(step: np.ndarray, seconds: np.ndarray, meters_per_unit: float) -> np.
     return np.asarray(step) > CUT_SPEED_M / meters_per_unit * np.asarray(seconds)
 
 
+def samples_per_second(sample_times: np.ndarray, time_codes_per_second: float) -> float:
+    """How many samples per second a path sampled at ``sample_times`` (shot time codes) has: a
+    120 fps clip on a 24 fps stage has five per time code (its median step)."""
+    step = np.diff(np.asarray(sample_times, dtype=np.float64))
+    step = step[step > 0]
+    return float(time_codes_per_second) / float(np.median(step)) if len(step) else float(time_codes_per_second)
+
+
 def turn_window(fps: float) -> int:
     """Half-width in frames of the windows of :func:`deformation_turns` at ``fps``."""
     return max(1, int(round(TURN_WINDOW_S * float(fps))))

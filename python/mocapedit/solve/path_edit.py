@@ -78,6 +78,9 @@ class AgentInput:
     stationary_refs: list[str] = field(default_factory=list)  # who each range comes from
     rest_turn: np.ndarray | None = None   # (R,) rotation of each range from source to rest
     sample_times: np.ndarray | None = None  # (F,) shot time of each frame (groups)
+    # The windows of the edit's turn at this agent's own sample rate (turn_settings); None: the
+    # Settings' (a clip sampled at the stage's rate).
+    turn: dict | None = None
 
     @property
     def frames(self) -> int:
@@ -141,6 +144,14 @@ class Settings:
     turn_max_step: float = 0.0            # stage units: a longer source step is a cut (0: none)
     group_step: float = 12.0              # time codes between the sampled times of a group mesh
     group_neighbours: int = 3
+
+
+def turn_args(a: AgentInput, settings: "Settings") -> tuple[int, float, float]:
+    """(window, min_travel, max_step) of :func:`trajectory.deformation_turns` for agent ``a``:
+    its own (``AgentInput.turn``), else the settings'."""
+    t = a.turn or {"turn_window": settings.turn_window, "turn_min_travel": settings.turn_min_travel,
+                   "turn_max_step": settings.turn_max_step}
+    return int(t["turn_window"]), float(t["turn_min_travel"]), float(t["turn_max_step"])
 
 
 def turn_settings(fps: float, meters_per_unit: float) -> dict:
@@ -620,7 +631,7 @@ class ComponentProblem:
     def _headings(self, ground: np.ndarray, result, turns: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
         """(F,) headings of the agents ``turns`` names (index -> turn of each stationary range)
         on their edited paths (``ground``: every agent's, concatenated), as ``edited_heading``
-        gives them, the turns of the deformation from one call."""
+        gives them, the turns of the deformation from one call per sample rate."""
         rigid = result.rigid_angle if result.rigid_motion else None
         fo = self._full_offset
         out, turned, fixed, fixed_turn = {}, [], [], []
@@ -637,21 +648,29 @@ class ComponentProblem:
                 fixed.extend((len(turned), first, last) for first, last in a.stationary)
                 fixed_turn.extend(turn)
                 turned.append(i)
-        if turned:
-            blocks = [(fo[i], fo[i + 1]) for i in turned]
-            if len(turned) == len(self._inputs):
+        # One call per sample rate among the agents (clips sampled at other rates than the stage's).
+        by_rate: dict[tuple, list[int]] = {}
+        for k, i in enumerate(turned):
+            by_rate.setdefault(turn_args(self._inputs[i], self.settings), []).append(k)
+        fixed = np.asarray(fixed, dtype=np.int64).reshape(-1, 3)
+        fixed_turn = np.asarray(fixed_turn, dtype=np.float64).reshape(-1)
+        for args, ks in by_rate.items():
+            chosen = [turned[k] for k in ks]
+            blocks = [(fo[i], fo[i + 1]) for i in chosen]
+            if len(chosen) == len(self._inputs):
                 if self._source_full is None:
                     self._source_full = np.concatenate([a.source for a in self._inputs], dtype=np.float64)
                 source, edited = self._source_full, ground
             else:
-                source = np.concatenate([self._inputs[i].source for i in turned])
+                source = np.concatenate([self._inputs[i].source for i in chosen])
                 edited = np.concatenate([ground[b:e] for b, e in blocks])
             offsets = np.cumsum([0] + [e - b for b, e in blocks])
-            h = trajectory.deformation_turns(source, edited, offsets, fixed, fixed_turn,
-                                             self.settings.turn_window, self.settings.turn_min_travel,
-                                             self.settings.turn_max_step)
-            for k, i in enumerate(turned):
-                out[i] = np.asarray(self._inputs[i].source_heading, dtype=np.float64) + h[offsets[k]:offsets[k + 1]]
+            mine = np.isin(fixed[:, 0], ks)
+            renumber = {k: n for n, k in enumerate(ks)}
+            ranges = [(renumber[int(b)], int(f), int(l)) for b, f, l in fixed[mine]]
+            h = trajectory.deformation_turns(source, edited, offsets, ranges, fixed_turn[mine], *args)
+            for n, i in enumerate(chosen):
+                out[i] = np.asarray(self._inputs[i].source_heading, dtype=np.float64) + h[offsets[n]:offsets[n + 1]]
         return out
 
     def _agents(self, result) -> dict[str, AgentResult]:
@@ -676,8 +695,7 @@ def edited_heading(a: AgentInput, g: np.ndarray, turn: np.ndarray, settings: Set
     applies to the path around each frame (``trajectory.deformation_turns``), and through each
     stationary range by that range's rotation ``turn``, so the range stays rigid."""
     fixed = [(0, int(f), int(l)) for f, l in a.stationary]
-    h = trajectory.deformation_turns(a.source, g, [0, a.frames], fixed, turn, settings.turn_window,
-                                     settings.turn_min_travel, settings.turn_max_step)
+    h = trajectory.deformation_turns(a.source, g, [0, a.frames], fixed, turn, *turn_args(a, settings))
     return np.asarray(a.source_heading, dtype=np.float64) + h
 
 

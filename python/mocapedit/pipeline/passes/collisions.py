@@ -211,7 +211,6 @@ def _problem(ctx: SolveContext, names: list[str], footprints, enabled: bool) -> 
 
 def _apply(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Outcome) -> None:
     info = ctx.data.info
-    window = path_edit.turn_settings(info.time_codes_per_second, info.meters_per_unit)
     for i in np.flatnonzero(outcome.delays > 0):
         name = problem.names[i]
         ctx.time_maps[name] = outcome.frame_times[i]
@@ -227,6 +226,10 @@ def _apply(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Out
         # of a standing root can flip.
         ranges = [(0, f, l) for a, f, l in problem.rigid if a == i]
         angles = [outcome.rigid_angles[k] for k, (a, _, _) in enumerate(problem.rigid) if a == i]
+        # Windows in seconds count this agent's own samples (a 120 fps clip on a 24 fps stage).
+        window = path_edit.turn_settings(trajectory.samples_per_second(ctx.data.agents[name].sample_times,
+                                                                       info.time_codes_per_second),
+                                         info.meters_per_unit)
         turn = trajectory.deformation_turns(problem.paths[i], outcome.paths[i], [0, len(outcome.paths[i])],
                                             ranges, angles, window["turn_window"], window["turn_min_travel"],
                                             window["turn_max_step"])

@@ -19,7 +19,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from mocapedit.geometry import curves, ground
+from mocapedit.geometry import curves, ground, trajectory
 from mocapedit.geometry.components import UnionFind
 from mocapedit.inspect import metrics
 from mocapedit.solve import path_edit
@@ -106,17 +106,20 @@ def _agent_input(ctx: SolveContext, path: str, fps: float) -> path_edit.AgentInp
     agent, traj = data.agents[path], ctx.trajectories[path]
     ranges, names = _merged_ranges(agent)
     rest, turn = traj.ground, None
+    # Windows in seconds count this agent's own samples (a 120 fps clip on a 24 fps stage).
+    rate = trajectory.samples_per_second(agent.sample_times, fps)
     if agent.path_curve:
         poly = curves.ground_polyline(data.curves[agent.path_curve], agent.path_curve, info.up_axis)
         try:
-            remapped = curves.remap(traj.ground, poly, ranges, fps, info.metres(STILL_M))
+            remapped = curves.remap(traj.ground, poly, ranges, rate, info.metres(STILL_M))
         except ValueError as exc:
             raise prim_error(agent.path_curve, f"cannot remap <{path}> onto this curve: {exc}", "points") from None
         rest, turn = remapped.ground, remapped.range_turn
     refs = [f"{agent.animation_path}.stationary:{'/'.join(n)}:frames" for n in names]
     return path_edit.AgentInput(path=path, rest=np.ascontiguousarray(rest, dtype=np.float64), source=traj.ground,
                                 source_heading=traj.heading, stationary=ranges, stationary_refs=refs,
-                                rest_turn=turn, sample_times=agent.sample_times)
+                                rest_turn=turn, sample_times=agent.sample_times,
+                                turn=path_edit.turn_settings(rate, info.meters_per_unit))
 
 
 class _Component:
@@ -136,10 +139,10 @@ class _Component:
         self.links = [path_edit.Link(c.agent, c.frame, c.target, c.target_frame, ground.to_ground(c.offset, up),
                                      c.space, _weight(c), c.path) for c in self.relatives]
         self.curve_only = not self.handles and not self.links
-        step = max(1, int(round(CURVE_ANCHOR_S * fps)))
         for a in self.inputs:
             curve = data.agents[a.path].path_curve
             if curve:
+                step = max(1, int(round(CURVE_ANCHOR_S * trajectory.samples_per_second(a.sample_times, fps))))
                 frames = sorted(set(range(0, a.frames, step)) | {a.frames - 1})
                 self.handles.extend(path_edit.Handle(a.path, f, a.rest[f], CURVE_ANCHOR_WEIGHT, curve) for f in frames)
         self.settings = path_edit.Settings(

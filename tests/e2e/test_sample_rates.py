@@ -1,0 +1,51 @@
+"""A clip sampled faster than the stage (a 120 fps take referenced into a 24 fps shot) is edited
+as the same take on a 120 fps stage: the windows that turn the body by the edit are in seconds
+of the clip's own samples, not in stage frames. Measured by UsdSkel FK on the composed stage."""
+from __future__ import annotations
+
+import numpy as np
+from pxr import Usd, UsdGeom
+
+from bvhgen import walk_idle_walk, write_bvh
+from mocapedit.data import examples
+from mocapedit.inspect import metrics
+from mocapedit.pipeline.processor import solve
+from mocapedit.usd import bvh_usd, evaluate
+
+
+def _edit_turn(folder, stage_fps: float) -> tuple[np.ndarray, np.ndarray]:
+    """(seconds, degrees the edit turns the body) of a 120 fps walk, stand and walk, referenced
+    into a stage at ``stage_fps`` and bent by four hard handles at 0, 1, 2.5 and 4 s."""
+    folder.mkdir(parents=True, exist_ok=True)
+    rig, values, _ = walk_idle_walk(fps=120.0, walk1=2.0, idle=1.0, walk2=2.0)
+    write_bvh(folder / "take.bvh", rig, values, frame_time="0.00833333")
+    bvh_usd.import_bvh(str(folder / "take.bvh"), str(folder / "clip.usda"),
+                       bvh_usd.ImportSettings(scale=1.0, up_axis="Y", agent=True))
+    clip = Usd.Stage.Open(str(folder / "clip.usda"))
+    stage = Usd.Stage.CreateNew(str(folder / "shot.usda"))
+    UsdGeom.SetStageUpAxis(stage, "Y")
+    UsdGeom.SetStageMetersPerUnit(stage, 0.01)
+    stage.SetTimeCodesPerSecond(stage_fps)
+    stage.SetStartTimeCode(0)
+    stage.SetEndTimeCode(clip.GetEndTimeCode() * stage_fps / 120.0)
+    agent = "/World/take"
+    stage.DefinePrim(agent).GetReferences().AddReference("./clip.usda")
+    times, hips = evaluate.joint_world_matrices(stage, agent)
+    for k, (second, move) in enumerate(((0.0, (0, 0)), (1.0, (40, 0)), (2.5, (-40, 30)), (4.0, (30, -20)))):
+        frame = int(np.argmin(np.abs(times - second * stage_fps)))     # the clip's sample index
+        at = metrics.to_ground(hips[frame, 3, :3], "Y") + np.array(move, dtype=float)
+        examples.add_position_constraint(stage, f"/Edits/handle{k}", agent, frame,
+                                         tuple(map(float, metrics.from_ground(at, hips[frame, 3, 1], "Y"))))
+    stage.GetRootLayer().Save()
+    solve(str(folder / "shot.usda"), output=str(folder / "e.usda"), composed=str(folder / "c.usda"))
+    _, before = evaluate.joint_world_matrices(stage, agent, times)
+    _, after = evaluate.joint_world_matrices(Usd.Stage.Open(str(folder / "c.usda")), agent, times)
+    turn = np.degrees(np.unwrap(metrics.body_facing(after, "Y") - metrics.body_facing(before, "Y")))
+    return times / stage_fps, turn
+
+
+def test_a_fast_clip_on_a_slow_stage_turns_as_on_a_stage_at_its_own_rate(tmp_path):
+    seconds, turn = _edit_turn(tmp_path / "at120", 120.0)
+    seconds24, turn24 = _edit_turn(tmp_path / "at24", 24.0)
+    # Windows counted in stage frames were five times too short at 24 fps: up to 17 degrees apart.
+    assert np.abs(np.interp(seconds, seconds24, turn24) - turn).max() < 0.01
