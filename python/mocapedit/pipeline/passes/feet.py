@@ -541,7 +541,9 @@ def lock_agents(ctx: SolveContext) -> list[AgentLocking]:
                 locks.append((lock, result))
         if len(locks) >= LOCK_RUN:
             _lock_run(ctx, locks)
-            locks = []
+            # Posed legs are shared by the agents of a run only: a crowd's retimed agents each
+            # have their own, and kept for the whole shot they held 240 KB an agent.
+            locks, shared = [], {}
     if locks:
         _lock_run(ctx, locks)
     return out
