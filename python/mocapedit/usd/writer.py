@@ -46,11 +46,13 @@ from mocapedit.model.names import unique_identifier
 
 #: The suffix of the transform ops the writer prepends (``xformOp:<kind>:mocapEdit``).
 EDIT_SUFFIX = "mocapEdit"
-#: USD value type of each kind of op it writes (all in double precision).
-_OP_TYPES = {"translate": (Sdf.ValueTypeNames.Double3, Vt.Vec3dArray),
-             "rotateY": (Sdf.ValueTypeNames.Double, Vt.DoubleArray),
-             "rotateZ": (Sdf.ValueTypeNames.Double, Vt.DoubleArray),
-             "transform": (Sdf.ValueTypeNames.Matrix4d, Vt.Matrix4dArray)}
+#: USD value type of each kind of op it writes (all in double precision), and what turns its
+#: (T,...) float64 values into T sample values in one conversion (angles: Python floats, which
+#: USD takes faster than the items of a Vt.DoubleArray).
+_OP_TYPES = {"translate": (Sdf.ValueTypeNames.Double3, Vt.Vec3dArray.FromNumpy),
+             "rotateY": (Sdf.ValueTypeNames.Double, np.ndarray.tolist),
+             "rotateZ": (Sdf.ValueTypeNames.Double, np.ndarray.tolist),
+             "transform": (Sdf.ValueTypeNames.Matrix4d, Vt.Matrix4dArray.FromNumpy)}
 ROOT = Sdf.Path("/MocapEdit")
 GUIDES = ROOT.AppendChild("Guides")
 ANIMATIONS = ROOT.AppendChild("Animations")
@@ -136,10 +138,10 @@ def _author_xform_ops(layer: Sdf.Layer, agent: Agent, edit: AgentEdit) -> None:
     sdf.attr(spec, "xformOpOrder", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(order), uniform=True)
     times = np.asarray(edit.times, dtype=np.float64).tolist()
     for name, (kind, values) in zip(names, edit.xform_ops):
-        type_name, array_type = _OP_TYPES[kind]
+        type_name, convert = _OP_TYPES[kind]
         path = sdf.attr(spec, name, type_name).path
         # One conversion of the whole array: per-sample Gf values from lists took half the time.
-        converted = array_type.FromNumpy(np.ascontiguousarray(values, dtype=np.float64))
+        converted = convert(np.ascontiguousarray(values, dtype=np.float64))
         for t, v in zip(times, converted):
             layer.SetTimeSample(path, t, v)
 
