@@ -135,6 +135,7 @@ class EditsToWrite(Mapping):
     def __len__(self) -> int:
         return len(self._ctx.edits)
 
+
 #: Agents whose plausibility is measured together (bounds the memory of a large crowd's arrays).
 PLAUSIBILITY_BATCH = 64
 
