@@ -217,7 +217,7 @@ def xform_ops(op: np.ndarray, up_axis: str) -> list[tuple[str, np.ndarray]]:
     upright = (np.abs(rot[:, up, :] - axis).max(initial=0.0) < 1e-12
                and np.abs(rot[:, :, up] - axis).max(initial=0.0) < 1e-12
                and np.abs(op[:, :3, 3]).max(initial=0.0) < 1e-12 and np.abs(op[:, 3, 3] - 1.0).max(initial=0.0) < 1e-12
-               and np.abs(np.einsum("tij,tkj->tik", rot, rot) - np.eye(3)).max(initial=0.0) < 1e-12)
+               and np.abs(rot @ rot.transpose(0, 2, 1) - np.eye(3)).max(initial=0.0) < 1e-12)
     if not upright:
         return [("transform", op)]
     if up_axis.upper() == "Z":

@@ -12,8 +12,10 @@ work through :mod:`mocapedit.solve` and numpy.
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,7 +50,9 @@ def compose_edits(ctx: SolveContext) -> None:
 
     The pose is the source sampled at the (warped) source frame of each output time, then
     modified by the pose edits in order (layering); the edited path carries the whole body
-    by one rigid ground motion per output time (the prepended xform op).
+    by one rigid ground motion per output time (the prepended xform op). The poses themselves
+    are baked as the writer reaches each agent (:class:`EditsToWrite`): a crowd's baked poses
+    are never all in memory at once.
     """
     up = ctx.data.info.up_axis
     for path in ctx.touched():
@@ -60,27 +64,14 @@ def compose_edits(ctx: SolveContext) -> None:
         lowered = None
         if spec:
             # The source clip plays on the agent's timing (its own, or the time map), nothing
-            # of it is baked ...
+            # of it is baked but the rotations pose edits change (:func:`baked_animation`) ...
             edit.retimed = writer.RetimedClip(
                 layer=spec[0], prim_path=spec[1], joints=list(clip.joints),
                 stage_times=ctx.time_maps.get(path, agent.sample_times), clip_times=clip.spec_times)
-        if path in ctx.pose_edits and spec:
-            # ... but the rotations the pose edits change, authored over it; a lowered body is
-            # carried by the agent's transform.
-            pose = animation.sample_pose(clip, frames)
-            for pose_edit in ctx.pose_edits[path]:
-                pose = pose_edit.apply(pose, times, frames)
+            # ... and a lowered body is carried by the agent's transform.
+            for pose_edit in ctx.pose_edits.get(path, []):
                 if pose_edit.drop is not None:
                     lowered = pose_edit.drop if lowered is None else lowered + pose_edit.drop
-            edit.animation = writer.BakedAnimation(joints=pose.joints, times=times, translations=None,
-                                                   rotations=pose.rotations, scales=None)
-        elif not spec and (path in ctx.time_maps or path in ctx.pose_edits):
-            pose = animation.sample_pose(clip, frames)
-            for pose_edit in ctx.pose_edits.get(path, []):
-                pose = pose_edit.apply(pose, times, frames)
-            edit.animation = writer.BakedAnimation(
-                joints=pose.joints, times=times, translations=pose.translations,
-                rotations=pose.rotations, scales=pose.scales)
         edited = ctx.paths.get(path)
         if edited is not None or lowered is not None:
             # Untimed agents are written at their own frames: nothing to interpolate.
@@ -100,8 +91,49 @@ def compose_edits(ctx: SolveContext) -> None:
                 else:
                     agent_view = agent
                 edit.xform_ops = trajectory.xform_ops(trajectory.agent_xform_op(agent_view, motion), up)
-        if edit.animation is not None or edit.retimed is not None or edit.xform_ops:
+        if edit.retimed is not None or edit.xform_ops or _baked(ctx, path, spec):
             ctx.edits[path] = edit
+
+
+def _baked(ctx: SolveContext, path: str, spec) -> bool:
+    """Whether the agent's pose is baked: the rotations its pose edits change over its re-timed
+    clip (``spec``), or, with no re-timed clip, its whole warped or edited pose."""
+    return path in ctx.pose_edits if spec else (path in ctx.time_maps or path in ctx.pose_edits)
+
+
+def baked_animation(ctx: SolveContext, path: str) -> writer.BakedAnimation | None:
+    """The agent's baked pose (see :func:`compose_edits`), None when nothing of it is baked."""
+    spec = ctx.retimed_spec(path) or ctx.rotations_spec(path)
+    if not _baked(ctx, path, spec):
+        return None
+    times, frames = ctx.output_frames(path)
+    pose = animation.sample_pose(ctx.data.clip_of(ctx.data.agents[path]), frames)
+    for pose_edit in ctx.pose_edits.get(path, []):
+        pose = pose_edit.apply(pose, times, frames)
+    if spec:  # the rotations alone, over the re-timed source
+        return writer.BakedAnimation(joints=pose.joints, times=times, translations=None,
+                                     rotations=pose.rotations, scales=None)
+    return writer.BakedAnimation(joints=pose.joints, times=times, translations=pose.translations,
+                                 rotations=pose.rotations, scales=pose.scales)
+
+
+class EditsToWrite(Mapping):
+    """The composed edits as the writer reads them: each agent's with its baked pose, computed
+    when the writer asks for it and dropped once written."""
+
+    def __init__(self, ctx: SolveContext):
+        self._ctx = ctx
+
+    def __getitem__(self, path: str) -> writer.AgentEdit:
+        edit = self._ctx.edits[path]
+        baked = baked_animation(self._ctx, path)
+        return edit if baked is None else dataclasses.replace(edit, animation=baked)
+
+    def __iter__(self):
+        return iter(self._ctx.edits)
+
+    def __len__(self) -> int:
+        return len(self._ctx.edits)
 
 
 #: Agents whose plausibility is measured together (bounds the memory of a large crowd's arrays).
@@ -234,7 +266,6 @@ def _measure_plausibility(ctx: SolveContext, items: list[_Measured]) -> dict:
 
 
 def _with_parent(agent, parent_to_world):
-    import dataclasses
     return dataclasses.replace(agent, agent_parent_to_world=parent_to_world)
 
 
@@ -353,7 +384,7 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
     t = time.perf_counter()
     provenance = stage_io.provenance(stage, options_text(guides, collisions, bake_timing, **overrides))
     layer = writer.build_layer(writer.LayerContent(
-        info=data.info, agents=data.agents, edits=ctx.edits, guides=ctx.guides,
+        info=data.info, agents=data.agents, edits=EditsToWrite(ctx), guides=ctx.guides,
         provenance=provenance, stats=report.stats.to_dict(), report=report.to_layer_dict(),
         anchor=os.path.dirname(os.path.abspath(output)) if output else None))
     # The layer holds the edits now: their arrays (10,000 moved agents: 250 MB of transforms)

@@ -35,7 +35,7 @@ from __future__ import annotations
 import hashlib
 import os
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Mapping
 
 import numpy as np
 from pxr import Sdf, UsdGeom, Vt
@@ -46,11 +46,13 @@ from mocapedit.model.names import unique_identifier
 
 #: The suffix of the transform ops the writer prepends (``xformOp:<kind>:mocapEdit``).
 EDIT_SUFFIX = "mocapEdit"
-#: USD value type of each kind of op it writes (all in double precision).
-_OP_TYPES = {"translate": (Sdf.ValueTypeNames.Double3, Vt.Vec3dArray),
-             "rotateY": (Sdf.ValueTypeNames.Double, Vt.DoubleArray),
-             "rotateZ": (Sdf.ValueTypeNames.Double, Vt.DoubleArray),
-             "transform": (Sdf.ValueTypeNames.Matrix4d, Vt.Matrix4dArray)}
+#: USD value type of each kind of op it writes (all in double precision), and what turns its
+#: (T,...) float64 values into T sample values in one conversion (angles: Python floats, which
+#: USD takes faster than the items of a Vt.DoubleArray).
+_OP_TYPES = {"translate": (Sdf.ValueTypeNames.Double3, Vt.Vec3dArray.FromNumpy),
+             "rotateY": (Sdf.ValueTypeNames.Double, np.ndarray.tolist),
+             "rotateZ": (Sdf.ValueTypeNames.Double, np.ndarray.tolist),
+             "transform": (Sdf.ValueTypeNames.Matrix4d, Vt.Matrix4dArray.FromNumpy)}
 ROOT = Sdf.Path("/MocapEdit")
 GUIDES = ROOT.AppendChild("Guides")
 ANIMATIONS = ROOT.AppendChild("Animations")
@@ -113,7 +115,7 @@ class GuidePoints:
 class LayerContent:
     info: StageInfo
     agents: dict[str, Agent]
-    edits: dict[str, AgentEdit]
+    edits: Mapping[str, AgentEdit]   # read once per agent, in sorted order
     guides: list = field(default_factory=list)
     provenance: dict = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
@@ -136,26 +138,22 @@ def _author_xform_ops(layer: Sdf.Layer, agent: Agent, edit: AgentEdit) -> None:
     sdf.attr(spec, "xformOpOrder", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(order), uniform=True)
     times = np.asarray(edit.times, dtype=np.float64).tolist()
     for name, (kind, values) in zip(names, edit.xform_ops):
-        type_name, array_type = _OP_TYPES[kind]
-        attr = sdf.attr(spec, name, type_name)
+        type_name, convert = _OP_TYPES[kind]
+        path = sdf.attr(spec, name, type_name).path
         # One conversion of the whole array: per-sample Gf values from lists took half the time.
-        converted = array_type.FromNumpy(np.ascontiguousarray(values, dtype=np.float64))
+        converted = convert(np.ascontiguousarray(values, dtype=np.float64))
         for t, v in zip(times, converted):
-            layer.SetTimeSample(attr.path, t, v)
+            layer.SetTimeSample(path, t, v)
 
 
-def _animation_key(anim: BakedAnimation, digests: dict[int, bytes]) -> tuple:
-    """Identity of a baked animation's content; arrays shared by several agents (the same
-    objects) are hashed once."""
+def _animation_key(anim: BakedAnimation) -> tuple:
+    """Identity of a baked animation's content (its arrays are hashed: the writer may be handed
+    each agent's as it reaches it, and they are gone after)."""
     def digest(array) -> bytes:
         if array is None:
             return b""
-        d = digests.get(id(array))
-        if d is None:
-            data = np.ascontiguousarray(array, dtype=np.float32)
-            d = hashlib.blake2b(data.tobytes(), digest_size=20).digest() + repr(data.shape).encode()
-            digests[id(array)] = d
-        return d
+        data = np.ascontiguousarray(array, dtype=np.float32)
+        return hashlib.blake2b(data, digest_size=20).digest() + repr(data.shape).encode()
     return (tuple(anim.joints), np.asarray(anim.times, dtype=np.float64).tobytes(),
             digest(anim.translations), digest(anim.rotations), digest(anim.scales),
             anim.translations is None, anim.scales is None)
@@ -185,10 +183,10 @@ def _author_channels(layer: Sdf.Layer, spec: Sdf.PrimSpec, anim: BakedAnimation)
     for attr_name, type_name, array_type, data in values:
         if data is None:
             continue
-        attr = sdf.attr(spec, attr_name, type_name)
+        path = sdf.attr(spec, attr_name, type_name).path
         data = np.ascontiguousarray(data, dtype=np.float32)
         for t, frame in zip(times, data):
-            layer.SetTimeSample(attr.path, t, array_type.FromNumpy(frame))
+            layer.SetTimeSample(path, t, array_type.FromNumpy(frame))
 
 
 def asset_path(identifier: str, anchor: str | None) -> str:
@@ -208,12 +206,12 @@ def _retimed_key(clip: RetimedClip) -> tuple:
             np.asarray(clip.clip_times, dtype=np.float64).tobytes())
 
 
-def _author_retimed(layer: Sdf.Layer, clip: RetimedClip, name: str, anchor: str | None) -> Sdf.Path:
+def _author_retimed(layer: Sdf.Layer, clip: RetimedClip, name: str, asset: str) -> Sdf.Path:
     """A SkelAnimation that references the source clip (its joints, defaults and any other
-    property) and plays its samples on the new timing through one value clip."""
+    property) and plays its samples on the new timing through one value clip; ``asset``: the
+    clip layer's :func:`asset_path`."""
     path = ANIMATIONS.AppendChild(name)
     spec = sdf.define(layer, path, "SkelAnimation")
-    asset = asset_path(clip.layer, anchor)
     spec.referenceList.Prepend(Sdf.Reference(asset, Sdf.Path(clip.prim_path)))
     sdf.attr(spec, "joints", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(clip.joints), uniform=True)
     pairs = np.stack([np.asarray(clip.stage_times, dtype=np.float64),
@@ -278,7 +276,9 @@ def set_input_metadata(layer: Sdf.Layer, info: StageInfo) -> None:
 
 def build_layer(content: LayerContent) -> Sdf.Layer:
     """An anonymous layer holding the edits; save it with :func:`save_layer`."""
-    layer = Sdf.Layer.CreateAnonymous(".usda")
+    # Held in USD's binary (crate) form: exported as .usdc it is written as it is, with no
+    # second copy of the whole layer; as .usda, the same text.
+    layer = Sdf.Layer.CreateAnonymous(".usdc")
     info = content.info
     set_input_metadata(layer, info)
     layer.documentation = "mocapedit edits: place over the input stage (sublayer above it)."
@@ -294,11 +294,9 @@ def build_layer(content: LayerContent) -> Sdf.Layer:
         root = Sdf.PrimSpec(layer.pseudoRoot, ROOT.name, Sdf.SpecifierDef, "Scope")
         Sdf.PrimSpec(root, GUIDES.name, Sdf.SpecifierDef, "Scope")
         taken: set[str] = set()
-        if any(e.animation is not None or e.retimed is not None for e in content.edits.values()):
-            Sdf.PrimSpec(root, ANIMATIONS.name, Sdf.SpecifierDef, "Scope")
         # Agents whose baked animations are identical share one prim, named after the first.
         authored: dict[tuple, Sdf.Path] = {}
-        digests: dict[int, bytes] = {}
+        assets: dict[str, str] = {}   # clip layer -> its asset path (many agents share a clip)
         for agent_path in sorted(content.edits):
             edit, agent = content.edits[agent_path], content.agents[agent_path]
             if edit.xform_ops:
@@ -306,12 +304,16 @@ def build_layer(content: LayerContent) -> Sdf.Layer:
             if edit.animation is not None or edit.retimed is not None:
                 retimed, anim = edit.retimed, edit.animation
                 key = ((_retimed_key(retimed) if retimed else ())
-                       + (_animation_key(anim, digests) if anim is not None else ()))
+                       + (_animation_key(anim) if anim is not None else ()))
                 path = authored.get(key)
                 if path is None:
+                    if not authored:   # the first animation: its scope, after the guides'
+                        Sdf.PrimSpec(root, ANIMATIONS.name, Sdf.SpecifierDef, "Scope")
                     name = _safe_name(agent_path, taken)
                     if retimed:
-                        path = _author_retimed(layer, retimed, name, content.anchor)
+                        if retimed.layer not in assets:
+                            assets[retimed.layer] = asset_path(retimed.layer, content.anchor)
+                        path = _author_retimed(layer, retimed, name, assets[retimed.layer])
                         if anim is not None:
                             _author_channels(layer, layer.GetPrimAtPath(path), anim)
                     else:
