@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mocapedit.geometry import animation, trajectory
-from mocapedit.pipeline import guides
+from mocapedit.pipeline import guides, memory
 from mocapedit.pipeline.context import EditedPath, SolveContext, SolveOptions  # noqa: F401 (the API's names)
 from mocapedit.pipeline.passes import PASSES
 from mocapedit.inspect import inspection, metrics
@@ -354,6 +354,7 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
     for solve_pass in PASSES:
         t = time.perf_counter()
         solve_pass.run(ctx)
+        memory.give_back()
         timings[solve_pass.name] = time.perf_counter() - t
     t = time.perf_counter()
     compose_edits(ctx)
@@ -363,6 +364,7 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
     timings["inspect"] = time.perf_counter() - t
     t = time.perf_counter()
     measure_plausibility(ctx)
+    memory.give_back()
     timings["plausibility"] = time.perf_counter() - t
 
     constraint_count = sum(len(x) for x in (data.position_constraints, data.relative_constraints,
@@ -390,6 +392,7 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
     # The layer holds the edits now: their arrays (10,000 moved agents: 250 MB of transforms)
     # go before USD's exporter allocates its own buffers.
     ctx.release()
+    memory.give_back()
     if output:
         timings["write"] = time.perf_counter() - t
         timings["total"] = time.perf_counter() - t0
