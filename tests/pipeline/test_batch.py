@@ -269,3 +269,18 @@ def test_split_components_on_a_running_cluster_writes_what_single_solves_write(t
     assert proc.returncode == 0, proc.stderr
     assert json.loads((out / batch.SUMMARY).read_text())["shots"][0]["componentTasks"] == 0
     assert (out / batch.output_name(str(shot), ".edits.usdc")).read_bytes() == expected
+
+
+def _worker_environ():
+    return {k: os.environ.get(k) for k in ("MALLOC_TRIM_THRESHOLD_", "OPENBLAS_NUM_THREADS")}
+
+
+def test_a_local_clusters_workers_reuse_freed_memory(monkeypatch):
+    # Dask's default MALLOC_TRIM_THRESHOLD_ makes glibc map every large array afresh (a
+    # 1,000-agent solve took 388k page faults instead of 183k, 0.9 s more system time); numpy
+    # stays on one thread per worker.
+    monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
+    client, cluster = batch.connect(None, 1)
+    with cluster, client:
+        (environ,) = client.run(_worker_environ).values()
+    assert environ == {"MALLOC_TRIM_THRESHOLD_": None, "OPENBLAS_NUM_THREADS": "1"}

@@ -27,6 +27,8 @@ from mocapedit.model.errors import MocapEditError
 
 #: Seconds to wait for a scheduler given by address before giving up.
 CONNECT_TIMEOUT = 5.0
+#: Dask's configuration of the environment its nannies give new worker processes.
+WORKER_ENVIRON = "distributed.nanny.pre-spawn-environ"
 #: File name of the summary written in the output folder.
 SUMMARY = "batch-summary.json"
 
@@ -183,7 +185,11 @@ def connect(scheduler: str | None, workers: int | None):
     n = workers or max(1, min(os.cpu_count() or 1, 8))
     # Workers forked from a fresh server process start in about a second; spawned ones, which
     # import everything again, took four (and a batch of small shots waits for them).
-    with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
+    # Dask sets MALLOC_TRIM_THRESHOLD_ in its workers, which turns off glibc's reuse of freed
+    # large blocks: every array then comes from fresh zeroed pages (twice the page faults of
+    # a solve). A solve hands its freed memory back itself after each phase (memory.give_back).
+    with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver",
+                          f"{WORKER_ENVIRON}.MALLOC_TRIM_THRESHOLD_": None}):
         # No dashboard, and the scheduler's HTTP routes on a free port: its default, 8787, is
         # often held by a dashboard or another batch on the same machine.
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
