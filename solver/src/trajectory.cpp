@@ -78,6 +78,53 @@ Eigen::VectorXd TangentHeadings(const Eigen::Ref<const Trajectory2>& points,
   return heading;
 }
 
+namespace {
+
+// Travel, in units of `min_travel`, from which a frame's own turn counts in full.
+constexpr double kConfidentTravel = 4.0;
+
+// The frames that are not keys: each pulled towards its own turn by its weight, and held to
+// its neighbours by springs of stiffness window^2 (so a frame sure of itself bends the turn
+// over about `window` frames, and a noisy, barely moving one over many more, diluted). Keys
+// keep their value; with none, every frame is also held weakly to `turn`, the whole path's.
+// `turn` holds the interpolation between the keys on entry and the result on return.
+void SmoothOwnTurns(const Eigen::VectorXd& own, const Eigen::VectorXd& weight, const std::vector<char>& key,
+                    bool any_key, int window, Eigen::VectorXd& turn) {
+  const Eigen::Index n = turn.size();
+  if (!(weight.array() > 0.0).any() || n < 2) return;
+  const double spring = double(window) * double(window), prior = any_key ? 0.0 : 1e-6;
+  // Tridiagonal system (lower, diagonal, upper, rhs), solved by the Thomas algorithm.
+  Eigen::VectorXd lower = Eigen::VectorXd::Zero(n), diag(n), upper = Eigen::VectorXd::Zero(n), rhs(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    if (key[static_cast<size_t>(i)]) {
+      diag[i] = 1.0;
+      rhs[i] = turn[i];
+      continue;
+    }
+    const double w = weight[i] < 1.0 ? weight[i] : 1.0;
+    const double target = turn[i] + std::remainder(own[i] - turn[i], 2.0 * M_PI);
+    diag[i] = w + prior;
+    rhs[i] = w * target + prior * turn[i];
+    if (i > 0) {
+      diag[i] += spring;
+      lower[i] = -spring;
+    }
+    if (i + 1 < n) {
+      diag[i] += spring;
+      upper[i] = -spring;
+    }
+  }
+  for (Eigen::Index i = 1; i < n; ++i) {
+    const double m = lower[i] / diag[i - 1];
+    diag[i] -= m * upper[i - 1];
+    rhs[i] -= m * rhs[i - 1];
+  }
+  turn[n - 1] = rhs[n - 1] / diag[n - 1];
+  for (Eigen::Index i = n - 2; i >= 0; --i) turn[i] = (rhs[i] - upper[i] * turn[i + 1]) / diag[i];
+}
+
+}  // namespace
+
 Eigen::VectorXd DeformationTurns(const Eigen::Ref<const Trajectory2>& source,
                                  const Eigen::Ref<const Trajectory2>& edited,
                                  const std::vector<FrameRange>& fixed,
@@ -107,33 +154,46 @@ Eigen::VectorXd DeformationTurns(const Eigen::Ref<const Trajectory2>& source,
   // frames from i - h to i + h.
   Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor> once(n + 1, 2);
   once.row(0).setZero();
-  std::vector<char> known(static_cast<size_t>(n), 0), in_range(static_cast<size_t>(n), 0);
+  // How far each frame's own turn counts: 0 below min_travel, 1 from kConfidentTravel times
+  // that, in proportion between.
+  Eigen::VectorXd weight = Eigen::VectorXd::Zero(n);
+  std::vector<char> in_range(static_cast<size_t>(n), 0);
   for (Eigen::Index i = 0; i < n; ++i) {
     const Eigen::Index lo = std::max<Eigen::Index>(i - h, 0), hi = std::min<Eigen::Index>(i + h, n - 1);
     once.row(i + 1) = once.row(i) + (steps.row(hi) - steps.row(lo));
-    known[static_cast<size_t>(i)] = (source.row(hi) - source.row(lo)).norm() >= min_travel;
+    const double travel = (source.row(hi) - source.row(lo)).norm();
+    if (travel >= min_travel)
+      weight[i] = min_travel > 0.0 ? std::min(1.0, (travel - min_travel) / ((kConfidentTravel - 1.0) * min_travel)) : 1.0;
   }
   for (Eigen::Index i = 0; i < n; ++i) {
     const Eigen::Index lo = std::max<Eigen::Index>(i - h, 0), hi = std::min<Eigen::Index>(i + h, n - 1);
     const Eigen::RowVector2d z = once.row(hi + 1) - once.row(lo);
     turn[i] = std::atan2(z[1], z[0]);
-    if (z[0] == 0.0 && z[1] == 0.0) known[static_cast<size_t>(i)] = 0;
+    if (z[0] == 0.0 && z[1] == 0.0) weight[i] = 0.0;
   }
   for (size_t r = 0; r < fixed.size(); ++r) {
     const Eigen::Index a = fixed[r].first, b = fixed[r].second;
     // The frames next to a rigid range blend from its turn into the moving frames'.
     for (Eigen::Index i = std::max<Eigen::Index>(a - h, 0); i <= std::min<Eigen::Index>(b + h, n - 1); ++i)
-      known[static_cast<size_t>(i)] = 0;
+      weight[i] = 0.0;
   }
   for (size_t r = 0; r < fixed.size(); ++r)
     for (Eigen::Index i = fixed[r].first; i <= fixed[r].second; ++i) {
       in_range[static_cast<size_t>(i)] = 1;
       turn[i] = fixed_turn[static_cast<Eigen::Index>(r)];
     }
+  if ((weight.array() == 0.0).all() && fixed.empty()) return Eigen::VectorXd::Zero(n);  // nothing moves: no turn
+  const Eigen::VectorXd own = turn;
   std::vector<Eigen::Index> keys;
   for (Eigen::Index i = 0; i < n; ++i)
-    if (known[static_cast<size_t>(i)] || in_range[static_cast<size_t>(i)]) keys.push_back(i);
-  if (keys.empty()) return Eigen::VectorXd::Zero(n);  // nothing moves: no turn
+    if (weight[i] == 1.0 || in_range[static_cast<size_t>(i)]) keys.push_back(i);
+  if (keys.empty()) {
+    // Nothing travels far enough to be sure of: the whole path's rotation, for every frame.
+    const double whole = std::atan2(steps(n - 1, 1), steps(n - 1, 0));
+    turn.setConstant(steps.row(n - 1).isZero(0.0) ? 0.0 : whole);
+    SmoothOwnTurns(own, weight, std::vector<char>(static_cast<size_t>(n), 0), false, static_cast<int>(h), turn);
+    return turn;
+  }
   Eigen::VectorXd v(static_cast<Eigen::Index>(keys.size()));
   for (size_t k = 0; k < keys.size(); ++k) v[static_cast<Eigen::Index>(k)] = turn[keys[k]];
   UnwrapAngles(v);
@@ -155,6 +215,9 @@ Eigen::VectorXd DeformationTurns(const Eigen::Ref<const Trajectory2>& source,
       turn[i] = v[static_cast<Eigen::Index>(k)] + t * (v[static_cast<Eigen::Index>(k + 1)] - v[static_cast<Eigen::Index>(k)]);
     }
   }
+  std::vector<char> key(static_cast<size_t>(n), 0);
+  for (Eigen::Index i : keys) key[static_cast<size_t>(i)] = 1;
+  SmoothOwnTurns(own, weight, key, true, static_cast<int>(h), turn);
   return turn;
 }
 

@@ -52,8 +52,9 @@ def test_real_clips_bent_by_three_handles_never_spin(tmp_path, name, scale):
     assert all(c["residual"] < 1e-6 for c in result.report.constraints)
     p = measure.plausibility(Usd.Stage.Open(shot), Usd.Stage.Open(str(tmp_path / "c.usda")), agent)
     assert p.spin_frames == 0, p
-    # At most 7 degrees per frame at 60 fps more than the source turns (tangent headings: 88 to 160).
-    assert p.max_extra_facing_rate < 7.0 * 60.0, p
+    # At most 4 degrees per frame at 60 fps more than the source turns (tangent headings: 88 to
+    # 160; a slow frame's own turn counted in full, before its neighbours smoothed it: up to 6.5).
+    assert p.max_extra_facing_rate < 4.0 * 60.0, p
     assert result.report.agents[agent]["plausibility"]["spinFrames"] == 0
 
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from mocapedit.geometry import trajectory
+from mocapedit.solve import path_edit
 
 
 def _rotate(points, angle, centre=(0.0, 0.0)):
@@ -85,3 +86,34 @@ def test_a_path_that_never_moves_does_not_turn():
     src = np.zeros((30, 2))
     turn = trajectory.deformation_turns(src, src + 1.0, [0, 30], window=2, min_travel=0.01)
     assert np.all(turn == 0.0)
+
+
+@pytest.mark.parametrize("speed", [0.12, 0.2])
+def test_a_slow_shuffle_nudged_sideways_barely_turns(speed):
+    """Avoidance nudges a shuffling agent 4 cm sideways for a moment: a displacement, not a
+    turn of the body (its own turn of the windows said 30 degrees at 0.12 m/s)."""
+    fps = 60.0
+    t = np.arange(0.0, 4.0, 1.0 / fps)
+    src = np.stack((speed * t, 0.0 * t), axis=1)
+    edited = src + np.stack((0.0 * t, 0.04 * np.exp(-0.5 * ((t - 2.0) / 0.15) ** 2)), axis=1)
+    args = path_edit.turn_settings(fps, 1.0)
+    turn = trajectory.deformation_turns(src, edited, [0, len(src)], window=args["turn_window"],
+                                        min_travel=args["turn_min_travel"])
+    assert np.degrees(np.abs(turn).max()) < 7.0
+    assert np.degrees(np.abs(np.diff(turn)).max()) * fps < 50.0          # degrees per second
+    # The same nudge of a walk is a turn, as before.
+    walk = np.stack((1.4 * t, 0.0 * t), axis=1)
+    bent = trajectory.deformation_turns(walk, walk + (edited - src), [0, len(src)], window=args["turn_window"],
+                                        min_travel=args["turn_min_travel"])
+    assert 2.0 < np.degrees(np.abs(bent).max()) < 4.0
+
+
+@pytest.mark.parametrize("speed", [0.12, 0.2, 0.5])
+def test_a_slow_path_turned_rigidly_still_turns_by_its_angle(speed):
+    fps = 60.0
+    args = path_edit.turn_settings(fps, 1.0)
+    src = _walk_stand_walk() * (speed / 1.4)
+    turned = _rotate(src, 1.1, centre=(0.3, 0.2)) + (2.0, -1.0)
+    turn = trajectory.deformation_turns(src, turned, [0, len(src)], window=args["turn_window"],
+                                        min_travel=args["turn_min_travel"])
+    np.testing.assert_allclose(turn, 1.1, atol=1e-9)

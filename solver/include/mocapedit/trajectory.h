@@ -48,8 +48,11 @@ Eigen::VectorXd TangentHeadings(const Eigen::Ref<const Trajectory2>& points,
 // product of its lengths and a step that barely moves cannot flip it. Where the source moves
 // less than `min_travel` from `window` frames before to `window` frames after (a stand, a turn on
 // the spot, the top of a jump: a displacement, so the jitter of a standing root is no travel)
-// the turn is interpolated, by frame, from the moving frames around it (held beyond the first
-// and last). Each fixed range turns by its own angle, as one rigid body, and the `window` frames
+// the turn is interpolated, by frame, from the frames around it that move at least
+// four times as far (held beyond the first and last); with none, it is the whole
+// path's rotation. A frame that moves between the two counts its own turn in proportion, on top
+// of that: a slow shuffle nudged a few centimetres sideways is not a turn of the body, a walk
+// bent by the same amount is. Each fixed range turns by its own angle, as one rigid body, and the `window` frames
 // either side of it blend from that angle into the moving frames'. An unedited path turns by
 // exactly 0, a rigidly turned one by its angle; with nothing that moves and no fixed range, 0.
 // A source step longer than `max_step` is a cut, not a motion (a clip whose first frame is its
