@@ -203,3 +203,17 @@ def test_agents_sharing_a_skeleton_asset_read_their_own_overrides(tmp_path):
     assert np.allclose(agents["/World/Crowd/d"].rest_transforms, rest)
     assert data.clip_of(agents["/World/Crowd/c"]).joints == swapped
     assert data.clip_of(agents["/World/Crowd/d"]).joints == joints
+
+
+def test_skeletons_without_the_agent_api_are_named_in_a_note(tmp_path, toy_stage):
+    """A crowd built from clips without MocapAgentAPI solved to nothing, silently."""
+    assert not any("MocapAgentAPI" in n for n in solve(str(toy_stage), output=str(tmp_path / "a.usda")).report.notes)
+    stage = Usd.Stage.Open(str(toy_stage))
+    stage.DefinePrim("/World/prop", "SkelRoot")
+    stage.DefinePrim("/World/prop/Skel", "Skeleton")
+    stage.DefinePrim("/World/loose", "Skeleton")
+    stage.GetRootLayer().Save()
+    notes = [n for n in solve(str(toy_stage), output=str(tmp_path / "b.usda")).report.notes if "MocapAgentAPI" in n]
+    assert len(notes) == 1 and notes[0].startswith("2 skeletons without MocapAgentAPI are left as authored")
+    assert "</World/prop>" in notes[0] and "</World/loose>" in notes[0]
+    assert "/World/prop/Skel" not in notes[0] and "agent" not in notes[0].split("(")[1].split(")")[0]

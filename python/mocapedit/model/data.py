@@ -210,6 +210,9 @@ class StageData:
     # "local_to_world": (4,4), "counts": (C,), "basis": str, "curve_type": str, "wrap": str,
     # "order": (C,) or None, "knots": (M,) or None, "weights": (K,) or None (NurbsCurves pointWeights)}
     curves: dict[str, dict] = field(default_factory=dict)
+    # Outermost SkelRoot and Skeleton prims that no agent is, holds or is held by (no
+    # MocapAgentAPI): left as they are.
+    skel_roots_without_agent: list[str] = field(default_factory=list)
 
     def clip_of(self, agent: Agent) -> Clip:
         return self.clips[agent.clip_key]

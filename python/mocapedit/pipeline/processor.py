@@ -344,6 +344,13 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
     timings["read"] = time.perf_counter() - t0
 
     report = Report(input=input_name, output=output)
+    if data.skel_roots_without_agent:
+        roots = data.skel_roots_without_agent
+        report.note(f"{len(roots)} skeleton{'s' if len(roots) > 1 else ''} without MocapAgentAPI "
+                    f"{'are' if len(roots) > 1 else 'is'} left as authored ("
+                    + ", ".join(f"<{r}>" for r in roots[:3]) + (", ..." if len(roots) > 3 else "")
+                    + "); apply MocapAgentAPI to the SkelRoot or Skeleton prim of each agent to edit "
+                    "it (`mocapedit import-bvh --agent` writes clips that have it)")
     ctx = SolveContext(data=data, options=SolveOptions(guides=guides, collisions=collisions,
                                                        overrides=overrides, bake_timing=bake_timing,
                                                        components=components),

@@ -742,11 +742,13 @@ class StageReader:
     # ---- the whole stage -----------------------------------------------------------------
 
     def read(self) -> model.StageData:
-        agent_prims, typed = [], {}
+        agent_prims, typed, skel_roots = [], {}, []
         for prim in self.stage.Traverse():
             if AGENT_API in prim.GetAppliedSchemas():
                 agent_prims.append(prim)
             type_name = prim.GetTypeName()
+            if type_name in ("SkelRoot", "Skeleton"):
+                skel_roots.append(prim.GetPath())
             if type_name.startswith("Mocap"):
                 typed.setdefault(type_name, []).append(prim)
         agent_prims.sort(key=lambda p: str(p.GetPath()))
@@ -759,7 +761,8 @@ class StageReader:
         if task:
             task.done()
 
-        data = model.StageData(info=self.info, agents=self.agents, clips=self.clips)
+        data = model.StageData(info=self.info, agents=self.agents, clips=self.clips,
+                               skel_roots_without_agent=_without_agent(skel_roots, agent_prims))
         readers = {
             "MocapPositionConstraint": (self.read_position, data.position_constraints),
             "MocapRelativeConstraint": (self.read_relative, data.relative_constraints),
@@ -783,6 +786,16 @@ class StageReader:
             if agent.path_curve and agent.path_curve not in data.curves:
                 data.curves[agent.path_curve] = self.read_curve(agent.path, agent.path_curve)
         return data
+
+
+def _without_agent(skels: list[Sdf.Path], agent_prims: list[Usd.Prim]) -> list[str]:
+    """The outermost of the SkelRoots and Skeletons ``skels`` that are not agents, inside one
+    or holding one."""
+    agents = {p.GetPath() for p in agent_prims}
+    holding = {a for path in agents for a in path.GetAncestorsRange()}
+    found = set(skels)
+    return [str(r) for r in skels if r not in holding and
+            not any(a in agents or (a != r and a in found) for a in r.GetAncestorsRange())]
 
 
 def _check_value_clips(prim: Usd.Prim) -> None:
