@@ -16,11 +16,11 @@ from mocapedit.pipeline.processor import solve
 from mocapedit.usd import bvh_usd, evaluate
 
 
-def _shot(tmp_path, cut: bool):
+def _shot(tmp_path, cut: bool, walk1: float = 2.0, idle: float = 0.5):
     """A generated walk (60 fps, centimetres, Y-up), its first frame a T-pose 3 m away when
     ``cut``, bent by three hard handles."""
     tmp_path.mkdir(parents=True, exist_ok=True)
-    rig, values, _ = walk_idle_walk(fps=60.0, walk1=2.0, idle=0.5, walk2=2.0)
+    rig, values, _ = walk_idle_walk(fps=60.0, walk1=walk1, idle=idle, walk2=2.0)
     if cut:
         values[0] = 0.0
         values[0, :3] = (200.0, 95.0, -300.0)          # the Hips position channels come first
@@ -71,3 +71,17 @@ def test_the_cut_is_what_the_limit_leaves_out(tmp_path, monkeypatch):
     holds it, and the body turns 13 degrees in one frame where it leaves them."""
     monkeypatch.setattr(trajectory, "CUT_SPEED_M", np.inf)
     assert _edit_turn_steps(tmp_path, True).max() > 5.0
+
+
+def test_feet_locked_next_to_a_cut_do_not_pull_the_body_down(tmp_path):
+    """The ease into the first contact of the take reached back over the cut to the rest frame,
+    whose hips stand 3.6 m from the plant: the pelvis dropped by the 3 m it took the leg to
+    reach, easing out over the take's first frames."""
+    shot, agent = _shot(tmp_path, True, walk1=0.0, idle=1.0)   # planted from the take's first frame
+    result = solve(shot, output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"))
+    _, ms = evaluate.joint_world_matrices(Usd.Stage.Open(shot), agent)
+    _, me = evaluate.joint_world_matrices(Usd.Stage.Open(str(tmp_path / "c.usda")), agent)
+    drop = ms[:, 3, 1] - me[:, 3, 1]                   # hips height, centimetres
+    assert result.report.stats.foot_locked_agents == 1
+    assert drop.max() < 8.0 + 1e-6, (int(np.argmax(drop)), float(drop.max()))
+    assert result.report.stats.max_pelvis_drop < 8.0 + 1e-6

@@ -314,12 +314,31 @@ class _Run:
         if agents is None:
             self.target, self.target_rot, self.weight, self.stepping, self.steps = (
                 out.target, out.target_rot, out.weight, out.stepping, out.steps)
-            return
-        for i, a in enumerate(agents):
-            lo, hi = self.span(a)
-            at = slice(int(inputs.offsets[i]), int(inputs.offsets[i + 1]))
-            self.target[lo:hi], self.target_rot[lo:hi] = out.target[at], out.target_rot[at]
-            self.weight[lo:hi], self.stepping[lo:hi], self.steps[a] = out.weight[at], out.stepping[at], out.steps[i]
+        else:
+            for i, a in enumerate(agents):
+                lo, hi = self.span(a)
+                at = slice(int(inputs.offsets[i]), int(inputs.offsets[i + 1]))
+                self.target[lo:hi], self.target_rot[lo:hi] = out.target[at], out.target_rot[at]
+                self.weight[lo:hi], self.stepping[lo:hi], self.steps[a] = out.weight[at], out.stepping[at], out.steps[i]
+        for a in chosen:
+            self._stop_at_cuts(a)
+
+    def _stop_at_cuts(self, a: int) -> None:
+        """No leg of agent ``a`` is locked in a take (a run of poses between cuts) where it has no
+        contact: the ease into a take's first contact would otherwise reach back over the cut to
+        a rest pose metres away, and the pelvis drop to make the leg reach it eases out over the
+        take's first poses."""
+        lo, hi = self.span(a)
+        lock, info = self.locks[a], self.ctx.data.info
+        seconds = self.times[lo:hi] / info.time_codes_per_second
+        for k, ranges in enumerate(lock.contacts):
+            pieces = contacts.takes(seconds, self.source["source_ankle"][lo:hi, k], info.up_axis, info.meters_per_unit)
+            if len(pieces) < 2:
+                continue
+            for first, end in pieces:
+                frames = lock.frames[first:end]
+                if not np.any((ranges[:, 0] <= frames[-1] + 1e-9) & (ranges[:, 1] >= frames[0] - 1e-9)):
+                    self.weight[lo + first:lo + end, k] = 0.0
 
     def solve(self, agents: list[int] | None = None) -> None:
         """The solver's IK job on these agents' legs (all: None) at once."""
