@@ -883,3 +883,37 @@ def test_a_standing_agent_pushed_aside_does_not_spin(tmp_path):
     measured = measure.plausibility(Usd.Stage.Open(str(tmp_path / "shot.usda")), out, stander)
     assert measured.spin_frames == 0
     assert measured.max_extra_facing_rate < 1.0 * 60.0     # under 1 degree per frame at 60 fps
+
+
+def test_an_agent_stepping_aside_sends_back_against_its_walk_keeps_its_path(monkeypatch):
+    """Whatever the separation does, no agent leaves avoidance walking back against the path it
+    came in with (a hook, a loop): it keeps that path, and the overlap it leaves is reported."""
+    frames = 60
+    t = np.arange(frames, dtype=np.float64)
+    a = np.stack([np.linspace(0.0, 3.0, frames), np.zeros(frames)], axis=1)
+    b = np.stack([np.linspace(3.0, 0.0, frames), np.full(frames, 0.2)], axis=1)   # head on, 20 cm apart
+    problem = avoidance.Problem(names=["a", "b"], paths=[a, b], frame_times=[t, t],
+                                radius=np.full(2, 0.3), height=np.full(2, 1.8), fixed_timing=np.ones(2, bool))
+    hooked = a.copy()
+    hooked[20:40] = a[20] - (a[20:40] - a[20])           # walks back for a third of a second, twice
+    hooked[40:] = hooked[39] + (a[40:] - a[39])
+    parted = b + (0.0, 1.0)
+
+    def sideways(state, run):
+        run.observe(np.concatenate([a, b]), 0)
+        return np.concatenate([hooked, parted]), np.zeros(0)
+
+    monkeypatch.setattr(avoidance, "_relinearize", sideways)
+    out = avoidance.resolve(problem)
+    assert out.kept_direction == [0]
+    np.testing.assert_array_equal(out.paths[0], a)
+    np.testing.assert_array_equal(out.paths[1], parted)
+    assert len(out.remaining) == 0        # b stepped a metre aside: nothing left between them
+    # Without the hook, the separation's paths stand.
+    def aside(state, run):
+        run.observe(np.concatenate([a, b]), 0)
+        return np.concatenate([a + (0.0, -1.0), b]), np.zeros(0)
+
+    monkeypatch.setattr(avoidance, "_relinearize", aside)
+    out = avoidance.resolve(problem)
+    assert out.kept_direction == [] and out.paths[0][0, 1] == -1.0

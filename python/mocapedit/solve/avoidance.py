@@ -187,6 +187,9 @@ class Outcome:
 
     #: (A,) the shot time of each source frame after waiting (the problem's when none waits)
     frame_times: list[np.ndarray] = field(default_factory=list)
+    #: agents that stepping aside sent back against their direction, kept on the paths they came
+    #: in with (their overlaps are left)
+    kept_direction: list[int] = field(default_factory=list)
     #: (A,) delay each agent took up by waiting, time codes
     delays: np.ndarray = field(default_factory=lambda: np.zeros(0))
     #: (constraint, agent a, agent b, first and last shot time, distance): hard links that hold
@@ -466,6 +469,17 @@ def resolve(problem: Problem, settings: Settings | None = None, progress=None) -
     watch = settings.buffer_m / settings.meters_per_unit if settings.strategy == "relinearize" else None
     run = _Run(state, progress, watch)
     flat, angles = strategy(state, run)
+    backward = _walks_backward(state, flat)
+    while any(backward[k.a] != backward[k.b] for k in problem.links):   # linked agents go back together
+        for k in problem.links:
+            backward[k.a] = backward[k.b] = backward[k.a] or backward[k.b]
+    if backward.any():
+        # An agent sent back against its source direction (a loop, a hook) is worse than an
+        # overlap it leaves: it keeps the path it came in with, and what it leaves is reported.
+        for a in np.flatnonzero(backward):
+            flat[state.starts[a]:state.starts[a + 1]] = state.rest[state.starts[a]:state.starts[a + 1]]
+        angles = np.where([backward[a] for a, _, _ in problem.rigid], 0.0, angles) if len(problem.rigid) else angles
+        run.found, run.hits = state.detect(flat, watch=run.watch), state.region_hits(flat)
     if detour is not None:
         angles = angles + detour[1]
         run.merge(detour[2])
@@ -479,12 +493,40 @@ def resolve(problem: Problem, settings: Settings | None = None, progress=None) -
             region_left.append((r, int(a), int(v - state.starts[a]), float(d)))
     moved = np.array([not np.array_equal(flat[state.starts[a]:state.starts[a + 1]], source.paths[a])
                       for a in range(len(problem.names))], dtype=bool)
-    return Outcome(paths=state.split(flat), rigid_angles=angles, iterations=run.iterations,
+    return Outcome(kept_direction=np.flatnonzero(backward).tolist(), paths=state.split(flat), rigid_angles=angles, iterations=run.iterations,
                    sampling=state.sampling, remaining=found, region_left=region_left,
                    blocked=_blocked(state, found), link_held=_link_held(state), moved=moved, solves=run.solves, stalled=run.stalled,
                    frame_times=waits.frame_times, delays=waits.delay, wait_refused=waits.refused,
                    seconds=time.perf_counter() - t0, timing=run.timing(time.perf_counter() - t0), work=dict(run.work),
                    detour_iterations=detour[2].iterations if detour is not None else [])
+
+
+#: Seconds between the two ends of the chords whose directions :func:`_walks_backward` compares,
+#: and metres a source chord spans at least to count (the plausibility figures' walking direction).
+CHORD_SECONDS = 0.25
+CHORD_MIN_M = 0.05
+
+
+def _walks_backward(state: "_State", flat: np.ndarray) -> np.ndarray:
+    """(agents,) whether the paths ``flat`` send an agent more than 90 degrees away from the
+    direction it walks in on the path it came in with, on any chord of ``CHORD_SECONDS``
+    where that path travels ``CHORD_MIN_M`` or more."""
+    s = state.s
+    out = np.zeros(len(state.p.names), dtype=bool)
+    least = CHORD_MIN_M / s.meters_per_unit
+    for a, times in enumerate(state.p.frame_times):
+        lo, hi = int(state.starts[a]), int(state.starts[a + 1])
+        if hi - lo < 2:
+            continue
+        seconds = np.asarray(times, dtype=np.float64) / s.time_codes_per_second
+        end = np.searchsorted(seconds, seconds + CHORD_SECONDS)
+        ok = end < len(seconds)
+        start, end = np.flatnonzero(ok), end[ok]
+        rest, edited = state.rest[lo:hi], flat[lo:hi]
+        was, now = rest[end] - rest[start], edited[end] - edited[start]
+        moving = np.linalg.norm(was, axis=1) >= least
+        out[a] = bool(np.any(np.einsum("ij,ij->i", was[moving], now[moving]) < 0.0))
+    return out
 
 
 def _detours(problem: Problem, settings: Settings, strategy, progress):

@@ -275,6 +275,13 @@ def _report(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Ou
     stats.collisions_per_iteration = [it.collisions for it in outcome.iterations]
     stats.remaining_overlaps = len(outcome.remaining)
     stats.region_frames_left = len(outcome.region_left)
+    if outcome.kept_direction:
+        kept = [names[a] for a in outcome.kept_direction]
+        report.note(f"collision avoidance would have sent {len(kept)} agent{'s' if len(kept) > 1 else ''} back "
+                    "against the way they walk (" + ", ".join(f"<{n}>" for n in kept[:5])
+                    + (", ..." if len(kept) > 5 else "") + "): they keep their paths, and the overlaps they "
+                    "leave are listed in the collision entries; move them or their neighbours, or make them wait with "
+                    "time constraints")
     # Nearest neighbour of each agent on the final paths, within reach.
     reach = data.info.metres(SEPARATION_REACH_M)
     final = collisions.detect(outcome.sampling, problem.radius, problem.height, problem.margin,
