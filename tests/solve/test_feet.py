@@ -781,3 +781,26 @@ def test_the_solvers_plant_placement_and_kinematics_jobs_match_numpy(tmp_path, m
     args = calls["fk"][0][0]
     with pytest.raises(ValueError, match="parent must precede"):
         kinematics.skeleton_space(np.arange(len(args[0])), *args[1:7])
+
+
+def test_easing_into_a_contact_pulls_a_foot_no_further_than_the_leash():
+    """A standing agent dragged fast by avoidance swings its foot far from its next plant: easing
+    towards the plant from there (85 cm, a CMU crowd) sank the pelvis 60 cm for the leg to reach.
+    While a foot eases in or out, the lock pulls it at most MAX_LEASH_M from where the edit puts
+    it; locked poses (weight 1) and free ones (weight 0) are left alone."""
+    from types import SimpleNamespace
+    from mocapedit.pipeline.passes import feet
+    weight = np.array([[0.0, 0.2], [0.5, 0.45], [1.0, 0.9], [0.3, 1.0]])
+    ankle = np.zeros((4, 2, 3))
+    target = np.zeros((4, 2, 3))
+    target[:, 0, 0] = [50.0, 50.0, 50.0, 10.0]     # centimetres from the ankle
+    target[:, 1, 2] = [85.0, 64.0, 30.0, 85.0]
+    run = SimpleNamespace(weight=weight.copy(), target=target, ankle=ankle, offsets=np.array([0, 4]),
+                          span=lambda a: (0, 4), ctx=SimpleNamespace(data=SimpleNamespace(info=SimpleNamespace(meters_per_unit=0.01))))
+    feet._Run._ease_within_leash(run, 0)
+    pull = run.weight * np.linalg.norm(target - ankle, axis=-1)
+    easing = (weight > 0) & (weight < 1)
+    assert np.all(pull[easing] <= feet.MAX_LEASH_M * 100 + 1e-9)
+    np.testing.assert_array_equal(run.weight[~easing], weight[~easing])
+    np.testing.assert_allclose(run.weight[3, 0], 0.3)                 # within the leash already
+    np.testing.assert_allclose(run.weight[1, 1], 15.0 / 64.0)

@@ -322,6 +322,22 @@ class _Run:
                 self.weight[lo:hi], self.stepping[lo:hi], self.steps[a] = out.weight[at], out.stepping[at], out.steps[i]
         for a in chosen:
             self._stop_at_cuts(a)
+            self._ease_within_leash(a)
+
+    def _ease_within_leash(self, a: int) -> None:
+        """While agent ``a``'s feet ease into or out of a contact, the lock pulls each foot no
+        further than ``MAX_LEASH_M`` from where the edit puts it: a body dragged fast (a standing
+        agent pushed by avoidance) swings its foot far from the next plant, and easing towards
+        it from there had the pelvis sink 60 cm for the leg to reach."""
+        lo, hi = self.span(a)
+        weight = self.weight[lo:hi]
+        easing = (weight > 0.0) & (weight < 1.0)
+        if not easing.any():
+            return
+        far = np.linalg.norm(self.target[lo:hi] - self.ankle[lo:hi], axis=-1)
+        most = MAX_LEASH_M / self.ctx.data.info.meters_per_unit
+        limit = np.where(far > most, most / np.maximum(far, 1e-300), 1.0)
+        self.weight[lo:hi] = np.where(easing, np.minimum(weight, limit), weight)
 
     def _stop_at_cuts(self, a: int) -> None:
         """No leg of agent ``a`` is locked in a take (a run of poses between cuts) where it has no
