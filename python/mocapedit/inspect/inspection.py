@@ -58,16 +58,14 @@ class Crowd:
         return {a.path: i for i, a in enumerate(self.agents)}
 
     def shot_times(self, step: float | None = None) -> np.ndarray:
-        """Time samples covering every edited track, ``step`` time codes apart, within the
-        stage's end time code when it has one (a walker that waited finishes its clip after
-        the shot; nothing plays there)."""
+        """Time samples ``step`` time codes apart over the shot (:meth:`StageInfo.shot_span`):
+        the stage's start and end time codes where it has them, else every edited track (a
+        walker that waited finishes its clip after the shot; nothing plays there)."""
         if not self.agents:
             return np.zeros(0)
         step = step or self.sample_step
-        t0 = min(float(a.edited.times[0]) for a in self.agents)
-        t1 = max(float(a.edited.times[-1]) for a in self.agents)
-        if self.info.end_time is not None:
-            t1 = max(min(t1, float(self.info.end_time)), t0)
+        t0, t1 = self.info.shot_span(min(float(a.edited.times[0]) for a in self.agents),
+                                     max(float(a.edited.times[-1]) for a in self.agents))
         return t0 + step * np.arange(int(np.floor((t1 - t0) / step + 1e-9)) + 1)
 
     def positions(self, times: np.ndarray, which: str = "edited") -> np.ndarray:

@@ -27,6 +27,16 @@ class StageInfo:
         """A length given in metres, in stage units."""
         return value_in_metres / self.meters_per_unit
 
+    def shot_span(self, first: float, last: float) -> tuple[float, float]:
+        """The shot times that play: the stage's start and end time codes where it authors
+        them, else ``first`` and ``last`` (the extent of the agents' clips). What a clip plays
+        before the shot starts or after it ends is never seen. Outside its clip an agent holds
+        its first or last pose, as UsdSkel holds samples, so a range wider than the clips
+        still counts there."""
+        lo = float(first) if self.start_time is None else float(self.start_time)
+        hi = float(last) if self.end_time is None else float(self.end_time)
+        return lo, max(hi, lo)
+
 
 CHANNELS = ("translations", "rotations", "scales")
 

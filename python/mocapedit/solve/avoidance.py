@@ -273,6 +273,23 @@ class _State:
                 pinned[self.starts[pin.agent] + pin.frame] = True
         self.pinned = pinned
         self.link_holds = self._link_holds()
+        self.in_span = self._in_span()
+
+    def _in_span(self) -> np.ndarray:
+        """(V,) the frames that play within ``Problem.span`` (and the frame on each side, whose
+        positions the samples at its ends interpolate); all frames without a span."""
+        out = np.ones(len(self.rest), dtype=bool)
+        if self.p.span is None:
+            return out
+        lo, hi = self.p.span
+        for a, t in self.times.items():
+            t = np.asarray(t, dtype=np.float64)
+            first = max(int(np.searchsorted(t, lo, side="right")) - 1, 0)
+            last = min(int(np.searchsorted(t, hi, side="left")), len(t) - 1)
+            inside = np.zeros(len(t), dtype=bool)
+            inside[first:last + 1] = True
+            out[self.starts[a]:self.starts[a + 1]] = inside
+        return out
 
     def _link_holds(self) -> list[tuple[int, int, int, int, int]]:
         """(link, a, b, first, last): samples around each hard link that holds its two agents
@@ -352,10 +369,12 @@ class _State:
                                  watch=None if watch is None else self.p.margin + watch)
 
     def region_hits(self, flat: np.ndarray, extra: float = 0.0):
-        """Per region: (vertices, agent of each, push) of frames within clearance + extra."""
+        """Per region: (vertices, agent of each, push) of the frames that play in the shot
+        (``in_span``) within clearance + extra."""
         out = []
         for k, region in enumerate(self.p.regions):
             verts = [np.arange(self.starts[a], self.starts[a + 1]) for a in region.agents]
+            verts = [v[self.in_span[v]] for v in verts]
             if not verts:
                 out.append(None)
                 continue

@@ -179,7 +179,11 @@ def _problem(ctx: SolveContext, names: list[str], footprints, enabled: bool) -> 
         names=names, paths=paths, frame_times=times,
         radius=np.array([a.collision_radius for a in agents]), height=np.array([a.collision_height for a in agents]),
         margin=float(data.settings.margin), sample_step=float(data.settings.sample_step), collide_agents=enabled,
-        fixed_timing=np.array([p in timed for p in names], dtype=bool))
+        fixed_timing=np.array([p in timed for p in names], dtype=bool),
+        # Only what plays in the shot is parted: a long clip's walk after the shot ends (or
+        # before it starts) is never seen, and pushes there would bend what is.
+        span=data.info.shot_span(min((float(t[0]) for t in times), default=0.0),
+                                 max((float(t[-1]) for t in times), default=0.0)))
     for i, a in enumerate(agents):
         problem.rigid.extend((i, first, last) for _, first, last in a.stationary)
     # What the artist fixed stays where it is now.

@@ -1,0 +1,99 @@
+"""Only what plays in the shot is parted and counted: clips longer than the stage's time range.
+
+A crowd is often built from takes longer than the shot, referenced with time offsets. What a
+take plays before the stage's start time code or after its end time code is never seen, so
+collision avoidance leaves it alone (a push there would bend what is seen), and the report does
+not count overlaps there. Without a time range, the whole of every clip counts.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pxr import Gf, Sdf, Usd, UsdGeom
+
+from mocapedit.data import examples, walker
+from mocapedit.pipeline.processor import solve
+from mocapedit.usd import evaluate
+
+FRAMES, FPS, SPEED = 240, 24.0, 1.4
+#: The two walkers meet head-on around this frame (each has walked half of the 14 m between them).
+MEET = 120
+
+
+def _head_on(path, start: float | None, end: float | None, regions: bool = False) -> None:
+    clip = walker.walk(frames=FRAMES, fps=FPS, speed=SPEED, name="walk")
+    length = SPEED * MEET / FPS           # each walker's way to the meeting
+    specs = [examples.AgentSpec("a", clip, (0.0, 0.0, 0.0), 0.0),
+             examples.AgentSpec("b", clip, (0.1, 0.0, 2 * length), 180.0)]
+    stage = examples.build_crowd_stage(path, specs, fps=FPS)
+    examples.define_mocap_prim(stage, "/Edits/settings", "MocapSolveSettings",
+                               attributes={"collisionAvoidance": (Sdf.ValueTypeNames.Bool, True)})
+    if start is not None:
+        stage.SetStartTimeCode(start)
+    if end is not None:
+        stage.SetEndTimeCode(end)
+    stage.GetRootLayer().Save()
+
+
+def _moved(shot, edits, times, agents=("/World/Crowd/a", "/World/Crowd/b")) -> float:
+    """Largest distance between the source's and the edit's root positions at ``times``."""
+    src = Usd.Stage.Open(str(shot))
+    layer = Sdf.Layer.CreateAnonymous(".usda")
+    layer.subLayerPaths.append(str(edits))
+    layer.subLayerPaths.append(str(shot))
+    out = Usd.Stage.Open(layer)
+    return max(float(np.abs(evaluate.agent_root_positions(out, p, times)
+                            - evaluate.agent_root_positions(src, p, times)).max())
+               for p in agents)
+
+
+@pytest.mark.parametrize("start, end", [(0.0, 90.0), (150.0, 239.0)])
+def test_walkers_who_meet_outside_the_shot_are_not_pushed_apart(tmp_path, start, end):
+    shot, edits = tmp_path / "shot.usda", tmp_path / "shot.edits.usda"
+    _head_on(shot, start, end)
+    stats = solve(str(shot), output=str(edits), guides=False).report.stats
+    assert stats["collisionsPerIteration"][0] == 0, "their meeting plays outside the shot"
+    assert stats["remainingOverlaps"] == 0
+    assert _moved(shot, edits, list(np.arange(start, end + 1))) < 1e-6
+
+
+def test_walkers_who_meet_in_the_shot_are_pushed_apart(tmp_path):
+    shot, edits = tmp_path / "shot.usda", tmp_path / "shot.edits.usda"
+    _head_on(shot, 60.0, 180.0)
+    stats = solve(str(shot), output=str(edits), guides=False).report.stats
+    assert stats["collisionsPerIteration"][0] > 0
+    assert stats["remainingOverlaps"] == 0
+    assert _moved(shot, edits, [float(MEET)]) > 0.1
+
+
+def test_overlaps_outside_the_shot_are_not_counted(tmp_path):
+    """Without avoidance, the report counts the overlap only when the meeting plays in the shot."""
+    counts = {}
+    for start in (0.0, 150.0):
+        shot = tmp_path / f"shot_{start:g}.usda"
+        _head_on(shot, start, 239.0)
+        result = solve(str(shot), output=str(tmp_path / f"shot_{start:g}.edits.usda"), guides=False,
+                       collisions=False)
+        counts[start] = result.report.stats["remainingOverlaps"]
+    assert counts == {0.0: 1, 150.0: 0}
+
+
+def test_an_avoid_region_reached_after_the_shot_bends_nothing(tmp_path):
+    """A walker reaches a fountain 2 s after the shot ends: it walks its source path in the shot."""
+    clip = walker.walk(frames=FRAMES, fps=FPS, speed=SPEED, name="walk")
+    shot, edits = tmp_path / "shot.usda", tmp_path / "shot.edits.usda"
+    stage = examples.build_crowd_stage(shot, [examples.AgentSpec("a", clip, (0.0, 0.0, 0.0), 0.0)], fps=FPS)
+    vt = Sdf.ValueTypeNames
+    region = examples.define_mocap_prim(stage, "/Edits/fountain", "MocapAvoidRegion", attributes={
+        "shape": (vt.Token, "box"), "size": (vt.Double3, Gf.Vec3d(2.0, 2.0, 2.0)), "margin": (vt.Double, 0.05)})
+    reach = SPEED * 180 / FPS       # where the walker is at frame 180
+    UsdGeom.Xformable(region).AddTranslateOp().Set(Gf.Vec3d(0.2, 0.0, reach))
+    stage.SetEndTimeCode(130.0)
+    stage.GetRootLayer().Save()
+    solve(str(shot), output=str(edits), guides=False)
+    assert _moved(shot, edits, list(np.arange(0.0, 131.0)), ("/World/Crowd/a",)) < 1e-6
+    # With the fountain in the shot, the walker goes round it.
+    stage.SetEndTimeCode(239.0)
+    stage.GetRootLayer().Save()
+    solve(str(shot), output=str(edits), guides=False)
+    assert _moved(shot, edits, [180.0], ("/World/Crowd/a",)) > 0.5
