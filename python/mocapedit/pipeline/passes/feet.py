@@ -466,21 +466,25 @@ class _Run:
                 count = len(self.locks[a].times)
                 worlds[a] = [w[start:start + count] for w in moved]
                 start += count
-        out = []
-        for a, lock in enumerate(self.locks):
-            if worlds[a] is None:
-                out.append(None)
-                continue
-            source_world, free_world, locked_world = worlds[a]
-            before = metrics.foot_skate_of_positions(source_world, lock.times, *units)
+        # Measured at once for agents with as many frames and feet (each on its own).
+        out: list = [None] * len(self.locks)
+        by_shape: dict = {}
+        for a in range(len(self.locks)):
+            if worlds[a] is not None:
+                by_shape.setdefault(worlds[a][0].shape, []).append(a)
+        for members in by_shape.values():
+            source_world, free_world, locked_world = (np.stack([worlds[a][k] for a in members]) for k in range(3))
+            times = np.stack([self.locks[a].times for a in members])
+            before = metrics.foot_skate_of_positions(source_world, times, *units)
 
             def skate(feet_world):
                 contact = metrics.on_ground(before.contact, source_world, feet_world, info.up_axis,
                                             info.meters_per_unit)
-                return metrics.foot_skate_of_positions(feet_world, lock.times, *units, contact=contact).mean
+                return np.atleast_1d(metrics.foot_skate_of_positions(feet_world, times, *units, contact=contact).mean)
 
-            free = skate(free_world)
-            out.append((before.mean, free, free if legs[a] is None else skate(locked_world)))
+            free, locked, source = skate(free_world), skate(locked_world), np.atleast_1d(before.mean)
+            for i, a in enumerate(members):
+                out[a] = (float(source[i]), float(free[i]), float(free[i] if legs[a] is None else locked[i]))
         return out
 
     def plants(self, a: int) -> tuple[np.ndarray, np.ndarray]:
