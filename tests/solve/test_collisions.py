@@ -917,3 +917,39 @@ def test_an_agent_stepping_aside_sends_back_against_its_walk_keeps_its_path(monk
     monkeypatch.setattr(avoidance, "_relinearize", aside)
     out = avoidance.resolve(problem)
     assert out.kept_direction == [] and out.paths[0][0, 1] == -1.0
+
+
+def test_agents_placed_inside_each_other_are_named_with_what_to_do(tmp_path):
+    """Two walkers start 10 cm apart (capsules of 0.3 m): the report names the pair and says to
+    place them apart. Walkers placed 2 m apart get no such note."""
+    for gap, named in ((0.1, True), (2.0, False)):
+        shot = tmp_path / f"gap_{gap:g}" / "shot.usda"
+        shot.parent.mkdir()
+        clip = _walk()
+        _walker_stage(shot, [("a", clip, (0.0, 0.0, 0.0), 0.0, 0.0), ("b", clip, (gap, 0.0, 0.0), 0.0, 0.0),
+                             ("far", clip, (20.0, 0.0, 0.0), 0.0, 0.0)])
+        result, _ = _solve(shot.parent, shot, guides=False)
+        notes = [n for n in result.report.notes if "already overlap" in n]
+        if named:
+            assert len(notes) == 1 and "1 agent pair already overlaps where the shot starts" in notes[0]
+            assert "</World/Crowd/a> and </World/Crowd/b>" in notes[0] and "place them apart" in notes[0]
+            assert "far" not in notes[0]
+        else:
+            assert notes == []
+
+
+def test_avoidance_stopped_while_still_parting_says_to_raise_max_iterations(tmp_path):
+    """The 128-walker crossing clears in 3 iterations; stopped after 2 with the count still
+    falling, the note says to raise maxIterations on the settings prim."""
+    STAGES.crossing(tmp_path)
+    stage_path = tmp_path / "collisions_crossing.usda"
+    stage = Usd.Stage.Open(str(stage_path))
+    settings = next(p for p in stage.Traverse() if p.GetTypeName() == "MocapSolveSettings")
+    settings.GetAttribute("maxIterations").Set(2)
+    stage.GetRootLayer().Save()
+    result, _ = _solve(tmp_path, stage_path, guides=False, foot_locking=False)
+    its = result.report.stats["collisionsPerIteration"]
+    assert len(its) == 3 and its[-1] > 0 and its[-1] < its[0]
+    notes = [n for n in result.report.notes if "raise maxIterations" in n]
+    assert len(notes) == 1 and f"<{settings.GetPath()}>" in notes[0]
+    assert ", ".join(map(str, its)) in notes[0]

@@ -339,13 +339,48 @@ def _report(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Ou
             why = (f"after {stats.collision_iterations} iterations without progress "
                    "(constraints that cannot all hold)" if outcome.stalled
                    else f"at maxIterations ({data.settings.max_iterations})")
-            report.note(f"collision avoidance stopped {why} with {left_text}; see the collision entries")
+            last = its[-3:]
+            if not outcome.stalled and len(last) == 3 and last[-1] < last[0]:
+                # Still parting them: more iterations would likely finish the job.
+                report.note(f"collision avoidance stopped {why} with {left_text}, still parting them "
+                            f"({', '.join(map(str, last))} collision intervals over the last iterations): raise "
+                            f"maxIterations on <{settings_prim}>, or move the agents the collision entries name")
+            else:
+                report.note(f"collision avoidance stopped {why} with {left_text}; see the collision entries")
+        _note_starting_overlaps(ctx, problem)
     if outcome.stalled:
         stats.collision_stalled = True
         if outcome.region_left:
             report.note(f"avoid regions: {len(outcome.region_left)} frames left inside after "
                         f"{stats.collision_iterations} iterations without progress (constraints that cannot "
                         "all hold); see the avoid-region entries")
+
+
+def _note_starting_overlaps(ctx: SolveContext, problem: avoidance.Problem) -> None:
+    """A note naming the pairs whose capsules already overlap where the shot starts, on the paths
+    avoidance was given: agents placed inside each other are pushed apart from their first frame,
+    which bends their paths the most (and a crowd full of them may not clear)."""
+    if not problem.names or not problem.collide_agents:
+        return
+    start = problem.span[0] if problem.span is not None else min(float(t[0]) for t in problem.frame_times)
+    at = np.array([start])
+    positions = np.stack([collisions.positions_at(np.asarray(path, dtype=np.float64),
+                                                  collisions.frames_at(np.asarray(times, dtype=np.float64), at))
+                          for path, times in zip(problem.paths, problem.frame_times)], axis=1)
+    found = collisions.detect_at(positions, problem.radius, problem.height, 0.0)
+    if len(found) == 0:
+        return
+    names = problem.names
+    order = np.argsort(-found.depth, kind="stable")
+    pairs = [f"<{names[found.agent_a[k]]}> and <{names[found.agent_b[k]]}> by {found.depth[k]:.3g}"
+             for k in order[:3]]
+    count = len(found)
+    more = f" and {count - 3} more" if count > 3 else ""
+    ctx.report.note(
+        f"{count} agent pair{'s' if count != 1 else ''} already overlap{'' if count != 1 else 's'} where the shot "
+        f"starts (time {start:g}; stage units): {', '.join(pairs)}{more}. Agents placed inside each other are "
+        "pushed apart from their first frame, which bends their paths the most; place them apart (their "
+        "translate) or offset their clips in time")
 
 
 def _region_entries(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Outcome) -> None:
