@@ -232,20 +232,24 @@ def measure_plausibility(ctx: SolveContext) -> None:
                 up)[:, None]
         seconds = 1.0 / info.time_codes_per_second
         skate = [float("nan"), float("nan")]
+        keep = metrics.in_shot(times, info.start_time, info.end_time)   # the samples the shot plays
         if feet:
             units = (up, info.meters_per_unit, info.time_codes_per_second)
             # A retimed agent against its source as its timing plays it (see the feet pass).
             same = len(times) == len(agent.sample_times) and np.allclose(times, agent.sample_times)
             played = source if same else animation.interp_frames(source, frames)
-            before = foot_skate_of_positions(played[:, 1:, 3, :3], times, *units)
+            planted = foot_skate_of_positions(played[:, 1:, 3, :3], times, *units).contact & keep[:, None]
+            before = foot_skate_of_positions(played[:, 1:, 3, :3], times, *units, contact=planted)
             skate = [before.mean, foot_skate_of_positions(edited[:, 1:, 3, :3], times, *units,
-                                                                  contact=before.contact).mean]
+                                                                  contact=planted).mean]
         entry = ctx.report.agent(path)
         if entry.foot_skate_unlocked is not None:  # foot locking measured the legs as the layer plays them
             skate = [entry.foot_skate_source, entry.foot_skate_edited]
-        p = plausibility_of(path, agent.sample_times * seconds, source[:, 0], times * seconds, edited[:, 0],
-                                    up, info.meters_per_unit, *skate, edited_frames=frames)
+        first, stop = metrics.shot_window(keep, frames, len(agent.sample_times))
+        p = plausibility_of(path, agent.sample_times[first:stop] * seconds, source[first:stop, 0],
+                            times[keep] * seconds, edited[keep, 0], up, info.meters_per_unit, *skate,
+                            edited_frames=frames[keep] - first)
         figures.append(p)
-        processor.record_plausibility(entry, p, skate, frames)
+        processor.record_plausibility(entry, p, skate, frames[keep])
     if figures:
         ctx.report.stats.plausibility = ShotPlausibility.from_dict(metrics.worst_plausibility(figures))

@@ -13,6 +13,7 @@ from pxr import Gf, Sdf, Usd, UsdGeom
 
 from mocapedit.data import examples, walker
 from mocapedit.pipeline.processor import solve
+from mocapedit.tools import measure
 from mocapedit.usd import evaluate
 
 FRAMES, FPS, SPEED = 240, 24.0, 1.4
@@ -97,3 +98,35 @@ def test_an_avoid_region_reached_after_the_shot_bends_nothing(tmp_path):
     stage.GetRootLayer().Save()
     solve(str(shot), output=str(edits), guides=False)
     assert _moved(shot, edits, [180.0], ("/World/Crowd/a",)) > 0.5
+
+
+def _bent(path, end: float) -> None:
+    """One walker of a 10 s take dragged 1 m sideways 2.5 s in, its ends held; the stage plays
+    frames 0 to ``end``."""
+    clip = walker.walk(frames=FRAMES, fps=FPS, speed=SPEED, name="walk")
+    stage = examples.build_crowd_stage(path, [examples.AgentSpec("a", clip, (0.0, 0.0, 0.0), 0.0)], fps=FPS)
+    agent = "/World/Crowd/a"
+    examples.add_position_constraint(stage, "/Edits/start", agent, 0, (0.0, 0.0, 0.0))
+    examples.add_position_constraint(stage, "/Edits/drag", agent, 60, (1.0, 0.0, SPEED * 60 / FPS))
+    examples.add_position_constraint(stage, "/Edits/end", agent, FRAMES - 1, (0.0, 0.0, SPEED * (FRAMES - 1) / FPS))
+    stage.SetEndTimeCode(end)
+    stage.GetRootLayer().Save()
+
+
+def test_the_plausibility_figures_are_of_what_plays_in_the_shot(tmp_path):
+    """The same bend in a shot of the first 5 s of the take and in one of all of it: the report's
+    figures are measured over the shot, so the short shot's path grows more (the bend is most of
+    it), and they are what UsdSkel FK on the composed stage measures over the shot."""
+    ratios = {}
+    for end in (120.0, 239.0):
+        shot, edits = tmp_path / f"bent_{end:g}.usda", tmp_path / f"bent_{end:g}.edits.usda"
+        _bent(shot, end)
+        composed = tmp_path / f"bent_{end:g}.edited.usda"
+        result = solve(str(shot), output=str(edits), composed=str(composed), guides=False, foot_locking=False)
+        figures = result.report.agent("/World/Crowd/a").plausibility
+        fk = measure.plausibility(Usd.Stage.Open(str(shot)), Usd.Stage.Open(str(composed)), "/World/Crowd/a")
+        assert figures.length_ratio == pytest.approx(fk.length_ratio, abs=1e-6)
+        assert figures.max_direction_deviation == pytest.approx(fk.max_direction_deviation, abs=1e-6)
+        assert figures.worst_direction_frame <= end
+        ratios[end] = figures.length_ratio
+    assert ratios[120.0] > ratios[239.0] + 0.005

@@ -277,6 +277,7 @@ def test_the_report_gives_the_foot_skate_of_moved_agents_source_and_edited(tmp_p
     examples.add_position_constraint(stage, "/Edits/end", "/World/Crowd/a0", 47, end)
     if retimed:  # the pose is baked again on the shot's frames: measured by UsdSkel on both stages
         examples.add_time_constraint(stage, "/Edits/late", "/World/Crowd/a0", 47, 55.0)
+        stage.SetEndTimeCode(55.0)   # the shot shows the walker to its last step (the report measures the shot)
     stage.GetRootLayer().Save()
     edits, composed = tmp_path / "e.usda", tmp_path / "c.usda"
     # Measured without foot locking, which would plant the feet the edit made slide.

@@ -645,6 +645,7 @@ def test_a_retimed_walk_is_measured_against_its_source_as_its_timing_plays_it(tm
     a = f"{CROWD}/a"
     for k, (frame, time) in enumerate(((22, 24.0), (46, 44.0), (70, 72.0))):
         examples.add_time_constraint(stage, f"/Edits/beat{k}", a, frame, time)
+    stage.SetEndTimeCode(140.0)     # the shot shows the walk to its end (the report measures the shot)
     stage.GetRootLayer().Save()
     result, out = _solve(tmp_path)
     entry = result.report.agents[a]

@@ -507,6 +507,29 @@ def _runs(values, count: int, tail: tuple, name: str) -> tuple[np.ndarray, np.nd
     return joined, np.r_[0, np.cumsum(runs, dtype=np.int64)]
 
 
+def in_shot(times: np.ndarray, start: float | None, end: float | None) -> np.ndarray:
+    """(T,) the samples at ``times`` that play in the shot from ``start`` to ``end`` (the stage's
+    time codes; None: open). An agent with fewer than two samples in the shot is measured on all
+    of them (all True), so that it still has figures."""
+    times = np.asarray(times, dtype=np.float64)
+    keep = np.ones(times.shape, dtype=bool)
+    if start is not None:
+        keep &= times >= float(start) - 1e-9
+    if end is not None:
+        keep &= times <= float(end) + 1e-9
+    return keep if keep.sum() >= 2 else np.ones(times.shape, dtype=bool)
+
+
+def shot_window(keep: np.ndarray, frames: np.ndarray, frame_count: int) -> tuple[int, int]:
+    """[first, end) of the source frames that the samples ``keep`` play (``frames``: the source
+    frame each sample plays): the whole clip when every sample is kept."""
+    if keep.all():
+        return 0, frame_count
+    played = np.asarray(frames, dtype=np.float64)[keep]
+    first = int(np.clip(np.floor(played.min() + 1e-9), 0, frame_count - 1))
+    return first, int(np.clip(np.ceil(played.max() - 1e-9), first, frame_count - 1)) + 1
+
+
 def plausibilities_of(agents: Sequence[str], source_seconds, source_hip, edited_seconds, edited_hip, up_axis,
                       meters_per_unit: float, foot_skate_source=None, foot_skate_edited=None,
                       edited_frames=None) -> list[Plausibility]:

@@ -246,6 +246,8 @@ def _measure_plausibility(ctx: SolveContext, items: list[_Measured]) -> dict:
             at([p.ground for p in paths]), at([p.heading for p in paths]), up)[:, :, None]
     seconds = 1.0 / info.time_codes_per_second
     skate = np.array([item.skate for item in items], dtype=np.float64)       # (A, 2)
+    # (A, T) the edited samples that play in the shot: the figures are of what is seen.
+    shot = np.stack([metrics.in_shot(item.times, info.start_time, info.end_time) for item in items])
     if source.shape[2] > 1:
         units = (up, info.meters_per_unit, info.time_codes_per_second)
         # A retimed agent against its source as its timing plays it (see the feet pass).
@@ -255,14 +257,21 @@ def _measure_plausibility(ctx: SolveContext, items: list[_Measured]) -> dict:
         played = feet if same.all() else animation.interp_frames(feet, frames)
         if same.any() and not same.all():
             played[same] = feet[same]
-        before = metrics.foot_skate_of_positions(played, times, *units)
-        after = metrics.foot_skate_of_positions(edited[:, :, 1:, 3, :3], times, *units, contact=before.contact)
+        contact = metrics.foot_skate_of_positions(played, times, *units).contact & shot[:, :, None]
+        before = metrics.foot_skate_of_positions(played, times, *units, contact=contact)
+        after = metrics.foot_skate_of_positions(edited[:, :, 1:, 3, :3], times, *units, contact=contact)
         skate = np.stack([before.mean, after.mean], axis=1)
+    # Each agent over the samples that play in the shot, against the source frames they play.
+    windows = [metrics.shot_window(keep, item.frames, len(agent.sample_times)) for keep, item, agent
+               in zip(shot, items, agents)]
     figures = metrics.plausibilities_of(
-        [item.path for item in items], np.stack([agent.sample_times for agent in agents]) * seconds,
-        source[:, :, 0], times * seconds, edited[:, :, 0], up, info.meters_per_unit, skate[:, 0], skate[:, 1],
-        edited_frames=frames)
-    return {item.path: (p, [float(v) for v in s], item.frames) for item, p, s in zip(items, figures, skate)}
+        [item.path for item in items], [agent.sample_times[f0:f1] * seconds for agent, (f0, f1) in zip(agents, windows)],
+        [source[k, f0:f1, 0] for k, (f0, f1) in enumerate(windows)],
+        [times[k][keep] * seconds for k, keep in enumerate(shot)], [edited[k][keep, 0] for k, keep in enumerate(shot)],
+        up, info.meters_per_unit, skate[:, 0], skate[:, 1],
+        edited_frames=[frames[k][keep] - f0 for k, (keep, (f0, _)) in enumerate(zip(shot, windows))])
+    return {item.path: (p, [float(v) for v in s], item.frames[keep])
+            for item, p, s, keep in zip(items, figures, skate, shot)}
 
 
 def _with_parent(agent, parent_to_world):

@@ -66,7 +66,13 @@ def plausibility(source_stage, edited_stage, agent_path, joint: Union[int, str, 
         at = np.stack([np.interp(frames, x, flat[:, c]) for c in range(flat.shape[1])], axis=1)
         played = evaluate.FootSamples(te, at.reshape((len(te),) + feet_s.positions.shape[1:]), feet_s.joints,
                                       np.ones(len(te), dtype=bool))
+    # What plays in the shot (the source stage's start and end time codes), as the solve's report
+    # measures it.
+    start, end = evaluate.shot_range(source_stage)
     skate_s = metrics.foot_skate_of_positions(played.positions, played.times, *source, played.joints, played.in_clip)
+    planted = skate_s.contact & metrics.in_shot(played.times, start, end)[:, None]
+    skate_s = metrics.foot_skate_of_positions(played.positions, played.times, *source, played.joints, played.in_clip,
+                                              contact=planted)
     if len(skate_s.times) == len(te):
         # Over the source's contacts, less where the edited foot is lifted (a step).
         feet_e = evaluate.foot_positions(edited_stage, agent_path, te, foot_joints)
@@ -76,6 +82,12 @@ def plausibility(source_stage, edited_stage, agent_path, joint: Union[int, str, 
                                                   feet_e.in_clip, contact=contact)
     else:
         skate_e = foot_skate(edited_stage, agent_path, foot_joints=foot_joints)
+    # The edited samples in the shot, against the source frames they play.
+    keep = metrics.in_shot(te, start, end)
+    paired = frames if frames is not None else (np.arange(len(te), dtype=np.float64) if len(te) == len(ts) else None)
+    if not keep.all() and paired is not None:
+        first, stop = metrics.shot_window(keep, paired, len(ts))
+        ts, ms, te, me, frames = ts[first:stop], ms[first:stop], te[keep], me[keep], paired[keep] - first
     return metrics.plausibility_of(str(agent_path), ts / source.time_codes_per_second, ms,
                                    te / edited.time_codes_per_second, me, source.up_axis,
                                    source.meters_per_unit, skate_s.mean, skate_e.mean, edited_frames=frames)

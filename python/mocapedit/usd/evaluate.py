@@ -35,6 +35,13 @@ def stage_units(stage: Usd.Stage) -> StageUnits:
                       stage.GetTimeCodesPerSecond())
 
 
+def shot_range(stage: Usd.Stage) -> tuple[float | None, float | None]:
+    """The stage's start and end time codes where its root layer authors them (None where not)."""
+    root = stage.GetRootLayer()
+    return (float(stage.GetStartTimeCode()) if root.HasStartTimeCode() else None,
+            float(stage.GetEndTimeCode()) if root.HasEndTimeCode() else None)
+
+
 class _Skel:
     """A skeleton of an agent, resolved once: its query, joints and composed sample times."""
 

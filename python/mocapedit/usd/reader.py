@@ -17,6 +17,7 @@ from mocapedit.geometry import contacts
 from mocapedit.model import data as model
 from mocapedit.model.errors import MocapEditError, prim_error
 from mocapedit.model.names import joint_leaf, resolve_joint
+from mocapedit.usd.evaluate import shot_range
 
 AGENT_API = "MocapAgentAPI"
 STATIONARY_API = "MocapStationaryAPI"
@@ -84,12 +85,13 @@ def check_composition(stage: Usd.Stage) -> None:
 
 def stage_info(stage: Usd.Stage) -> model.StageInfo:
     root = stage.GetRootLayer()
+    start, end = shot_range(stage)
     return model.StageInfo(
         up_axis=str(UsdGeom.GetStageUpAxis(stage)),
         meters_per_unit=float(UsdGeom.GetStageMetersPerUnit(stage)),
         time_codes_per_second=float(stage.GetTimeCodesPerSecond()),
-        start_time=float(stage.GetStartTimeCode()) if root.HasStartTimeCode() else None,
-        end_time=float(stage.GetEndTimeCode()) if root.HasEndTimeCode() else None,
+        start_time=start,
+        end_time=end,
         root_layer=root.identifier,
         used_layers=sorted(layer.identifier for layer in stage.GetUsedLayers()),
     )

@@ -475,10 +475,13 @@ class _Run:
         for members in by_shape.values():
             source_world, free_world, locked_world = (np.stack([worlds[a][k] for a in members]) for k in range(3))
             times = np.stack([self.locks[a].times for a in members])
-            before = metrics.foot_skate_of_positions(source_world, times, *units)
+            # Over the samples that play in the shot (the figures are of what is seen).
+            shot = np.stack([metrics.in_shot(t, info.start_time, info.end_time) for t in times])
+            planted = metrics.foot_skate_of_positions(source_world, times, *units).contact & shot[:, :, None]
+            before = metrics.foot_skate_of_positions(source_world, times, *units, contact=planted)
 
             def skate(feet_world):
-                contact = metrics.on_ground(before.contact, source_world, feet_world, info.up_axis,
+                contact = metrics.on_ground(planted, source_world, feet_world, info.up_axis,
                                             info.meters_per_unit)
                 return np.atleast_1d(metrics.foot_skate_of_positions(feet_world, times, *units, contact=contact).mean)
 
