@@ -16,6 +16,10 @@ edits: `over`s on edited agents and new prims under /MocapEdit (guides under
 /MocapEdit/Guides, purpose 'guide'). Sub-layer it over the input, or pass --composed
 to get a ready stage. The same input gives the same bytes.
 
+The shot is STAGE's startTimeCode to endTimeCode (every frame the clips play when it
+has none): collision avoidance parts, and the report counts and judges, only what
+plays there.
+
 Exit status: 0 on success, 1 on bad input (the message names the prim and property),
 2 on bad usage. Nothing is written on error."""
 
