@@ -953,3 +953,22 @@ def test_avoidance_stopped_while_still_parting_says_to_raise_max_iterations(tmp_
     notes = [n for n in result.report.notes if "raise maxIterations" in n]
     assert len(notes) == 1 and f"<{settings.GetPath()}>" in notes[0]
     assert ", ".join(map(str, its)) in notes[0]
+
+
+def test_overlaps_left_by_the_guard_against_walking_back_do_not_ask_for_more_iterations(tmp_path, monkeypatch):
+    """The crossing clears in 3 iterations; when the guard against walking back then hands an
+    agent its incoming path, the overlaps it leaves are not for more iterations to part."""
+    STAGES.crossing(tmp_path)
+    stage_path = tmp_path / "collisions_crossing.usda"
+
+    def first_walks_back(state, flat):
+        out = np.zeros(len(state.p.names), dtype=bool)
+        out[0] = True
+        return out
+
+    monkeypatch.setattr(avoidance, "_walks_backward", first_walks_back)
+    result, _ = _solve(tmp_path, stage_path, guides=False, foot_locking=False)
+    its = result.report.stats["collisionsPerIteration"]
+    assert len(its) >= 3 and its[-1] == 0 and result.report.stats["remainingOverlaps"] > 0
+    assert not any("raise maxIterations" in n or "stopped at maxIterations" in n for n in result.report.notes)
+    assert any("back against the way they walk" in n for n in result.report.notes)

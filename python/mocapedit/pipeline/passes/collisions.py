@@ -335,13 +335,15 @@ def _report(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Ou
                f"{stats.collision_iterations} iteration{'s' if stats.collision_iterations != 1 else ''} "
                f"({problem.names and stats.collision_strategy})")
         report.note(f"collision avoidance: {how}")
-        if len(left) and not blocked:
+        ran_out = outcome.stalled or stats.collision_iterations >= data.settings.max_iterations
+        # (Overlaps left by the guard against walking back have their own note.)
+        if len(left) and not blocked and ran_out:
             why = (f"after {stats.collision_iterations} iterations without progress "
                    "(constraints that cannot all hold)" if outcome.stalled
                    else f"at maxIterations ({data.settings.max_iterations})")
             last = its[-3:]
-            if not outcome.stalled and len(last) == 3 and last[-1] < last[0]:
-                # Still parting them: more iterations would likely finish the job.
+            if not outcome.stalled and len(last) == 3 and 0 < last[-1] < last[0]:
+                # Still parting them when the iterations ran out: more would likely finish the job.
                 report.note(f"collision avoidance stopped {why} with {left_text}, still parting them "
                             f"({', '.join(map(str, last))} collision intervals over the last iterations): raise "
                             f"maxIterations on <{settings_prim}>, or move the agents the collision entries name")
