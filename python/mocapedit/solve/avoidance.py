@@ -19,9 +19,10 @@ an avoid region, or ``max_iterations`` is reached. Two strategies:
   iteration; each solve finds the row forces of that complementarity problem (a row
   pushes or stays idle, it never pulls), so near misses switch on by themselves when a
   push drives them into contact. Where two agents overlap they are pushed sideways to
-  their relative motion, on one side per pair, so a walker steps round the other instead
-  of being held back before the crossing and thrown forward after it. Each solve starts
-  from the original source, so deformation does not accumulate.
+  their relative motion, on one side per pair (one side in the world, so a walker who
+  walks up to another and back passes it on the same side both ways), so a walker steps
+  round the other instead of being held back before the crossing and thrown forward after
+  it. Each solve starts from the original source, so deformation does not accumulate.
 
   What makes it fast: the detection that counts the collisions also gathers the near
   misses (one pass); a row keeps the direction it was solved with while the fresh one
@@ -409,12 +410,12 @@ def _separation_normals(state: _State, a: np.ndarray, b: np.ndarray, k: np.ndarr
 
     Two agents passing each other must keep to one side over the whole encounter: the
     line between their points swings from side to side with the sway of a walk, and
-    following it would push them alternately left and right. The side (of b as seen
-    along their relative motion) is voted once per pair, by the samples where they are
-    closest, and where they overlap they are pushed sideways to their relative motion, on
-    that side (a conservative linearisation of the distance). The vote is taken again at each
-    iteration (among the samples that still overlap), so a pair that other pushes moved to
-    the other side is not pulled back through.
+    following it would push them alternately left and right. The side of b that a keeps to is
+    voted once per pair, in the world (the sum of a's offsets from b across their relative
+    motion, over the samples where they are closest), and where they overlap they are pushed
+    sideways to their relative motion, towards that side (a conservative linearisation of
+    the distance). The vote is taken again at each iteration (among the samples that still
+    overlap), so a pair that other pushes moved to the other side is not pulled back through.
     """
     pos = state.sampling.positions
     rel = pos[k, a] - pos[k, b]
@@ -430,8 +431,19 @@ def _separation_normals(state: _State, a: np.ndarray, b: np.ndarray, k: np.ndarr
     pair = a * np.int64(len(state.p.names)) + b
     close = moving & (np.linalg.norm(rel, axis=1) < _clearance(state, a, b))
     uniq, inverse = np.unique(pair, return_inverse=True)
-    vote = np.bincount(inverse, weights=np.where(close, across, 0.0), minlength=len(uniq))
-    side = np.where(vote >= 0, 1.0, -1.0)[inverse]
+    # The side is voted in the world: the offsets of a from b across their motion, summed.
+    # A vote along the motion (pass on its left) flips with it, and an agent who walks up
+    # to another and back, or who walks beside another a little faster then a little slower,
+    # was pushed to one side going and to the other coming back: round the other in a loop.
+    lateral = np.where(close[:, None], across[:, None] * perp, 0.0)
+    vote = np.stack([np.bincount(inverse, weights=lateral[:, i], minlength=len(uniq)) for i in (0, 1)], axis=1)
+    # A pair met exactly head-on votes for the left of its motion.
+    fallback = np.stack([np.bincount(inverse, weights=np.where(close, perp[:, i], 0.0), minlength=len(uniq))
+                         for i in (0, 1)], axis=1)
+    scale = np.bincount(inverse, weights=np.where(close, np.abs(across), 0.0), minlength=len(uniq))
+    tied = np.linalg.norm(vote, axis=1) <= 1e-9 * scale
+    vote[tied] = fallback[tied]
+    side = np.where(np.sum(vote[inverse] * perp, axis=1) >= 0, 1.0, -1.0)
     # Where they overlap they pass side by side on the voted side; the line between the
     # points would turn along their motion before and after the crossing and hold one
     # back on each side of it. Apart, each sample keeps its own direction.
