@@ -12,6 +12,9 @@ namespace {
 constexpr double kPi = 3.141592653589793;
 constexpr double kDegrees = 180.0 / kPi;  // numpy.degrees' factor
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+// The edit's turn is measured over spans where the source's chord is at least this fraction of
+// its path: a half circle (2 / pi) is a turn, a step away and back is not.
+constexpr double kLeastStraightness = 0.5;
 
 // Where a point's ground coordinates sit: (p[0], -p[2]) for Y up, (p[0], p[1]) for Z up.
 struct GroundPlane {
@@ -237,10 +240,15 @@ void DeviationOf(const double* s, const double* e, const double* t, std::size_t 
 }
 
 void TurnOf(const double* s, const double* e, const double* t, std::size_t n, double min_speed, double span,
-            std::vector<double>& at, std::vector<double>& angle, double* out) {
+            double least_straightness, std::vector<double>& at, std::vector<double>& angle,
+            std::vector<double>& along, double* out) {
   std::fill(out, out + n, 0.0);
-  if (n < 2) return;
   at.clear(), angle.clear();
+  if (n < 2) return;
+  // The source's path length from its first sample, to tell a walk from a back and forth.
+  along.assign(n, 0.0);
+  for (std::size_t i = 1; i < n; ++i)
+    along[i] = along[i - 1] + Norm(s[2 * i] - s[2 * i - 2], s[2 * i + 1] - s[2 * i - 1]);
   std::size_t a = 0, past = 0;  // the span's first sample, and the first after it (later for each i)
   for (std::size_t i = 0; i < n; ++i) {
     const double from = t[i] - 0.5 * span, to = t[i] + 0.5 * span;
@@ -250,7 +258,10 @@ void TurnOf(const double* s, const double* e, const double* t, std::size_t n, do
     const double su = s[2 * b] - s[2 * a], sv = s[2 * b + 1] - s[2 * a + 1];
     const double eu = e[2 * b] - e[2 * a], ev = e[2 * b + 1] - e[2 * a + 1];
     const double dt = std::max(t[b] - t[a], 1e-12);
-    if (b > a && Norm(su, sv) / dt >= min_speed && Norm(eu, ev) > 0) {
+    // The source walks over the span (and, with least_straightness, goes somewhere: a back and
+    // forth has no direction for an edit to turn).
+    const double chord = Norm(su, sv);
+    if (b > a && chord / dt >= min_speed && chord >= least_straightness * (along[b] - along[a]) && Norm(eu, ev) > 0) {
       at.push_back(static_cast<double>(i));
       angle.push_back(std::atan2(su * ev - sv * eu, su * eu + sv * ev));
     }
@@ -263,8 +274,9 @@ void TurnOf(const double* s, const double* e, const double* t, std::size_t n, do
 // Scratch arrays of one agent, kept between agents.
 struct Scratch {
   std::vector<double> fs, fe, gs, ge, rate_e, rate_s, rate_src, dt_src, dt_at, warps, extra, unwrapped, fractions, steps;
-  std::vector<double> gs_at, ss_at, fs_at, gk, ek, tk, turn, dev, turned, at, angle;
+  std::vector<double> gs_at, ss_at, fs_at, gk, ek, tk, turn, dev, turned, at, angle, along;
   std::vector<std::size_t> kept;
+  std::vector<char> measured;
 };
 
 }  // namespace
@@ -300,8 +312,8 @@ void EditTurn(Span<const double> source, Span<const double> edited, Span<const d
   CheckSize(source.size, 2 * n, "EditTurn", "source");
   CheckSize(edited.size, 2 * n, "EditTurn", "edited");
   CheckSize(turn.size, n, "EditTurn", "turn");
-  std::vector<double> at, angle;
-  TurnOf(source.data, edited.data, seconds.data, n, min_speed, span, at, angle, turn.data);
+  std::vector<double> at, angle, along;
+  TurnOf(source.data, edited.data, seconds.data, n, min_speed, span, kLeastStraightness, at, angle, along, turn.data);
 }
 
 void PlausibilityJob::Validate() const {
@@ -442,18 +454,36 @@ void PlausibilityJob::Run() const {
       w.ek[2 * k] = w.ge[2 * i], w.ek[2 * k + 1] = w.ge[2 * i + 1];
       w.tk[k] = w.ss_at[i];
     }
-    // EditTurn, DirectionDeviation, Extremes.
-    TurnOf(w.gk.data(), w.ek.data(), w.tk.data(), nk, walking_speed, edit_turn_span, w.at, w.angle, w.turn.data());
+    // EditTurn, DirectionDeviation, Extremes. The largest turn the edit gives the walk counts
+    // every span where the source walks, a step away and back included: an edit that sends a
+    // take round a loop where it wanders turns it past 180 degrees there.
+    TurnOf(w.gk.data(), w.ek.data(), w.tk.data(), nk, walking_speed, edit_turn_span, 0.0, w.at, w.angle, w.along,
+           w.turn.data());
+    double max_turn = 0.0;
+    for (std::size_t k = 0; k < nk; ++k) {
+      if (std::isnan(w.turn[k]) || std::isnan(max_turn)) max_turn = kNaN;
+      else max_turn = std::max(max_turn, std::abs(w.turn[k]));
+    }
+    // The turn a walking direction is compared with is measured only where the source goes
+    // somewhere over the span (the chord of a step away and back points anywhere), and is a
+    // guess elsewhere (from the frames around; held from the first or last before the source
+    // walks or after it stops). Where it is a guess, a chord walks back only if it also does
+    // against the source as it is: a take that stands, then steps away and back where the edit
+    // bends it, had its standing frames' small steps compared with a turn of 108 degrees that
+    // only the step away gets (tests/inspect/test_metrics.py).
+    TurnOf(w.gk.data(), w.ek.data(), w.tk.data(), nk, walking_speed, edit_turn_span, kLeastStraightness, w.at,
+           w.angle, w.along, w.turn.data());
     DeviationOf(w.gk.data(), w.ek.data(), w.tk.data(), nk, walking_speed, chord, nullptr, w.dev.data());
     DeviationOf(w.gk.data(), w.ek.data(), w.tk.data(), nk, walking_speed, chord, w.turn.data(), w.turned.data());
+    w.measured.assign(nk, 0);
+    for (const double k : w.at) w.measured[static_cast<std::size_t>(k)] = 1;
     std::int64_t dev_frame = -1;
-    double max_dev = kNaN, max_turned = kNaN, max_turn = 0.0;
+    double max_dev = kNaN, max_turned = kNaN;
     for (std::size_t k = 0; k < nk; ++k) {
       if (!std::isnan(w.dev[k]) && (dev_frame < 0 || w.dev[k] > max_dev))
         max_dev = w.dev[k], dev_frame = static_cast<std::int64_t>(w.kept[k]);
-      if (!std::isnan(w.turned[k]) && (std::isnan(max_turned) || w.turned[k] > max_turned)) max_turned = w.turned[k];
-      if (std::isnan(w.turn[k]) || std::isnan(max_turn)) max_turn = kNaN;
-      else max_turn = std::max(max_turn, std::abs(w.turn[k]));
+      const double turned = w.measured[k] ? w.turned[k] : std::min(w.turned[k], w.dev[k]);
+      if (!std::isnan(turned) && (std::isnan(max_turned) || turned > max_turned)) max_turned = turned;
     }
     worst_direction_frame[a] = dev_frame;
     max_direction_deviation[a] = max_dev;

@@ -428,6 +428,33 @@ def test_a_walk_back_or_a_loop_is_still_a_reversal():
     assert np.degrees(np.abs(M.edit_turn(source, edited, t, speed)).max()) > 180.0
 
 
+def _step_away_and_back(shift):
+    """30 fps ground samples: a slow step east (0.35 m/s, 0.5 s), a quick step 0.8 m east and
+    0.9 m back west (0.5 s each), ``shift`` metres north on the way back, then a walk south."""
+    fps, pts = 30.0, [np.zeros((1, 2))]
+    for velocity, secs in (((0.35, 0.0), 0.5), ((1.6, 0.0), 0.5), ((-1.8, 2.0 * shift), 0.5), ((0.0, -1.3), 2.5)):
+        n = int(round(secs * fps))
+        pts.append(pts[-1][-1] + np.outer(np.arange(1, n + 1) / fps, velocity))
+    ground = np.concatenate(pts)
+    return ground, np.arange(len(ground)) / fps
+
+
+def test_a_step_away_and_back_has_no_direction_for_an_edit_to_turn():
+    """A take that steps away and back, pushed 0.4 m aside on the way back: its walking direction
+    never deviates 50 degrees from the source's. The 2 s chord of a step away and back is short
+    and points anywhere; measured there, the edit's turn was 108 degrees, held back over the
+    slow step before, where the edit changes nothing, and that step counted as walking back."""
+    source, t = _step_away_and_back(0.0)
+    edited, _ = _step_away_and_back(0.4)
+    speed = M.WALKING_SPEED_M
+    assert np.nanmax(M.direction_deviation(source, edited, t, speed)) < 50.0
+    turn = M.edit_turn(source, edited, t, speed)
+    assert np.nanmax(M.direction_deviation(source, edited, t, speed, turn=turn)) < 60.0
+    zero = np.zeros(len(t))
+    figures = M.plausibility_of("a", t, _hips(zero, source), t, _hips(zero, edited), "Y", 1.0)
+    assert figures.max_turned_deviation < 60.0 and not figures.reverses
+
+
 def test_default_facing_joint():
     assert M.default_facing_joint(["Root", "Root/Hips", "Root/Hips/LeftUpLeg"]) == 1
     assert M.default_facing_joint(["pelvis", "pelvis/spine"]) == 0

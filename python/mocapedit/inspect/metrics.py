@@ -404,7 +404,10 @@ def edit_turn(source_ground, edited_ground, seconds, min_speed: float,
     corner turns by 90 degrees); a walk that goes back against it over a short chord
     (:func:`direction_deviation` with ``turn``) hooks, zig-zags or loops. Where the source does
     not walk over the span (slower than ``min_speed``) the turn is interpolated from the frames
-    around it where it does (held at the ends); 0 everywhere when it never does. Paths ``(T, 2)``,
+    around it where it does (held at the ends); 0 everywhere when it never does. A source that
+    steps away and back over the span (its chord less than half its path) does not walk there
+    either: such a chord points anywhere, and an edit that bends the step had it turn the walk
+    by 108 degrees. Paths ``(T, 2)``,
     paired by frame; leading axes (..., T, 2) are agents measured each on its own."""
     s, e, t = _paths(source_ground, edited_ground, seconds)
     return _plausibility.edit_turn(s, e, t, min_speed, span)
@@ -422,8 +425,12 @@ class Plausibility:
     the source never walks): against the source's direction as it is, so a group turned 90 degrees
     on purpose measures 90. ``max_turned_deviation``: degrees, against the source's direction
     turned by the edit's own turn (:func:`edit_turn`): a hook, zig-zag or small loop that walks
-    back against where the edit sends the agent. ``max_edit_turn``: degrees, the largest turn the
-    edit gives the walk (:func:`edit_turn`; a walk sent back turns by 180, a loop past it).
+    back against where the edit sends the agent. Where that turn is a guess (the source stands,
+    or steps away and back, over the span: :func:`edit_turn`), the smaller of this and the
+    deviation from the source as it is. ``max_edit_turn``: degrees, the largest turn the
+    edit gives the walk (:func:`edit_turn`, over every span where the source walks, a step away
+    and back included; a walk sent back turns by 180, a loop past it: a take sent round a loop
+    where it wanders too).
     ``length_ratio``: edited over source ground path of the facing joint.
     ``time_warp``: smallest and largest shot time per source time (from the time map when the
     caller gives ``edited_frames``, else the ratio of edited to source sample intervals). ``foot_skate_source``

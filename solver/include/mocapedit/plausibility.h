@@ -90,7 +90,8 @@ struct PlausibilityJob {
   Span<std::int64_t> spin_frames;        // intervals over spin_rate where the source's is not
   Span<double> max_direction_deviation;  // degrees; NaN when the source never walks
   Span<std::int64_t> worst_direction_frame;  // edited sample where that is (-1: none)
-  Span<double> max_turned_deviation;     // degrees, against the source turned by the edit
+  Span<double> max_turned_deviation;     // degrees, against the source turned by the edit (where
+                                         // that turn is a guess, also against the source as is)
   Span<double> max_edit_turn;            // degrees, the largest turn the edit gives the walk
   Span<double> length_ratio;             // edited over source ground path of the facing joint
   Span<double> time_warp_min;            // smallest and largest time warp
