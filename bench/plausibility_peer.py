@@ -110,19 +110,27 @@ def direction_deviation(source_ground, edited_ground, seconds, min_speed: float,
 
 
 def edit_turn(source_ground, edited_ground, seconds, min_speed: float,
-              span: float = EDIT_TURN_SECONDS) -> np.ndarray:
+              span: float = EDIT_TURN_SECONDS, least_straightness: float = 0.5, measured: list | None = None
+              ) -> np.ndarray:
     s = _points(source_ground, "source_ground", dims=(2,))
     e = _points(edited_ground, "edited_ground", dims=(2,))
     t = np.asarray(seconds, dtype=np.float64)
     if s.shape != e.shape or t.shape != (len(s),):
         raise ValueError(f"source {s.shape}, edited {e.shape} and seconds {t.shape} must pair by frame")
     if len(s) < 2:
+        if measured is not None:
+            measured.append(np.zeros(len(s), dtype=bool))
         return np.zeros(len(s))
     a = np.searchsorted(t, t - 0.5 * span, side="left")
     b = np.minimum(np.searchsorted(t, t + 0.5 * span, side="right") - 1, len(s) - 1)
     ds, de = s[b] - s[a], e[b] - e[a]
     dt = np.maximum(t[b] - t[a], 1e-12)
-    walk = (b > a) & (np.linalg.norm(ds, axis=1) / dt >= min_speed) & (np.linalg.norm(de, axis=1) > 0)
+    along = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(s, axis=0), axis=1))]
+    chord = np.linalg.norm(ds, axis=1)
+    walk = ((b > a) & (chord / dt >= min_speed) & (chord >= least_straightness * (along[b] - along[a]))
+            & (np.linalg.norm(de, axis=1) > 0))
+    if measured is not None:
+        measured.append(walk)
     if not walk.any():
         return np.zeros(len(s))
     angle = np.unwrap(np.arctan2(ds[walk, 0] * de[walk, 1] - ds[walk, 1] * de[walk, 0],
@@ -184,13 +192,21 @@ def plausibility_of(agent: str, source_seconds, source_hip, edited_seconds, edit
         keep = np.r_[True, np.diff(ss_at) > 0]
         walking = WALKING_SPEED_M / meters_per_unit
         dev, turned = np.full(len(ge), np.nan), np.full(len(ge), np.nan)
-        turn = edit_turn(gs_at[keep], ge[keep], ss_at[keep], walking)
+        # The largest turn counts every span where the source walks; the turn directions are
+        # compared with only where it also goes somewhere, and where that is a guess a chord
+        # walks back only if it also does against the unturned source.
+        max_turn = float(np.degrees(np.abs(edit_turn(gs_at[keep], ge[keep], ss_at[keep], walking,
+                                                     least_straightness=0.0)).max(initial=0.0)))
+        measured: list = []
+        turn = edit_turn(gs_at[keep], ge[keep], ss_at[keep], walking, measured=measured)
         dev[keep] = direction_deviation(gs_at[keep], ge[keep], ss_at[keep], walking)
         turned[keep] = direction_deviation(gs_at[keep], ge[keep], ss_at[keep], walking, turn=turn)
+        guess = np.ones(len(ge), dtype=bool)
+        guess[np.flatnonzero(keep)[measured[0]]] = False
+        turned = np.where(guess & np.isfinite(dev), np.minimum(turned, dev), turned)
         dev_frame = int(np.nanargmax(dev)) if np.isfinite(dev).any() else -1
         max_dev = float(dev[dev_frame]) if dev_frame >= 0 else float("nan")
         max_turned = float(np.nanmax(turned)) if np.isfinite(turned).any() else float("nan")
-        max_turn = float(np.degrees(np.abs(turn).max(initial=0.0)))
         rates = (float(rate_e.max()), float(rate_s.max()))
         warp_range = (float(warp.min()), float(warp.max()))
     else:
