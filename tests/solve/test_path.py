@@ -288,6 +288,26 @@ def test_spline_and_constraints_and_stationary_tags_together(tmp_path, stop_clip
     assert _to_polyline(e[:first - 24], poly).max() < 0.02
 
 
+def test_a_pin_off_the_curve_stretches_the_walk_gradually(tmp_path, stop_clip):
+    """The last frame pinned 42 cm off the curve, after a stand: the walk after the stand takes
+    the extra length over its whole span, not between the pin and the nearest curve anchor (it
+    sped up by 46 % there, and the locked feet slid)."""
+    stage, a, clip, _ = _standing_agent(tmp_path, stop_clip)
+    examples.add_path_curve(stage, "/Curves/arc", [(0, 0, 0), (0, 0, 3), (2, 0, 5), (5, 0, 5)], [a],
+                            basis="bezier", wrap="nonperiodic")
+    _, _, out = _solve(tmp_path, stage)
+    end = _root_ground(out, a, [149])[0]
+    examples.add_position_constraint(stage, "/Edits/end", a, 149, (end[0] + 0.3, 0.0, -end[1] + 0.3))
+    result, src, out = _solve(tmp_path, stage)
+    frames = np.arange(150)
+    speed = [np.linalg.norm(np.diff(_root_ground(s, a, frames), axis=0), axis=1) * FPS for s in (src, out)]
+    walking = speed[0] > 0.5
+    assert np.linalg.norm(_root_ground(out, a, [149])[0] - (end + [0.3, -0.3])) < 1e-6
+    assert (speed[1][walking] / speed[0][walking]).max() < 1.3
+    entry = result.report.agents[a]
+    assert entry["footSkateEdited"] <= entry["footSkateSource"] + 0.005
+
+
 # ---- bad input ------------------------------------------------------------------------
 
 def test_bad_input_names_the_prims(tmp_path, walk_clip, stop_clip):

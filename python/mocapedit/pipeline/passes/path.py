@@ -34,6 +34,12 @@ MET = 1e-6  # stage units: a hard constraint's residual within this is met
 #: so other constraints bend the path away from the curve only where they act.
 CURVE_ANCHOR_S = 0.5
 CURVE_ANCHOR_WEIGHT = 0.05
+#: Towards a frame that another constraint moves, the anchors fade out over this many seconds
+#: (smoothly, to nothing at that frame): the path leaves the curve gradually, so the change of
+#: its length spreads over the walk instead of piling up between the constraint and the
+#: nearest anchor (a walk stretched there by half plays its steps half as fast again: the
+#: feet slide).
+CURVE_ANCHOR_FADE_S = 3.0
 #: Lengths that set the solve's tolerances, in metres (and path_edit.MIN_BASELINE_M).
 RIGID_MIN_EXTENT_M = 0.02  # smaller stationary ranges turn with the path around them
 STILL_M = 1e-5             # as trajectory.headings: tangents shorter than this stand still
@@ -139,12 +145,22 @@ class _Component:
         self.links = [path_edit.Link(c.agent, c.frame, c.target, c.target_frame, ground.to_ground(c.offset, up),
                                      c.space, _weight(c), c.path) for c in self.relatives]
         self.curve_only = not self.handles and not self.links
+        # Frames where this component's constraints act on each agent.
+        held: dict[str, list[int]] = {}
+        for h in self.handles:
+            held.setdefault(h.agent, []).append(h.frame)
+        for k in self.links:
+            held.setdefault(k.agent, []).append(k.frame)
+            held.setdefault(k.target, []).append(k.target_frame)
         for a in self.inputs:
             curve = data.agents[a.path].path_curve
             if curve:
-                step = max(1, int(round(CURVE_ANCHOR_S * trajectory.samples_per_second(a.sample_times, fps))))
-                frames = sorted(set(range(0, a.frames, step)) | {a.frames - 1})
-                self.handles.extend(path_edit.Handle(a.path, f, a.rest[f], CURVE_ANCHOR_WEIGHT, curve) for f in frames)
+                rate = trajectory.samples_per_second(a.sample_times, fps)
+                step = max(1, int(round(CURVE_ANCHOR_S * rate)))
+                frames = np.array(sorted(set(range(0, a.frames, step)) | {a.frames - 1}))
+                weights = CURVE_ANCHOR_WEIGHT * _anchor_fade(frames, held.get(a.path, []), CURVE_ANCHOR_FADE_S * rate)
+                self.handles.extend(path_edit.Handle(a.path, int(f), a.rest[f], float(w), curve)
+                                    for f, w in zip(frames, weights) if w > 0)
         self.settings = path_edit.Settings(
             min_baseline=info.metres(MIN_BASELINE_M), rigid_min_extent=info.metres(RIGID_MIN_EXTENT_M),
             still=info.metres(STILL_M), group_step=max(1.0, round(GROUP_SAMPLE_S * fps)),
@@ -202,6 +218,16 @@ class _Component:
                        f"{exc.mismatch:g} stage units); make some of them soft")
             prop = "offset" if any(x not in positions for x in prims) else "position"
         return prim_error(sorted(set(prims))[0] if prims else stationary[0], message, prop)
+
+
+def _anchor_fade(frames: np.ndarray, held: list[int], width: float) -> np.ndarray:
+    """(K,) factor of the curve anchors at ``frames``: 0 at the ``held`` frames, easing
+    (smoothstep) to 1 at ``width`` frames from the nearest of them; 1 without any."""
+    if not held or width <= 0:
+        return np.ones(len(frames))
+    gap = np.abs(np.asarray(frames, dtype=np.float64)[:, None] - np.asarray(held, dtype=np.float64)[None]).min(axis=1)
+    x = np.clip(gap / width, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
 
 
 def _weight(c) -> float:
