@@ -338,6 +338,32 @@ def test_a_walker_who_walks_up_to_a_stander_and_back_stays_on_one_side(x, pause)
     assert metrics.length_ratio(walk1, walk) < 1.05
 
 
+@pytest.mark.parametrize("sway,turns", [(0.02, 0.5), (0.04, 1.0)])
+def test_a_walker_who_turns_back_where_another_stopped_stays_on_one_side(sway, turns):
+    """One walks in and stops (its clip ends there: the rest of the shot holds that pose); the
+    other walks up to that very spot, sways round a few centimetres as it turns back, and
+    walks away. Where they barely move against each other the line between them is a few
+    centimetres long and points anywhere: pushed along it, the turning samples were spread
+    round the stopped one, and the walker went round it (229 and 323 degrees, path 15 and 19 %
+    longer; on a CMU crowd 500 degrees and 57 %)."""
+    t = np.arange(200, dtype=np.float64)
+    keys = [(0, (0, -1.2)), (20, (0, -1.2)), (60, (0, 0)), (80, (0, 0)), (120, (0, -1.0)), (160, (1.5, -1.1)),
+            (200, (2.0, -1.1))]
+    walk = np.stack([np.interp(t, [k for k, _ in keys], [p[c] for _, p in keys]) for c in (0, 1)], axis=1)
+    turning = (t >= 60) & (t <= 80)
+    phase = 2.0 * np.pi * turns * (t[turning] - 60) / 20.0
+    walk[turning] += sway * np.stack([np.sin(phase), 1.0 - np.cos(phase)], axis=1)
+    t_stop = np.arange(41, dtype=np.float64)
+    stop = np.stack([np.linspace(-3.0, 0.0, 41), np.zeros(41)], axis=1)
+    problem = avoidance.Problem(names=["walker", "stopper"], paths=[walk, stop], frame_times=[t, t_stop],
+                                radius=np.full(2, 0.3), height=np.full(2, 1.8), margin=0.05, span=(0.0, 199.0))
+    outcome = avoidance.resolve(problem, avoidance.Settings(max_wait_s=0.0))
+    assert outcome.converged
+    walk1, stop1 = outcome.paths
+    assert _winding_degrees(walk1, stop1[-1]) < 90.0
+    assert metrics.length_ratio(walk1, walk) < 1.05
+
+
 def test_walkers_side_by_side_who_drift_back_and_forth_are_pushed_apart_one_way():
     """Two walkers side by side, 0.4 m apart (closer than their clearance), one drifting a
     little ahead and back: each is pushed away from the other on its own side all along,

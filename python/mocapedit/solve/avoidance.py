@@ -448,6 +448,13 @@ def _separation_normals(state: _State, a: np.ndarray, b: np.ndarray, k: np.ndarr
     # points would turn along their motion before and after the crossing and hold one
     # back on each side of it. Apart, each sample keeps its own direction.
     d = np.where(close[:, None], side[:, None] * perp, along[:, None] * t + across[:, None] * perp)
+    # Where they overlap but barely move against each other (one stands where the other
+    # turns back, pauses or sways), the pair's voted side holds: the line between their
+    # points is a few centimetres long there and points anywhere, and following it pushed
+    # such samples out in every direction, round the other in a loop.
+    still = ~moving & (np.linalg.norm(rel, axis=1) < _clearance(state, a, b)) & \
+        (np.linalg.norm(vote, axis=1) > 0)[inverse]
+    d[still] = vote[inverse[still]]
     return _unit(d, np.where(moving[:, None], side[:, None] * perp, [[1.0, 0.0]]))
 
 
