@@ -47,3 +47,25 @@ def test_an_edit_under_a_tilted_parent_stays_a_matrix():
     ops = trajectory.xform_ops(tilted, "Y")
     assert [kind for kind, _ in ops] == ["transform"]
     assert np.abs(_usd_local(ops, 1) - tilted[1]).max() < 1e-12
+
+
+@pytest.mark.parametrize("up", ["Y", "Z"])
+def test_a_turn_through_a_half_turn_plays_smoothly_between_samples(up):
+    """USD interpolates a rotate op's angle linearly between time samples: the angles are
+    written unwrapped, so a heading that passes 180 degrees between two samples turns by the
+    small step between them. Wrapped to (-180, 180], it read about 0 halfway and the whole
+    agent swung half round its parent's origin for that instant (a CMU take on a path curve,
+    at its clip's 120 fps samples: its hips 10 m away)."""
+    yaw = np.radians(np.linspace(170.0, 190.0, 9))
+    op = kinematics.yaw_matrix(yaw, up) @ kinematics.translation_matrix(np.zeros((9, 3)))
+    ops = trajectory.xform_ops(op, up)
+    stage = Usd.Stage.CreateInMemory()
+    xf = UsdGeom.Xform.Define(stage, "/A")
+    rotate = xf.AddRotateYOp if up == "Y" else xf.AddRotateZOp
+    attr = rotate(UsdGeom.XformOp.PrecisionDouble, "mocapEdit")
+    for k, v in enumerate(ops[1][1]):
+        attr.Set(float(v), float(k))
+    for k in range(8):
+        halfway = np.array(xf.GetLocalTransformation(k + 0.5))
+        expected = kinematics.yaw_matrix(np.array([0.5 * (yaw[k] + yaw[k + 1])]), up)[0]
+        assert np.abs(halfway - expected).max() < 1e-9

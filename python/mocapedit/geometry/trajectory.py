@@ -208,7 +208,8 @@ def xform_ops(op: np.ndarray, up_axis: str) -> list[tuple[str, np.ndarray]]:
     """The transform op values of :func:`agent_xform_op` as the fewest USD ops that make them,
     outermost first: ``("translate", (T,3))`` then ``("rotateY" or "rotateZ", (T,) degrees)``
     where each op turns about the up axis alone (an edit's turn in an upright parent: a quarter
-    of a matrix's bytes, and values an artist can read), else ``[("transform", (T,4,4))]``."""
+    of a matrix's bytes, and values an artist can read; the angles unwrapped, continuous from
+    sample to sample), else ``[("transform", (T,4,4))]``."""
     op = np.asarray(op, dtype=np.float64)
     rot = op[:, :3, :3]
     up = ground.up_index(up_axis)
@@ -224,4 +225,6 @@ def xform_ops(op: np.ndarray, up_axis: str) -> list[tuple[str, np.ndarray]]:
         name, angle = "rotateZ", np.arctan2(rot[:, 0, 1], rot[:, 0, 0])
     else:
         name, angle = "rotateY", np.arctan2(-rot[:, 0, 2], rot[:, 0, 0])
-    return [("translate", op[:, 3, :3].copy()), (name, np.degrees(angle))]
+    # Unwrapped: USD interpolates the angle linearly between samples, and a heading wrapped
+    # from +180 to -180 degrees would turn the agent the long way round in between.
+    return [("translate", op[:, 3, :3].copy()), (name, np.degrees(np.unwrap(angle)))]
