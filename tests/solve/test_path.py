@@ -266,6 +266,36 @@ def test_remap_keeps_distance_per_frame_and_sway():
     np.testing.assert_allclose(r.ground[0], [0, 0.0], atol=0.02)
 
 
+def _chord_winding(path: np.ndarray, chord: int = 8) -> float:
+    """Degrees the direction of a path's chords turns through in all (left and right)."""
+    d = path[chord:] - path[:-chord]
+    d = d[np.linalg.norm(d, axis=1) > 1e-3]
+    return float(np.degrees(np.abs(np.diff(np.unwrap(np.arctan2(d[:, 1], d[:, 0])))).sum()))
+
+
+def test_remap_keeps_a_shuffle_at_the_start_sideways():
+    """A take that stands, shuffles 0.8 m sideways and half way back at 0.2 m/s, then walks off
+    at right angles (a start-walk-stop take): on a curve, the shuffle stays a shuffle beside the
+    curve's start, and the walk settles onto the curve. Measured against the centreline's own
+    tangents, which turn through the corner, the sway swung round with them: loops, the path's
+    direction turning 870 degrees more than the source's (a CMU take: its facing turned at 336
+    degrees per second)."""
+    fps = 30.0
+    x = np.concatenate([np.zeros(60), np.linspace(0.0, 0.8, 120), np.linspace(0.8, 0.3, 75)])
+    walk = -np.arange(1, 150) * 1.3 / fps
+    uv = np.concatenate([np.stack([x, np.zeros_like(x)], axis=1),
+                         np.stack([np.full_like(walk, 0.3), walk], axis=1)])
+    uv[:, 0] += 0.02 * np.sin(2.0 * np.pi * np.arange(len(uv)) / fps)       # the sway
+    t = np.linspace(0.0, np.pi / 2, 400)
+    arc = np.stack([6.0 - 6.0 * np.cos(t), -6.0 * np.sin(t)], axis=1)       # sets off along -y, turns to +x
+    r = curves.remap(uv, arc, [], fps, 1e-5, curves.SLOW_M_S, curves.SETTLE_M)
+    assert _chord_winding(r.ground) < _chord_winding(uv) + 90.0
+    # The shuffle moves across the curve's start, not along it; the walk ends on the curve.
+    shuffle = r.ground[60:255]
+    assert np.ptp(shuffle[:, 1]) < 0.2 and np.ptp(shuffle[:, 0]) > 0.7
+    assert _to_polyline(r.ground[-10:], arc).max() < 0.1
+
+
 def test_spline_and_constraints_and_stationary_tags_together(tmp_path, stop_clip):
     stage, a, clip, (first, last) = _standing_agent(tmp_path, stop_clip)
     examples.add_path_curve(stage, "/Curves/arc", [(0, 0, 0), (0, 0, 3), (2, 0, 5), (5, 0, 5)], [a],

@@ -27,6 +27,11 @@ from mocapedit.model.errors import prim_error
 SAMPLES_PER_SEGMENT = 32
 #: Width (seconds) of the window that separates the centreline from the sway.
 CENTRELINE_WINDOW_S = 1.0
+#: Metres per second below which the centreline does not walk (it shuffles, turns on the spot,
+#: sets off or stops): there it keeps the heading of the walk around it and its sideways
+#: steps stay sideways; they ease back onto the curve over SETTLE_M metres of walking.
+SLOW_M_S = 0.6
+SETTLE_M = 2.0
 
 _BASES = {  # cubic basis matrices: row-vector [1 t t^2 t^3] @ M @ [P0 P1 P2 P3]
     "bezier": np.array([[1, 0, 0, 0], [-3, 3, 0, 0], [3, -6, 3, 0], [-1, 3, -3, 1]], dtype=np.float64),
@@ -152,22 +157,57 @@ def smooth(uv: np.ndarray, sigma_frames: float) -> np.ndarray:
     return np.stack([np.convolve(pad[:, c], k, mode="valid") for c in (0, 1)], axis=1)
 
 
+def _slow_frames(centre: np.ndarray, head: np.ndarray, arc: np.ndarray, fps: float, slow: float,
+                 settle: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(heading, distance along, lateral offset) of each frame of a centreline where it moves
+    slower than ``slow`` stage units per second (shuffling, turning on the spot, setting off):
+    the heading is interpolated from the faster frames around (held before the first and
+    after the last), the centreline's steps count along the curve only as far as they go that
+    way, and the rest is a lateral offset that eases back to the curve over ``settle`` stage
+    units of walking. Measured against its own tangents there, which point anywhere, the sway
+    swung round with them (a start-walk-stop take drew loops on the curve), and a shuffle
+    sideways was walked forward along the curve."""
+    speed = np.linalg.norm(np.gradient(centre, axis=0), axis=1) * fps
+    fast = speed >= slow
+    if fast.all() or not fast.any():
+        return head, arc, np.zeros(len(centre))
+    h = np.unwrap(head)
+    k = np.flatnonzero(fast)
+    h = np.where(fast, h, np.interp(np.arange(len(h)), k, h[k]))
+    step = np.diff(centre, axis=0)
+    mid = 0.5 * (h[1:] + h[:-1])
+    forward = np.where(fast[1:] & fast[:-1], np.diff(arc), step[:, 0] * np.cos(mid) + step[:, 1] * np.sin(mid))
+    sideways = np.where(fast[1:] & fast[:-1], 0.0, step[:, 1] * np.cos(mid) - step[:, 0] * np.sin(mid))
+    decay = np.exp(-np.abs(forward) / settle) if settle > 0 else np.zeros(len(forward))
+    lateral = np.zeros(len(centre))
+    for i in range(len(forward)):
+        lateral[i + 1] = lateral[i] * decay[i] + sideways[i]
+    return h, np.concatenate([[0.0], np.cumsum(forward)]), lateral
+
+
 def remap(uv: np.ndarray, curve: np.ndarray, stationary: list[tuple[int, int]], fps: float,
-          still: float) -> Remap:
+          still: float, slow: float = 0.0, settle: float = 0.0) -> Remap:
     """Remaps a (F,2) ground trajectory onto a (K,2) ground polyline (see the module doc).
 
     ``stationary``: inclusive frame ranges moved rigidly; ``still``: ground steps (stage
-    units) below which the centreline is said to stand still.
+    units) below which the centreline is said to stand still; ``slow`` (stage units per
+    second, 0: none): frames where the centreline moves slower keep the heading of the walk
+    around them, and their sideways steps stay sideways, easing back to the curve over
+    ``settle`` stage units of walking (see ``SLOW_M_S``, ``SETTLE_M``).
     """
     uv = np.asarray(uv, dtype=np.float64)
     centre = smooth(uv, CENTRELINE_WINDOW_S * fps / 2.0)
     head = _solver.tangent_headings(np.ascontiguousarray(centre), [], np.zeros(0), still)
+    arc = _solver.cumulative_arc_length(np.ascontiguousarray(centre))
+    lateral = np.zeros(len(uv))
+    if slow > 0 and len(centre) > 2:
+        head, arc, lateral = _slow_frames(centre, head, arc, fps, slow, settle)
     tangent = np.stack([np.cos(head), np.sin(head)], axis=1)
     normal = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
     rel = uv - centre
     along = np.einsum("ij,ij->i", rel, tangent)
-    across = np.einsum("ij,ij->i", rel, normal)
-    s = _solver.cumulative_arc_length(np.ascontiguousarray(centre)) + along
+    across = np.einsum("ij,ij->i", rel, normal) + lateral
+    s = arc + along
 
     # The curve by arc length, with its tangent angle interpolated so normals turn smoothly.
     keep = np.concatenate([[True], np.linalg.norm(np.diff(curve, axis=0), axis=1) > 0])

@@ -117,7 +117,8 @@ def _agent_input(ctx: SolveContext, path: str, fps: float) -> path_edit.AgentInp
     if agent.path_curve:
         poly = curves.ground_polyline(data.curves[agent.path_curve], agent.path_curve, info.up_axis)
         try:
-            remapped = curves.remap(traj.ground, poly, ranges, rate, info.metres(STILL_M))
+            remapped = curves.remap(traj.ground, poly, ranges, rate, info.metres(STILL_M),
+                                    info.metres(curves.SLOW_M_S), info.metres(curves.SETTLE_M))
         except ValueError as exc:
             raise prim_error(agent.path_curve, f"cannot remap <{path}> onto this curve: {exc}", "points") from None
         rest, turn = remapped.ground, remapped.range_turn
