@@ -127,6 +127,29 @@ def _twist(axis, a, b):
     return normalize(q)
 
 
+def turn_legs_toward_plants(legs: dict, up: np.ndarray) -> dict:
+    """The job's leg inputs (``hip``, ``knee``, ``ankle``, their rotations, ``hinge``,
+    ``target_rot``, ``weight``) with each leg turned about ``up`` through its hip by the
+    plant's turn against the edited foot, in proportion to ``weight``: a foot planted while the
+    body turns over it stays turned with the leg above it, and the leg turns at the hip, as a
+    person's does. The IK then only swings the leg to its target. Left turned with the body,
+    the shin turned over the planted foot and twisted the ankle about the shin by as much as
+    the plant lagged."""
+    delta = quat_multiply(legs["target_rot"], _conj(legs["ankle_rot"]))
+    angle = 2.0 * np.arctan2(np.sum(delta[..., :3] * up, axis=-1), delta[..., 3])
+    angle = (angle + np.pi) % (2.0 * np.pi) - np.pi
+    half = 0.5 * angle * legs["weight"]
+    q = np.concatenate([np.sin(half)[..., None] * up, np.cos(half)[..., None]], axis=-1)
+    out = dict(legs)
+    hip = legs["hip"]
+    for key in ("knee", "ankle"):
+        out[key] = hip + _rotate(q, legs[key] - hip)
+    for key in ("hip_rot", "knee_rot", "ankle_rot"):
+        out[key] = quat_multiply(q, legs[key])
+    out["hinge"] = _rotate(q, legs["hinge"])
+    return out
+
+
 def knee_hinge(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, knee_rot: np.ndarray) -> np.ndarray:
     """(...,3) a leg's knee hinge axis in the knee joint's own frame, learned from (T,...,3)
     positions and (T,...,4) world rotations of a clip (legs along the axes after the first): the
