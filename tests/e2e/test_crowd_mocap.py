@@ -110,9 +110,3 @@ def test_a_real_crowd_crossing_is_parted_without_loops_and_keeps_its_feet(tmp_pa
     skate = np.array([(f.foot_skate_source, f.foot_skate_edited) for f in figures])
     skate = skate[np.isfinite(skate).all(axis=1)]
     assert skate[:, 1].mean() <= skate[:, 0].mean() + 0.5, skate.mean(axis=0)
-    # Agent by agent too, within 1 cm/s: a walker dodging over a planted foot turned that foot
-    # along and slid its toes 4 cm/s more than its source before its leg turned at the hip.
-    locked = {a: (e["footSkateSource"], e["footSkateEdited"]) for a, e in result.report.agents.items()
-              if e.get("footContactsLocked") and "footSkateEdited" in e}
-    worst = max(locked, key=lambda a: locked[a][1] - locked[a][0])
-    assert locked[worst][1] <= locked[worst][0] + 1.0, (worst, locked[worst])

@@ -428,9 +428,7 @@ def test_a_dragged_idle_drags_the_plant_along_without_a_pop(tmp_path):
     _, free = _solve(tmp_path, "free", foot_locking=False)
     result, out = _solve(tmp_path)
     entry = result.report.agents[a]
-    # The leash: legs never strained further. A plant turned with its foot within the turn's
-    # leash (30 degrees) is carried round with the turn, up to 1 cm further here (16.0 cm).
-    assert entry["maxFootCorrection"] <= 0.15 + 0.015
+    assert entry["maxFootCorrection"] <= 0.15 + 1e-9          # the leash: legs never strained further
     src = Usd.Stage.Open(str(tmp_path / "shot.usda"))
     times = evaluate.sample_times(src, a)
     bones, flips, speed = _leg_quality(src, out, a, times, LEGS, FPS, unlocked=free)

@@ -49,11 +49,9 @@ MAX_DROP_M = 0.08
 #: Metres a plant never lies further than from where the edit puts the foot, however far the
 #: leg reaches (a body dragged sideways would otherwise straddle).
 MAX_LEASH_M = 0.15
-#: Degrees a plant may be turned from the edited foot before it is turned along. The leg turns
-#: at the hip with its planted foot (``footlock.turn_legs_toward_plants``), as far as people
-#: turn their legs at the hip while a foot stays planted; at 15 degrees a CMU walker dodging
-#: in a crowd turned its planted foot along and slid its toes 4 cm/s more than its source.
-LEASH_DEGREES = 30.0
+#: Degrees a plant may be turned from the edited foot before it is turned along (the leg turns
+#: at the hip with its planted foot up to there: ``footlock.turn_legs_toward_plants``).
+LEASH_DEGREES = 15.0
 #: Seconds a foot takes to step where an edit drags or turns a standing body further than the
 #: leash (:func:`footplant.replant`): at least STEP_SECONDS, longer so that the foot moves no
 #: faster than its source does, but no longer than STEP_LONGEST_SECONDS; and metres it lifts at
