@@ -230,7 +230,8 @@ class _Run:
     agent ``a`` owning poses ``offsets[a]:offsets[a + 1]``. Each pose is computed alone, so an
     agent's results do not depend on the others in its run."""
 
-    def __init__(self, ctx: SolveContext, locks: list[_AgentLock]):
+    def __init__(self, ctx: SolveContext, locks: list[_AgentLock], legs: bool = True):
+        """``legs`` False: only what :meth:`skates` measures before locking (no legs placed)."""
         info = ctx.data.info
         self.ctx, self.locks = ctx, locks
         self.offsets = np.cumsum([0] + [len(lock.times) for lock in locks]).astype(np.int64)
@@ -262,6 +263,9 @@ class _Run:
             src_uv, src_h, new_uv, new_h = (np.concatenate([locks[a].ground[i] for a in moved]) for i in range(4))
             self.motion[at] = trajectory.ground_motion(src_uv, src_h, new_uv, new_h, info.up_axis)
             self.turn[at] = new_h - src_h
+        self.times = np.concatenate([lock.times for lock in locks])
+        if not legs:
+            return
         # The legs in the world, before the ground motion (the posed source) and as edited.
         source, pos, source_rot, rot = footplant.place(
             self.to_world, world_q, self.motion, self.turn, self.up, flat([lock.posed.pos[:, :6] for lock in locks]),
@@ -275,7 +279,6 @@ class _Run:
         self.source = dict(source_hip=source[:, 0:2], source_ankle=source[:, 4:6], source_hip_rot=source_rot[:, 0:2],
                            source_knee_rot=source_rot[:, 2:4], source_ankle_rot=source_rot[:, 4:6])
         self.frames = np.concatenate([lock.frames for lock in locks])
-        self.times = np.concatenate([lock.times for lock in locks])
         self.keep = np.concatenate([lock.keep for lock in locks])
         self.stretch = np.ones((len(locks), 2))
 
@@ -598,6 +601,19 @@ def lock_agents(ctx: SolveContext) -> list[AgentLocking]:
 def _lock_run(ctx: SolveContext, locks: list) -> None:
     """Runs the plant and IK jobs on some agents' legs and fills in their results."""
     info = ctx.data.info
+    tolerance = SKATE_TOLERANCE_M / info.meters_per_unit
+    # Agents whose edits leave their feet as planted as the source's keep their legs: measured
+    # first, so that no plant or IK is solved for them (nothing of it would be applied).
+    before = _Run(ctx, [lock for lock, _ in locks], legs=False).skates([None] * len(locks))
+    needed = []
+    for (lock, result), skate in zip(locks, before):
+        if skate is not None and skate[1] <= skate[0] + tolerance:
+            result.contacts, result.skate, result.kept = lock.locked, skate, True
+        else:
+            needed.append((lock, result))
+    locks = needed
+    if not locks:
+        return
     run = _Run(ctx, [lock for lock, _ in locks])
     run.plan()
     run.solve()
@@ -614,13 +630,8 @@ def _lock_run(ctx: SolveContext, locks: list) -> None:
             break
         run.plan(again)
         run.solve(again)
-    tolerance = SKATE_TOLERANCE_M / info.meters_per_unit
     legs = [run.locked_legs(a, info.meters_per_unit) for a in range(len(locks))]
     for a, ((lock, result), locked_legs, skate) in enumerate(zip(locks, legs, run.skates(legs))):
-        if locked_legs is not None and skate is not None and skate[1] <= skate[0] + tolerance:
-            # The edit left the feet as planted as the source's: keep the legs, bake nothing.
-            locked_legs, skate = None, (skate[0], skate[1], skate[1])
-            result.kept = True
         result.contacts, result.skate, result.legs = lock.locked, skate, locked_legs
         result.steps = int(run.steps[a]) if locked_legs is not None else 0
         result.max_drop, result.max_correction = lock.max_drop, lock.max_correction
@@ -693,7 +704,7 @@ def run(ctx: SolveContext) -> None:
         if r.legs is not None:
             ctx.pose_edits.setdefault(r.path, []).append(r.legs)
     if ctx.options.guides:
-        _plant_guides(ctx, [r.plants for r in locked if r.path in ctx.pose_edits])
+        _plant_guides(ctx, [r.plants for r in locked if r.plants is not None and r.path in ctx.pose_edits])
     stats = ctx.report.stats
     stats.foot_locked_agents = sum(r.legs is not None for r in locked)
     stats.foot_locking_not_needed = sum(r.kept for r in locked)
