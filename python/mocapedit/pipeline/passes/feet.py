@@ -156,6 +156,8 @@ class _AgentLock:
         self.path = path
         agent = self.agent = ctx.data.agents[path]
         self.legs = agent.legs
+        # (source, unlocked) feet in the world, (T,F,3) each, once measured (:meth:`_Run.skates`).
+        self.feet_world: tuple | None = None
         # Locked legs are a pose edit, and a pose edit bakes the animation: lock on its frames.
         self.times, self.frames = ctx.output_frames(path, baked=True)
         self.root = _top(agent, self.legs[0].hip)
@@ -425,22 +427,24 @@ class _Run:
         ctx, info = self.ctx, self.ctx.data.info
         units = (info.up_axis, info.meters_per_unit, info.time_codes_per_second)
         place = self.to_world @ self.motion
-        # The feet's skeleton-space positions: of the source, before locking and after, by agent.
-        source, unlocked, locked = [None] * len(self.locks), [None] * len(self.locks), [None] * len(self.locks)
+        # The feet's skeleton-space positions: of the source and before locking where the agent
+        # has not had them carried into the world yet (an earlier measure keeps them on the
+        # agent), and after locking where its legs change; by agent.
+        count = len(self.locks)
+        source, unlocked, locked = [None] * count, [None] * count, [None] * count
         groups: dict = {}
         for a, lock in enumerate(self.locks):
             feet = lock.posed.feet
             if feet is None:
                 continue
-            unlocked[a] = feet
-            if ctx.pose_edits.get(lock.path):
-                source[a] = _feet_of(lock.agent, animation.sample_pose(ctx.data.clip_of(lock.agent), lock.frames))
-            else:
-                # The pose locking starts from is the source's at these frames.
-                source[a] = feet
-            if legs[a] is None:
-                locked[a] = feet
-            else:
+            if lock.feet_world is None:
+                unlocked[a] = feet
+                if ctx.pose_edits.get(lock.path):
+                    source[a] = _feet_of(lock.agent, animation.sample_pose(ctx.data.clip_of(lock.agent), lock.frames))
+                else:
+                    # The pose locking starts from is the source's at these frames.
+                    source[a] = feet
+            if legs[a] is not None:
                 agent = lock.agent
                 key = (tuple(agent.joints), tuple(lock.pose.joints), agent.parents.tobytes(),
                        agent.rest_transforms.tobytes())
@@ -455,24 +459,31 @@ class _Run:
             feet = _feet_of(self.locks[members[0]].agent, stacked)
             start = 0
             for a in members:
-                count = len(self.locks[a].times)
-                locked[a] = feet[start:start + count]
-                start += count
+                frames = len(self.locks[a].times)
+                locked[a] = feet[start:start + frames]
+                start += frames
         # In the world, agents with as many feet at once.
-        worlds: list = [None] * len(self.locks)
-        by_count: dict = {}
-        for a in range(len(self.locks)):
-            if source[a] is not None:
-                by_count.setdefault(source[a].shape[1], []).append(a)
-        for members in by_count.values():
-            at = np.concatenate([np.arange(*self.span(a)) for a in members])
-            moved = [kinematics.transform_points(np.concatenate([feet[a] for a in members]), m[at, None])
-                     for feet, m in ((source, self.to_world), (unlocked, place), (locked, place))]
-            start = 0
-            for a in members:
-                count = len(self.locks[a].times)
-                worlds[a] = [w[start:start + count] for w in moved]
-                start += count
+        for parts in (((source, self.to_world), (unlocked, place)), ((locked, place),)):
+            by_count: dict = {}
+            for a in range(count):
+                if parts[0][0][a] is not None:
+                    by_count.setdefault(parts[0][0][a].shape[1], []).append(a)
+            for members in by_count.values():
+                at = np.concatenate([np.arange(*self.span(a)) for a in members])
+                moved = [kinematics.transform_points(np.concatenate([feet[a] for a in members]), m[at, None])
+                         for feet, m in parts]
+                start = 0
+                for a in members:
+                    frames = len(self.locks[a].times)
+                    if len(parts) == 2:
+                        self.locks[a].feet_world = tuple(w[start:start + frames] for w in moved)
+                    else:
+                        locked[a] = moved[0][start:start + frames]
+                    start += frames
+        # (source, unlocked, locked) world feet of each agent with feet.
+        worlds = [None if lock.feet_world is None else
+                  (*lock.feet_world, lock.feet_world[1] if locked[a] is None else locked[a])
+                  for a, lock in enumerate(self.locks)]
         # Measured at once for agents with as many frames and feet (each on its own).
         out: list = [None] * len(self.locks)
         by_shape: dict = {}
@@ -492,7 +503,8 @@ class _Run:
                                             info.meters_per_unit)
                 return np.atleast_1d(metrics.foot_skate_of_positions(feet_world, times, *units, contact=contact).mean)
 
-            free, locked, source = skate(free_world), skate(locked_world), np.atleast_1d(before.mean)
+            free, source = skate(free_world), np.atleast_1d(before.mean)
+            locked = skate(locked_world) if any(legs[a] is not None for a in members) else free
             for i, a in enumerate(members):
                 out[a] = (float(source[i]), float(free[i]), float(free[i] if legs[a] is None else locked[i]))
         return out
