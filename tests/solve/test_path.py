@@ -428,3 +428,27 @@ def test_path_editor_drags_without_refactoring(tmp_path, walk_clip):
     one = PathEditor(editor.ground, [10])
     moved = one.move(0, one.ground[10] + [1.0, 2.0])
     np.testing.assert_allclose(moved - editor.ground, np.tile([1.0, 2.0], (193, 1)), atol=1e-12)
+
+
+def test_a_curve_drawn_against_the_walk_is_not_a_reversal(tmp_path, walk_clip):
+    """A path curve is the way the artist draws an agent to walk: drawn back along the take's
+    walk, the agent walks it the other way round. Its walking direction deviates from its
+    source's by nearly 180 degrees, which the report still gives, but that turn is the curve's:
+    the agent is not reversing. A walker sent back by pins still is
+    (``test_path_multi.test_an_edit_that_sends_a_walker_back_is_a_reversal``)."""
+    stage = _stage(tmp_path, [examples.AgentSpec("a", walk_clip)])
+    a = f"{CROWD}/a"
+    examples.add_path_curve(stage, "/Curves/back", [(0, 0, 12.0), (1.0, 0, 9.0), (-0.5, 0, 6.0), (1.0, 0, 3.0),
+                                                     (0, 0, 0)], [a])
+    result, src, out = _solve(tmp_path, stage)
+    p = result.report.agents[a]["plausibility"]
+    assert p["maxDirectionDeviation"] > 150.0 and p["maxEditTurn"] > metrics.REVERSE_TURN_DEGREES
+    assert p["maxTurnOffCurve"] < 30.0
+    assert p["reverses"] is False and result.report.stats["plausibility"]["reversingAgents"] == 0
+    # Walking the curve back and forth would still reverse against it.
+    figures = metrics.Plausibility(agent=a, max_facing_rate=0.0, source_max_facing_rate=0.0,
+                                   max_extra_facing_rate=0.0, spin_frames=0, max_direction_deviation=170.0,
+                                   length_ratio=1.0, time_warp=(1.0, 1.0), foot_skate_source=1.0,
+                                   foot_skate_edited=1.0, foot_skate_ratio=1.0, max_turned_deviation=10.0,
+                                   max_edit_turn=170.0, max_turn_off_curve=170.0)
+    assert figures.reverses

@@ -431,6 +431,10 @@ class Plausibility:
     edit gives the walk (:func:`edit_turn`, over every span where the source walks, a step away
     and back included; a walk sent back turns by 180, a loop past it: a take sent round a loop
     where it wanders too).
+    ``max_turn_off_curve``: degrees, for an agent on a path curve, the largest turn of its walk
+    off the curve's own (:func:`edit_turn` of the path the curve draws against the edited
+    path): the way along the curve is the artist's, so that is what a reversal is judged
+    against instead of ``max_edit_turn`` (NaN when unknown).
     ``length_ratio``: edited over source ground path of the facing joint.
     ``time_warp``: smallest and largest shot time per source time (from the time map when the
     caller gives ``edited_frames``, else the ratio of edited to source sample intervals). ``foot_skate_source``
@@ -453,6 +457,7 @@ class Plausibility:
     worst_direction_frame: int = -1   # edited sample where the direction deviates most (-1: none)
     max_turned_deviation: float = float("nan")
     max_edit_turn: float = 0.0
+    max_turn_off_curve: float = float("nan")
 
     @property
     def spins(self) -> bool:
@@ -464,8 +469,11 @@ class Plausibility:
         (``max_turned_deviation``: a hook, a zig-zag), or turned by the edit nearer to the way
         it came than to a right angle (``max_edit_turn`` over ``REVERSE_TURN_DEGREES``: sent
         back, or a loop). A deliberate turn of 90 degrees, the overshoot of its rounded corner
-        included, is not a reversal."""
-        return bool(self.max_turned_deviation > 90.0 or self.max_edit_turn > REVERSE_TURN_DEGREES)
+        included, is not a reversal. On a path curve the turn is judged off the curve's way
+        (``max_turn_off_curve``): a curve drawn back along the take is walked the other way on
+        purpose."""
+        turn = self.max_turn_off_curve if np.isfinite(self.max_turn_off_curve) else self.max_edit_turn
+        return bool(self.max_turned_deviation > 90.0 or turn > REVERSE_TURN_DEGREES)
 
 
 def _ratio(edited, source):

@@ -100,6 +100,7 @@ class AgentPlausibility(Entry):
     max_direction_deviation: float = key("maxDirectionDeviation")      # degrees
     max_turned_direction_deviation: float = key("maxTurnedDirectionDeviation")
     max_edit_turn: float = key("maxEditTurn")
+    max_turn_off_curve: float = key("maxTurnOffCurve")                 # on a path curve only
     reverses: bool = key("reverses")
     length_ratio: float = key("lengthRatio")
     time_warp: list = key("timeWarp")                                  # [slowest, fastest]
@@ -333,7 +334,8 @@ def plausibility_lines(p: ShotPlausibility | None) -> list[str]:
            + (f" ({p.max_turned_direction_deviation_agent})" if p.max_turned_direction_deviation_agent else "")
            if p.max_turned_direction_deviation is not None else "")
         + f", {p.reversing_agents} reversing"
-        + (" (over 90 against the edit's turn, or turned over 135)" if p.max_edit_turn is not None else " (over 90)"),
+        + (" (over 90 against the edit's turn, or turned over 135 from the source's way, or from its"
+           " path curve's on one)" if p.max_edit_turn is not None else " (over 90)"),
         f"  path length ratio mean {p.mean_length_ratio:.3f} ({lo:.3f}..{hi:.3f}); time warp {wlo:.3f}..{whi:.3f}; "
         f"foot skate ratio mean {p.mean_foot_skate_ratio:.2f} (max {p.max_foot_skate_ratio:.2f})"]
 

@@ -24,6 +24,7 @@ from mocapedit.geometry import animation, trajectory
 from mocapedit.pipeline import guides, memory
 from mocapedit.pipeline.context import EditedPath, SolveContext, SolveOptions  # noqa: F401 (the API's names)
 from mocapedit.pipeline.passes import PASSES
+from mocapedit.pipeline.passes.path import on_curve
 from mocapedit.inspect import inspection, metrics
 from mocapedit.model import limits
 from mocapedit.usd import outputs, reader, stage_io, writer
@@ -184,11 +185,29 @@ def measure_plausibility(ctx: SolveContext) -> None:
     for items in groups.values():
         for first in range(0, len(items), PLAUSIBILITY_BATCH):
             figures.update(_measure_plausibility(ctx, items[first:first + PLAUSIBILITY_BATCH]))
+    for path, (p, skate, frames) in figures.items():
+        if ctx.data.agents[path].path_curve and path in ctx.paths:
+            figures[path] = (dataclasses.replace(p, max_turn_off_curve=_turn_off_curve(ctx, path, frames)),
+                             skate, frames)
     for path in sorted(figures):
         record_plausibility(ctx.report.agent(path), *figures[path])
     if figures:
         ordered = [figures[path][0] for path in sorted(figures)]
         ctx.report.stats.plausibility = ShotPlausibility.from_dict(metrics.worst_plausibility(ordered))
+
+
+def _turn_off_curve(ctx: SolveContext, path: str, frames: np.ndarray) -> float:
+    """Degrees: the largest turn of the agent's edited root path off the way its path curve
+    draws it (:func:`metrics.edit_turn`), over the source frames ``frames`` played in the shot."""
+    info, agent = ctx.data.info, ctx.data.agents[path]
+    first = int(np.clip(np.floor(frames.min() + 1e-9), 0, agent.frame_count - 1))
+    end = int(np.clip(np.ceil(frames.max() - 1e-9), first, agent.frame_count - 1)) + 1
+    if end - first < 2:
+        return 0.0
+    turn = metrics.edit_turn(on_curve(ctx, path).ground[first:end], ctx.paths[path].ground[first:end],
+                             agent.sample_times[first:end] / info.time_codes_per_second,
+                             metrics.WALKING_SPEED_M / info.meters_per_unit)
+    return float(np.degrees(np.max(np.abs(turn))))
 
 
 def record_plausibility(entry, p: metrics.Plausibility, skate, frames: np.ndarray) -> None:
@@ -206,6 +225,7 @@ def record_plausibility(entry, p: metrics.Plausibility, skate, frames: np.ndarra
         max_extra_facing_rate=p.max_extra_facing_rate, spin_frames=p.spin_frames,
         max_direction_deviation=p.max_direction_deviation,
         max_turned_direction_deviation=p.max_turned_deviation, max_edit_turn=p.max_edit_turn,
+        max_turn_off_curve=p.max_turn_off_curve if np.isfinite(p.max_turn_off_curve) else None,
         reverses=p.reverses, length_ratio=p.length_ratio,
         time_warp=list(p.time_warp), foot_skate_ratio=p.foot_skate_ratio,
         worst_turn_frame=int(round(frames[max(p.worst_turn_frame, 0)])),

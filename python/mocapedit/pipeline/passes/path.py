@@ -107,6 +107,22 @@ def _merged_ranges(agent) -> tuple[list[tuple[int, int]], list[list[str]]]:
     return out, names
 
 
+def on_curve(ctx: SolveContext, path: str) -> curves.Remap:
+    """The agent's source path laid along its path curve (``agent.path_curve``): what the path
+    pass starts from, and the way the artist draws the agent to walk."""
+    data, info = ctx.data, ctx.data.info
+    agent, traj = data.agents[path], ctx.trajectories[path]
+    ranges, _ = _merged_ranges(agent)
+    # Windows in seconds count this agent's own samples (a 120 fps clip on a 24 fps stage).
+    rate = trajectory.samples_per_second(agent.sample_times, info.time_codes_per_second)
+    poly = curves.ground_polyline(data.curves[agent.path_curve], agent.path_curve, info.up_axis)
+    try:
+        return curves.remap(traj.ground, poly, ranges, rate, info.metres(STILL_M),
+                            info.metres(curves.SLOW_M_S), info.metres(curves.SETTLE_M))
+    except ValueError as exc:
+        raise prim_error(agent.path_curve, f"cannot remap <{path}> onto this curve: {exc}", "points") from None
+
+
 def _agent_input(ctx: SolveContext, path: str, fps: float) -> path_edit.AgentInput:
     data, info = ctx.data, ctx.data.info
     agent, traj = data.agents[path], ctx.trajectories[path]
@@ -115,12 +131,7 @@ def _agent_input(ctx: SolveContext, path: str, fps: float) -> path_edit.AgentInp
     # Windows in seconds count this agent's own samples (a 120 fps clip on a 24 fps stage).
     rate = trajectory.samples_per_second(agent.sample_times, fps)
     if agent.path_curve:
-        poly = curves.ground_polyline(data.curves[agent.path_curve], agent.path_curve, info.up_axis)
-        try:
-            remapped = curves.remap(traj.ground, poly, ranges, rate, info.metres(STILL_M),
-                                    info.metres(curves.SLOW_M_S), info.metres(curves.SETTLE_M))
-        except ValueError as exc:
-            raise prim_error(agent.path_curve, f"cannot remap <{path}> onto this curve: {exc}", "points") from None
+        remapped = on_curve(ctx, path)
         rest, turn = remapped.ground, remapped.range_turn
     refs = [f"{agent.animation_path}.stationary:{'/'.join(n)}:frames" for n in names]
     return path_edit.AgentInput(path=path, rest=np.ascontiguousarray(rest, dtype=np.float64), source=traj.ground,
