@@ -130,3 +130,45 @@ def test_the_plausibility_figures_are_of_what_plays_in_the_shot(tmp_path):
         assert figures.worst_direction_frame <= end
         ratios[end] = figures.length_ratio
     assert ratios[120.0] > ratios[239.0] + 0.005
+
+
+def _stander_in_a_walkers_way(path, pin: bool) -> None:
+    """``a`` walks 2 s and its clip ends: it holds its last pose to the end of the shot. ``b``
+    walks across, through that spot, 6 s in."""
+    short = walker.walk(frames=48, fps=FPS, speed=SPEED, name="short")
+    long = walker.walk(frames=FRAMES, fps=FPS, speed=SPEED, name="walk")
+    end = float(short.translations[-1, 0, 2])
+    across = SPEED * 144 / FPS
+    specs = [examples.AgentSpec("a", short, (0.0, 0.0, 0.0), 0.0),
+             examples.AgentSpec("b", long, (-across, 0.0, end + 0.1), 90.0)]
+    stage = examples.build_crowd_stage(path, specs, fps=FPS)
+    examples.define_mocap_prim(stage, "/Edits/settings", "MocapSolveSettings",
+                               attributes={"collisionAvoidance": (Sdf.ValueTypeNames.Bool, True)})
+    stage.SetStartTimeCode(0.0)
+    stage.SetEndTimeCode(FRAMES - 1.0)
+    if pin:
+        where = evaluate.agent_root_positions(stage, "/World/Crowd/a", [47.0])[0]
+        examples.add_position_constraint(stage, "/Edits/a_stays", "/World/Crowd/a", 47, tuple(map(float, where)))
+    stage.GetRootLayer().Save()
+
+
+def test_a_pose_held_after_its_clip_that_avoidance_moves_gets_a_note_saying_how_to_keep_it(tmp_path):
+    """Pushed aside while it holds its last pose, a stander has its last steps turn into the new
+    place (one frame of its path stands for all the time it holds). The report says so and how
+    to keep the pose where it is: pin it. Pinned, it stays, and the walker goes round it."""
+    shot, edits = tmp_path / "shot.usda", tmp_path / "shot.edits.usda"
+    _stander_in_a_walkers_way(shot, pin=False)
+    report = solve(str(shot), output=str(edits), guides=False).report
+    assert report.stats["remainingOverlaps"] == 0
+    moved = _moved(shot, edits, [47.0, 200.0], agents=("/World/Crowd/a",))
+    assert moved > 0.1
+    notes = " ".join(report.agents["/World/Crowd/a"]["notes"])
+    assert "holds after its clip ends" in notes and "MocapPositionConstraint at frame 47" in notes
+    assert not report.agents["/World/Crowd/b"].get("notes")
+
+    pinned, pinned_edits = tmp_path / "pinned.usda", tmp_path / "pinned.edits.usda"
+    _stander_in_a_walkers_way(pinned, pin=True)
+    report = solve(str(pinned), output=str(pinned_edits), guides=False).report
+    assert report.stats["remainingOverlaps"] == 0
+    assert _moved(pinned, pinned_edits, [47.0, 200.0], agents=("/World/Crowd/a",)) < 1e-6
+    assert not report.agents["/World/Crowd/a"].get("notes")

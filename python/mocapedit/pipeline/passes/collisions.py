@@ -51,6 +51,10 @@ OUTLINE_SIDES = 64
 REGION_COLOR = (0.9, 0.35, 0.1)
 #: Largest capsule radius (metres) collision avoidance accepts.
 MAX_RADIUS_M = 10.0
+#: A pose held in the shot for at least this long (seconds: the clip ends before the shot does,
+#: or starts after it) that avoidance moves further than HELD_MOVED_M (metres) gets a note.
+HELD_NOTE_S = 0.5
+HELD_MOVED_M = 0.25
 
 
 def _settings(ctx: SolveContext):
@@ -87,9 +91,37 @@ def run(ctx: SolveContext) -> None:
     _check_refused_waits(ctx, problem, outcome)
     _apply(ctx, problem, outcome)
     _report(ctx, problem, outcome, enabled)
+    _held_pose_notes(ctx, problem, outcome)
     _soft_timing_given_way(ctx, problem, outcome)
     if ctx.options.guides and data.avoid_regions:
         _region_guides(ctx, footprints)
+
+
+def _held_pose_notes(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Outcome) -> None:
+    """A note on each agent whose pose held before or after its clip (the shot starts before
+    the clip or ends after it) avoidance moved: one frame of its path stands for all the time
+    it holds, so its first or last steps turn into the new place. Pinned (a hard position
+    constraint at that frame), the pose stays and the others go round it."""
+    if problem.span is None:
+        return
+    info = ctx.data.info
+    fps, far = info.time_codes_per_second, info.metres(HELD_MOVED_M)
+    for i in np.flatnonzero(outcome.moved):
+        times, name = np.asarray(outcome.frame_times[i], dtype=np.float64), problem.names[i]
+        last = len(times) - 1
+        for frame, held, when in ((last, problem.span[1] - times[-1], "after its clip ends"),
+                                  (0, times[0] - problem.span[0], "before its clip starts")):
+            moved = float(np.linalg.norm(outcome.paths[i][frame] - problem.paths[i][frame]))
+            if held / fps < HELD_NOTE_S or moved <= far:
+                continue
+            span = (f"from {times[-1] / fps:.1f} s to the shot's end" if frame else
+                    f"from the shot's start to {times[0] / fps:.1f} s")
+            ctx.report.agent(name).add_notes(
+                f"collision avoidance moved the pose it holds {when} ({span}) by {moved:.3g} stage units "
+                f"({moved * info.meters_per_unit:.2f} m), "
+                f"and its {'last' if frame else 'first'} steps turn to reach the new place; to keep the pose "
+                f"where it is and have the others go round it, pin it: a hard MocapPositionConstraint at "
+                f"frame {frame} at its position there")
 
 
 def _check_radii(ctx: SolveContext, names: list[str]) -> None:
