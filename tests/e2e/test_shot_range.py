@@ -164,6 +164,7 @@ def test_a_pose_held_after_its_clip_that_avoidance_moves_gets_a_note_saying_how_
     assert moved > 0.1
     notes = " ".join(report.agents["/World/Crowd/a"]["notes"])
     assert "holds after its clip ends" in notes and "MocapPositionConstraint at frame 47" in notes
+    assert any("moved the pose 1 agent holds" in n and "</World/Crowd/a>" in n for n in report.notes)
     assert not report.agents["/World/Crowd/b"].get("notes")
 
     pinned, pinned_edits = tmp_path / "pinned.usda", tmp_path / "pinned.edits.usda"
@@ -172,3 +173,4 @@ def test_a_pose_held_after_its_clip_that_avoidance_moves_gets_a_note_saying_how_
     assert report.stats["remainingOverlaps"] == 0
     assert _moved(pinned, pinned_edits, [47.0, 200.0], agents=("/World/Crowd/a",)) < 1e-6
     assert not report.agents["/World/Crowd/a"].get("notes")
+    assert not any("moved the pose" in n for n in report.notes)

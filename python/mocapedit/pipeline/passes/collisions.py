@@ -106,6 +106,7 @@ def _held_pose_notes(ctx: SolveContext, problem: avoidance.Problem, outcome: avo
         return
     info = ctx.data.info
     fps, far = info.time_codes_per_second, info.metres(HELD_MOVED_M)
+    noted: list[tuple[float, str]] = []
     for i in np.flatnonzero(outcome.moved):
         times, name = np.asarray(outcome.frame_times[i], dtype=np.float64), problem.names[i]
         last = len(times) - 1
@@ -114,6 +115,7 @@ def _held_pose_notes(ctx: SolveContext, problem: avoidance.Problem, outcome: avo
             moved = float(np.linalg.norm(outcome.paths[i][frame] - problem.paths[i][frame]))
             if held / fps < HELD_NOTE_S or moved <= far:
                 continue
+            noted.append((moved, name))
             span = (f"from {times[-1] / fps:.1f} s to the shot's end" if frame else
                     f"from the shot's start to {times[0] / fps:.1f} s")
             ctx.report.agent(name).add_notes(
@@ -122,6 +124,13 @@ def _held_pose_notes(ctx: SolveContext, problem: avoidance.Problem, outcome: avo
                 f"and its {'last' if frame else 'first'} steps turn to reach the new place; to keep the pose "
                 f"where it is and have the others go round it, pin it: a hard MocapPositionConstraint at "
                 f"frame {frame} at its position there")
+    if noted:
+        noted.sort(key=lambda item: (-item[0], item[1]))
+        most = ", ".join(f"<{name}> {moved * info.meters_per_unit:.2f} m" for moved, name in noted[:3])
+        ctx.report.note(f"collision avoidance moved the pose {len(noted)} agent{'s' if len(noted) > 1 else ''} "
+                        f"hold{'' if len(noted) > 1 else 's'} before or after their clips more than "
+                        f"{HELD_MOVED_M:g} m ({most}{', ...' if len(noted) > 3 else ''}): their first or last "
+                        "steps veer to reach it; each agent's note says which frame to pin to keep the pose")
 
 
 def _check_radii(ctx: SolveContext, names: list[str]) -> None:
