@@ -303,6 +303,34 @@ def test_a_dense_crowd_of_1000_crossing_at_random_ends_apart_without_loops():
     assert np.abs(ratio - 1.0).mean() < 0.02
 
 
+def test_the_walking_direction_guard_holds_chords_about_to_break_not_only_broken_ones():
+    """The guard that keeps walkers going their way (0.25 s chords keep half their source
+    length along the source's way) holds a chord from the iterate it comes within a quarter of
+    its length of breaking: held before it breaks, it does not break in the next solve, and no
+    iteration is spent on it alone. A chord well clear of breaking is left free."""
+    fps, frames = 24.0, 48
+    path = np.stack([np.linspace(0.0, 1.4 * (frames - 1) / fps, frames), np.zeros(frames)], axis=1)
+    problem = avoidance.Problem(names=["a"], paths=[path], frame_times=[np.arange(frames, dtype=np.float64)],
+                                radius=np.array([0.3]), height=np.array([1.8]))
+    settings = avoidance.Settings(time_codes_per_second=fps)
+    state = avoidance._State(problem, settings)
+    guard = avoidance._Forward(state, settings.forward_keep, cone_degrees=settings.forward_cone_degrees,
+                               watch=settings.forward_watch)
+    h = int(guard.u[0] - guard.v[0])
+    assert h == 6 and guard.watch(path) == 0 and not guard.on.any()
+    # Frames 10..16 squeezed: their chord keeps 0.6 of its length (unbroken, within the watch);
+    # frames 30..36 keep 0.9 (clear of it).
+    squeezed = path.copy()
+    squeezed[16:, 0] -= 0.4 * (path[16, 0] - path[10, 0])
+    squeezed[36:, 0] -= 0.1 * (path[36, 0] - path[30, 0])
+    assert guard.watch(squeezed) == 0
+    held = {int(v) for v in guard.v[guard.on.any(axis=1)]}
+    assert 10 in held and 30 not in held
+    # A chord not held yet that breaks (it keeps 0.3) counts, so the iterations go on.
+    squeezed[36:, 0] -= 0.6 * (path[36, 0] - path[30, 0])
+    assert guard.watch(squeezed) > 0
+
+
 def _winding_degrees(walker: np.ndarray, other: np.ndarray) -> float:
     """Degrees the line from ``other`` to ``walker`` sweeps round ``other`` over the paths
     (T, 2): about 360 for a walker that goes once round the other in a loop."""

@@ -142,6 +142,8 @@ class Settings:
     forward_keep: float | None = 0.5    # relinearize: least projection of an edited 0.25 s chord on
                                         # the source's direction, in source chord lengths (None: none)
     forward_cone_degrees: float = 45.0  # relinearize: largest angle of such a chord off that direction
+    forward_watch: float = 0.25         # relinearize: such a chord's rows are held once within this
+                                        # many source chord lengths of breaking
     #: pull of every frame to its source while the paths go round the avoid regions, before
     #: any walker waits or steps aside (None: regions are solved with the collisions, at
     #: ``anchor_weight``): weak, so a detour round a static region spreads over the approach
@@ -914,11 +916,13 @@ class _Forward:
     projection on the source chord's direction stays at least ``keep`` times the source
     chord's length, and the edited chord stays within ``cone_degrees`` of that direction (a
     push never sends a walker back the way it came, nor across its way: a projection alone
-    lets a push far enough sideways pass for progress). Only the rows an iterate broke are
-    solved, kept from then on."""
+    lets a push far enough sideways pass for progress). Only the rows an iterate broke, or
+    came within ``watch`` source chord lengths of breaking, are solved, kept from then on:
+    held before they break, they cost no iteration of their own (on the bench's dense crowds
+    of 1,000, 5 to 7 iterations instead of 8 to 10; the mean displacement grows by up to 1%)."""
 
     def __init__(self, state: _State, keep: float = 0.5, chord_s: float = 0.25, moving_m_s: float = 0.2,
-                 cone_degrees: float = 45.0):
+                 cone_degrees: float = 45.0, watch: float = 0.0):
         s, p = state.s, state.p
         starts = state.starts.astype(np.int64)
         counts = np.diff(starts)
@@ -939,6 +943,7 @@ class _Forward:
         moving = n > moving_m_s / s.meters_per_unit * hv * dt[owner]
         self.v, self.u = v[moving], (v + hv)[moving]
         d, length = c[moving] / n[moving, None], n[moving]
+        self.slack = watch * length[:, None]
         # Three rows per chord: d.c >= keep |c_source|, and the cone's two edges n.c >= 0.
         across = np.stack((-d[:, 1], d[:, 0]), axis=1)
         sin, cos = np.sin(np.radians(cone_degrees)), np.cos(np.radians(cone_degrees))
@@ -950,10 +955,12 @@ class _Forward:
         self.force1 = np.zeros((len(d), 3))
 
     def watch(self, flat: np.ndarray) -> int:
-        """Turns on the rows of the chords ``flat`` breaks; returns how many were new."""
+        """Turns on the rows of the chords ``flat`` breaks or nearly breaks; returns how many
+        broken ones were new."""
         chord = flat[self.u] - flat[self.v]
-        fresh = ~self.on & (np.einsum("ckj,cj->ck", self.normal, chord) < self.rhs)
-        self.on |= fresh
+        value = np.einsum("ckj,cj->ck", self.normal, chord)
+        fresh = ~self.on & (value < self.rhs)
+        self.on |= fresh | (value < self.rhs + self.slack)
         return int(fresh.sum())
 
     def add(self, rows: "_Rows") -> np.ndarray:
@@ -977,7 +984,7 @@ def _relinearize(state: _State, run: _Run):
     buffer = s.buffer_m / s.meters_per_unit
     fixed_force, fixed_force1 = np.zeros(0), np.zeros(0)
     forward = _Forward(state, s.forward_keep or 0.0, cone_degrees=s.forward_cone_degrees,
-                       moving_m_s=0.2 if s.forward_keep is not None else np.inf)
+                       moving_m_s=0.2 if s.forward_keep is not None else np.inf, watch=s.forward_watch)
     for it in range(s.max_iterations + 1):
         # A result that sends someone back the way it came is solved again, with the chords
         # it broke held, even when nothing collides any more.
