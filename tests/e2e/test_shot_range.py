@@ -174,3 +174,47 @@ def test_a_pose_held_after_its_clip_that_avoidance_moves_gets_a_note_saying_how_
     assert _moved(pinned, pinned_edits, [47.0, 200.0], agents=("/World/Crowd/a",)) < 1e-6
     assert not report.agents["/World/Crowd/a"].get("notes")
     assert not any("moved the pose" in n for n in report.notes)
+
+
+def test_two_poses_held_in_one_spot_get_notes_saying_to_pin_only_one(tmp_path):
+    """Two walkers whose clips end in the same spot are pushed apart while they hold their last
+    poses: pinned both, neither could give way, so each note says to pin one of the two."""
+    shot, edits = tmp_path / "shot.usda", tmp_path / "shot.edits.usda"
+    short = walker.walk(frames=48, fps=FPS, speed=SPEED, name="short")
+    end = float(short.translations[-1, 0, 2])
+    specs = [examples.AgentSpec("a", short, (0.0, 0.0, 0.0), 0.0),
+             examples.AgentSpec("c", short, (-end, 0.0, end), 90.0)]
+    stage = examples.build_crowd_stage(shot, specs, fps=FPS)
+    examples.define_mocap_prim(stage, "/Edits/settings", "MocapSolveSettings",
+                               attributes={"collisionAvoidance": (Sdf.ValueTypeNames.Bool, True)})
+    stage.SetStartTimeCode(0.0)
+    stage.SetEndTimeCode(FRAMES - 1.0)
+    stage.GetRootLayer().Save()
+    ends = evaluate.agent_root_positions(stage, ["/World/Crowd/a", "/World/Crowd/c"], [47.0])[:, 0]
+    assert np.linalg.norm((ends[0] - ends[1])[[0, 2]]) < 0.05
+    report = solve(str(shot), output=str(edits), guides=False).report
+    assert report.stats["remainingOverlaps"] == 0
+    for me, other in (("a", "c"), ("c", "a")):
+        notes = " ".join(report.agents[f"/World/Crowd/{me}"]["notes"])
+        assert "MocapPositionConstraint at frame 47" in notes
+        assert f"not together with </World/Crowd/{other}>" in notes
+
+
+def test_a_held_pose_an_avoid_region_pushes_gets_a_note_saying_why_no_pin_can_keep_it(tmp_path):
+    """A stander whose clip ends inside a fountain's clearance is pushed out of it: a pin there
+    would contradict the region, so the note names the region instead of advising a pin."""
+    shot, edits = tmp_path / "shot.usda", tmp_path / "shot.edits.usda"
+    short = walker.walk(frames=48, fps=FPS, speed=SPEED, name="short")
+    end = float(short.translations[-1, 0, 2])
+    stage = examples.build_crowd_stage(shot, [examples.AgentSpec("a", short, (0.0, 0.0, 0.0), 0.0)], fps=FPS)
+    vt = Sdf.ValueTypeNames
+    region = examples.define_mocap_prim(stage, "/Edits/fountain", "MocapAvoidRegion", attributes={
+        "shape": (vt.Token, "box"), "size": (vt.Double3, Gf.Vec3d(1.0, 2.0, 1.0)), "margin": (vt.Double, 0.05)})
+    UsdGeom.Xformable(region).AddTranslateOp().Set(Gf.Vec3d(0.45, 0.0, end))
+    stage.SetStartTimeCode(0.0)
+    stage.SetEndTimeCode(FRAMES - 1.0)
+    stage.GetRootLayer().Save()
+    report = solve(str(shot), output=str(edits), guides=False).report
+    assert _moved(shot, edits, [200.0], agents=("/World/Crowd/a",)) > 0.25
+    notes = " ".join(report.agents["/World/Crowd/a"]["notes"])
+    assert "avoid region </Edits/fountain>'s clearance" in notes and "MocapPositionConstraint" not in notes

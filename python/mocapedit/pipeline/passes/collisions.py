@@ -8,6 +8,11 @@ It runs when ``MocapSolveSettings.collisionAvoidance`` is on or ``mocapedit solv
 --collisions`` asks for it. Active ``MocapAvoidRegion`` prims always apply: their agents
 are kept out of the footprint by capsule radius plus margin, through the same solve.
 
+A pose an agent holds before or after its clip (the shot is longer than the take) that
+avoidance moves more than HELD_MOVED_M gets a note: one frame of its path stands for all the
+time it holds, so its first or last steps veer to the new place. The note says how to keep
+the pose (a hard position constraint at that frame), or why no pin can.
+
 What held before holds after: every hard position constraint keeps its frame where it is,
 every hard relative constraint keeps its offset, stationary ranges move rigidly. Agents
 with ``mocap:collide = false`` are left alone. Walkers that wait (``maxWait``) get a time
@@ -34,6 +39,8 @@ and ``mocap:collisionRadius``; so is a hard constraint that holds an agent insid
 region it must keep out of (the error names both prims).
 """
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
@@ -97,40 +104,130 @@ def run(ctx: SolveContext) -> None:
         _region_guides(ctx, footprints)
 
 
+def _holds(problem: avoidance.Problem, fps: float) -> list[tuple[int, int, float, float]]:
+    """(agent, frame, first, last shot time) of each pose held at least HELD_NOTE_S in the shot:
+    the last frame while the shot goes on after the clip ends, the first before it starts."""
+    out = []
+    if problem.span is None:
+        return out
+    lo, hi = problem.span
+    for i, times in enumerate(problem.frame_times):
+        if len(times) < 2:
+            continue
+        first, last = float(times[0]), float(times[-1])
+        if (first - lo) / fps >= HELD_NOTE_S:
+            out.append((i, 0, lo, first))
+        if (hi - last) / fps >= HELD_NOTE_S:
+            out.append((i, len(times) - 1, last, hi))
+    return out
+
+
+def _moved_holds(ctx: SolveContext, problem: avoidance.Problem,
+                 outcome: avoidance.Outcome) -> list[tuple[float, int, tuple[int, int, float, float]]]:
+    """(distance, agent, hold) of each held pose (:func:`_holds`, on the timing after waiting)
+    that avoidance moved more than HELD_MOVED_M, furthest first."""
+    info = ctx.data.info
+    timed = dataclasses.replace(problem, frame_times=outcome.frame_times or problem.frame_times)
+    out = []
+    for hold in _holds(timed, info.time_codes_per_second):
+        i, frame = hold[0], hold[1]
+        if not outcome.moved[i]:
+            continue
+        moved = float(np.linalg.norm(outcome.paths[i][frame] - problem.paths[i][frame]))
+        if moved > info.metres(HELD_MOVED_M):
+            out.append((moved, i, hold))
+    out.sort(key=lambda item: (-item[0], item[1], item[2][1]))
+    return out
+
+
+def _pin_advice(problem: avoidance.Problem, holds: list, fps: float) -> dict:
+    """(agent, frame) -> how to keep each held pose of ``holds`` (:func:`_holds`) where it is: a
+    hard MocapPositionConstraint at that frame, unless a pin cannot hold it there (an artist
+    constraint holds that frame, it stands within an avoid region's clearance, where a pin is an
+    error, or it overlaps a pose an artist pin holds at the same time). A pose that overlaps
+    another held pose while both hold: pin one, and the other gives way."""
+    names = problem.names
+    taken = {(pin.agent, pin.frame): pin.name for pin in problem.pins}
+    taken.update({(a, f): link.name for link in problem.links for a, f in ((link.a, link.fa), (link.b, link.fb))})
+    blocked: dict[tuple[int, int], str] = {}
+    for i, frame, _, _ in holds:
+        if (i, frame) in taken:
+            blocked[(i, frame)] = f"<{taken[(i, frame)]}> holds that frame"
+            continue
+        for region in problem.regions:
+            at = np.searchsorted(region.agents, i)
+            if (at < len(region.agents) and region.agents[at] == i and float(collisions.signed_distance(
+                    region.footprint, problem.paths[i][frame][None])[0]) < region.clearance[at]):
+                blocked[(i, frame)] = f"it stands within avoid region <{region.name}>'s clearance"
+                break
+    # What stands still while each holds: the other held poses (these first), and the artist's
+    # hard pins (over all the time a pinned pose holds).
+    every = _holds(problem, fps)
+    spans = {(i, frame): (t0, t1) for i, frame, t0, t1 in every}
+    given = {tuple(h[:2]) for h in holds}
+    fixed = [(i, problem.paths[i][frame], t0, t1, None)
+             for i, frame, t0, t1 in list(holds) + [h for h in every if tuple(h[:2]) not in given]]
+    for pin in problem.pins:
+        if pin.softness == 0:
+            t = float(problem.frame_times[pin.agent][pin.frame])
+            fixed.append((pin.agent, pin.position, *spans.get((pin.agent, pin.frame), (t, t)), pin.name))
+    paired: dict[tuple[int, int], list[str]] = {}
+    if fixed:
+        agents = np.array([f[0] for f in fixed], dtype=np.int64)
+        found = collisions.detect_at(np.array([f[1] for f in fixed], dtype=np.float64)[None],
+                                     problem.radius[agents], problem.height[agents], problem.margin)
+        for a, b in zip(found.agent_a, found.agent_b):
+            (ia, _, a0, a1, pin_a), (ib, _, b0, b1, pin_b) = fixed[a], fixed[b]
+            if ia == ib or a0 > b1 or b0 > a1:
+                continue
+            for k, other, pin in ((a, ib, pin_b), (b, ia, pin_a)):
+                if k >= len(holds):
+                    continue
+                key = tuple(holds[k][:2])
+                if pin is not None:
+                    blocked.setdefault(key, f"it overlaps <{names[other]}>, held by <{pin}>, at the same time")
+                else:
+                    paired.setdefault(key, []).append(f"<{names[other]}>")
+    out = {}
+    for i, frame, _, _ in holds:
+        key = (i, frame)
+        if key in blocked:
+            out[key] = f"a pin could not keep it where it is ({blocked[key]}): move the agent, or offset its clip in time"
+            continue
+        out[key] = ("to keep the pose where it is and have the others go round it, pin it: a hard "
+                    f"MocapPositionConstraint at frame {frame} at its position there")
+        if key in paired:
+            out[key] += (f" (not together with {', '.join(sorted(set(paired[key])))}, whose held pose it overlaps "
+                         "then: pin one, and the other gives way)")
+    return out
+
+
 def _held_pose_notes(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Outcome) -> None:
     """A note on each agent whose pose held before or after its clip (the shot starts before
-    the clip or ends after it) avoidance moved: one frame of its path stands for all the time
-    it holds, so its first or last steps turn into the new place. Pinned (a hard position
-    constraint at that frame), the pose stays and the others go round it."""
-    if problem.span is None:
-        return
+    the clip or ends after it) avoidance moved more than HELD_MOVED_M: its first or last steps
+    turn into the new place. Pinned (a hard position constraint at that frame), the pose stays
+    and the others go round it: the note says how (:func:`_pin_advice`), and one note for the
+    run counts them."""
     info = ctx.data.info
-    fps, far = info.time_codes_per_second, info.metres(HELD_MOVED_M)
-    noted: list[tuple[float, str]] = []
-    for i in np.flatnonzero(outcome.moved):
-        times, name = np.asarray(outcome.frame_times[i], dtype=np.float64), problem.names[i]
-        last = len(times) - 1
-        for frame, held, when in ((last, problem.span[1] - times[-1], "after its clip ends"),
-                                  (0, times[0] - problem.span[0], "before its clip starts")):
-            moved = float(np.linalg.norm(outcome.paths[i][frame] - problem.paths[i][frame]))
-            if held / fps < HELD_NOTE_S or moved <= far:
-                continue
-            noted.append((moved, name))
-            span = (f"from {times[-1] / fps:.1f} s to the shot's end" if frame else
-                    f"from the shot's start to {times[0] / fps:.1f} s")
-            ctx.report.agent(name).add_notes(
-                f"collision avoidance moved the pose it holds {when} ({span}) by {moved:.3g} stage units "
-                f"({moved * info.meters_per_unit:.2f} m), "
-                f"and its {'last' if frame else 'first'} steps turn to reach the new place; to keep the pose "
-                f"where it is and have the others go round it, pin it: a hard MocapPositionConstraint at "
-                f"frame {frame} at its position there")
-    if noted:
-        noted.sort(key=lambda item: (-item[0], item[1]))
-        most = ", ".join(f"<{name}> {moved * info.meters_per_unit:.2f} m" for moved, name in noted[:3])
-        ctx.report.note(f"collision avoidance moved the pose {len(noted)} agent{'s' if len(noted) > 1 else ''} "
-                        f"hold{'' if len(noted) > 1 else 's'} before or after their clips more than "
-                        f"{HELD_MOVED_M:g} m ({most}{', ...' if len(noted) > 3 else ''}): their first or last "
-                        "steps veer to reach it; each agent's note says which frame to pin to keep the pose")
+    fps = info.time_codes_per_second
+    noted = _moved_holds(ctx, problem, outcome)
+    if not noted:
+        return
+    advice = _pin_advice(problem, [hold for _, _, hold in noted], fps)
+    for moved, i, (_, frame, _, _) in noted:
+        times = outcome.frame_times[i] if outcome.frame_times else problem.frame_times[i]
+        when = "after its clip ends" if frame else "before its clip starts"
+        span = (f"from {float(times[-1]) / fps:.1f} s to the shot's end" if frame else
+                f"from the shot's start to {float(times[0]) / fps:.1f} s")
+        ctx.report.agent(problem.names[i]).add_notes(
+            f"collision avoidance moved the pose it holds {when} ({span}) by {moved:.3g} stage units "
+            f"({moved * info.meters_per_unit:.2f} m), and its {'last' if frame else 'first'} steps turn to "
+            f"reach the new place; {advice[(i, frame)]}")
+    most = ", ".join(f"<{problem.names[i]}> {moved * info.meters_per_unit:.2f} m" for moved, i, _ in noted[:3])
+    ctx.report.note(f"collision avoidance moved the pose {len(noted)} agent{'s' if len(noted) > 1 else ''} "
+                    f"hold{'' if len(noted) > 1 else 's'} before or after their clips more than "
+                    f"{HELD_MOVED_M:g} m ({most}{', ...' if len(noted) > 3 else ''}): their first or last "
+                    "steps veer to reach it; each agent's note says how to keep the pose")
 
 
 def _check_radii(ctx: SolveContext, names: list[str]) -> None:
