@@ -30,7 +30,6 @@ unique across the skeleton (:func:`joint_tokens`).
 from __future__ import annotations
 
 import io
-import itertools
 import math
 import os
 import re
@@ -39,6 +38,7 @@ from typing import Iterator
 
 import numpy as np
 
+from mocapedit.geometry.kinematics import quat_multiply, quat_rotate
 from mocapedit.model.errors import MocapEditError
 from mocapedit.model.names import unique_identifier
 
@@ -463,23 +463,6 @@ def load(path: str, chunk_frames: int = CHUNK_FRAMES) -> BvhMotion:
 
 # ---- conversion -----------------------------------------------------------------------------
 
-def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product of (...,4) quaternions (x,y,z,w): the rotation b, then a."""
-    ax, ay, az, aw = np.moveaxis(a, -1, 0)
-    bx, by, bz, bw = np.moveaxis(b, -1, 0)
-    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw,
-                     aw * bw - ax * bx - ay * by - az * bz], axis=-1)
-
-
-def _qrotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """(...,3) vectors v rotated by (...,4) unit quaternions q."""
-    u, w = q[..., :3], q[..., 3:]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
-
-
 #: Y-up to Z-up: +90 degrees about X, (x, y, z) -> (x, -z, y).
 Y_TO_Z = np.array([math.sin(math.pi / 4), 0.0, 0.0, math.cos(math.pi / 4)])
 
@@ -600,7 +583,7 @@ class Converter:
         rotations = np.zeros((len(parents), 4))
         rotations[:, 3] = 1.0
         if self.up_axis == "Z":
-            translations[self._roots] = _qrotate(Y_TO_Z, translations[self._roots])
+            translations[self._roots] = quat_rotate(Y_TO_Z, translations[self._roots])
             rotations[self._roots] = Y_TO_Z
         from mocapedit.geometry.kinematics import compose_trs, skel_space
         bind = skel_space(compose_trs(translations, rotations), parents)
@@ -628,15 +611,15 @@ class Converter:
             q = np.zeros((n, j_count, 4))
             q[:, rows, self._rot_axes[:, k]] = s[:, :, k]
             q[..., 3] = c[:, :, k]
-            rot = q if rot is None else _qmul(rot, q)
+            rot = q if rot is None else quat_multiply(rot, q)
         rotations = np.zeros((n, total, 4))
         rotations[..., 3] = 1.0
         rotations[:, :j_count] = rot
 
         if self.up_axis == "Z":
             roots = self._roots
-            translations[:, roots] = _qrotate(Y_TO_Z, translations[:, roots])
-            rotations[:, roots] = _qmul(np.broadcast_to(Y_TO_Z, rotations[:, roots].shape), rotations[:, roots])
+            translations[:, roots] = quat_rotate(Y_TO_Z, translations[:, roots])
+            rotations[:, roots] = quat_multiply(np.broadcast_to(Y_TO_Z, rotations[:, roots].shape), rotations[:, roots])
 
         rotations = self._continuous(rotations)
         return translations, rotations

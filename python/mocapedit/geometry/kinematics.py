@@ -12,6 +12,32 @@ import numpy as np
 from mocapedit import _solver
 
 
+#: Multiplies a quaternion (x, y, z, w) into its conjugate.
+_CONJUGATE = np.array([-1.0, -1.0, -1.0, 1.0])
+
+
+def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product ``a * b`` of (...,4) quaternions (x, y, z, w): rotate by b, then a."""
+    ax, ay, az, aw = np.moveaxis(np.asarray(a), -1, 0)
+    bx, by, bz, bw = np.moveaxis(np.asarray(b), -1, 0)
+    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw,
+                     aw * bw - ax * bx - ay * by - az * bz], -1)
+
+
+def quat_conjugate(q: np.ndarray) -> np.ndarray:
+    """(...,4) conjugates of quaternions (x, y, z, w): the inverse rotations of unit ones."""
+    return np.asarray(q) * _CONJUGATE
+
+
+def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(...,3) vectors ``v`` rotated by (...,4) unit quaternions ``q``."""
+    u, w = q[..., :3], q[..., 3:]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
 def quat_to_matrix3(q: np.ndarray) -> np.ndarray:
     """(...,4) unit quaternions -> (...,3,3) row-vector rotation matrices (p @ R)."""
     q = np.asarray(q, dtype=np.float64)

@@ -25,7 +25,7 @@ import numpy as np
 
 from mocapedit import _solver
 from mocapedit.geometry.animation import slerp
-from mocapedit.solve.layering import quat_multiply
+from mocapedit.geometry.kinematics import quat_conjugate, quat_multiply, quat_rotate
 
 #: The fraction of a leg's full length beyond which a reach is softened (never snaps straight).
 SOFT_REACH = 0.97
@@ -84,17 +84,6 @@ def lock_feet(inputs: LegInputs) -> LegOutputs:
 # ---- the job in numpy --------------------------------------------------------------------------
 
 
-def _conj(q):
-    return q * np.array([-1.0, -1.0, -1.0, 1.0])
-
-
-def _rotate(q, v):
-    """Rotates (...,3) vectors by (...,4) unit quaternions."""
-    u, w = q[..., :3], q[..., 3:]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
-
-
 def normalize(v, eps=1e-12):
     """Vectors (or quaternions) along the last axis scaled to unit length (zero ones stay zero)."""
     n = np.linalg.norm(v, axis=-1, keepdims=True)
@@ -135,7 +124,7 @@ def turn_legs_toward_plants(legs: dict, up: np.ndarray) -> dict:
     person's does. The IK then only swings the leg to its target. Left turned with the body,
     the shin turned over the planted foot and twisted the ankle about the shin by as much as
     the plant lagged."""
-    delta = quat_multiply(legs["target_rot"], _conj(legs["ankle_rot"]))
+    delta = quat_multiply(legs["target_rot"], quat_conjugate(legs["ankle_rot"]))
     angle = 2.0 * np.arctan2(np.sum(delta[..., :3] * up, axis=-1), delta[..., 3])
     angle = (angle + np.pi) % (2.0 * np.pi) - np.pi
     half = 0.5 * angle * legs["weight"]
@@ -143,10 +132,10 @@ def turn_legs_toward_plants(legs: dict, up: np.ndarray) -> dict:
     out = dict(legs)
     hip = legs["hip"]
     for key in ("knee", "ankle"):
-        out[key] = hip + _rotate(q, legs[key] - hip)
+        out[key] = hip + quat_rotate(q, legs[key] - hip)
     for key in ("hip_rot", "knee_rot", "ankle_rot"):
         out[key] = quat_multiply(q, legs[key])
-    out["hinge"] = _rotate(q, legs["hinge"])
+    out["hinge"] = quat_rotate(q, legs["hinge"])
     return out
 
 
@@ -156,7 +145,7 @@ def knee_hinge(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, knee_rot: n
     normals of the bend planes, weighted by the square of the bend, so the clearly bent poses
     decide."""
     cross = np.cross(knee - hip, ankle - hip)
-    local = _rotate(_conj(np.asarray(knee_rot, dtype=np.float64)), cross)
+    local = quat_rotate(quat_conjugate(np.asarray(knee_rot, dtype=np.float64)), cross)
     weight = np.linalg.norm(cross, axis=-1) / np.maximum(
         np.linalg.norm(knee - hip, axis=-1) * np.linalg.norm(ankle - knee, axis=-1), 1e-30)
     axis = np.sum(local * weight[..., None], axis=0)
@@ -165,13 +154,13 @@ def knee_hinge(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, knee_rot: n
 
 def world_hinge(knee_rot: np.ndarray, local: np.ndarray) -> np.ndarray:
     """(...,3) the knee hinge in world space from (…,4) knee world rotations."""
-    return _rotate(np.asarray(knee_rot, dtype=np.float64), np.broadcast_to(local, np.shape(knee_rot)[:-1] + (3,)))
+    return quat_rotate(np.asarray(knee_rot, dtype=np.float64), np.broadcast_to(local, np.shape(knee_rot)[:-1] + (3,)))
 
 
 def _frame_delta(u0, n0, u1, n1):
     """The rotation taking the orthonormal pair (u0, n0) to (u1, n1)."""
     q1 = _arc(u0, u1)
-    return normalize(quat_multiply(_twist(u1, _rotate(q1, n0), n1), q1))
+    return normalize(quat_multiply(_twist(u1, quat_rotate(q1, n0), n1), q1))
 
 
 def required_drop(hip, target, reach, up):
@@ -267,7 +256,7 @@ def lock_feet_numpy(inputs: LegInputs) -> LegOutputs:
     ankle_rot = slerp(inputs.ankle_rot, inputs.target_rot, w[..., 0])
 
     def local(parent, child):
-        q = normalize(quat_multiply(_conj(np.asarray(parent, dtype=np.float64)), child))
+        q = normalize(quat_multiply(quat_conjugate(np.asarray(parent, dtype=np.float64)), child))
         return np.where(q[..., 3:] < 0, -q, q)
 
     return LegOutputs(local(inputs.parent_rot, hip_rot), local(hip_rot, knee_rot), local(knee_rot, ankle_rot),

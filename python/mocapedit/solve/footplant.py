@@ -22,7 +22,7 @@ import numpy as np
 from mocapedit import _solver
 from mocapedit.geometry import kinematics
 from mocapedit.solve.footlock import normalize
-from mocapedit.solve.layering import quat_multiply
+from mocapedit.geometry.kinematics import quat_conjugate, quat_multiply
 
 __all__ = ["follow", "leash", "leash_rows", "Replant", "replant", "step_profile", "step_frames", "lift_bend",
            "PlantInputs", "PlantOutputs", "plan_feet", "plan_feet_numpy", "place", "place_numpy", "reach", "turn_speed", "yaw_quat"]
@@ -368,7 +368,6 @@ def place_numpy(placement: np.ndarray, placement_rotation: np.ndarray, motion: n
             quat_multiply(yaw_quat(turn, up)[:, None], source_rot))
 
 
-_CONJUGATE = np.array([-1.0, -1.0, -1.0, 1.0])
 
 
 @dataclass
@@ -556,7 +555,7 @@ class _AgentPlan:
         speed = [float(np.linalg.norm(np.gradient(self.source_ankle[:, k] - self.source_hip[:, k], seconds, axis=0),
                                       axis=-1).max()) for k in range(2)]
         spin = [float(turn_speed(self.source_ankle_rot[:, k], seconds).max()) for k in range(2)]
-        knee_spin = [float(turn_speed(quat_multiply(self.source_hip_rot[:, k] * _CONJUGATE, self.source_knee_rot[:, k]),
+        knee_spin = [float(turn_speed(quat_multiply(quat_conjugate(self.source_hip_rot[:, k]), self.source_knee_rot[:, k]),
                                       seconds).max()) for k in range(2)]
         height = p.step_height_m / p.meters_per_unit
         bend = lift_bend(np.linalg.norm(self.knee - self.hip, axis=-1), np.linalg.norm(self.ankle - self.knee, axis=-1),

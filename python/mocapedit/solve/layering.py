@@ -30,6 +30,7 @@ import numpy as np
 from mocapedit import _solver
 from mocapedit.geometry import animation
 from mocapedit.geometry.animation import Pose
+from mocapedit.geometry.kinematics import quat_multiply
 from mocapedit.model.errors import prim_error
 from mocapedit.model.data import CHANNELS, Agent, AnimationLayer, Clip
 from mocapedit.model.names import joint_leaf, resolve_joint
@@ -89,16 +90,6 @@ def trs_from_matrices(m: np.ndarray) -> PoseArrays:
     q = np.take_along_axis(options, k[..., None], -2)[..., 0, :]
     q = np.where(q[..., 3:] < 0, -q, q)
     return t.astype(np.float32), q.astype(np.float32), s.astype(np.float32)
-
-
-def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product ``a * b`` of (...,4) quaternions (x, y, z, w): rotate by b, then a."""
-    ax, ay, az, aw = np.moveaxis(np.asarray(a), -1, 0)
-    bx, by, bz, bw = np.moveaxis(np.asarray(b), -1, 0)
-    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw,
-                     aw * bw - ax * bx - ay * by - az * bz], -1)
 
 
 def apply_layers_numpy(source: PoseArrays, layers: list) -> PoseArrays:

@@ -32,7 +32,8 @@ from mocapedit.inspect import metrics
 from mocapedit.pipeline.context import SolveContext, consecutive_runs
 from mocapedit.usd import writer
 from mocapedit.model.errors import MocapEditError
-from mocapedit.solve.layering import quat_multiply, trs_from_matrices
+from mocapedit.geometry.kinematics import quat_multiply
+from mocapedit.solve.layering import trs_from_matrices
 from mocapedit.model.data import Agent
 from mocapedit.model.progress import Silent
 from mocapedit.model.report import Report
