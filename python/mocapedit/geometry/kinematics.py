@@ -31,11 +31,20 @@ def quat_conjugate(q: np.ndarray) -> np.ndarray:
     return np.asarray(q) * _CONJUGATE
 
 
+def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(...,3) cross products of (...,3) vectors, broadcast: ``np.cross``'s values, without its
+    overhead (40% of its time on the few hundred vectors of one agent's legs)."""
+    a, b = np.asarray(a), np.asarray(b)
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], -1)
+
+
 def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """(...,3) vectors ``v`` rotated by (...,4) unit quaternions ``q``."""
     u, w = q[..., :3], q[..., 3:]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
+    t = 2.0 * cross3(u, v)
+    return v + w * t + cross3(u, t)
 
 
 def quat_to_matrix3(q: np.ndarray) -> np.ndarray:

@@ -25,7 +25,7 @@ import numpy as np
 
 from mocapedit import _solver
 from mocapedit.geometry.animation import slerp
-from mocapedit.geometry.kinematics import quat_conjugate, quat_multiply, quat_rotate
+from mocapedit.geometry.kinematics import cross3, quat_conjugate, quat_multiply, quat_rotate
 
 #: The fraction of a leg's full length beyond which a reach is softened (never snaps straight).
 SOFT_REACH = 0.97
@@ -93,10 +93,10 @@ def normalize(v, eps=1e-12):
 def _arc(a, b):
     """Shortest-arc unit quaternions taking unit vectors a to b."""
     d = np.sum(a * b, axis=-1, keepdims=True)
-    axis = np.cross(a, b)
+    axis = cross3(a, b)
     # Opposite vectors: half a turn about any axis perpendicular to a.
     other = np.where(np.abs(a[..., :1]) < 0.9, np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))
-    flip = normalize(np.cross(a, other))
+    flip = normalize(cross3(a, other))
     opposite = d < -1.0 + 1e-12
     q = np.where(opposite, np.concatenate([flip, np.zeros_like(d)], -1), np.concatenate([axis, 1.0 + d], -1))
     return normalize(q)
@@ -106,7 +106,7 @@ def _twist(axis, a, b):
     """Unit quaternions turning (…,3) a about the unit axis onto b's direction around it: with
     (c, s) the cosine and sine of that angle, (s axis, 1 + c) normalised."""
     c = np.sum(a * b, -1, keepdims=True)
-    s = np.sum(np.cross(a, b) * axis, -1, keepdims=True)
+    s = np.sum(cross3(a, b) * axis, -1, keepdims=True)
     r = np.hypot(c, s)
     none = r < 1e-300
     r = np.where(none, 1.0, r)
@@ -144,7 +144,7 @@ def knee_hinge(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, knee_rot: n
     positions and (T,...,4) world rotations of a clip (legs along the axes after the first): the
     normals of the bend planes, weighted by the square of the bend, so the clearly bent poses
     decide."""
-    cross = np.cross(knee - hip, ankle - hip)
+    cross = cross3(knee - hip, ankle - hip)
     local = quat_rotate(quat_conjugate(np.asarray(knee_rot, dtype=np.float64)), cross)
     weight = np.linalg.norm(cross, axis=-1) / np.maximum(
         np.linalg.norm(knee - hip, axis=-1) * np.linalg.norm(ankle - knee, axis=-1), 1e-30)
@@ -232,14 +232,14 @@ def lock_feet_numpy(inputs: LegInputs) -> LegOutputs:
     # The knee's plane: its normal from the pose before locking, kept perpendicular to the new
     # hip-ankle line; the knee bends to the same side as before (never backwards).
     # A nearly straight knee says little about its plane: there the hinge axis takes over.
-    cross = np.cross(knee - hip, ankle - hip)
+    cross = cross3(knee - hip, ankle - hip)
     trust = np.clip((np.linalg.norm(cross, axis=-1) / np.maximum(l1 * l2, 1e-30) - BEND_NOISE) / BEND_TRUST, 0.0, 1.0)
     hinge = normalize(np.asarray(inputs.hinge, dtype=np.float64))
     normal = trust[..., None] * normalize(cross) + (1.0 - trust[..., None]) * hinge
     weak = np.linalg.norm(normal, axis=-1) < 1e-6
     normal = normalize(np.where(weak[..., None], hinge, normal))
     n1 = normalize(normal - np.sum(normal * d, -1, keepdims=True) * d)
-    bend = np.cross(d, n1)
+    bend = cross3(d, n1)
     along = (l1 * l1 - l2 * l2 + reach * reach) / (2.0 * reach)
     height = np.sqrt(np.maximum(l1 * l1 - along * along, 0.0))
     new_knee = hip + along[..., None] * d + height[..., None] * bend
