@@ -102,6 +102,11 @@ class Agent:
     # Authored MocapFootContactAPI instances of the clip as (name, skeleton joint, first, last);
     # None when the clip has none (contacts are then detected).
     foot_contacts: list[tuple[str, int, int, int]] | None = None
+    # Instances (instanceable prims that share a prototype) among the agent prim, its
+    # ancestors and the prims between it and its skeleton, outermost first: an opinion
+    # authored below an instance is ignored, so the writer makes those it authors under
+    # not instanceable in the edits layer.
+    instances: list[str] = field(default_factory=list)
 
     @property
     def frame_count(self) -> int:

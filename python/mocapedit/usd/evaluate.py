@@ -60,7 +60,7 @@ class _Skel:
             if root and root.GetPath() not in [r.GetPath() for r in roots]:
                 roots.append(root)
         for root in roots:
-            cache.Populate(root, Usd.PrimDefaultPredicate)
+            cache.Populate(root, Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate))
         self.query = cache.GetSkelQuery(skel)
         if not self.query:
             raise ValueError(f"{skel.GetPath()}: skeleton is not valid "
@@ -95,6 +95,12 @@ class _Skel:
         return self.world_matrices(xform_cache)[:, 3, :3]  # row-vector: translation is the last row
 
     def world_matrices(self, xform_cache: UsdGeom.XformCache) -> np.ndarray:
+        prim = self.skeleton.GetPrim()
+        if prim.IsInstanceProxy():
+            # The query is the prototype's skeleton, which sits at the prototype's origin: the
+            # instance's own transform is the proxy's.
+            skel = np.asarray(self.query.ComputeJointSkelTransforms(xform_cache.GetTime()))
+            return skel @ np.asarray(xform_cache.GetLocalToWorldTransform(prim))
         return np.asarray(self.query.ComputeJointWorldTransforms(xform_cache))
 
 
@@ -105,7 +111,7 @@ def _find_skeleton(prim: Usd.Prim) -> UsdSkel.Skeleton:
     if inherited:
         return inherited
     bound, found = [], []
-    for p in Usd.PrimRange(prim):
+    for p in Usd.PrimRange(prim, Usd.TraverseInstanceProxies()):
         if p.IsA(UsdSkel.Skeleton):
             found.append(p.GetPath())
         rel = p.GetRelationship("skel:skeleton")

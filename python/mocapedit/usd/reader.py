@@ -286,7 +286,8 @@ class StageReader:
             return prim
         for target in _targets(prim, "skel:skeleton"):
             return self._target_prim(prim, "skel:skeleton", target, UsdSkel.Skeleton, "Skeleton")
-        for child in Usd.PrimRange(prim):
+        # Below an instance (a crowd of instanceable agents), the skeleton is an instance proxy.
+        for child in Usd.PrimRange(prim, Usd.TraverseInstanceProxies()):
             if child.IsA(UsdSkel.Skeleton):
                 return child
         raise prim_error(prim.GetPath(), "agent has no skeleton: no skel:skeleton binding and no "
@@ -548,6 +549,7 @@ class StageReader:
             stationary=self._stationary(anim, times.size),
             legs=legs, foot_locking=bool(_get(prim, "mocap:footLocking", True)),
             foot_contacts=self._foot_contacts(anim, joints, times.size, legs),
+            instances=_instances(prim, skel),
         )
 
     # ---- the other prims ---------------------------------------------------------------
@@ -745,7 +747,7 @@ class StageReader:
 
     def read(self) -> model.StageData:
         agent_prims, typed, skel_roots = [], {}, []
-        for prim in self.stage.Traverse():
+        for prim in self.stage.Traverse(Usd.TraverseInstanceProxies()):
             if AGENT_API in prim.GetAppliedSchemas():
                 agent_prims.append(prim)
             type_name = prim.GetTypeName()
@@ -788,6 +790,16 @@ class StageReader:
             if agent.path_curve and agent.path_curve not in data.curves:
                 data.curves[agent.path_curve] = self.read_curve(agent.path, agent.path_curve)
         return data
+
+
+def _instances(agent: Usd.Prim, skel: Usd.Prim) -> list[str]:
+    """Paths of the instances among the agent prim, its ancestors and the prims between it and
+    its skeleton (the skeleton excluded), outermost first."""
+    chain = list(skel.GetPath().GetParentPath().GetAncestorsRange()) \
+        if skel.GetPath().HasPrefix(agent.GetPath()) and skel.GetPath() != agent.GetPath() \
+        else list(agent.GetPath().GetAncestorsRange())
+    stage = agent.GetStage()
+    return [str(p) for p in chain if stage.GetPrimAtPath(p).IsInstance()]
 
 
 def _without_agent(skels: list[Sdf.Path], agent_prims: list[Usd.Prim]) -> list[str]:

@@ -21,6 +21,9 @@ UsdSkel and UsdGeom. Layout:
 - an agent whose poses changed otherwise (layering) gets a baked SkelAnimation there
   instead; each is bound to its skeleton with ``skel:animationSource``, and agents whose
   animations are identical share one;
+- an instance the layer authors under (an instanced agent whose skeleton gets an animation,
+  the instanced group of an edited agent) gets ``instanceable = false``: opinions under an
+  instance are ignored;
 - guide geometry goes under ``/MocapEdit/Guides`` with purpose ``guide``;
 - ``customLayerData["mocapedit"]`` (:mod:`mocapedit.usd.edits_format`) records the version,
   the input layers, a content hash, the solve statistics and the whole solve report
@@ -129,7 +132,18 @@ def _safe_name(path: str, taken: set[str]) -> str:
     return unique_identifier(path.strip("/"), taken, "agent")
 
 
+def _deinstance_above(layer: Sdf.Layer, agent: Agent, path: Sdf.Path) -> None:
+    """Makes the agent's instances that hold ``path`` below them not instanceable: an opinion
+    authored under an instance is ignored (the agent, or its group, then composes on its own;
+    the agents that are not edited stay instanced)."""
+    for instance in agent.instances:
+        held = Sdf.Path(instance)
+        if path != held and path.HasPrefix(held):
+            sdf.over_chain(layer, held).instanceable = False
+
+
 def _author_xform_ops(layer: Sdf.Layer, agent: Agent, edit: AgentEdit) -> None:
+    _deinstance_above(layer, agent, Sdf.Path(agent.path))
     spec = sdf.over_chain(layer, Sdf.Path(agent.path))
     order = [o for o in agent.xform_op_order if not o.endswith(":" + EDIT_SUFFIX)]
     at = 1 if order and order[0] == "!resetXformStack!" else 0
@@ -160,6 +174,7 @@ def _animation_key(anim: BakedAnimation) -> tuple:
 
 
 def _bind_animation(layer: Sdf.Layer, agent: Agent, path: Sdf.Path) -> None:
+    _deinstance_above(layer, agent, Sdf.Path(agent.skeleton_path))
     skel = sdf.over_chain(layer, Sdf.Path(agent.skeleton_path))
     skel.SetInfo("apiSchemas", Sdf.TokenListOp.Create(prependedItems=["SkelBindingAPI"]))
     rel = Sdf.RelationshipSpec(skel, "skel:animationSource", custom=False)
