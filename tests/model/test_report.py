@@ -76,3 +76,19 @@ def test_format_text_lists_figures_it_has_no_words_for():
     assert "delay 1.5" in text and "length ratio 1.2" in text
     assert "/c          position   3      -       0         hard      yes" in text
     assert "/S          collision  4      /b@4    0.1       soft      NO" in text
+
+
+@pytest.mark.parametrize("unknown", [float("nan"), None], ids=["as solved", "read back from a layer"])
+def test_walking_figures_of_a_shot_where_no_moved_source_walks_read_as_such(unknown):
+    # Agents that only stand or shuffle have no walking direction: solve has NaN, the layer null.
+    r = _report()
+    p = r.stats.plausibility
+    p.max_extra_facing_rate, p.max_extra_turn_per_frame_at_60fps, p.max_extra_facing_rate_agent = 0.0, 0.0, "/a"
+    p.spinning_agents, p.reversing_agents, p.mean_length_ratio = 0, 0, 1.1
+    p.max_direction_deviation = p.max_turned_direction_deviation = unknown
+    p.max_edit_turn, p.mean_foot_skate_ratio, p.max_foot_skate_ratio = 0.0, 1.0, 1.0
+    r.agents["/a"].plausibility.max_direction_deviation = unknown
+    text = format_text(StoredReport(file="e.usda", report=Report.from_dict(json.loads(json.dumps(r.to_dict())))
+                                    if unknown is None else r))
+    assert "nan" not in text.lower()
+    assert "no walking direction to compare" in text

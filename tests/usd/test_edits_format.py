@@ -72,3 +72,17 @@ def test_what_is_not_an_edits_layer_says_so(solved, tmp_path):
     edits_format.write(bad, {"report": "{not json"})
     with pytest.raises(MocapEditError, match="customLayerData mocapedit.report is not valid JSON"):
         edits_format.read_report(bad)
+
+
+def test_values_that_are_none_are_left_out_so_usd_writes_no_warning(tmp_path, capfd):
+    # A shot where no agent walks has no worst-walking agent: the report says null, the layer
+    # leaves the key out (USD would print a warning for each empty entry as it writes).
+    stats = edits_format.layer_value({"maxDirectionDeviationAgent": None, "agents": 2,
+                                      "nested": {"worst": None, "figures": [1.5, 2.0]}})
+    assert stats == {"agents": 2, "nested": {"figures": [1.5, 2.0]}}
+    layer = Sdf.Layer.CreateAnonymous(".usda")
+    edits_format.write(layer, {"stats": stats})
+    capfd.readouterr()
+    assert layer.Export(str(tmp_path / "edits.usda"))
+    assert "Warning" not in capfd.readouterr().err
+    assert edits_format.data(Sdf.Layer.FindOrOpen(str(tmp_path / "edits.usda")))["stats"]["agents"] == 2

@@ -9,6 +9,7 @@ Readers that go by the stored names (``entry.get("met")``) get the same values.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field, fields
 from typing import Any, ClassVar
 
@@ -320,24 +321,31 @@ def foot_locking_lines(stats: Stats) -> list[str]:
 
 
 def plausibility_lines(p: ShotPlausibility | None) -> list[str]:
-    """The shot's worst plausibility figures (``stats.plausibility``), as ``solve`` prints them."""
+    """The shot's worst plausibility figures (``stats.plausibility``), as ``solve`` prints them;
+    a figure that was not measured (NaN, or null as a stored report reads back) reads "-"."""
     if p is None or not p.agents:
         return []
-    lo, hi = p.length_ratio_range
-    wlo, whi = p.time_warp_range
+    lo, hi = p.length_ratio_range or (None, None)
+    wlo, whi = p.time_warp_range or (None, None)
     return [
-        f"plausibility of {p.agents} moved agents: largest extra turn {p.max_extra_turn_per_frame_at_60fps:.1f} "
+        f"plausibility of {p.agents} moved agents: largest extra turn {_fixed(p.max_extra_turn_per_frame_at_60fps, 1)} "
         f"deg/frame at 60 fps ({p.max_extra_facing_rate_agent}), {p.spinning_agents} spinning (over 15)",
-        f"  largest walking direction change {p.max_direction_deviation:.1f} deg"
-        + (f" ({p.max_direction_deviation_agent})" if p.max_direction_deviation_agent else "")
-        + (f", {p.max_turned_direction_deviation:.1f} deg against the edit's own turn"
-           + (f" ({p.max_turned_direction_deviation_agent})" if p.max_turned_direction_deviation_agent else "")
-           if p.max_turned_direction_deviation is not None else "")
+        ("  no walking direction to compare (no moved agent's source walks)" if not _known(p.max_direction_deviation)
+         else f"  largest walking direction change {p.max_direction_deviation:.1f} deg"
+         + (f" ({p.max_direction_deviation_agent})" if p.max_direction_deviation_agent else "")
+         + (f", {p.max_turned_direction_deviation:.1f} deg against the edit's own turn"
+            + (f" ({p.max_turned_direction_deviation_agent})" if p.max_turned_direction_deviation_agent else "")
+            if _known(p.max_turned_direction_deviation) else ""))
         + f", {p.reversing_agents} reversing"
         + (" (over 90 against the edit's turn, or turned over 135 from the source's way, or from its"
            " path curve's on one)" if p.max_edit_turn is not None else " (over 90)"),
-        f"  path length ratio mean {p.mean_length_ratio:.3f} ({lo:.3f}..{hi:.3f}); time warp {wlo:.3f}..{whi:.3f}; "
-        f"foot skate ratio mean {p.mean_foot_skate_ratio:.2f} (max {p.max_foot_skate_ratio:.2f})"]
+        f"  path length ratio mean {_fixed(p.mean_length_ratio, 3)} ({_fixed(lo, 3)}..{_fixed(hi, 3)}); "
+        f"time warp {_fixed(wlo, 3)}..{_fixed(whi, 3)}; "
+        f"foot skate ratio mean {_fixed(p.mean_foot_skate_ratio, 2)} (max {_fixed(p.max_foot_skate_ratio, 2)})"]
+
+
+def _fixed(value, digits: int) -> str:
+    return f"{value:.{digits}f}" if _known(value) else "-"
 
 
 def _plain(value):
@@ -400,8 +408,13 @@ def _or(value, default):
     return default if value is None else value
 
 
+def _known(value) -> bool:
+    """A figure that was measured: not None (null in a stored report) and not NaN."""
+    return value is not None and not (isinstance(value, float) and math.isnan(value))
+
+
 def _num(value, digits: int = 4) -> str:
-    if value is None:
+    if not _known(value):
         return "-"
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         return str(value)
@@ -464,9 +477,11 @@ def format_text(stored: StoredReport, show_all: bool = False) -> str:
             parts.append(f"shape change {_num(fig.shape_change)}")
         if fig.plausibility is not None:
             p = fig.plausibility
-            parts.append(f"extra turn {_num(p.max_extra_facing_rate / 60.0)} deg/frame at 60 fps"
-                         f" ({p.spin_frames} spinning frames), walking direction change "
-                         f"{_num(p.max_direction_deviation)} deg, foot skate ratio {_num(p.foot_skate_ratio)}")
+            walking = (f"walking direction change {_num(p.max_direction_deviation)} deg"
+                       if _known(p.max_direction_deviation) else "no walking direction to compare")
+            extra = p.max_extra_facing_rate / 60.0 if _known(p.max_extra_facing_rate) else None
+            parts.append(f"extra turn {_num(extra)} deg/frame at 60 fps"
+                         f" ({p.spin_frames} spinning frames), {walking}, foot skate ratio {_num(p.foot_skate_ratio)}")
         if fig.foot_skate_source is not None or fig.foot_skate_edited is not None:
             a, b = fig.foot_skate_source, fig.foot_skate_edited
             change = f" ({'+' if b - a >= 0 else ''}{_num(b - a)})" if a is not None and b is not None else ""

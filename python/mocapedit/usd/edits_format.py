@@ -38,9 +38,11 @@ def write(layer: Sdf.Layer, entries: dict) -> None:
 
 
 def layer_value(value):
-    """A value made fit for customLayerData: lists of numbers or strings become Vt arrays."""
+    """A value made fit for customLayerData: lists of numbers or strings become Vt arrays;
+    entries of a dictionary that are None are left out (USD cannot hold an empty value: it
+    warns and skips them as it writes)."""
     if isinstance(value, dict):
-        return {str(k): layer_value(v) for k, v in value.items()}
+        return {str(k): layer_value(v) for k, v in value.items() if v is not None}
     if isinstance(value, np.ndarray):
         value = value.tolist()
     if isinstance(value, (list, tuple)):
