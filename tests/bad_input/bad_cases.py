@@ -160,6 +160,11 @@ shot("agent-no-skeleton", 'def SkelRoot "Lonely" (prepend apiSchemas = ["MocapAg
 shot("agent-no-animation", 'def SkelRoot "Lonely" (prepend apiSchemas = ["MocapAgentAPI"])\n{\n'
      '    def Skeleton "Skel"\n    {\n        uniform token[] joints = ["Root"]\n    }\n}\n',
      r"</Lonely>\.mocap:animationSource: agent has no animation")
+# The skeleton's own binding set to nothing blocks the one its SkelRoot inherits: UsdSkel plays
+# the rest pose, so there is no clip to edit.
+shot("agent-animation-blocked", agent_over('rel skel:animationSource = </World/agent0/Skel/Anim>\n'
+                                           'over "Skel"\n{\n    rel skel:animationSource = None\n}'),
+     r"</World/agent0/Skel>\.skel:animationSource: .*set to none")
 shot("skeleton-no-joints", agent_over('over "Skel"\n{\n    uniform token[] joints = []\n}'),
      r"</World/agent0/Skel>\.joints: skeleton has no joints")
 shot("skeleton-bad-hierarchy", agent_over('over "Skel"\n{\n    uniform token[] joints = ["Root/Hips", "Root", '

@@ -298,11 +298,17 @@ class StageReader:
         if explicit:
             return self._target_prim(prim, "mocap:animationSource", explicit[0], UsdSkel.Animation,
                                      "SkelAnimation")
-        # UsdSkel binds the animation on the skeleton or inherits it from an ancestor.
+        # UsdSkel binds the animation on the skeleton or inherits it from an ancestor; the
+        # nearest binding authored holds, even one set to nothing (it blocks those above).
         p = skel
         while p and not p.IsPseudoRoot():
-            for target in _targets(p, "skel:animationSource"):
-                return self._target_prim(p, "skel:animationSource", target, UsdSkel.Animation, "SkelAnimation")
+            rel = p.GetRelationship("skel:animationSource")
+            if rel and rel.HasAuthoredTargets():
+                for target in _targets(p, "skel:animationSource"):
+                    return self._target_prim(p, "skel:animationSource", target, UsdSkel.Animation, "SkelAnimation")
+                raise prim_error(p.GetPath(), "agent has no animation: its binding is set to none, so UsdSkel "
+                                 "plays the rest pose; bind a SkelAnimation here or set mocap:animationSource on "
+                                 f"<{prim.GetPath()}>", "skel:animationSource")
             if p == prim:
                 break
             p = p.GetParent()
