@@ -107,6 +107,14 @@ class Agent:
     # authored below an instance is ignored, so the writer makes those it authors under
     # not instanceable in the edits layer.
     instances: list[str] = field(default_factory=list)
+    # (F,4,4) the agent prim's own local transform at each clip frame when its transform ops
+    # are animated (ground motion carried by the prim, as crowd tools export), else None. A
+    # re-timed agent's edit op then replaces those ops: they play at shot time, its clip at
+    # the re-timed source time.
+    own_transform: np.ndarray | None = None
+    # A prim between the agent and its skeleton (the skeleton included) has an animated
+    # transform, which a re-timed clip does not carry.
+    inner_transform_animated: bool = False
 
     @property
     def frame_count(self) -> int:

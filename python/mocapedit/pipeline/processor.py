@@ -74,7 +74,16 @@ def compose_edits(ctx: SolveContext) -> None:
                 if pose_edit.drop is not None:
                     lowered = pose_edit.drop if lowered is None else lowered + pose_edit.drop
         edited = ctx.paths.get(path)
-        if edited is not None or lowered is not None:
+        # An animated transform on the agent prim itself (crowd tools put the walk's ground
+        # motion there) plays at shot time while a re-timed clip plays its source time: the
+        # edit op then stands for it, the prim's transform at each output frame's source time.
+        own_ops = path in ctx.time_maps and agent.own_transform is not None
+        if path in ctx.time_maps and (agent.inner_transform_animated or agent.agent_parent_to_world.shape[0] > 1):
+            where = "a prim between it and its skeleton" if agent.inner_transform_animated else "its parent"
+            ctx.report.agent(path).add_notes(
+                f"{where} has an animated transform, which plays at shot time while the re-timed clip plays "
+                "its source time: put that motion on the agent prim itself or in the clip to re-time it too")
+        if edited is not None or lowered is not None or own_ops:
             # Untimed agents are written at their own frames: nothing to interpolate.
             whole = len(frames) == len(traj.ground) and np.array_equal(frames, np.arange(len(frames)))
             at = (lambda values: values) if whole else (lambda values: animation.interp_frames(values, frames))
@@ -84,14 +93,18 @@ def compose_edits(ctx: SolveContext) -> None:
             if lowered is not None:
                 motion = motion @ trajectory.lowering(lowered, up)
             # A path moved by less than a nanometre is not an edit: only its timing is written.
-            if lowered is not None or ctx.moved(path):
+            if lowered is not None or ctx.moved(path) or own_ops:
                 edit.times = times
                 parent = agent.agent_parent_to_world
                 if parent.shape[0] > 1:  # a moving parent, sampled per source frame
                     agent_view = _with_parent(agent, animation.interp_frames(parent, frames))
                 else:
                     agent_view = agent
-                edit.xform_ops = trajectory.xform_ops(trajectory.agent_xform_op(agent_view, motion), up)
+                op = trajectory.agent_xform_op(agent_view, motion)
+                if own_ops:
+                    op = at(agent.own_transform) @ op
+                    edit.replaces_ops = True
+                edit.xform_ops = trajectory.xform_ops(op, up)
         if edit.retimed is not None or edit.xform_ops or _baked(ctx, path, spec):
             ctx.edits[path] = edit
 

@@ -238,6 +238,25 @@ class _XformTimes:
             return np.array(self.cache(None).GetLocalToWorldTransform(prim))[None]
         return np.stack([np.array(self.cache(float(t)).GetLocalToWorldTransform(prim)) for t in times])
 
+    def own_transform(self, agent: Usd.Prim, skel: Usd.Prim, times: np.ndarray) -> np.ndarray | None:
+        """(F,4,4) the agent prim's local transform at ``times`` when its own transform ops are
+        animated, else None."""
+        xf = UsdGeom.Xformable(agent)
+        if not xf or not xf.TransformMightBeTimeVarying():
+            return None
+        return np.stack([np.array(xf.GetLocalTransformation(Usd.TimeCode(float(t)))) for t in times])
+
+    def inner_animated(self, agent: Usd.Prim, skel: Usd.Prim) -> bool:
+        """Whether a prim from the skeleton up to the agent (the agent excluded) has an animated
+        transform."""
+        p = skel
+        while p and p != agent and not p.IsPseudoRoot() and p.GetPath().HasPrefix(agent.GetPath()):
+            xf = UsdGeom.Xformable(p)
+            if xf and xf.TransformMightBeTimeVarying():
+                return True
+            p = p.GetParent()
+        return False
+
     def parent_to_world(self, prim: Usd.Prim, times: np.ndarray) -> np.ndarray:
         xf = UsdGeom.Xformable(prim)
         if xf and xf.GetResetXformStack():
@@ -556,6 +575,8 @@ class StageReader:
             legs=legs, foot_locking=bool(_get(prim, "mocap:footLocking", True)),
             foot_contacts=self._foot_contacts(anim, joints, times.size, legs),
             instances=_instances(prim, skel),
+            own_transform=self.xforms.own_transform(prim, skel, times),
+            inner_transform_animated=self.xforms.inner_animated(prim, skel),
         )
 
     # ---- the other prims ---------------------------------------------------------------

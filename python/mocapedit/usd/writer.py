@@ -7,7 +7,8 @@ UsdSkel and UsdGeom. Layout:
 - an edited agent gets ``xformOp:translate:mocapEdit`` and ``xformOp:rotateY:mocapEdit``
   (``rotateZ`` on a Z-up stage; ``xformOp:transform:mocapEdit`` under a parent that is not
   upright), time-sampled and prepended to its ``xformOpOrder``: the rigid ground motion of
-  its path edit;
+  its path edit (for a re-timed agent whose own transform ops are animated, the ops stand
+  for those too and replace them in the order: they would play at shot time);
 - an agent whose joints changed only in timing (time warp, time and sync constraints,
   speed matching) gets a SkelAnimation under ``/MocapEdit/Animations`` that references its
   source clip and re-times it with USD value clips (``clips:times`` maps shot time to the
@@ -91,6 +92,9 @@ class AgentEdit:
     # The prepended ops, outermost first: (kind, (T,...) values), kind one of translate,
     # rotateY, rotateZ (degrees) or transform ((T,4,4) matrices).
     xform_ops: list[tuple[str, np.ndarray]] = field(default_factory=list)
+    # The ops stand for the agent prim's authored ones too, which leave its xformOpOrder (a
+    # re-timed agent whose own transform is animated: see processor.compose_edits).
+    replaces_ops: bool = False
     animation: BakedAnimation | None = None
     retimed: RetimedClip | None = None
 
@@ -147,6 +151,8 @@ def _author_xform_ops(layer: Sdf.Layer, agent: Agent, edit: AgentEdit) -> None:
     spec = sdf.over_chain(layer, Sdf.Path(agent.path))
     order = [o for o in agent.xform_op_order if not o.endswith(":" + EDIT_SUFFIX)]
     at = 1 if order and order[0] == "!resetXformStack!" else 0
+    if edit.replaces_ops:
+        order = order[:at]
     names = [f"xformOp:{kind}:{EDIT_SUFFIX}" for kind, _ in edit.xform_ops]
     order[at:at] = names
     sdf.attr(spec, "xformOpOrder", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(order), uniform=True)
