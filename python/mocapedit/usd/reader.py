@@ -822,11 +822,13 @@ class StageReader:
 def _instances(agent: Usd.Prim, skel: Usd.Prim) -> list[str]:
     """Paths of the instances among the agent prim, its ancestors and the prims between it and
     its skeleton (the skeleton excluded), outermost first."""
-    chain = list(skel.GetPath().GetParentPath().GetAncestorsRange()) \
-        if skel.GetPath().HasPrefix(agent.GetPath()) and skel.GetPath() != agent.GetPath() \
-        else list(agent.GetPath().GetAncestorsRange())
-    stage = agent.GetStage()
-    return [str(p) for p in chain if stage.GetPrimAtPath(p).IsInstance()]
+    below = skel.GetPath() != agent.GetPath() and skel.GetPath().HasPrefix(agent.GetPath())
+    p, out = (skel.GetParent() if below else agent), []
+    while p and not p.IsPseudoRoot():
+        if p.IsInstance():
+            out.append(str(p.GetPath()))
+        p = p.GetParent()
+    return out[::-1]
 
 
 def _without_agent(skels: list[Sdf.Path], agent_prims: list[Usd.Prim]) -> list[str]:
