@@ -217,3 +217,13 @@ def test_skeletons_without_the_agent_api_are_named_in_a_note(tmp_path, toy_stage
     assert len(notes) == 1 and notes[0].startswith("2 skeletons without MocapAgentAPI are left as authored")
     assert "</World/prop>" in notes[0] and "</World/loose>" in notes[0]
     assert "/World/prop/Skel" not in notes[0] and "agent" not in notes[0].split("(")[1].split(")")[0]
+
+
+def test_a_stage_without_agents_says_so(tmp_path):
+    # The wrong file given (a set, an empty layer): the solve succeeds with nothing to do, and
+    # says why, rather than reporting 0 agents as if that were the shot.
+    shot = tmp_path / "set.usda"
+    shot.write_text('#usda 1.0\ndef Xform "World"\n{\n    def Xform "Props"\n    {\n    }\n}\n')
+    proc = run_cli("solve", shot, "-o", tmp_path / "set.edits.usda")
+    assert proc.returncode == 0, proc.stderr
+    assert "note: the stage has no agents" in proc.stdout + proc.stderr

@@ -386,6 +386,9 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
     timings["read"] = time.perf_counter() - t0
 
     report = Report(input=input_name, output=output)
+    if not data.agents and not data.skel_roots_without_agent:
+        report.note("the stage has no agents: no SkelRoot or Skeleton prim on it, and none with MocapAgentAPI; "
+                    "check that this is the shot you meant")
     if data.skel_roots_without_agent:
         roots = data.skel_roots_without_agent
         report.note(f"{len(roots)} skeleton{'s' if len(roots) > 1 else ''} without MocapAgentAPI "
