@@ -40,10 +40,11 @@ def _clips(folder):
     return travel
 
 
-def _shot(folder, carrier: str, fix_time: bool = True) -> str:
+def _shot(folder, carrier: str) -> str:
     """Agents a and b walking; ``carrier`` says where the travel is: "joint" (the clip's root
     joint), "agent" (the SkelRoot's xformOp:transform) or "skeleton" (the Skeleton prim's).
-    a is pinned 1.5 m off its end, b's frame 60 plays at shot time 70."""
+    a is pinned 1.5 m off its end and its frame 40 plays at shot time 46, b's frame 60 plays
+    at shot time 70, c is pinned 1 m off its end."""
     folder.mkdir()
     travel = _clips(folder)
     layer = Sdf.Layer.CreateNew(str(folder / "shot.usda"))
@@ -53,7 +54,7 @@ def _shot(folder, carrier: str, fix_time: bool = True) -> str:
     layer.startTimeCode, layer.endTimeCode = 0, FRAMES - 1
     world = Sdf.PrimSpec(layer.pseudoRoot, "World", Sdf.SpecifierDef, "Xform")
     layer.defaultPrim = "World"
-    for name, x0 in (("a", 0.0), ("b", 3.0)):
+    for name, x0 in (("a", 0.0), ("b", 3.0), ("c", -3.0)):
         agent = Sdf.PrimSpec(world, name, Sdf.SpecifierDef, "SkelRoot")
         agent.SetInfo("apiSchemas", Sdf.TokenListOp.Create(prependedItems=["MocapAgentAPI"]))
         skel = Sdf.PrimSpec(agent, "Skel", Sdf.SpecifierDef, "Skeleton")
@@ -76,8 +77,9 @@ def _shot(folder, carrier: str, fix_time: bool = True) -> str:
     stage = Usd.Stage.Open(layer)
     examples.add_position_constraint(stage, "/Edits/keep", "/World/a", 0, (0.0, 0.0, float(travel[0, 2])))
     examples.add_position_constraint(stage, "/Edits/aside", "/World/a", FRAMES - 1, (1.5, 0.0, float(travel[-1, 2])))
-    if fix_time:
-        examples.add_time_constraint(stage, "/Edits/late", "/World/b", 60, 70.0)
+    examples.add_position_constraint(stage, "/Edits/c_aside", "/World/c", FRAMES - 1, (-2.0, 0.0, float(travel[-1, 2])))
+    examples.add_time_constraint(stage, "/Edits/late", "/World/b", 60, 70.0)
+    examples.add_time_constraint(stage, "/Edits/a_late", "/World/a", 40, 46.0)
     layer.Save()
     return str(folder / "shot.usda")
 
@@ -92,22 +94,23 @@ def _solved(folder, shot, **kwargs):
 def test_travel_on_the_agent_prim_is_edited_as_travel_in_the_root_joint(tmp_path, bake_timing):
     by_joint, in_joint = _solved(tmp_path / "joint", _shot(tmp_path / "joint", "joint"), bake_timing=bake_timing)
     by_prim, on_prim = _solved(tmp_path / "agent", _shot(tmp_path / "agent", "agent"), bake_timing=bake_timing)
-    assert by_joint.report.stats["editedAgents"] == by_prim.report.stats["editedAgents"] == 2
+    assert by_joint.report.stats["editedAgents"] == by_prim.report.stats["editedAgents"] == 3
     # Every joint, at the frames and between them.
     times = np.concatenate([np.arange(FRAMES, dtype=np.float64), np.arange(FRAMES - 1) + 0.5])
-    for agent in ("/World/a", "/World/b"):
+    for agent in ("/World/a", "/World/b", "/World/c"):
         np.testing.assert_allclose(evaluate.joint_world_positions(on_prim, agent, times),
                                    evaluate.joint_world_positions(in_joint, agent, times), atol=1e-6, err_msg=agent)
     # b's frame 60 is where its source has it, at shot time 70.
     source = Usd.Stage.Open(str(tmp_path / "agent" / "shot.usda"))
     np.testing.assert_allclose(evaluate.agent_root_positions(on_prim, "/World/b", [70.0]),
                                evaluate.agent_root_positions(source, "/World/b", [60.0]), atol=1e-6)
-    # The re-timed agent's edit op stands for its own: the input's op is out of its order.
+    # The re-timed agents' edit ops stand for their own: the input's op is out of their order.
     layer = Sdf.Layer.FindOrOpen(str(tmp_path / "agent" / "edits.usda"))
-    order = list(layer.GetAttributeAtPath("/World/b.xformOpOrder").default)
-    assert order and all(op.endswith(":mocapEdit") for op in order)
-    # a is not re-timed: its op is prepended to the input's, which still plays.
-    assert list(layer.GetAttributeAtPath("/World/a.xformOpOrder").default)[-1] == "xformOp:transform"
+    for agent in ("/World/a", "/World/b"):
+        order = list(layer.GetAttributeAtPath(f"{agent}.xformOpOrder").default)
+        assert order and all(op.endswith(":mocapEdit") for op in order), agent
+    # c is not re-timed: its op is prepended to the input's, which still plays.
+    assert list(layer.GetAttributeAtPath("/World/c.xformOpOrder").default)[-1] == "xformOp:transform"
 
 
 def test_travel_on_the_skeleton_prim_of_a_retimed_agent_is_named_in_a_note(tmp_path):
@@ -115,4 +118,4 @@ def test_travel_on_the_skeleton_prim_of_a_retimed_agent_is_named_in_a_note(tmp_p
     notes = result.report.agents["/World/b"].notes or []
     assert any("between it and its skeleton has an animated transform" in n for n in notes), notes
     # Not re-timed, nothing to say.
-    assert not any("animated transform" in n for n in (result.report.agents["/World/a"].notes or []))
+    assert not any("animated transform" in n for n in (result.report.agents["/World/c"].notes or []))
