@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from pxr import Gf, Sdf, Usd, UsdSkel, Vt
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
 
 from mocapedit.data import examples, walker
 from mocapedit.pipeline.processor import solve
@@ -119,3 +119,32 @@ def test_travel_on_the_skeleton_prim_of_a_retimed_agent_is_named_in_a_note(tmp_p
     assert any("between it and its skeleton has an animated transform" in n for n in notes), notes
     # Not re-timed, nothing to say.
     assert not any("animated transform" in n for n in (result.report.agents["/World/c"].notes or []))
+
+
+def test_a_retimed_agent_under_a_moving_parent_plays_each_frame_where_its_source_does(tmp_path):
+    # Walkers on a platform that slides 4 m along x over the shot: b's frame 60 plays at shot
+    # time 70, when the platform is 0.4 m further on than at time 60.
+    clip = walker.walk(frames=FRAMES, name="walk")
+    specs = [examples.AgentSpec("a", clip, (0.0, 0.0, 0.0), 0.0), examples.AgentSpec("b", clip, (3.0, 0.0, 0.0), 0.0)]
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", specs)
+    crowd = stage.GetPrimAtPath("/World/Crowd")
+    slide = UsdGeom.Xformable(crowd).AddTranslateOp(opSuffix="platform")
+    for t in (0.0, FRAMES - 1.0):
+        slide.Set(Gf.Vec3d(4.0 * t / (FRAMES - 1.0), 0.0, 0.0), t)
+    examples.add_time_constraint(stage, "/Edits/late", "/World/Crowd/b", 60, 70.0)
+    examples.add_position_constraint(stage, "/Edits/aside", "/World/Crowd/a", FRAMES - 1,
+                                     tuple(evaluate.agent_root_positions(stage, "/World/Crowd/a", [FRAMES - 1.0])[0]
+                                           + np.array([1.0, 0.0, 0.0])))
+    stage.GetRootLayer().Save()
+    result, composed = _solved(tmp_path, str(tmp_path / "shot.usda"))
+    assert not any("animated transform" in n for n in (result.report.agents["/World/Crowd/b"].notes or []))
+    source = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    layer = Sdf.Layer.FindOrOpen(str(tmp_path / "edits.usda"))
+    pairs = np.asarray(layer.GetPrimAtPath("/MocapEdit/Animations/World_Crowd_b").GetInfo("clips")["default"]["times"])
+    assert np.abs(pairs[:, 0] - pairs[:, 1]).max() > 5.0     # re-timed by frames, not a trifle
+    np.testing.assert_allclose(evaluate.joint_world_positions(composed, "/World/Crowd/b", pairs[:, 0]),
+                               evaluate.joint_world_positions(source, "/World/Crowd/b", pairs[:, 1]), atol=1e-6)
+    # The pinned agent is not re-timed: it plays at its own times, pinned.
+    np.testing.assert_allclose(evaluate.agent_root_positions(composed, "/World/Crowd/a", [FRAMES - 1.0])[0, [0, 2]],
+                               (evaluate.agent_root_positions(source, "/World/Crowd/a", [FRAMES - 1.0])[0]
+                                + np.array([1.0, 0.0, 0.0]))[[0, 2]], atol=1e-6)

@@ -193,15 +193,17 @@ def lowering(drop: np.ndarray, up_axis: str) -> np.ndarray:
     return kinematics.translation_matrix(ground.from_ground(np.zeros(drop.shape + (2,)), -drop, up_axis))
 
 
-def agent_xform_op(agent: Agent, motion: np.ndarray) -> np.ndarray:
+def agent_xform_op(agent: Agent, motion: np.ndarray, shot_parent: np.ndarray | None = None) -> np.ndarray:
     """(F,4,4) values of the transform op prepended to the agent prim's xformOpOrder.
 
     The prepended op ``O`` makes the agent's local matrix ``local @ O``; with the parent's
     world matrix ``W`` the new world matrix is ``local @ O @ W``, which must equal
-    ``local @ W @ M``: so ``O = W @ M @ W^-1``.
+    ``local @ W @ M``: so ``O = W @ M @ W^-1``. A re-timed agent under a moving parent plays
+    each frame at a shot time other than its source time: ``W`` is the parent's at the source
+    time and ``shot_parent`` its own at the shot time, so ``O = W @ M @ shot_parent^-1``.
     """
     w = agent.agent_parent_to_world
-    return w @ motion @ np.linalg.inv(w)
+    return w @ motion @ np.linalg.inv(w if shot_parent is None else shot_parent)
 
 
 def xform_ops(op: np.ndarray, up_axis: str) -> list[tuple[str, np.ndarray]]:

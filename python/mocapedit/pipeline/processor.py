@@ -46,7 +46,7 @@ def extract_trajectories(ctx: SolveContext) -> None:
     task.done()
 
 
-def compose_edits(ctx: SolveContext) -> None:
+def compose_edits(ctx: SolveContext, parents_at=None) -> None:
     """Turns edited paths, time maps and pose edits into what the writer authors.
 
     The pose is the source sampled at the (warped) source frame of each output time, then
@@ -54,6 +54,9 @@ def compose_edits(ctx: SolveContext) -> None:
     by one rigid ground motion per output time (the prepended xform op). The poses themselves
     are baked as the writer reaches each agent (:class:`EditsToWrite`): a crowd's baked poses
     are never all in memory at once.
+
+    ``parents_at(path, times)``: an agent's parent-to-world transforms at stage times (read
+    from the stage), for re-timed agents under a moving parent.
     """
     up = ctx.data.info.up_axis
     for path in ctx.touched():
@@ -77,13 +80,17 @@ def compose_edits(ctx: SolveContext) -> None:
         # An animated transform on the agent prim itself (crowd tools put the walk's ground
         # motion there) plays at shot time while a re-timed clip plays its source time: the
         # edit op then stands for it, the prim's transform at each output frame's source time.
-        own_ops = path in ctx.time_maps and agent.own_transform is not None
-        if path in ctx.time_maps and (agent.inner_transform_animated or agent.agent_parent_to_world.shape[0] > 1):
-            where = "a prim between it and its skeleton" if agent.inner_transform_animated else "its parent"
+        retimed = path in ctx.time_maps
+        own_ops = retimed and agent.own_transform is not None
+        # Likewise a moving parent plays at shot time: the op carries the body from where the
+        # parent is then to where it was at the source time.
+        moving_parent = retimed and agent.agent_parent_to_world.shape[0] > 1 and parents_at is not None
+        if retimed and agent.inner_transform_animated:
             ctx.report.agent(path).add_notes(
-                f"{where} has an animated transform, which plays at shot time while the re-timed clip plays "
-                "its source time: put that motion on the agent prim itself or in the clip to re-time it too")
-        if edited is not None or lowered is not None or own_ops:
+                "a prim between it and its skeleton has an animated transform, which plays at shot time while the "
+                "re-timed clip plays its source time: put that motion on the agent prim itself or in the clip to "
+                "re-time it too")
+        if edited is not None or lowered is not None or own_ops or moving_parent:
             # Untimed agents are written at their own frames: nothing to interpolate.
             whole = len(frames) == len(traj.ground) and np.array_equal(frames, np.arange(len(frames)))
             at = (lambda values: values) if whole else (lambda values: animation.interp_frames(values, frames))
@@ -93,14 +100,15 @@ def compose_edits(ctx: SolveContext) -> None:
             if lowered is not None:
                 motion = motion @ trajectory.lowering(lowered, up)
             # A path moved by less than a nanometre is not an edit: only its timing is written.
-            if lowered is not None or ctx.moved(path) or own_ops:
+            if lowered is not None or ctx.moved(path) or own_ops or moving_parent:
                 edit.times = times
                 parent = agent.agent_parent_to_world
                 if parent.shape[0] > 1:  # a moving parent, sampled per source frame
                     agent_view = _with_parent(agent, animation.interp_frames(parent, frames))
                 else:
                     agent_view = agent
-                op = trajectory.agent_xform_op(agent_view, motion)
+                op = trajectory.agent_xform_op(agent_view, motion,
+                                               parents_at(path, times) if moving_parent else None)
                 if own_ops:
                     op = at(agent.own_transform) @ op
                     edit.replaces_ops = True
@@ -409,7 +417,7 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
         memory.give_back()
         timings[solve_pass.name] = time.perf_counter() - t
     t = time.perf_counter()
-    compose_edits(ctx)
+    compose_edits(ctx, lambda path, times: reader.parent_to_world_at(stage, path, times))
     timings["compose"] = time.perf_counter() - t
     t = time.perf_counter()
     inspect(ctx)

@@ -870,4 +870,11 @@ def read_stage(stage: Usd.Stage, progress=None) -> model.StageData:
     return StageReader(stage, progress).read()
 
 
-__all__ = ["open_stage", "check_composition", "read_stage", "stage_info", "resolve_joint", "StageReader"]
+def parent_to_world_at(stage: Usd.Stage, path: str, times) -> np.ndarray:
+    """(T,4,4) the parent-to-world transform of the prim at ``path`` at stage ``times`` (one
+    (1,4,4) when it does not move; identity under ``!resetXformStack!``)."""
+    return _XformTimes(stage).parent_to_world(stage.GetPrimAtPath(path), np.asarray(times, dtype=np.float64))
+
+
+__all__ = ["open_stage", "check_composition", "read_stage", "stage_info", "resolve_joint", "StageReader",
+           "parent_to_world_at"]
