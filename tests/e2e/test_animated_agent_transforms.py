@@ -113,8 +113,35 @@ def test_travel_on_the_agent_prim_is_edited_as_travel_in_the_root_joint(tmp_path
     assert list(layer.GetAttributeAtPath("/World/c.xformOpOrder").default)[-1] == "xformOp:transform"
 
 
-def test_travel_on_the_skeleton_prim_of_a_retimed_agent_is_named_in_a_note(tmp_path):
-    result, _ = _solved(tmp_path / "skel", _shot(tmp_path / "skel", "skeleton"))
+def test_travel_on_the_skeleton_prim_is_edited_as_travel_in_the_root_joint(tmp_path):
+    by_joint, in_joint = _solved(tmp_path / "joint", _shot(tmp_path / "joint", "joint"))
+    by_skel, on_skel = _solved(tmp_path / "skel", _shot(tmp_path / "skel", "skeleton"))
+    times = np.concatenate([np.arange(FRAMES, dtype=np.float64), np.arange(FRAMES - 1) + 0.5])
+    for agent in ("/World/a", "/World/b", "/World/c"):
+        np.testing.assert_allclose(evaluate.joint_world_positions(on_skel, agent, times),
+                                   evaluate.joint_world_positions(in_joint, agent, times), atol=1e-6, err_msg=agent)
+    # The re-timed agents' skeletons play the edits layer's ops instead of their own.
+    layer = Sdf.Layer.FindOrOpen(str(tmp_path / "skel" / "edits.usda"))
+    for agent in ("/World/a", "/World/b"):
+        order = list(layer.GetAttributeAtPath(f"{agent}/Skel.xformOpOrder").default)
+        assert order and all(op.endswith(":mocapEdit") for op in order), agent
+    assert not layer.GetAttributeAtPath("/World/c/Skel.xformOpOrder")
+
+
+def test_travel_on_a_prim_between_agent_and_skeleton_of_a_retimed_agent_is_named_in_a_note(tmp_path):
+    shot = _shot(tmp_path / "mid", "skeleton")
+    # The skeleton's travel moved onto a prim between it and the agent.
+    layer = Sdf.Layer.FindOrOpen(shot)
+    for name in ("a", "b", "c"):
+        agent = layer.GetPrimAtPath(f"/World/{name}")
+        mid = Sdf.PrimSpec(agent, "Rig", Sdf.SpecifierDef, "Xform")
+        Sdf.CopySpec(layer, f"/World/{name}/Skel", layer, f"/World/{name}/Rig/Skel")
+        for prop in ("xformOp:transform", "xformOpOrder"):
+            Sdf.CopySpec(layer, f"/World/{name}/Skel.{prop}", layer, f"/World/{name}/Rig.{prop}")
+            mid.GetPrimAtPath("Skel").RemoveProperty(mid.GetPrimAtPath("Skel").properties[prop])
+        del agent.nameChildren["Skel"]
+    layer.Save()
+    result, _ = _solved(tmp_path / "mid", shot)
     notes = result.report.agents["/World/b"].notes or []
     assert any("between it and its skeleton has an animated transform" in n for n in notes), notes
     # Not re-timed, nothing to say.

@@ -112,8 +112,12 @@ class Agent:
     # re-timed agent's edit op then replaces those ops: they play at shot time, its clip at
     # the re-timed source time.
     own_transform: np.ndarray | None = None
-    # A prim between the agent and its skeleton (the skeleton included) has an animated
-    # transform, which a re-timed clip does not carry.
+    # The same for the skeleton prim's own transform ops (the skeleton below the agent), and
+    # the skeleton's authored xformOpOrder.
+    skeleton_transform: np.ndarray | None = None
+    skeleton_xform_op_order: list[str] = field(default_factory=list)
+    # A prim between the agent and its skeleton (both excluded) has an animated transform,
+    # which a re-timed clip does not carry.
     inner_transform_animated: bool = False
 
     @property

@@ -90,10 +90,15 @@ def compose_edits(ctx: SolveContext, parents_at=None) -> None:
                 "a prim between it and its skeleton has an animated transform, which plays at shot time while the "
                 "re-timed clip plays its source time: put that motion on the agent prim itself or in the clip to "
                 "re-time it too")
+        # Untimed agents are written at their own frames: nothing to interpolate.
+        whole = len(frames) == len(traj.ground) and np.array_equal(frames, np.arange(len(frames)))
+        at = (lambda values: values) if whole else (lambda values: animation.interp_frames(values, frames))
+        if retimed and agent.skeleton_transform is not None:
+            # The skeleton prim's own animated ops too: its transform at each output frame's
+            # source time.
+            edit.times = times
+            edit.skeleton_ops = trajectory.xform_ops(at(agent.skeleton_transform), up)
         if edited is not None or lowered is not None or own_ops or moving_parent:
-            # Untimed agents are written at their own frames: nothing to interpolate.
-            whole = len(frames) == len(traj.ground) and np.array_equal(frames, np.arange(len(frames)))
-            at = (lambda values: values) if whole else (lambda values: animation.interp_frames(values, frames))
             moved = edited if edited is not None else traj
             motion = trajectory.ground_motion(at(traj.ground), at(traj.heading), at(moved.ground),
                                               at(moved.heading), up)
@@ -113,7 +118,7 @@ def compose_edits(ctx: SolveContext, parents_at=None) -> None:
                     op = at(agent.own_transform) @ op
                     edit.replaces_ops = True
                 edit.xform_ops = trajectory.xform_ops(op, up)
-        if edit.retimed is not None or edit.xform_ops or _baked(ctx, path, spec):
+        if edit.retimed is not None or edit.xform_ops or edit.skeleton_ops or _baked(ctx, path, spec):
             ctx.edits[path] = edit
 
 

@@ -238,18 +238,18 @@ class _XformTimes:
             return np.array(self.cache(None).GetLocalToWorldTransform(prim))[None]
         return np.stack([np.array(self.cache(float(t)).GetLocalToWorldTransform(prim)) for t in times])
 
-    def own_transform(self, agent: Usd.Prim, skel: Usd.Prim, times: np.ndarray) -> np.ndarray | None:
-        """(F,4,4) the agent prim's local transform at ``times`` when its own transform ops are
+    def own_transform(self, prim: Usd.Prim, times: np.ndarray) -> np.ndarray | None:
+        """(F,4,4) the prim's local transform at ``times`` when its own transform ops are
         animated, else None."""
-        xf = UsdGeom.Xformable(agent)
+        xf = UsdGeom.Xformable(prim)
         if not xf or not xf.TransformMightBeTimeVarying():
             return None
         return np.stack([np.array(xf.GetLocalTransformation(Usd.TimeCode(float(t)))) for t in times])
 
     def inner_animated(self, agent: Usd.Prim, skel: Usd.Prim) -> bool:
-        """Whether a prim from the skeleton up to the agent (the agent excluded) has an animated
+        """Whether a prim between the skeleton and the agent (both excluded) has an animated
         transform."""
-        p = skel
+        p = skel.GetParent()
         while p and p != agent and not p.IsPseudoRoot() and p.GetPath().HasPrefix(agent.GetPath()):
             xf = UsdGeom.Xformable(p)
             if xf and xf.TransformMightBeTimeVarying():
@@ -559,14 +559,14 @@ class StageReader:
 
         legs = self._legs(prim, joints, parents)
         curves = _targets(prim, "mocap:pathCurve")
-        order = UsdGeom.Xformable(prim).GetXformOpOrderAttr().Get() if UsdGeom.Xformable(prim) else None
+        order = _op_order(prim)
         return model.Agent(
             path=path, skeleton_path=str(skel.GetPath()), animation_path=str(anim.GetPath()),
             clip_key=key, joints=joints, parents=parents, rest_transforms=rest,
             anim_to_skel=anim_to_skel, sample_times=times,
             skel_to_world=self.xforms.local_to_world(skel, times),
             agent_parent_to_world=self.xforms.parent_to_world(prim, times),
-            xform_op_order=[str(o) for o in (order or [])],
+            xform_op_order=order,
             root_joint=int(root_joint), hip_joint=hip_joint,
             collision_radius=radius, collision_height=height,
             collide=bool(_get(prim, "mocap:collide", True)),
@@ -575,7 +575,9 @@ class StageReader:
             legs=legs, foot_locking=bool(_get(prim, "mocap:footLocking", True)),
             foot_contacts=self._foot_contacts(anim, joints, times.size, legs),
             instances=_instances(prim, skel),
-            own_transform=self.xforms.own_transform(prim, skel, times),
+            own_transform=self.xforms.own_transform(prim, times),
+            skeleton_transform=None if skel == prim else self.xforms.own_transform(skel, times),
+            skeleton_xform_op_order=[] if skel == prim else _op_order(skel),
             inner_transform_animated=self.xforms.inner_animated(prim, skel),
         )
 
@@ -817,6 +819,13 @@ class StageReader:
             if agent.path_curve and agent.path_curve not in data.curves:
                 data.curves[agent.path_curve] = self.read_curve(agent.path, agent.path_curve)
         return data
+
+
+def _op_order(prim: Usd.Prim) -> list[str]:
+    """The prim's authored xformOpOrder (empty when it has none or is not xformable)."""
+    xf = UsdGeom.Xformable(prim)
+    order = xf.GetXformOpOrderAttr().Get() if xf else None
+    return [str(o) for o in (order or [])]
 
 
 def _instances(agent: Usd.Prim, skel: Usd.Prim) -> list[str]:

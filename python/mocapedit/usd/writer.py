@@ -8,7 +8,8 @@ UsdSkel and UsdGeom. Layout:
   (``rotateZ`` on a Z-up stage; ``xformOp:transform:mocapEdit`` under a parent that is not
   upright), time-sampled and prepended to its ``xformOpOrder``: the rigid ground motion of
   its path edit (for a re-timed agent whose own transform ops are animated, the ops stand
-  for those too and replace them in the order: they would play at shot time);
+  for those too and replace them in the order: they would play at shot time; likewise on
+  its skeleton prim when that prim's own transform ops are animated);
 - an agent whose joints changed only in timing (time warp, time and sync constraints,
   speed matching) gets a SkelAnimation under ``/MocapEdit/Animations`` that references its
   source clip and re-times it with USD value clips (``clips:times`` maps shot time to the
@@ -95,6 +96,9 @@ class AgentEdit:
     # The ops stand for the agent prim's authored ones too, which leave its xformOpOrder (a
     # re-timed agent whose own transform is animated: see processor.compose_edits).
     replaces_ops: bool = False
+    # Ops that replace the skeleton prim's own animated ones, sampled at ``times`` (a re-timed
+    # agent whose travel is on its skeleton prim).
+    skeleton_ops: list[tuple[str, np.ndarray]] = field(default_factory=list)
     animation: BakedAnimation | None = None
     retimed: RetimedClip | None = None
 
@@ -147,17 +151,28 @@ def _deinstance_above(layer: Sdf.Layer, agent: Agent, path: Sdf.Path) -> None:
 
 
 def _author_xform_ops(layer: Sdf.Layer, agent: Agent, edit: AgentEdit) -> None:
-    _deinstance_above(layer, agent, Sdf.Path(agent.path))
-    spec = sdf.over_chain(layer, Sdf.Path(agent.path))
-    order = [o for o in agent.xform_op_order if not o.endswith(":" + EDIT_SUFFIX)]
+    if edit.xform_ops:
+        _author_ops(layer, agent, agent.path, agent.xform_op_order, edit.xform_ops, edit.times, edit.replaces_ops)
+    if edit.skeleton_ops:
+        _author_ops(layer, agent, agent.skeleton_path, agent.skeleton_xform_op_order, edit.skeleton_ops,
+                    edit.times, True)
+
+
+def _author_ops(layer: Sdf.Layer, agent: Agent, prim_path: str, authored: list[str], ops, times,
+                replaces: bool) -> None:
+    """``ops`` time-sampled on the prim, first in its xformOpOrder after any
+    ``!resetXformStack!``: prepended to its ``authored`` ops, or instead of them."""
+    _deinstance_above(layer, agent, Sdf.Path(prim_path))
+    spec = sdf.over_chain(layer, Sdf.Path(prim_path))
+    order = [o for o in authored if not o.endswith(":" + EDIT_SUFFIX)]
     at = 1 if order and order[0] == "!resetXformStack!" else 0
-    if edit.replaces_ops:
+    if replaces:
         order = order[:at]
-    names = [f"xformOp:{kind}:{EDIT_SUFFIX}" for kind, _ in edit.xform_ops]
+    names = [f"xformOp:{kind}:{EDIT_SUFFIX}" for kind, _ in ops]
     order[at:at] = names
     sdf.attr(spec, "xformOpOrder", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(order), uniform=True)
-    times = np.asarray(edit.times, dtype=np.float64).tolist()
-    for name, (kind, values) in zip(names, edit.xform_ops):
+    times = np.asarray(times, dtype=np.float64).tolist()
+    for name, (kind, values) in zip(names, ops):
         type_name, convert = _OP_TYPES[kind]
         path = sdf.attr(spec, name, type_name).path
         # One conversion of the whole array: per-sample Gf values from lists took half the time.
@@ -320,7 +335,7 @@ def build_layer(content: LayerContent) -> Sdf.Layer:
         assets: dict[str, str] = {}   # clip layer -> its asset path (many agents share a clip)
         for agent_path in sorted(content.edits):
             edit, agent = content.edits[agent_path], content.agents[agent_path]
-            if edit.xform_ops:
+            if edit.xform_ops or edit.skeleton_ops:
                 _author_xform_ops(layer, agent, edit)
             if edit.animation is not None or edit.retimed is not None:
                 retimed, anim = edit.retimed, edit.animation
