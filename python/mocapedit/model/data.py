@@ -22,6 +22,9 @@ class StageInfo:
     end_time: float | None
     root_layer: str                   # identifier of the input's root layer
     used_layers: list[str]            # identifiers of every layer the input uses
+    # Names of the prims under /MocapEdit/Animations the input already has (an earlier
+    # solve's edits layer in it): a new layer's animations take other names.
+    taken_animation_names: list[str] = field(default_factory=list)
 
     def metres(self, value_in_metres: float) -> float:
         """A length given in metres, in stage units."""

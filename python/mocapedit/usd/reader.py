@@ -94,6 +94,8 @@ def stage_info(stage: Usd.Stage) -> model.StageInfo:
         end_time=end,
         root_layer=root.identifier,
         used_layers=sorted(layer.identifier for layer in stage.GetUsedLayers()),
+        taken_animation_names=sorted(p.GetName() for p in stage.GetPrimAtPath("/MocapEdit/Animations").GetAllChildren())
+        if stage.GetPrimAtPath("/MocapEdit/Animations") else [],
     )
 
 

@@ -161,14 +161,22 @@ def _author_xform_ops(layer: Sdf.Layer, agent: Agent, edit: AgentEdit) -> None:
 def _author_ops(layer: Sdf.Layer, agent: Agent, prim_path: str, authored: list[str], ops, times,
                 replaces: bool) -> None:
     """``ops`` time-sampled on the prim, first in its xformOpOrder after any
-    ``!resetXformStack!``: prepended to its ``authored`` ops, or instead of them."""
+    ``!resetXformStack!``: prepended to its ``authored`` ops, or instead of them.
+
+    Ops an earlier solve wrote are the input's like any other (a shot edited again over its
+    composed stage): the new ones go on top, under a suffix of their own (``mocapEdit2``, ...),
+    since an opinion on the same attribute would override the earlier edit."""
     _deinstance_above(layer, agent, Sdf.Path(prim_path))
     spec = sdf.over_chain(layer, Sdf.Path(prim_path))
-    order = [o for o in authored if not o.endswith(":" + EDIT_SUFFIX)]
+    order = list(authored)
     at = 1 if order and order[0] == "!resetXformStack!" else 0
     if replaces:
         order = order[:at]
-    names = [f"xformOp:{kind}:{EDIT_SUFFIX}" for kind, _ in ops]
+    suffix, n = EDIT_SUFFIX, 1
+    while any(o.endswith(":" + suffix) for o in authored):
+        n += 1
+        suffix = f"{EDIT_SUFFIX}{n}"
+    names = [f"xformOp:{kind}:{suffix}" for kind, _ in ops]
     order[at:at] = names
     sdf.attr(spec, "xformOpOrder", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(order), uniform=True)
     times = np.asarray(times, dtype=np.float64).tolist()
@@ -329,7 +337,9 @@ def build_layer(content: LayerContent) -> Sdf.Layer:
     with Sdf.ChangeBlock():
         root = Sdf.PrimSpec(layer.pseudoRoot, ROOT.name, Sdf.SpecifierDef, "Scope")
         Sdf.PrimSpec(root, GUIDES.name, Sdf.SpecifierDef, "Scope")
-        taken: set[str] = set()
+        # Names an earlier solve's layer in the input already uses: a prim of the same name here
+        # would compose with it.
+        taken: set[str] = set(info.taken_animation_names)
         # Agents whose baked animations are identical share one prim, named after the first.
         authored: dict[tuple, Sdf.Path] = {}
         assets: dict[str, str] = {}   # clip layer -> its asset path (many agents share a clip)

@@ -1,0 +1,69 @@
+"""Editing a shot again: a second solve on the composed stage of a first (the shot with its
+edits layer under a new shot layer that adds constraints). The first edits are part of the
+second solve's input; the second layer's edits go on top of them, so every constraint of
+both holds on the final composed stage."""
+from __future__ import annotations
+
+import numpy as np
+from pxr import Sdf, Usd
+
+from mocapedit.data import examples, walker
+from mocapedit.pipeline.processor import solve
+from mocapedit.usd import evaluate
+
+FRAMES = 72
+
+
+def _over(folder, below: str, name: str) -> Usd.Stage:
+    """A new shot layer over the stage file ``below``, with its metadata."""
+    under = Sdf.Layer.FindOrOpen(str(folder / below))
+    layer = Sdf.Layer.CreateNew(str(folder / name))
+    layer.subLayerPaths.append(below)
+    for key in ("upAxis", "metersPerUnit"):
+        if under.pseudoRoot.HasInfo(key):
+            layer.pseudoRoot.SetInfo(key, under.pseudoRoot.GetInfo(key))
+    layer.timeCodesPerSecond = under.timeCodesPerSecond
+    layer.startTimeCode, layer.endTimeCode = under.startTimeCode, under.endTimeCode
+    layer.Save()
+    stage = Usd.Stage.Open(layer)
+    stage.SetEditTarget(layer)
+    return stage
+
+
+def test_a_second_solve_on_the_composed_stage_keeps_the_first_edits(tmp_path):
+    clip = walker.walk(frames=FRAMES, name="walk")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip, (0, 0, 0), 0.0),
+                                                                 examples.AgentSpec("b", clip, (3, 0, 0), 0.0)])
+    a, b = "/World/Crowd/a", "/World/Crowd/b"
+    start, end = evaluate.agent_root_positions(stage, a, [0.0, FRAMES - 1.0])
+    examples.add_position_constraint(stage, "/Edits/keep", a, 0, tuple(map(float, start)))
+    examples.add_position_constraint(stage, "/Edits/aside", a, FRAMES - 1, tuple(map(float, end + [1.0, 0, 0])))
+    stage.GetRootLayer().Save()
+    solve(str(tmp_path / "shot.usda"), output=str(tmp_path / "first.usda"), composed=str(tmp_path / "first.composed.usda"),
+          guides=False)
+
+    again = _over(tmp_path, "first.composed.usda", "again.usda")
+    middle = evaluate.agent_root_positions(again, a, [35.0])[0] + [0.5, 0, 0]
+    examples.add_position_constraint(again, "/Edits/middle", a, 35, tuple(map(float, middle)))
+    examples.add_time_constraint(again, "/Edits/late", b, 30, 36.0)
+    again.GetRootLayer().Save()
+    result = solve(str(tmp_path / "again.usda"), output=str(tmp_path / "second.usda"),
+                   composed=str(tmp_path / "second.composed.usda"), guides=False)
+    assert all(c.met for c in result.report.constraints)
+
+    final = Usd.Stage.Open(str(tmp_path / "second.composed.usda"))
+    got = evaluate.agent_root_positions(final, a, [0.0, 35.0, FRAMES - 1.0])[:, [0, 2]]
+    want = np.array([start, middle, end + [1.0, 0, 0]])[:, [0, 2]]
+    np.testing.assert_allclose(got, want, atol=1e-6)
+    source = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    np.testing.assert_allclose(evaluate.joint_world_positions(final, b, [36.0]),
+                               evaluate.joint_world_positions(source, b, [30.0]), atol=1e-6)
+    # The second layer's ops go on top of the first's, under names of their own.
+    order = list(Sdf.Layer.FindOrOpen(str(tmp_path / "second.usda")).GetAttributeAtPath(f"{a}.xformOpOrder").default)
+    assert order[:2] == ["xformOp:translate:mocapEdit2", "xformOp:rotateY:mocapEdit2"]
+    assert order[2:4] == ["xformOp:translate:mocapEdit", "xformOp:rotateY:mocapEdit"]
+    # Its animations take names the first layer does not use: a prim of the same name would
+    # compose with the first layer's.
+    names = [{c.name for c in (Sdf.Layer.FindOrOpen(str(tmp_path / f"{n}.usda")).GetPrimAtPath("/MocapEdit/Animations")
+                               or Sdf.Layer.CreateAnonymous().pseudoRoot).nameChildren} for n in ("first", "second")]
+    assert names[0] and names[1] and not names[0] & names[1], names
