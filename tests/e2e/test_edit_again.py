@@ -38,12 +38,18 @@ def test_a_second_solve_on_the_composed_stage_keeps_the_first_edits(tmp_path):
     start, end = evaluate.agent_root_positions(stage, a, [0.0, FRAMES - 1.0])
     examples.add_position_constraint(stage, "/Edits/keep", a, 0, tuple(map(float, start)))
     examples.add_position_constraint(stage, "/Edits/aside", a, FRAMES - 1, tuple(map(float, end + [1.0, 0, 0])))
+    # a is re-timed too: its first layer plays its clip through value clips, its locked legs
+    # baked over them (two sets of sample times that differ by rounding).
+    examples.add_time_constraint(stage, "/Edits/a_late", a, 40, 44.0)
     stage.GetRootLayer().Save()
     solve(str(tmp_path / "shot.usda"), output=str(tmp_path / "first.usda"), composed=str(tmp_path / "first.composed.usda"),
           guides=False)
 
     again = _over(tmp_path, "first.composed.usda", "again.usda")
-    middle = evaluate.agent_root_positions(again, a, [35.0])[0] + [0.5, 0, 0]
+    # a's frames as the first solve plays them: its value clip's (shot time, clip time) pairs.
+    first = Sdf.Layer.FindOrOpen(str(tmp_path / "first.usda"))
+    frame_times = np.asarray(first.GetPrimAtPath("/MocapEdit/Animations/World_Crowd_a").GetInfo("clips")["default"]["times"])[:, 0]
+    middle = evaluate.agent_root_positions(again, a, [frame_times[35]])[0] + [0.5, 0, 0]
     examples.add_position_constraint(again, "/Edits/middle", a, 35, tuple(map(float, middle)))
     examples.add_time_constraint(again, "/Edits/late", b, 30, 36.0)
     again.GetRootLayer().Save()
@@ -52,10 +58,19 @@ def test_a_second_solve_on_the_composed_stage_keeps_the_first_edits(tmp_path):
     assert all(c.met for c in result.report.constraints)
 
     final = Usd.Stage.Open(str(tmp_path / "second.composed.usda"))
-    got = evaluate.agent_root_positions(final, a, [0.0, 35.0, FRAMES - 1.0])[:, [0, 2]]
+    got = evaluate.agent_root_positions(final, a, frame_times[[0, 35, FRAMES - 1]])[:, [0, 2]]
     want = np.array([start, middle, end + [1.0, 0, 0]])[:, [0, 2]]
     np.testing.assert_allclose(got, want, atol=1e-6)
     source = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+
+    def upper_body(stage, t):
+        """Distances of the spine, head and arms from the hips: the pose, whatever carries it."""
+        p = evaluate.joint_world_positions(stage, a, [t])[0]
+        return np.linalg.norm(p[10:] - p[1], axis=1)
+
+    # a's frame 40 still plays at shot time 44 (and a frame a few away would not pass).
+    np.testing.assert_allclose(upper_body(final, 44.0), upper_body(source, 40.0), atol=1e-6)
+    assert np.abs(upper_body(final, 44.0) - upper_body(source, 37.0)).max() > 1e-3
     np.testing.assert_allclose(evaluate.joint_world_positions(final, b, [36.0]),
                                evaluate.joint_world_positions(source, b, [30.0]), atol=1e-6)
     # The second layer's ops go on top of the first's, under names of their own.

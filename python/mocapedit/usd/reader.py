@@ -208,6 +208,10 @@ def _frame_range(anim: Usd.Prim, prop: str, frame_count: int, what: str) -> tupl
     return a, b
 
 
+#: Time codes: sample times closer than this are one frame (see StageReader._composed_times).
+SAME_TIME = 1e-6
+
+
 class _XformTimes:
     """Local-to-world matrices, cached per time code; static prims are read once."""
 
@@ -388,8 +392,13 @@ class StageReader:
             self._same_times[specs] = same
         if same:
             return np.asarray(sampled[0][0].GetTimeSamples(), dtype=np.float64)
-        return np.unique(np.concatenate(
+        times = np.unique(np.concatenate(
             [np.asarray(a.GetTimeSamples(), dtype=np.float64) for a in attrs if a] + [np.zeros(0)]))
+        # Channels of one frame sampled at times that differ by rounding (a value clip's mapped
+        # times beside samples baked at the same frames) are one frame, not two a hair apart.
+        keep = np.ones(len(times), dtype=bool)
+        keep[1:] = np.diff(times) > SAME_TIME
+        return times[keep]
 
     def _clip(self, anim: Usd.Prim, all_channels: bool = True):
         """(clip key, composed stage times of the clip's frames); reads the clip on first use.
