@@ -160,6 +160,9 @@ shot("agent-no-skeleton", 'def SkelRoot "Lonely" (prepend apiSchemas = ["MocapAg
 shot("agent-no-animation", 'def SkelRoot "Lonely" (prepend apiSchemas = ["MocapAgentAPI"])\n{\n'
      '    def Skeleton "Skel"\n    {\n        uniform token[] joints = ["Root"]\n    }\n}\n',
      r"</Lonely>\.mocap:animationSource: agent has no animation")
+# A second skeleton under an agent (a prop's, a cloth rig's) and nothing saying which is the body.
+shot("agent-several-skeletons", agent_over('def Skeleton "Prop"\n{\n    uniform token[] joints = ["stick"]\n}'),
+     r"</World/agent0>\.skel:skeleton: agent has several skeletons \(</World/agent0/Skel>, </World/agent0/Prop>\)")
 # The skeleton's own binding set to nothing blocks the one its SkelRoot inherits: UsdSkel plays
 # the rest pose, so there is no clip to edit.
 shot("agent-animation-blocked", agent_over('rel skel:animationSource = </World/agent0/Skel/Anim>\n'

@@ -16,7 +16,7 @@ from pxr import Sdf, Usd, UsdGeom, UsdSkel
 
 from mocapedit.model.names import default_facing_joint, default_foot_joints
 
-__all__ = ["StageUnits", "stage_units", "sample_times", "joint_world_positions", "agent_root_positions",
+__all__ = ["StageUnits", "stage_units", "skeleton_candidates", "sample_times", "joint_world_positions", "agent_root_positions",
            "joint_world_matrices", "joint_transforms", "FootSamples", "foot_positions"]
 
 PathLike = Union[str, Sdf.Path]
@@ -104,12 +104,18 @@ class _Skel:
         return np.asarray(self.query.ComputeJointWorldTransforms(xform_cache))
 
 
-def _find_skeleton(prim: Usd.Prim) -> UsdSkel.Skeleton:
+def skeleton_candidates(prim: Usd.Prim) -> list[Sdf.Path]:
+    """The skeletons an agent prim may play, by the strongest evidence there is: the prim itself
+    if it is a Skeleton; else the skeleton bound to it (``skel:skeleton``, inherited from an
+    ancestor as UsdSkel inherits it); else the skeletons its geometry below binds; else the
+    Skeleton prims below it (through instances). One path when the choice is clear, several when
+    it is not (a prop's skeleton beside the body's), none when there is no skeleton."""
     if prim.IsA(UsdSkel.Skeleton):
-        return UsdSkel.Skeleton(prim)
+        return [prim.GetPath()]
     inherited = UsdSkel.BindingAPI(prim).GetInheritedSkeleton()
     if inherited:
-        return inherited
+        return [inherited.GetPath()]
+    stage = prim.GetStage()
     bound, found = [], []
     for p in Usd.PrimRange(prim, Usd.TraverseInstanceProxies()):
         if p.IsA(UsdSkel.Skeleton):
@@ -117,17 +123,19 @@ def _find_skeleton(prim: Usd.Prim) -> UsdSkel.Skeleton:
         rel = p.GetRelationship("skel:skeleton")
         if rel:
             for target in rel.GetForwardedTargets():
-                if target not in bound:
+                if target not in bound and stage.GetPrimAtPath(target).IsA(UsdSkel.Skeleton):
                     bound.append(target)
-    for candidates in (bound, found):
-        if len(candidates) == 1:
-            skel = UsdSkel.Skeleton.Get(prim.GetStage(), candidates[0])
-            if skel:
-                return skel
-    if not bound and not found:
+    return bound or found
+
+
+def _find_skeleton(prim: Usd.Prim) -> UsdSkel.Skeleton:
+    candidates = skeleton_candidates(prim)
+    if not candidates:
         raise ValueError(f"{prim.GetPath()}: no Skeleton at or below this prim")
-    names = ", ".join(str(c) for c in (bound or found))
-    raise ValueError(f"{prim.GetPath()}: several skeletons ({names}); name the Skeleton prim")
+    if len(candidates) > 1:
+        names = ", ".join(str(c) for c in candidates)
+        raise ValueError(f"{prim.GetPath()}: several skeletons ({names}); name the Skeleton prim")
+    return UsdSkel.Skeleton.Get(prim.GetStage(), candidates[0])
 
 
 def _times(times) -> np.ndarray:

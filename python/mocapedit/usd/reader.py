@@ -17,7 +17,7 @@ from mocapedit.geometry import contacts
 from mocapedit.model import data as model
 from mocapedit.model.errors import MocapEditError, prim_error
 from mocapedit.model.names import joint_leaf, resolve_joint
-from mocapedit.usd.evaluate import shot_range
+from mocapedit.usd.evaluate import shot_range, skeleton_candidates
 
 AGENT_API = "MocapAgentAPI"
 STATIONARY_API = "MocapStationaryAPI"
@@ -311,10 +311,14 @@ class StageReader:
             return prim
         for target in _targets(prim, "skel:skeleton"):
             return self._target_prim(prim, "skel:skeleton", target, UsdSkel.Skeleton, "Skeleton")
-        # Below an instance (a crowd of instanceable agents), the skeleton is an instance proxy.
-        for child in Usd.PrimRange(prim, Usd.TraverseInstanceProxies()):
-            if child.IsA(UsdSkel.Skeleton):
-                return child
+        candidates = skeleton_candidates(prim)
+        if len(candidates) == 1:
+            return self.stage.GetPrimAtPath(candidates[0])
+        if candidates:
+            names = ", ".join(f"<{c}>" for c in candidates)
+            raise prim_error(prim.GetPath(), f"agent has several skeletons ({names}) and none is bound to it: "
+                             "bind the one to edit with skel:skeleton on the agent (SkelBindingAPI)",
+                             "skel:skeleton")
         raise prim_error(prim.GetPath(), "agent has no skeleton: no skel:skeleton binding and no "
                          "Skeleton prim below it", "apiSchemas")
 
