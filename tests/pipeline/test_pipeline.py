@@ -13,6 +13,7 @@ from mocapedit.data import examples, walker
 from mocapedit.geometry import trajectory
 from mocapedit.model.errors import MocapEditError
 from mocapedit.pipeline.processor import solve
+from mocapedit.usd import evaluate
 
 from conftest import TOY_JOINTS, run_cli, world_joints, write_toy_stage
 
@@ -227,3 +228,29 @@ def test_a_stage_without_agents_says_so(tmp_path):
     proc = run_cli("solve", shot, "-o", tmp_path / "set.edits.usda")
     assert proc.returncode == 0, proc.stderr
     assert "note: the stage has no agents" in proc.stdout + proc.stderr
+
+
+def test_long_clips_solved_by_sparse_qr_give_one_note_for_the_shot(tmp_path):
+    # Paths of 9,000 frames (75 s at 120 fps) are too ill-conditioned for LDLT and are solved by
+    # sparse QR, exactly. That is the solver's business, not the artist's: before, every agent
+    # printed a note of its own (a crowd of long clips printed thousands).
+    frames, agents = 9000, 3
+    clip = walker.walk(frames=frames, name="long")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [
+        examples.AgentSpec(f"a{i}", clip, position=(2.0 * i, 0.0, 0.0)) for i in range(agents)], clip_format="usdc")
+    for i in range(agents):
+        agent = f"/World/Crowd/a{i}"
+        start, middle = evaluate.agent_root_positions(stage, agent, [0.0, float(frames // 2)])
+        examples.add_position_constraint(stage, f"/Edits/start{i}", agent, 0, tuple(map(float, start)))
+        examples.add_position_constraint(stage, f"/Edits/middle{i}", agent, frames // 2,
+                                         tuple(map(float, middle + (3.0, 0.0, 0.0))))
+    stage.GetRootLayer().Save()
+    result = solve(str(tmp_path / "shot.usda"), output=str(tmp_path / "out.usdc"))
+    report = result.report
+    assert all(c.met for c in report.constraints)
+    solvers = [report.agents[f"/World/Crowd/a{i}"].solver for i in range(agents)]
+    assert all("SPQR" in s for s in solvers), solvers
+    notes = [n for n in report.notes if "sparse QR" in n]
+    assert len(notes) == 1, notes
+    assert notes[0].startswith(f"path solve: {agents} of {agents} path components were solved by sparse QR"), notes
+    assert "</World/Crowd/a0>" in notes[0]

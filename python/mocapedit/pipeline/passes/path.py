@@ -287,9 +287,18 @@ def _report(ctx: SolveContext, comp: _Component) -> None:
         if res.notes:
             notes = entry.add_notes()
             notes.extend(n for n in res.notes if n not in notes)
-    if "SPQR" in res.solver:
-        ctx.report.note(f"path solve of {', '.join(comp.members[:5])}{' ...' if len(comp.members) > 5 else ''}: "
-                        f"fell back to sparse QR ({res.solver})")
+
+
+def _note_sparse_qr(ctx: SolveContext, comps: list[_Component]) -> None:
+    """One note for the shot on the components sparse QR solved (too ill-conditioned for LDLT:
+    paths of thousands of frames). Their results are as exact; each agent's entry names its solver."""
+    qr = [c for c in comps if "SPQR" in c.result.solver]
+    if not qr:
+        return
+    named = ", ".join(f"<{c.members[0]}>" for c in qr[:3]) + (f" and {len(qr) - 3} more" if len(qr) > 3 else "")
+    how = sorted({c.result.solver for c in qr})
+    ctx.report.note(f"path solve: {len(qr)} of {len(comps)} path components were solved by sparse QR, slower "
+                    f"than LDLT and as exact ({named}; {', '.join(how)})")
 
 
 def solve_components(comps: list[_Component]) -> list:
@@ -347,4 +356,5 @@ def run(ctx: SolveContext) -> None:
         for path, r in comp.result.agents.items():
             ctx.paths[path] = EditedPath(ground=r.ground, heading=r.heading)
         _report(ctx, comp)
+    _note_sparse_qr(ctx, comps)
     ctx.report.stats.path_components = len(comps)
