@@ -113,6 +113,56 @@ def test_legs_are_found_by_name_on_common_rigs(names, hip, toe):
     assert (names[left.toe].rsplit("/", 1)[-1] if left.toe is not None else None) == toe
 
 
+def _rig(pelvis: str, left: list[str], right: list[str], extra: tuple = ()) -> tuple[list[str], np.ndarray]:
+    """Joint paths of a pelvis with two leg chains (each joint the child of the one before) and
+    ``extra`` (parent leaf, leaf) joints hung from a chain joint, and their parents."""
+    names = [pelvis]
+    for chain in (left, right):
+        path = pelvis
+        for leaf in chain:
+            path = f"{path}/{leaf}"
+            names.append(path)
+    for parent, leaf in extra:
+        names.append(next(n for n in names if n.rsplit("/", 1)[-1] == parent) + "/" + leaf)
+    return names, np.array([-1 if "/" not in n else names.index(n.rsplit("/", 1)[0]) for n in names])
+
+
+@pytest.mark.parametrize("rig, left, right, extra", [
+    # Mixamo as USD exporters write it: the "mixamorig:" namespace becomes a prefix.
+    ("mixamo in USD", ["mixamorig_LeftUpLeg", "mixamorig_LeftLeg", "mixamorig_LeftFoot", "mixamorig_LeftToeBase"],
+     ["mixamorig_RightUpLeg", "mixamorig_RightLeg", "mixamorig_RightFoot", "mixamorig_RightToeBase"], ()),
+    ("Unreal mannequin", ["thigh_l", "calf_l", "foot_l", "ball_l"], ["thigh_r", "calf_r", "foot_r", "ball_r"],
+     (("thigh_l", "thigh_twist_01_l"), ("calf_l", "calf_twist_01_l"))),
+    ("3ds Max biped", ["Bip01_L_Thigh", "Bip01_L_Calf", "Bip01_L_Foot", "Bip01_L_Toe0"],
+     ["Bip01_R_Thigh", "Bip01_R_Calf", "Bip01_R_Foot", "Bip01_R_Toe0"], ()),
+    ("Xsens MVN", ["LeftUpperLeg", "LeftLowerLeg", "LeftFoot", "LeftToe"],
+     ["RightUpperLeg", "RightLowerLeg", "RightFoot", "RightToe"], ()),
+    ("Rokoko", ["LeftThigh", "LeftShin", "LeftFoot", "LeftToe"], ["RightThigh", "RightShin", "RightFoot", "RightToe"], ()),
+    ("OptiTrack Motive", ["LThigh", "LShin", "LFoot", "LToe"], ["RThigh", "RShin", "RFoot", "RToe"], ()),
+    # SMPL's "Foot" is the toe end below its ankle.
+    ("SMPL", ["L_Hip", "L_Knee", "L_Ankle", "L_Foot"], ["R_Hip", "R_Knee", "R_Ankle", "R_Foot"], ()),
+    ("Rigify deform bones", ["DEF_thigh_L", "DEF_shin_L", "DEF_foot_L", "DEF_toe_L"],
+     ["DEF_thigh_R", "DEF_shin_R", "DEF_foot_R", "DEF_toe_R"], ()),
+    ("Maya HumanIK, lower case", ["leftUpLeg", "leftLeg", "leftFoot", "leftToeBase"],
+     ["rightUpLeg", "rightLeg", "rightFoot", "rightToeBase"], (("leftUpLeg", "leftUpLegRoll"),)),
+])
+def test_legs_are_found_on_rigs_as_they_arrive_in_usd(rig, left, right, extra):
+    names, parents = _rig("Hips", left, right, extra)
+    legs = contacts.find_legs(names, parents)
+    assert [leg.side for leg in legs] == ["left", "right"], rig
+    for leg, chain in zip(legs, (left, right)):
+        assert [names[j].rsplit("/", 1)[-1] for j in leg.joints] == chain, rig
+
+
+def test_legs_are_not_made_of_joints_that_only_sound_like_legs():
+    # Twist and roll joints beside the chain, a prop named after a foot, a left arm: no leg.
+    names, parents = _rig("Hips", ["LeftUpLegRoll", "LeftLegTwist", "LeftFootProp"], ["RightArm", "RightForeArm", "RightHand"])
+    assert contacts.find_legs(names, parents) == []
+    # The chain must be hip, knee, ankle, each the child of the one before.
+    names, parents = _rig("Hips", ["thigh_l", "foot_l"], ["thigh_r", "calf_r"], (("thigh_l", "calf_l"),))
+    assert contacts.find_legs(names, parents) == []
+
+
 def test_no_legs_on_a_rig_without_leg_names():
     names = ["Root", "Root/A", "Root/A/B", "Root/A/B/C"]
     assert contacts.find_legs(names, np.array([-1, 0, 1, 2])) == []
@@ -288,6 +338,32 @@ def test_a_bent_path_keeps_the_planted_feet_where_they_are(tmp_path, walk_clip):
     assert locked.report.stats["footLockedAgents"] == 1
     plants = locked.layer.GetPrimAtPath("/MocapEdit/Guides/FootPlants")
     assert plants and len(plants.attributes["points"].default) == entry["footContactsLocked"]
+
+
+UNREAL_NAMES = {"Root": "root", "Hips": "pelvis", "LeftUpLeg": "thigh_l", "LeftLeg": "calf_l", "LeftFoot": "foot_l",
+                "LeftToe": "ball_l", "RightUpLeg": "thigh_r", "RightLeg": "calf_r", "RightFoot": "foot_r",
+                "RightToe": "ball_r"}
+
+
+@pytest.mark.parametrize("rename", [lambda leaf: UNREAL_NAMES.get(leaf, leaf), lambda leaf: "mixamorig_" + leaf],
+                         ids=["Unreal mannequin", "Mixamo in USD"])
+def test_a_rig_named_another_way_keeps_its_feet_as_the_walker_does(tmp_path, walk_clip, rename):
+    """The walker with its joints renamed as another rig family names them: the same legs are
+    found, the same contacts locked, and the composed stage plays the same motion."""
+    joints = tuple("/".join(rename(leaf) for leaf in j.split("/")) for j in walk_clip.joints)
+    renamed = dataclasses.replace(walk_clip, joints=joints, name="renamed")
+    (tmp_path / "walker").mkdir()
+    (tmp_path / "renamed").mkdir()
+    _bent_path_stage(tmp_path / "walker", walk_clip)
+    _, a = _bent_path_stage(tmp_path / "renamed", renamed)
+    base, base_stage = _solve(tmp_path / "walker")
+    other, other_stage = _solve(tmp_path / "renamed")
+    entry, expected = other.report.agents[a], base.report.agents[a]
+    assert entry["footContactsLocked"] == expected["footContactsLocked"] >= 12
+    assert entry["footSkateEdited"] == pytest.approx(expected["footSkateEdited"], abs=1e-9)
+    times = np.arange(193, dtype=np.float64)
+    np.testing.assert_allclose(evaluate.joint_world_positions(other_stage, a, times),
+                               evaluate.joint_world_positions(base_stage, a, times), atol=1e-6)
 
 
 def test_locking_is_off_by_setting_and_by_agent(tmp_path, walk_clip):

@@ -1,10 +1,11 @@
 """Legs and foot contacts of a source clip (numpy, no USD).
 
 A leg is a chain hip (thigh) -> knee -> ankle, each joint the child of the one before,
-with an optional toe below the ankle. Legs are found by joint name on common rigs (CMU
-and Mixamo ``LeftUpLeg/LeftLeg/LeftFoot/LeftToeBase``, Character Creator
-``CC_Base_L_Thigh/L_Calf/L_Foot/L_ToeBase``, the project's walker) or given by
-``mocap:leftLegJoints`` / ``mocap:rightLegJoints``.
+with an optional toe below the ankle. Legs are found by what the joints' names say
+(:func:`mocapedit.model.names.side_and_role`: CMU and Mixamo ``LeftUpLeg/LeftLeg/LeftFoot/LeftToeBase``,
+Character Creator ``CC_Base_L_Thigh/L_Calf/L_Foot/L_ToeBase``, Unreal ``thigh_l/calf_l/foot_l/ball_l``
+and other rig families, the project's walker) or given by ``mocap:leftLegJoints`` /
+``mocap:rightLegJoints``.
 
 A foot is planted when its ankle or its toe is near the lowest height that joint reaches
 in the clip and barely moves over the ground. The test has hysteresis (stricter to enter
@@ -23,19 +24,10 @@ import numpy as np
 
 from mocapedit.geometry import ground, trajectory
 from mocapedit.model.data import Agent, Clip, StageInfo
+from mocapedit.model.names import side_and_role
 from mocapedit.geometry.stationary import runs
 
 SIDES = ("left", "right")
-
-# Leaf names (lower case, any "namespace:" prefix removed) of hip, knee, ankle, toe per rig
-# family; "{S}" is Left/Right, "{s}" is L/R.
-_NAME_PATTERNS = (
-    ("{S}UpLeg", "{S}Leg", "{S}Foot", ("{S}ToeBase", "{S}Toe", "{S}Toes")),
-    ("CC_Base_{s}_Thigh", "CC_Base_{s}_Calf", "CC_Base_{s}_Foot", ("CC_Base_{s}_ToeBase",)),
-    ("{S}Thigh", "{S}Calf", "{S}Foot", ("{S}ToeBase", "{S}Toe")),
-    ("{S}Hip", "{S}Knee", "{S}Ankle", ("{S}Toe", "{S}Ball")),
-)
-
 
 @dataclass(frozen=True)
 class Leg:
@@ -51,7 +43,7 @@ class Leg:
 
 
 def _leaf(joint: str) -> str:
-    return joint.rsplit("/", 1)[-1].rsplit(":", 1)[-1].lower()
+    return joint.rsplit("/", 1)[-1].rsplit(":", 1)[-1]
 
 
 def chain_problem(names: list[str], parents: np.ndarray, indices: list[int]) -> str | None:
@@ -67,25 +59,28 @@ def chain_problem(names: list[str], parents: np.ndarray, indices: list[int]) -> 
 
 
 def find_legs(joints: list[str], parents: np.ndarray) -> list[Leg]:
-    """The legs found by joint name, left first; a side not found is left out."""
-    by_leaf: dict[str, list[int]] = {}
-    for i, j in enumerate(joints):
-        by_leaf.setdefault(_leaf(j), []).append(i)
+    """The legs found by joint name, left first; a side not found is left out. A leg is a hip
+    joint whose child is a knee whose child is an ankle, all named for the same side; the toe
+    is a child of the ankle named as one (the first in joint order)."""
+    said = [side_and_role(_leaf(str(j))) for j in joints]
+    children: dict[int, list[int]] = {}
+    for i, p in enumerate(parents):
+        children.setdefault(int(p), []).append(i)
 
-    def one(name: str) -> int | None:
-        hits = by_leaf.get(name.lower(), [])
-        return hits[0] if len(hits) == 1 else None
+    def below(joint: int, side: str, roles: tuple[str, ...]) -> list[int]:
+        return [c for c in children.get(joint, []) if said[c][0] == side and said[c][1] in roles]
 
     legs = []
     for side in SIDES:
-        words = {"S": side.capitalize(), "s": side[0].upper()}
-        for hip, knee, ankle, toes in _NAME_PATTERNS:
-            chain = [one(p.format(**words)) for p in (hip, knee, ankle)]
-            if None in chain or chain_problem(joints, parents, chain) is not None:
+        for hip in (i for i, (s, r) in enumerate(said) if s == side and r == "hip"):
+            chain = next(((knee, ankle) for knee in below(hip, side, ("knee",))
+                          for ankle in below(knee, side, ("ankle",))), None)
+            if chain is None:
                 continue
-            toe = next((t for t in (one(p.format(**words)) for p in toes)
-                        if t is not None and int(parents[t]) == chain[2]), None)
-            legs.append(Leg(side, *chain, toe))
+            knee, ankle = chain
+            toes = below(ankle, side, ("toe", "ankle") if _leaf(str(joints[ankle])).lower().endswith("ankle")
+                         else ("toe",))
+            legs.append(Leg(side, hip, knee, ankle, toes[0] if toes else None))
             break
     return legs
 

@@ -38,16 +38,55 @@ def resolve_joint(joints: list[str], name: str) -> int | None:
     return matches[0] if len(matches) == 1 else None
 
 
+# What a leg joint's name says it is, once split into words with its side word taken out
+# (``mixamorig_LeftUpLeg`` -> left, "upleg"; ``thigh_l`` -> left, "thigh"; ``Bip01_L_Toe0`` ->
+# left, "toe"): the words of hip, knee, ankle and toe on CMU, Mixamo, HumanIK, Character
+# Creator, Unreal, 3ds Max Biped, Xsens, Rokoko, OptiTrack, SMPL and Rigify rigs. A name may
+# also end in one of them after a prefix (``DEF_thigh_L``). SMPL's "foot" is the toe end below
+# its "ankle".
+_ROLE_WORDS = {
+    "hip": ("upleg", "upperleg", "thigh", "hip"),
+    "knee": ("lowerleg", "leg", "calf", "shin", "knee"),
+    "ankle": ("foot", "ankle"),
+    "toe": ("toebase", "toes", "toe", "ball"),
+}
+_SIDE_WORDS = {"left": "left", "l": "left", "right": "right", "r": "right"}
+_WORD = re.compile(r"[A-Z]+(?=[A-Z][a-z])|[A-Z]?[a-z]+|[A-Z]+|[0-9]+")
+
+
+def side_and_role(leaf: str, prefixed: bool = True) -> tuple[str | None, str | None]:
+    """(side, role) a joint's leaf name says ("left"/"right"; "hip", "knee", "ankle", "toe"), or
+    None for what it does not say. ``prefixed``: also a role word after a prefix (``DEF_thigh_L``)."""
+    words = [w.lower() for w in _WORD.findall(leaf) if not w.isdigit()]
+    sides = [k for k, w in enumerate(words) if w in _SIDE_WORDS]
+    if len(sides) != 1:
+        return None, None
+    k = sides[0]
+    rest = "".join(words[k + 1:]) or "".join(words[:k])
+    exact = [role for role, names in _ROLE_WORDS.items() if rest in names]
+    if exact:
+        return _SIDE_WORDS[words[k]], exact[0]
+    if not prefixed:
+        return _SIDE_WORDS[words[k]], None
+    # A prefix before the role (DEF_thigh_L): the longest role word the name ends with.
+    ends = sorted(((len(n), role) for role, names in _ROLE_WORDS.items() for n in names if rest.endswith(n)),
+                  reverse=True)
+    return _SIDE_WORDS[words[k]], (ends[0][1] if ends else None)
+
+
 _FOOT_WORDS = ("foot", "toe", "ankle")
 _NOT_FOOT_WORDS = ("end", "site")
 
 
 def default_foot_joints(joints: Sequence[str]) -> list[int]:
-    """Indices of the joints whose own name says foot, toe or ankle (not an end site)."""
+    """Indices of the joints whose own name says foot, toe or ankle (not an end site), or is
+    a side's ankle or toe by another word (``ball_l``)."""
     out = []
     for k, j in enumerate(joints):
-        leaf = joint_leaf(str(j)).lower()
-        if any(w in leaf for w in _FOOT_WORDS) and not any(w in leaf for w in _NOT_FOOT_WORDS):
+        leaf = joint_leaf(str(j))
+        low = leaf.lower()
+        if any(w in low for w in _FOOT_WORDS) and not any(w in low for w in _NOT_FOOT_WORDS) or \
+                side_and_role(leaf, prefixed=False)[1] in ("ankle", "toe"):
             out.append(k)
     return out
 
