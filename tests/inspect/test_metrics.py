@@ -460,6 +460,8 @@ def test_default_facing_joint():
     assert M.default_facing_joint(["pelvis", "pelvis/spine"]) == 0
     assert M.default_facing_joint(["Root", "Root/LeftHip", "Root/mixamorig_Hips"]) == 2
     assert M.default_facing_joint(["Root", "Root/Spine"]) == 0
+    # A side's hip joint is not the hips (CMU's LHipJoint before the pelvis of a rig without "Hips").
+    assert M.default_facing_joint(["Ref", "Ref/LHipJoint", "Ref/Bip01_Pelvis"]) == 2
 
 
 

@@ -94,15 +94,24 @@ def default_foot_joints(joints: Sequence[str]) -> list[int]:
 _FACING_NAMES = ("hips", "hip", "pelvis")
 
 
+def hips_joint(joints: Sequence[str], skip: int | None = None) -> int | None:
+    """Index of the joint named for the hips: the one named hips, hip or pelvis (leaf name, any
+    case), else the first whose leaf name contains one of those words and names no side or leg
+    (not ``LHipJoint``, ``thigh_l``); None when there is none. ``skip``: a joint not to take."""
+    leaves = [joint_leaf(str(j)) for j in joints]
+    for k, leaf in enumerate(leaves):
+        if k != skip and leaf.lower() in _FACING_NAMES:
+            return k
+    for k, leaf in enumerate(leaves):
+        low = leaf.lower()
+        if k != skip and any(w in low for w in ("hip", "pelvis")) and \
+                not any(w in low for w in ("leg", "thigh", "up")) and side_and_role(leaf)[0] is None:
+            return k
+    return None
+
+
 def default_facing_joint(joints: Sequence[str]) -> int:
-    """Index of the joint whose frame stands for the body's facing: the one named hips, hip or
-    pelvis (leaf name, any case), else the first joint whose leaf name contains one of those
-    words without naming a leg, else the skeleton's root (0)."""
-    leaves = [joint_leaf(str(j)).lower() for j in joints]
-    for k, leaf in enumerate(leaves):
-        if leaf in _FACING_NAMES:
-            return k
-    for k, leaf in enumerate(leaves):
-        if any(w in leaf for w in ("hip", "pelvis")) and not any(w in leaf for w in ("leg", "thigh", "up", "left", "right")):
-            return k
-    return 0
+    """Index of the joint whose frame stands for the body's facing: :func:`hips_joint`, else the
+    skeleton's root (0)."""
+    k = hips_joint(joints)
+    return 0 if k is None else k

@@ -16,7 +16,7 @@ from pxr import Sdf, Usd, UsdGeom, UsdSkel
 from mocapedit.geometry import contacts
 from mocapedit.model import data as model
 from mocapedit.model.errors import MocapEditError, prim_error
-from mocapedit.model.names import joint_leaf, resolve_joint
+from mocapedit.model.names import hips_joint, resolve_joint
 from mocapedit.usd.evaluate import shot_range, skeleton_candidates
 
 AGENT_API = "MocapAgentAPI"
@@ -880,11 +880,10 @@ def _check_value_clips(prim: Usd.Prim) -> None:
 
 
 def _guess_hip(joints: list[str], parents: np.ndarray, root_joint: int) -> int | None:
-    for i, j in enumerate(joints):
-        name = joint_leaf(j).lower()
-        if i != root_joint and ("hip" in name or "pelvis" in name) and \
-                not any(s in name for s in ("left", "right", "_l", "_r", "thigh")):
-            return i
+    """The joint named for the hips other than the root, else the root's first child."""
+    hip = hips_joint(joints, skip=root_joint)
+    if hip is not None:
+        return hip
     children = [i for i, p in enumerate(parents) if p == root_joint]
     return children[0] if children else None
 
