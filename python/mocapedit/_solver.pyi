@@ -678,11 +678,12 @@ def blas() -> BlasInfo:
     """
     The BLAS that CHOLMOD and SPQR call in this process (BlasInfo).
     """
-def block_deformation_turns(*, source: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], edited: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], blocks: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 2]", "flags.c_contiguous"], fixed: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 3]", "flags.c_contiguous"], fixed_turn: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"], window: typing.SupportsInt | typing.SupportsIndex, min_travel: typing.SupportsFloat | typing.SupportsIndex, max_step: typing.SupportsFloat | typing.SupportsIndex = 0.0) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+def block_deformation_turns(*, source: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], edited: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], blocks: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 2]", "flags.c_contiguous"], fixed: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 3]", "flags.c_contiguous"], fixed_turn: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"], window: typing.SupportsInt | typing.SupportsIndex, min_travel: typing.SupportsFloat | typing.SupportsIndex, max_step: typing.SupportsFloat | typing.SupportsIndex = 0.0, keep_spot: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 1]"] = ...) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
     """
     (V,) turn of each frame's heading from source to edited paths (V,2), block by block: blocks (B,2)
     int32 [begin, end), fixed (R,3) int32 (block, first, last) grouped by block, fixed_turn (R,),
-    window (frames), min_travel (stage units), max_step (stage units per frame, 0: none); see
+    window (frames), min_travel (stage units), max_step (stage units per frame, 0: none), keep_spot
+    (B,) int32 (nonzero: a path about one spot keeps its facing; empty: every block); see
     DeformationTurns in trajectory.h.
     """
 def build_additive_clip(reference: tuple, clip: tuple) -> tuple:

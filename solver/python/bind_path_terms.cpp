@@ -87,16 +87,19 @@ MOCAPEDIT_BINDINGS(BindPathTerms) {
       "block_deformation_turns",
       [](const Eigen::Ref<const Trajectory2>& source, const Eigen::Ref<const Trajectory2>& edited,
          const Eigen::Ref<const mocapedit::IndexPairs>& blocks, const Eigen::Ref<const mocapedit::IndexTriples>& fixed,
-         const Eigen::Ref<const Eigen::VectorXd>& fixed_turn, int window, double min_travel, double max_step) {
+         const Eigen::Ref<const Eigen::VectorXd>& fixed_turn, int window, double min_travel, double max_step,
+         const Eigen::Ref<const Eigen::VectorXi>& keep_spot) {
         Eigen::VectorXd out;
-        mocapedit::BlockDeformationTurns(source, edited, blocks, fixed, fixed_turn, window, min_travel, max_step, out);
+        mocapedit::BlockDeformationTurns(source, edited, blocks, fixed, fixed_turn, window, min_travel, max_step,
+                                         keep_spot, out);
         return out;
       },
       kReleaseGil, py::kw_only(), py::arg("source"), py::arg("edited"), py::arg("blocks"), py::arg("fixed"), py::arg("fixed_turn"),
-      py::arg("window"), py::arg("min_travel"), py::arg("max_step") = 0.0,
+      py::arg("window"), py::arg("min_travel"), py::arg("max_step") = 0.0, py::arg("keep_spot") = Eigen::VectorXi(),
       "(V,) turn of each frame's heading from source to edited paths (V,2), block by block: blocks (B,2)\n"
       "int32 [begin, end), fixed (R,3) int32 (block, first, last) grouped by block, fixed_turn (R,),\n"
-      "window (frames), min_travel (stage units), max_step (stage units per frame, 0: none); see\n"
+      "window (frames), min_travel (stage units), max_step (stage units per frame, 0: none), keep_spot\n"
+      "(B,) int32 (nonzero: a path about one spot keeps its facing; empty: every block); see\n"
       "DeformationTurns in trajectory.h.");
   m.def(
       "null_space_support",

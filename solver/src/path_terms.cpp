@@ -191,8 +191,10 @@ constexpr Eigen::Index kParallelHeadingFrames = 20000;
 void BlockDeformationTurns(const Eigen::Ref<const Trajectory2>& source, const Eigen::Ref<const Trajectory2>& edited,
                            const Eigen::Ref<const IndexPairs>& blocks, const Eigen::Ref<const IndexTriples>& fixed,
                            const Eigen::Ref<const Eigen::VectorXd>& fixed_turn, int window, double min_travel,
-                           double max_step, Eigen::VectorXd& turns) {
+                           double max_step, const Eigen::Ref<const Eigen::VectorXi>& keep_spot, Eigen::VectorXd& turns) {
   Require(fixed.rows() == fixed_turn.size(), "BlockDeformationTurns", "one turn is needed per fixed range");
+  Require(keep_spot.size() == 0 || keep_spot.size() == blocks.rows(), "BlockDeformationTurns",
+          "keep_spot needs one flag per block, or none");
   Require(source.rows() == edited.rows(), "BlockDeformationTurns", "source and edited differ in rows");
   turns.setZero(source.rows());
   // Each block's first fixed range; the blocks are independent.
@@ -219,7 +221,8 @@ void BlockDeformationTurns(const Eigen::Ref<const Trajectory2>& source, const Ei
       for (Eigen::Index k = lo; k < hi; ++k) ranges.emplace_back(fixed(k, 1), fixed(k, 2));
       turns.segment(begin, end - begin) =
           DeformationTurns(source.middleRows(begin, end - begin), edited.middleRows(begin, end - begin), ranges,
-                           fixed_turn.segment(lo, hi - lo), window, min_travel, max_step);
+                           fixed_turn.segment(lo, hi - lo), window, min_travel, max_step,
+                           keep_spot.size() == 0 || keep_spot[b] != 0);
     }
   };
   if (count < 2 || frames < kParallelHeadingFrames || !disjoint) {

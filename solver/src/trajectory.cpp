@@ -82,17 +82,31 @@ namespace {
 
 // Travel, in units of `min_travel`, from which a frame's own turn counts in full.
 constexpr double kConfidentTravel = 4.0;
+// A path that goes somewhere: over windows of kStraightWindows turn windows each side, the
+// chord is at least kStraightFrom of the distance walked for a frame's turn to count at all,
+// and kStraightFrom + kStraightRamp of it to count in full. A clip that moves about one spot (a
+// boxer's bounce, a dance, an idle's shuffle) has no direction for an edit to turn: its
+// wiggles' rotation is not the body's.
+constexpr int kStraightWindows = 3;
+constexpr double kStraightFrom = 0.4, kStraightRamp = 0.3;
+
+double Straightness(double chord, double walked) {
+  if (!(walked > 0.0)) return 0.0;
+  return std::clamp((chord / walked - kStraightFrom) / kStraightRamp, 0.0, 1.0);
+}
 
 // The frames that are not keys: each pulled towards its own turn by its weight, and held to
 // its neighbours by springs of stiffness window^2 (so a frame sure of itself bends the turn
 // over about `window` frames, and a noisy, barely moving one over many more, diluted). Keys
-// keep their value; with none, every frame is also held weakly to `turn`, the whole path's.
-// `turn` holds the interpolation between the keys on entry and the result on return.
+// keep their value; with none, every frame is also held to `turn`, the whole path's, by
+// `prior` (weakly for a path that goes somewhere, as strongly as a sure frame for one that
+// stays about one spot). `turn` holds the interpolation between the keys on entry and the
+// result on return.
 void SmoothOwnTurns(const Eigen::VectorXd& own, const Eigen::VectorXd& weight, const std::vector<char>& key,
-                    bool any_key, int window, Eigen::VectorXd& turn) {
+                    double prior, int window, Eigen::VectorXd& turn) {
   const Eigen::Index n = turn.size();
   if (!(weight.array() > 0.0).any() || n < 2) return;
-  const double spring = double(window) * double(window), prior = any_key ? 0.0 : 1e-6;
+  const double spring = double(window) * double(window);
   // Tridiagonal system (lower, diagonal, upper, rhs), solved by the Thomas algorithm.
   Eigen::VectorXd lower = Eigen::VectorXd::Zero(n), diag(n), upper = Eigen::VectorXd::Zero(n), rhs(n);
   for (Eigen::Index i = 0; i < n; ++i) {
@@ -129,7 +143,7 @@ Eigen::VectorXd DeformationTurns(const Eigen::Ref<const Trajectory2>& source,
                                  const Eigen::Ref<const Trajectory2>& edited,
                                  const std::vector<FrameRange>& fixed,
                                  const Eigen::Ref<const Eigen::VectorXd>& fixed_turn, int window,
-                                 double min_travel, double max_step) {
+                                 double min_travel, double max_step, bool keep_spot) {
   const Eigen::Index n = source.rows();
   if (edited.rows() != n) throw InvalidInput("DeformationTurns", "source and edited differ in frames");
   if (static_cast<Eigen::Index>(fixed.size()) != fixed_turn.size())
@@ -158,12 +172,24 @@ Eigen::VectorXd DeformationTurns(const Eigen::Ref<const Trajectory2>& source,
   // that, in proportion between.
   Eigen::VectorXd weight = Eigen::VectorXd::Zero(n);
   std::vector<char> in_range(static_cast<size_t>(n), 0);
+  // Distance walked from the first frame (cuts left out).
+  Eigen::VectorXd walked = Eigen::VectorXd::Zero(n);
+  for (Eigen::Index k = 0; k + 1 < n; ++k) {
+    const double step = (source.row(k + 1) - source.row(k)).norm();
+    walked[k + 1] = walked[k] + (max_step > 0.0 && step > max_step ? 0.0 : step);
+  }
+  const Eigen::Index wide = kStraightWindows * h;
+  const bool spot = keep_spot && min_travel > 0.0;
   for (Eigen::Index i = 0; i < n; ++i) {
     const Eigen::Index lo = std::max<Eigen::Index>(i - h, 0), hi = std::min<Eigen::Index>(i + h, n - 1);
     once.row(i + 1) = once.row(i) + (steps.row(hi) - steps.row(lo));
     const double travel = (source.row(hi) - source.row(lo)).norm();
     if (travel >= min_travel)
       weight[i] = min_travel > 0.0 ? std::min(1.0, (travel - min_travel) / ((kConfidentTravel - 1.0) * min_travel)) : 1.0;
+    if (spot && weight[i] > 0.0) {
+      const Eigen::Index wlo = std::max<Eigen::Index>(i - wide, 0), whi = std::min<Eigen::Index>(i + wide, n - 1);
+      weight[i] *= Straightness((source.row(whi) - source.row(wlo)).norm(), walked[whi] - walked[wlo]);
+    }
   }
   for (Eigen::Index i = 0; i < n; ++i) {
     const Eigen::Index lo = std::max<Eigen::Index>(i - h, 0), hi = std::min<Eigen::Index>(i + h, n - 1);
@@ -188,10 +214,13 @@ Eigen::VectorXd DeformationTurns(const Eigen::Ref<const Trajectory2>& source,
   for (Eigen::Index i = 0; i < n; ++i)
     if (weight[i] == 1.0 || in_range[static_cast<size_t>(i)]) keys.push_back(i);
   if (keys.empty()) {
-    // Nothing travels far enough to be sure of: the whole path's rotation, for every frame.
+    // Nothing travels far enough to be sure of: the whole path's rotation, for every frame, as
+    // far as the path goes somewhere (none for a clip that stays about one spot).
     const double whole = std::atan2(steps(n - 1, 1), steps(n - 1, 0));
-    turn.setConstant(steps.row(n - 1).isZero(0.0) ? 0.0 : whole);
-    SmoothOwnTurns(own, weight, std::vector<char>(static_cast<size_t>(n), 0), false, static_cast<int>(h), turn);
+    const double sure = spot ? Straightness((source.row(n - 1) - source.row(0)).norm(), walked[n - 1]) : 1.0;
+    turn.setConstant(steps.row(n - 1).isZero(0.0) ? 0.0 : sure * whole);
+    SmoothOwnTurns(own, weight, std::vector<char>(static_cast<size_t>(n), 0), 1e-6 + (1.0 - sure),
+                   static_cast<int>(h), turn);
     return turn;
   }
   Eigen::VectorXd v(static_cast<Eigen::Index>(keys.size()));
@@ -217,7 +246,7 @@ Eigen::VectorXd DeformationTurns(const Eigen::Ref<const Trajectory2>& source,
   }
   std::vector<char> key(static_cast<size_t>(n), 0);
   for (Eigen::Index i : keys) key[static_cast<size_t>(i)] = 1;
-  SmoothOwnTurns(own, weight, key, true, static_cast<int>(h), turn);
+  SmoothOwnTurns(own, weight, key, 0.0, static_cast<int>(h), turn);
   return turn;
 }
 

@@ -68,7 +68,7 @@ TEST(PathTerms, ValidityRejectsBadInput) {
     blocks << 0, 31;
     Eigen::VectorXd turns;
     EXPECT_THROW(mocapedit::BlockDeformationTurns(rest, rest, blocks, IndexTriples(0, 3), Eigen::VectorXd(), 2, 0.0, 0.0,
-                                                  turns),
+                                                  Eigen::VectorXi(), turns),
                  mocapedit::InvalidInput);
   }
 }
@@ -176,13 +176,24 @@ TEST(PathTerms, BlockTurnsAreEachBlocksDeformationTurns) {
   Eigen::VectorXd fixed_turn(1);
   fixed_turn << 0.25;
   Eigen::VectorXd t;
-  mocapedit::BlockDeformationTurns(rest, edited, blocks, fixed, fixed_turn, 2, 0.01, 0.0, t);
+  mocapedit::BlockDeformationTurns(rest, edited, blocks, fixed, fixed_turn, 2, 0.01, 0.0, Eigen::VectorXi(), t);
   const Eigen::VectorXd first = mocapedit::DeformationTurns(rest.middleRows(20, 20), edited.middleRows(20, 20), {},
                                                             Eigen::VectorXd(), 2, 0.01);
   const Eigen::VectorXd second = mocapedit::DeformationTurns(rest.middleRows(0, 20), edited.middleRows(0, 20),
                                                              {{5, 9}}, fixed_turn, 2, 0.01);
   EXPECT_EQ(t.segment(20, 20), first);
   EXPECT_EQ(t.segment(0, 20), second);
+  // Each block's own keep_spot.
+  Eigen::VectorXi keep(2);
+  keep << 0, 1;
+  mocapedit::BlockDeformationTurns(rest, edited, blocks, fixed, fixed_turn, 2, 0.01, 0.0, keep, t);
+  EXPECT_EQ(t.segment(20, 20), mocapedit::DeformationTurns(rest.middleRows(20, 20), edited.middleRows(20, 20), {},
+                                                           Eigen::VectorXd(), 2, 0.01, 0.0, false));
+  EXPECT_EQ(t.segment(0, 20), second);
+  Eigen::VectorXi wrong(3);
+  wrong << 1, 1, 1;
+  EXPECT_THROW(mocapedit::BlockDeformationTurns(rest, edited, blocks, fixed, fixed_turn, 2, 0.01, 0.0, wrong, t),
+               mocapedit::InvalidInput);
   EXPECT_TRUE((t.segment(40, 20).array() == 0).all());
   EXPECT_TRUE((t.segment(5, 5).array() == 0.25).all());
 }

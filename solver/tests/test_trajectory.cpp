@@ -149,3 +149,30 @@ TEST(Trajectory, ACutInTheSourceCountsForNothing) {
                mocapedit::DeformationTurns(q, f, {}, Eigen::VectorXd(), window, 1.0).array())
                   .all());
 }
+
+namespace {
+
+// A root that moves about one spot at 60 frames per second: within 8 cm, at 10 to 30 cm/s.
+Trajectory2 Wander(int frames) {
+  Trajectory2 p(frames, 2);
+  for (int i = 0; i < frames; ++i) {
+    const double t = i / 60.0;
+    p.row(i) << 0.08 * (0.6 * std::sin(1.3 * t) + 0.4 * std::sin(3.1 * t + 1.0)),
+        0.08 * (0.6 * std::sin(1.7 * t + 0.5) + 0.4 * std::sin(2.3 * t + 2.0));
+  }
+  return p;
+}
+
+}  // namespace
+
+TEST(Trajectory, APathAboutOneSpotKeepsItsFacingUnlessItTurnsWithAGroup) {
+  const Trajectory2 p = Wander(720);
+  // The edit turns its wiggles by 0.7 and moves it 40 cm aside and back.
+  Trajectory2 e = Turned(p, -0.7, 0.0, 0.0);
+  for (Eigen::Index i = 0; i < e.rows(); ++i) e(i, 0) += 0.4 * std::sin(M_PI * i / (e.rows() - 1.0));
+  // 60 fps, metres: windows of 12 frames, 4 cm of travel, cuts beyond 25 cm a frame.
+  const Eigen::VectorXd kept = mocapedit::DeformationTurns(p, e, {}, Eigen::VectorXd(), 12, 0.04, 0.25);
+  EXPECT_LT(kept.cwiseAbs().maxCoeff(), 10.0 * M_PI / 180.0);
+  const Eigen::VectorXd turned = mocapedit::DeformationTurns(p, e, {}, Eigen::VectorXd(), 12, 0.04, 0.25, false);
+  EXPECT_LT(turned.mean(), -25.0 * M_PI / 180.0);
+}

@@ -117,3 +117,36 @@ def test_a_slow_path_turned_rigidly_still_turns_by_its_angle(speed):
     turn = trajectory.deformation_turns(src, turned, [0, len(src)], window=args["turn_window"],
                                         min_travel=args["turn_min_travel"])
     np.testing.assert_allclose(turn, 1.1, atol=1e-9)
+
+
+def _wander(seconds=12.0, fps=60.0, reach=0.08):
+    """A root that moves about one spot (a boxer's bounce, an idle's shuffle): within ``reach``
+    metres of where it starts, at 10 to 30 cm/s."""
+    t = np.arange(0.0, seconds, 1.0 / fps)
+    u = reach * (0.6 * np.sin(1.3 * t) + 0.4 * np.sin(3.1 * t + 1.0))
+    v = reach * (0.6 * np.sin(1.7 * t + 0.5) + 0.4 * np.sin(2.3 * t + 2.0))
+    return t, np.stack((u - u[0], v - v[0]), axis=1)
+
+
+def test_a_path_about_one_spot_keeps_its_facing_however_the_edit_turns_its_wiggles():
+    """Moved 40 cm sideways by handles, the path solve turns such a path's wiggles by tens of
+    degrees to keep their lengths: that rotation is not the body's (a boxer moved aside faced
+    45 degrees away, from the first frame on)."""
+    fps = 60.0
+    t, src = _wander(fps=fps)
+    bump = np.stack((0.4 * np.sin(np.pi * t / t[-1]), 0.0 * t), axis=1)
+    edited = _rotate(src, -0.7) + bump
+    args = path_edit.turn_settings(fps, 1.0)
+    kw = dict(window=args["turn_window"], min_travel=args["turn_min_travel"], max_step=args["turn_max_step"])
+    turn = trajectory.deformation_turns(src, edited, [0, len(src)], **kw)
+    # At most a few degrees where the root goes straight for a moment; 40 before.
+    assert np.degrees(np.abs(turn).max()) < 10.0 and np.degrees(np.abs(turn).mean()) < 3.0
+    # A group member turns with its formation, about one spot or not.
+    member = trajectory.deformation_turns(src, edited, [0, len(src)], keep_spot=[False], **kw)
+    assert np.degrees(member.mean()) < -25.0
+    # A walk with the same wiggles, edited the same way, turns as before.
+    walk = np.stack((1.4 * t, 0.0 * t), axis=1) + src
+    bent = [trajectory.deformation_turns(walk, _rotate(walk, -0.7) + bump, [0, len(src)], keep_spot=[keep], **kw)
+            for keep in (True, False)]
+    np.testing.assert_array_equal(bent[0], bent[1])
+    assert np.degrees(bent[0].mean()) < -30.0

@@ -143,7 +143,8 @@ def turn_window(fps: float) -> int:
 
 
 def deformation_turns(source: np.ndarray, edited: np.ndarray, offsets, fixed=(), fixed_turn=(),
-                      window: int = 2, min_travel: float = 0.0, max_step: float = 0.0) -> np.ndarray:
+                      window: int = 2, min_travel: float = 0.0, max_step: float = 0.0,
+                      keep_spot=None) -> np.ndarray:
     """(F,) turn of each frame's heading (radians, counter-clockwise) when paths go from source
     to edited: the local rotation the edit applies to the path around the frame (the least-squares
     rotation of the source steps onto the edited ones within two nested windows of ``window``
@@ -151,12 +152,15 @@ def deformation_turns(source: np.ndarray, edited: np.ndarray, offsets, fixed=(),
     window, interpolated from the moving frames around it; each fixed range by its own turn; a source
     step longer than ``max_step`` stage units, a cut, counts for nothing (0: none)). See
     ``DeformationTurns`` in ``solver/include/mocapedit/trajectory.h``. An unedited path turns by
-    exactly 0, a rigidly turned one by its angle.
+    exactly 0, a rigidly turned one by its angle. A path that stays about one spot (a boxer's
+    bounce, a dance, an idle) keeps its facing, however the edit turns its wiggles, unless
+    ``keep_spot`` says otherwise for its block (a group member turns with its formation).
 
       source, edited  (F,2) ground paths of one or more agents, concatenated
       offsets         (B+1,) first frame of each agent's block, then F
       fixed           (R,3) (block, first, last) inclusive frame ranges within the blocks, by block
       fixed_turn      (R,) turn of each fixed range
+      keep_spot       (B,) bool per block, or None: every block
     """
     s = np.ascontiguousarray(source, dtype=np.float64)
     e = np.ascontiguousarray(edited, dtype=np.float64)
@@ -166,9 +170,10 @@ def deformation_turns(source: np.ndarray, edited: np.ndarray, offsets, fixed=(),
     blocks = np.ascontiguousarray(np.stack((off[:-1], off[1:]), axis=1))
     ranges = np.ascontiguousarray(np.asarray(fixed, dtype=np.int32).reshape(-1, 3))
     turns = np.asarray(fixed_turn, dtype=np.float64).reshape(-1)
+    keep = np.ones(len(blocks), dtype=np.int32) if keep_spot is None else np.asarray(keep_spot, dtype=np.int32)
     return _solver.block_deformation_turns(source=s, edited=e, blocks=blocks, fixed=ranges, fixed_turn=turns,
                                            window=int(window), min_travel=float(min_travel),
-                                           max_step=float(max_step))
+                                           max_step=float(max_step), keep_spot=keep)
 
 
 def ground_motion(src_uv: np.ndarray, src_heading: np.ndarray, new_uv: np.ndarray,

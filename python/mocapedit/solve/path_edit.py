@@ -668,7 +668,10 @@ class ComponentProblem:
             mine = np.isin(fixed[:, 0], ks)
             renumber = {k: n for n, k in enumerate(ks)}
             ranges = [(renumber[int(b)], int(f), int(l)) for b, f, l in fixed[mine]]
-            h = trajectory.deformation_turns(source, edited, offsets, ranges, fixed_turn[mine], *args)
+            # A group member turns with its formation, even one that stays about one spot.
+            members = set(self._members)
+            keep = [i not in members for i in chosen]
+            h = trajectory.deformation_turns(source, edited, offsets, ranges, fixed_turn[mine], *args, keep_spot=keep)
             for n, i in enumerate(chosen):
                 out[i] = np.asarray(self._inputs[i].source_heading, dtype=np.float64) + h[offsets[n]:offsets[n + 1]]
         return out

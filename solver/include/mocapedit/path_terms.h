@@ -141,13 +141,14 @@ void GroupMeshTerms(const Eigen::Ref<const Trajectory2>& rest,
 //                   that turn rigidly, grouped by block in block order
 //   fixed_turn      #R turn of each fixed range
 //   window, min_travel, max_step  as in DeformationTurns
+//   keep_spot       #B DeformationTurns' keep_spot of each block (nonzero: keep), or empty: every block
 // Outputs:
 //   turns           #V: each block's rows filled as DeformationTurns fills them, other rows 0
 // Throws InvalidInput on blocks or ranges out of range.
 void BlockDeformationTurns(const Eigen::Ref<const Trajectory2>& source, const Eigen::Ref<const Trajectory2>& edited,
                            const Eigen::Ref<const IndexPairs>& blocks, const Eigen::Ref<const IndexTriples>& fixed,
                            const Eigen::Ref<const Eigen::VectorXd>& fixed_turn, int window, double min_travel,
-                           double max_step, Eigen::VectorXd& turns);
+                           double max_step, const Eigen::Ref<const Eigen::VectorXi>& keep_spot, Eigen::VectorXd& turns);
 
 // Columns of a sparse complex #R by #C matrix A that its null space reaches: c such that
 // some x with A x = 0 has x_c != 0. Each column is first scaled to unit largest magnitude;

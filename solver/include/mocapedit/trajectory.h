@@ -66,12 +66,22 @@ Eigen::VectorXd TangentHeadings(const Eigen::Ref<const Trajectory2>& points,
 //   window          half-width of each box window, frames (at least 1)
 //   min_travel      stage units
 //   max_step        stage units per frame (0: no step is a cut)
+//   keep_spot       a path that stays about one spot keeps its facing (see below)
+//
+// With `keep_spot` (and min_travel > 0), a frame's own turn counts only as far as the path
+// goes somewhere around it: over windows of three turn windows each side, its chord must be
+// at least 0.4 of the distance walked (in full from 0.7). And with no frame sure of its turn,
+// the whole path's rotation counts only as far as the whole path goes somewhere, and holds
+// every frame as strongly as the rest falls short. A clip that moves about one spot (a boxer's
+// bounce, a dance, an idle's shuffle) moved by an edit then keeps its facing: the rotation the
+// edit gives its wiggles is not the body's. Without it (a group member, turned with its
+// formation), as before.
 // Returns #N turns, unwrapped. Throws InvalidInput on bad shapes or ranges.
 Eigen::VectorXd DeformationTurns(const Eigen::Ref<const Trajectory2>& source,
                                  const Eigen::Ref<const Trajectory2>& edited,
                                  const std::vector<FrameRange>& fixed,
                                  const Eigen::Ref<const Eigen::VectorXd>& fixed_turn, int window,
-                                 double min_travel, double max_step = 0.0);
+                                 double min_travel, double max_step = 0.0, bool keep_spot = true);
 
 // Adds multiples of 2*pi so consecutive angles differ by at most pi.
 void UnwrapAngles(Eigen::Ref<Eigen::VectorXd> angles);

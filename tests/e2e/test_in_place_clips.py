@@ -1,0 +1,88 @@
+"""Clips that stay about one spot (a boxer's bounce, an idle's shuffle, a dance), moved by an
+edit: the path solve turns their wiggles to keep their lengths, and that rotation is not the
+body's. A boxer moved 40 cm aside faced 45 degrees away from its source, from its first frame
+(pinned where it was) to its last. Measured by UsdSkel FK on the composed stage."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from pxr import Usd
+
+from mocapedit.data import examples, walker
+from mocapedit.geometry import ground
+from mocapedit.pipeline.processor import solve
+from mocapedit.usd import evaluate
+
+FPS = 60.0
+FRAMES = 720
+
+
+def _wandering(name: str, phase: float) -> walker.Clip:
+    """An idle whose root moves about one spot: within 8 cm of where it starts, 10-30 cm/s."""
+    clip = walker.idle(frames=FRAMES, fps=FPS, phase=phase, name=name)
+    t = np.arange(FRAMES) / FPS + 7.0 * phase
+    u = 0.08 * (0.6 * np.sin(1.3 * t) + 0.4 * np.sin(3.1 * t + 1.0))
+    v = 0.08 * (0.6 * np.sin(1.7 * t + 0.5) + 0.4 * np.sin(2.3 * t + 2.0))
+    translations = clip.translations.copy()
+    translations[:, 0, 0] += (u - u[0]).astype(np.float32)
+    translations[:, 0, 2] += (v - v[0]).astype(np.float32)
+    return dataclasses.replace(clip, translations=translations)
+
+
+def _facing(stage, agent, times):
+    _, m = evaluate.joint_world_matrices(stage, agent, times)
+    forward = ground.to_ground(m[:, 2, :3], "Y")
+    return np.arctan2(forward[:, 1], forward[:, 0])
+
+
+def _offset_degrees(source, edited, agent, times):
+    d = _facing(edited, agent, times) - _facing(source, agent, times)
+    return np.degrees(np.angle(np.exp(1j * d)))
+
+
+def _shot(folder, agents):
+    stage = examples.build_crowd_stage(folder / "shot.usda", agents, fps=FPS)
+    return stage, Usd.Stage.Open(stage.GetRootLayer())
+
+
+def test_an_in_place_clip_moved_aside_by_handles_keeps_its_facing(tmp_path):
+    stage, source = _shot(tmp_path, [examples.AgentSpec("boxer", _wandering("bounce", 0.0))])
+    agent = "/World/Crowd/boxer"
+    for k, f in enumerate((0, FRAMES // 2, FRAMES - 1)):
+        p = evaluate.agent_root_positions(source, agent, [float(f)])[0] + (0.4 * (k == 1), 0.0, 0.0)
+        examples.add_position_constraint(stage, f"/Edits/handle{k}", agent, f, tuple(map(float, p)))
+    stage.GetRootLayer().Save()
+    result = solve(str(tmp_path / "shot.usda"), output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"))
+    assert all(c.met for c in result.report.constraints)
+    edited = Usd.Stage.Open(str(tmp_path / "c.usda"))
+    times = np.arange(FRAMES, dtype=np.float64)
+    moved = np.linalg.norm(evaluate.agent_root_positions(edited, agent, times)
+                           - evaluate.agent_root_positions(source, agent, times), axis=1)
+    assert moved.max() > 0.35                              # it was moved aside
+    offset = np.abs(_offset_degrees(source, edited, agent, times))
+    assert offset.max() < 15.0 and offset.mean() < 4.0, (offset.max(), offset.mean())
+
+
+def test_in_place_agents_in_a_group_turn_with_their_formation(tmp_path):
+    """A group turned by a handle turns its members' bodies, those about one spot too."""
+    specs = [examples.AgentSpec("a", _wandering("bounce_a", 0.0)),
+             examples.AgentSpec("b", _wandering("bounce_b", 0.3), position=(2.0, 0.0, 0.0))]
+    stage, source = _shot(tmp_path, specs)
+    a, b = "/World/Crowd/a", "/World/Crowd/b"
+    last = float(FRAMES - 1)
+    pa = evaluate.agent_root_positions(source, a, [0.0, last])
+    pb = evaluate.agent_root_positions(source, b, [last])[0]
+    examples.add_position_constraint(stage, "/Edits/a_start", a, 0, tuple(map(float, pa[0])))
+    examples.add_position_constraint(stage, "/Edits/a_end", a, FRAMES - 1, tuple(map(float, pa[1])))
+    # b's last frame a quarter turn round a's (counter-clockwise seen from above, Y up).
+    rel = pb - pa[1]
+    turned = pa[1] + np.array([rel[2], 0.0, -rel[0]])
+    examples.add_position_constraint(stage, "/Edits/b_end", b, FRAMES - 1, tuple(map(float, turned)))
+    examples.add_group(stage, "/Edits/pair", [a, b])
+    stage.GetRootLayer().Save()
+    result = solve(str(tmp_path / "shot.usda"), output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"))
+    assert all(c.met for c in result.report.constraints)
+    edited = Usd.Stage.Open(str(tmp_path / "c.usda"))
+    end = _offset_degrees(source, edited, b, [last])[0]
+    assert end > 45.0, end
