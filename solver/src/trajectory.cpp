@@ -172,11 +172,16 @@ Eigen::VectorXd DeformationTurns(const Eigen::Ref<const Trajectory2>& source,
   // that, in proportion between.
   Eigen::VectorXd weight = Eigen::VectorXd::Zero(n);
   std::vector<char> in_range(static_cast<size_t>(n), 0);
-  // Distance walked from the first frame (cuts left out).
+  // Distance walked and displacement from the first frame, cuts left out of both (a clip's
+  // first frame left at its rest pose at the origin must not make the frames near it look as
+  // if they go somewhere).
   Eigen::VectorXd walked = Eigen::VectorXd::Zero(n);
+  Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor> moved = Eigen::MatrixX2d::Zero(n, 2);
   for (Eigen::Index k = 0; k + 1 < n; ++k) {
-    const double step = (source.row(k + 1) - source.row(k)).norm();
-    walked[k + 1] = walked[k] + (max_step > 0.0 && step > max_step ? 0.0 : step);
+    const Eigen::RowVector2d s = source.row(k + 1) - source.row(k);
+    const bool cut = max_step > 0.0 && s.squaredNorm() > max_step * max_step;
+    walked[k + 1] = walked[k] + (cut ? 0.0 : s.norm());
+    moved.row(k + 1) = moved.row(k) + (cut ? Eigen::RowVector2d::Zero() : s);
   }
   const Eigen::Index wide = kStraightWindows * h;
   const bool spot = keep_spot && min_travel > 0.0;
@@ -188,7 +193,7 @@ Eigen::VectorXd DeformationTurns(const Eigen::Ref<const Trajectory2>& source,
       weight[i] = min_travel > 0.0 ? std::min(1.0, (travel - min_travel) / ((kConfidentTravel - 1.0) * min_travel)) : 1.0;
     if (spot && weight[i] > 0.0) {
       const Eigen::Index wlo = std::max<Eigen::Index>(i - wide, 0), whi = std::min<Eigen::Index>(i + wide, n - 1);
-      weight[i] *= Straightness((source.row(whi) - source.row(wlo)).norm(), walked[whi] - walked[wlo]);
+      weight[i] *= Straightness((moved.row(whi) - moved.row(wlo)).norm(), walked[whi] - walked[wlo]);
     }
   }
   for (Eigen::Index i = 0; i < n; ++i) {
@@ -217,7 +222,7 @@ Eigen::VectorXd DeformationTurns(const Eigen::Ref<const Trajectory2>& source,
     // Nothing travels far enough to be sure of: the whole path's rotation, for every frame, as
     // far as the path goes somewhere (none for a clip that stays about one spot).
     const double whole = std::atan2(steps(n - 1, 1), steps(n - 1, 0));
-    const double sure = spot ? Straightness((source.row(n - 1) - source.row(0)).norm(), walked[n - 1]) : 1.0;
+    const double sure = spot ? Straightness(moved.row(n - 1).norm(), walked[n - 1]) : 1.0;
     turn.setConstant(steps.row(n - 1).isZero(0.0) ? 0.0 : sure * whole);
     SmoothOwnTurns(own, weight, std::vector<char>(static_cast<size_t>(n), 0), 1e-6 + (1.0 - sure),
                    static_cast<int>(h), turn);

@@ -175,4 +175,13 @@ TEST(Trajectory, APathAboutOneSpotKeepsItsFacingUnlessItTurnsWithAGroup) {
   EXPECT_LT(kept.cwiseAbs().maxCoeff(), 10.0 * M_PI / 180.0);
   const Eigen::VectorXd turned = mocapedit::DeformationTurns(p, e, {}, Eigen::VectorXd(), 12, 0.04, 0.25, false);
   EXPECT_LT(turned.mean(), -25.0 * M_PI / 180.0);
+  // The same clip placed 2 m away with its first frame left at its rest pose at the origin (a
+  // cut): the frames near the cut do not look as if they went somewhere.
+  Trajectory2 q = p, f = e;
+  q.rowwise() += Eigen::RowVector2d(2.0, 1.0);
+  f.rowwise() += Eigen::RowVector2d(2.0, 1.0);
+  q.row(0).setZero();
+  f.row(0).setZero();
+  const Eigen::VectorXd cut = mocapedit::DeformationTurns(q, f, {}, Eigen::VectorXd(), 12, 0.04, 0.25);
+  EXPECT_LT(cut.tail(cut.size() - 1).cwiseAbs().maxCoeff(), 10.0 * M_PI / 180.0);
 }

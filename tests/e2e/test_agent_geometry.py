@@ -127,3 +127,18 @@ def test_two_skeletons_with_geometry_are_an_error_until_the_agent_binds_one(tmp_
     _, plain = _composed(tmp_path / "plain", _shot(tmp_path / "plain", geometry=True))
     composed = Usd.Stage.Open(str(composed_path))
     np.testing.assert_allclose(_joints(composed, AGENTS[1]), _joints(plain, AGENTS[1]), atol=1e-6)
+
+
+def test_the_skeleton_the_agents_geometry_binds_outranks_one_inherited_from_above(tmp_path):
+    """UsdSkel skins each mesh by its own binding: a skel:skeleton on an ancestor (here the
+    crowd's, naming a1's prop) does not make the agents play another skeleton than their body's."""
+    _, plain = _composed(tmp_path / "plain", _shot(tmp_path / "plain", geometry=True))
+    shot = _shot(tmp_path / "shot", geometry=True, prop=True)
+    stage = Usd.Stage.Open(shot)
+    UsdSkel.BindingAPI.Apply(stage.GetPrimAtPath("/World/Crowd")).CreateSkeletonRel().SetTargets(
+        [f"{AGENTS[1]}/Prop"])
+    stage.GetRootLayer().Save()
+    result, composed = _composed(tmp_path / "shot", shot)
+    assert result.report.stats["editedAgents"] == 2
+    for agent in AGENTS:
+        np.testing.assert_allclose(_joints(composed, agent), _joints(plain, agent), atol=1e-6, err_msg=agent)

@@ -462,6 +462,7 @@ def test_default_facing_joint():
     assert M.default_facing_joint(["Root", "Root/Spine"]) == 0
     # A side's hip joint is not the hips (CMU's LHipJoint before the pelvis of a rig without "Hips").
     assert M.default_facing_joint(["Ref", "Ref/LHipJoint", "Ref/Bip01_Pelvis"]) == 2
+    assert M.default_facing_joint(["root", "root/lhipjoint", "root/lhipjoint/lfemur", "root/lowerback"]) == 0
 
 
 

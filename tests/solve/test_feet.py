@@ -145,6 +145,9 @@ def _rig(pelvis: str, left: list[str], right: list[str], extra: tuple = ()) -> t
      ["DEF_thigh_R", "DEF_shin_R", "DEF_foot_R", "DEF_toe_R"], ()),
     ("Maya HumanIK, lower case", ["leftUpLeg", "leftLeg", "leftFoot", "leftToeBase"],
      ["rightUpLeg", "rightLeg", "rightFoot", "rightToeBase"], (("leftUpLeg", "leftUpLegRoll"),)),
+    ("one case, no separators", ["leftupleg", "leftleg", "leftfoot", "lefttoebase"],
+     ["RIGHTUPLEG", "RIGHTLEG", "RIGHTFOOT", "RIGHTTOEBASE"], ()),
+    ("CMU ASF", ["lfemur", "ltibia", "lfoot", "ltoes"], ["rfemur", "rtibia", "rfoot", "rtoes"], ()),
 ])
 def test_legs_are_found_on_rigs_as_they_arrive_in_usd(rig, left, right, extra):
     names, parents = _rig("Hips", left, right, extra)

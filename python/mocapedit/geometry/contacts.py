@@ -24,7 +24,7 @@ import numpy as np
 
 from mocapedit.geometry import ground, trajectory
 from mocapedit.model.data import Agent, Clip, StageInfo
-from mocapedit.model.names import side_and_role
+from mocapedit.model.names import joint_leaf, side_and_role
 from mocapedit.geometry.stationary import runs
 
 SIDES = ("left", "right")
@@ -43,7 +43,8 @@ class Leg:
 
 
 def _leaf(joint: str) -> str:
-    return joint.rsplit("/", 1)[-1].rsplit(":", 1)[-1]
+    """The joint's own name without a ``namespace:`` prefix."""
+    return joint_leaf(joint).rsplit(":", 1)[-1]
 
 
 def chain_problem(names: list[str], parents: np.ndarray, indices: list[int]) -> str | None:

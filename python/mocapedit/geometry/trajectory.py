@@ -152,9 +152,10 @@ def deformation_turns(source: np.ndarray, edited: np.ndarray, offsets, fixed=(),
     window, interpolated from the moving frames around it; each fixed range by its own turn; a source
     step longer than ``max_step`` stage units, a cut, counts for nothing (0: none)). See
     ``DeformationTurns`` in ``solver/include/mocapedit/trajectory.h``. An unedited path turns by
-    exactly 0, a rigidly turned one by its angle. A path that stays about one spot (a boxer's
-    bounce, a dance, an idle) keeps its facing, however the edit turns its wiggles, unless
-    ``keep_spot`` says otherwise for its block (a group member turns with its formation).
+    exactly 0, a rigidly turned walk by its angle. A path that stays about one spot (a boxer's
+    bounce, a dance, an idle) keeps its facing, however the edit turns its wiggles, rigidly or
+    not, unless ``keep_spot`` says otherwise for its block (a group member turns with its
+    formation; the path editor turns a component moved as one rigid body without asking).
 
       source, edited  (F,2) ground paths of one or more agents, concatenated
       offsets         (B+1,) first frame of each agent's block, then F

@@ -45,8 +45,8 @@ def resolve_joint(joints: list[str], name: str) -> int | None:
 # also end in one of them after a prefix (``DEF_thigh_L``). SMPL's "foot" is the toe end below
 # its "ankle".
 _ROLE_WORDS = {
-    "hip": ("upleg", "upperleg", "thigh", "hip"),
-    "knee": ("lowerleg", "leg", "calf", "shin", "knee"),
+    "hip": ("upleg", "upperleg", "thigh", "hip", "femur"),
+    "knee": ("lowerleg", "leg", "calf", "shin", "knee", "tibia"),
     "ankle": ("foot", "ankle"),
     "toe": ("toebase", "toes", "toe", "ball"),
 }
@@ -59,19 +59,40 @@ def side_and_role(leaf: str, prefixed: bool = True) -> tuple[str | None, str | N
     None for what it does not say. ``prefixed``: also a role word after a prefix (``DEF_thigh_L``)."""
     words = [w.lower() for w in _WORD.findall(leaf) if not w.isdigit()]
     sides = [k for k, w in enumerate(words) if w in _SIDE_WORDS]
-    if len(sides) != 1:
+    if len(sides) > 1:
         return None, None
-    k = sides[0]
-    rest = "".join(words[k + 1:]) or "".join(words[:k])
-    exact = [role for role, names in _ROLE_WORDS.items() if rest in names]
-    if exact:
-        return _SIDE_WORDS[words[k]], exact[0]
-    if not prefixed:
-        return _SIDE_WORDS[words[k]], None
+    if sides:
+        k = sides[0]
+        side, rest = _SIDE_WORDS[words[k]], "".join(words[k + 1:]) or "".join(words[:k])
+    else:
+        side, rest = _side_in_one_word("".join(words))
+        if side is None:
+            return None, None
+    exact = _role_of(rest)
+    if exact or not prefixed:
+        return side, exact
     # A prefix before the role (DEF_thigh_L): the longest role word the name ends with.
     ends = sorted(((len(n), role) for role, names in _ROLE_WORDS.items() for n in names if rest.endswith(n)),
                   reverse=True)
-    return _SIDE_WORDS[words[k]], (ends[0][1] if ends else None)
+    return side, (ends[0][1] if ends else None)
+
+
+def _role_of(word: str) -> str | None:
+    return next((role for role, names in _ROLE_WORDS.items() if word in names), None)
+
+
+def _side_in_one_word(word: str) -> tuple[str | None, str]:
+    """(side, the rest) of a name written in one case without separators (``leftupleg``,
+    ``LEFTFOOT``, CMU's ``lfemur``): "left" or "right" at its start or end, or "l" or "r" in front
+    of a role word."""
+    for name in ("left", "right"):
+        if len(word) > len(name) and word.startswith(name):
+            return name, word[len(name):]
+        if len(word) > len(name) and word.endswith(name):
+            return name, word[:-len(name)]
+    if len(word) > 1 and word[0] in "lr" and _role_of(word[1:]):
+        return _SIDE_WORDS[word[0]], word[1:]
+    return None, word
 
 
 _FOOT_WORDS = ("foot", "toe", "ankle")
@@ -97,7 +118,7 @@ _FACING_NAMES = ("hips", "hip", "pelvis")
 def hips_joint(joints: Sequence[str], skip: int | None = None) -> int | None:
     """Index of the joint named for the hips: the one named hips, hip or pelvis (leaf name, any
     case), else the first whose leaf name contains one of those words and names no side or leg
-    (not ``LHipJoint``, ``thigh_l``); None when there is none. ``skip``: a joint not to take."""
+    (not ``LHipJoint``, CMU's ``lhipjoint``, ``thigh_l``); None when there is none. ``skip``: a joint not to take."""
     leaves = [joint_leaf(str(j)) for j in joints]
     for k, leaf in enumerate(leaves):
         if k != skip and leaf.lower() in _FACING_NAMES:
@@ -105,7 +126,8 @@ def hips_joint(joints: Sequence[str], skip: int | None = None) -> int | None:
     for k, leaf in enumerate(leaves):
         low = leaf.lower()
         if k != skip and any(w in low for w in ("hip", "pelvis")) and \
-                not any(w in low for w in ("leg", "thigh", "up")) and side_and_role(leaf)[0] is None:
+                not any(w in low for w in ("leg", "thigh", "up")) and side_and_role(leaf)[0] is None \
+                and not re.match(r"[lr](?:hip|pelvis)", low):
             return k
     return None
 

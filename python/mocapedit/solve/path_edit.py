@@ -631,7 +631,8 @@ class ComponentProblem:
     def _headings(self, ground: np.ndarray, result, turns: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
         """(F,) headings of the agents ``turns`` names (index -> turn of each stationary range)
         on their edited paths (``ground``: every agent's, concatenated), as ``edited_heading``
-        gives them, the turns of the deformation from one call per sample rate."""
+        gives them, the turns of the deformation from one call per sample rate; except that a
+        group member about one spot turns with its formation (``keep_spot`` off)."""
         rigid = result.rigid_angle if result.rigid_motion else None
         fo = self._full_offset
         out, turned, fixed, fixed_turn = {}, [], [], []

@@ -106,26 +106,31 @@ class _Skel:
 
 def skeleton_candidates(prim: Usd.Prim) -> list[Sdf.Path]:
     """The skeletons an agent prim may play, by the strongest evidence there is: the prim itself
-    if it is a Skeleton; else the skeleton bound to it (``skel:skeleton``, inherited from an
-    ancestor as UsdSkel inherits it); else the skeletons its geometry below binds; else the
-    Skeleton prims below it (through instances). One path when the choice is clear, several when
-    it is not (a prop's skeleton beside the body's), none when there is no skeleton."""
+    if it is a Skeleton; else the skeleton bound on it (``skel:skeleton``); else the skeletons its
+    geometry below binds (UsdSkel skins each mesh by its own binding); else the skeleton it
+    inherits from an ancestor's binding; else the Skeleton prims below it (through instances).
+    One path when the choice is clear, several when it is not (a prop's skeleton beside the
+    body's), none when there is no skeleton."""
     if prim.IsA(UsdSkel.Skeleton):
         return [prim.GetPath()]
-    inherited = UsdSkel.BindingAPI(prim).GetInheritedSkeleton()
-    if inherited:
-        return [inherited.GetPath()]
     stage = prim.GetStage()
+
+    def skeletons(rel) -> list[Sdf.Path]:
+        return [t for t in (rel.GetForwardedTargets() if rel else []) if stage.GetPrimAtPath(t).IsA(UsdSkel.Skeleton)]
+
+    own = skeletons(prim.GetRelationship("skel:skeleton"))
+    if own:
+        return own[:1]
     bound, found = [], []
     for p in Usd.PrimRange(prim, Usd.TraverseInstanceProxies()):
         if p.IsA(UsdSkel.Skeleton):
             found.append(p.GetPath())
-        rel = p.GetRelationship("skel:skeleton")
-        if rel:
-            for target in rel.GetForwardedTargets():
-                if target not in bound and stage.GetPrimAtPath(target).IsA(UsdSkel.Skeleton):
-                    bound.append(target)
-    return bound or found
+        if p != prim:
+            bound.extend(t for t in skeletons(p.GetRelationship("skel:skeleton")) if t not in bound)
+    if bound:
+        return bound
+    inherited = UsdSkel.BindingAPI(prim).GetInheritedSkeleton()
+    return [inherited.GetPath()] if inherited else found
 
 
 def _find_skeleton(prim: Usd.Prim) -> UsdSkel.Skeleton:

@@ -54,7 +54,7 @@ Eigen::VectorXd TangentHeadings(const Eigen::Ref<const Trajectory2>& points,
 // of that: a slow shuffle nudged a few centimetres sideways is not a turn of the body, a walk
 // bent by the same amount is. Each fixed range turns by its own angle, as one rigid body, and the `window` frames
 // either side of it blend from that angle into the moving frames'. An unedited path turns by
-// exactly 0, a rigidly turned one by its angle; with nothing that moves and no fixed range, 0.
+// exactly 0, a rigidly turned walk by its angle; with nothing that moves and no fixed range, 0.
 // A source step longer than `max_step` is a cut, not a motion (a clip whose first frame is its
 // rest pose at the origin, a teleport): it counts for nothing, so its length cannot outweigh
 // the steps around it and make the turn jump where it leaves the windows.
@@ -74,8 +74,10 @@ Eigen::VectorXd TangentHeadings(const Eigen::Ref<const Trajectory2>& points,
 // the whole path's rotation counts only as far as the whole path goes somewhere, and holds
 // every frame as strongly as the rest falls short. A clip that moves about one spot (a boxer's
 // bounce, a dance, an idle's shuffle) moved by an edit then keeps its facing: the rotation the
-// edit gives its wiggles is not the body's. Without it (a group member, turned with its
-// formation), as before.
+// edit gives its wiggles is not the body's; nor is any other turn of such a path, rigid or not
+// (they cannot be told apart here: the path editor turns a component moved as one rigid body
+// by its angle without asking). Without it (a group member, turned with its formation), as
+// before.
 // Returns #N turns, unwrapped. Throws InvalidInput on bad shapes or ranges.
 Eigen::VectorXd DeformationTurns(const Eigen::Ref<const Trajectory2>& source,
                                  const Eigen::Ref<const Trajectory2>& edited,
