@@ -7,7 +7,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from pxr import Usd
+from pxr import Sdf, Usd
 
 from mocapedit.data import examples, walker
 from mocapedit.geometry import ground
@@ -86,3 +86,26 @@ def test_in_place_agents_in_a_group_turn_with_their_formation(tmp_path):
     edited = Usd.Stage.Open(str(tmp_path / "c.usda"))
     end = _offset_degrees(source, edited, b, [last])[0]
     assert end > 45.0, end
+
+
+def test_an_idler_that_avoidance_pushes_aside_keeps_its_facing(tmp_path):
+    """Three walkers head through the spot where someone bounces on the spot: avoidance moves
+    the idler aside (26 cm), and it faced up to 23 degrees away (6 on average); it is a push,
+    not a turn of the body."""
+    walk = walker.walk(frames=FRAMES, fps=FPS, name="walk")
+    specs = [examples.AgentSpec("idler", _wandering("bounce", 0.0))]
+    specs += [examples.AgentSpec(f"w{k}", walk, position=(0.05 * (k - 1), 0.0, -4.0 - 3.0 * k)) for k in range(3)]
+    stage, source = _shot(tmp_path, specs)
+    examples.define_mocap_prim(stage, "/Edits/settings", "MocapSolveSettings", attributes={
+        "collisionAvoidance": (Sdf.ValueTypeNames.Bool, True)})
+    stage.GetRootLayer().Save()
+    result = solve(str(tmp_path / "shot.usda"), output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"))
+    assert result.report.stats["remainingOverlaps"] == 0
+    edited = Usd.Stage.Open(str(tmp_path / "c.usda"))
+    agent = "/World/Crowd/idler"
+    times = np.arange(FRAMES, dtype=np.float64)
+    moved = np.linalg.norm(evaluate.agent_root_positions(edited, agent, times)
+                           - evaluate.agent_root_positions(source, agent, times), axis=1)
+    assert moved.max() > 0.15                              # it was pushed aside
+    offset = np.abs(_offset_degrees(source, edited, agent, times))
+    assert offset.max() < 10.0 and offset.mean() < 2.0, (offset.max(), offset.mean())
