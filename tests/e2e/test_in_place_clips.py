@@ -41,6 +41,15 @@ def _offset_degrees(source, edited, agent, times):
     return np.degrees(np.angle(np.exp(1j * d)))
 
 
+def _moved_and_turned(source, edited, agent):
+    """How far the edit moved the agent's root at most (m), and its facing's offset from the
+    source's at every frame (degrees)."""
+    times = np.arange(FRAMES, dtype=np.float64)
+    moved = np.linalg.norm(evaluate.agent_root_positions(edited, agent, times)
+                           - evaluate.agent_root_positions(source, agent, times), axis=1)
+    return float(moved.max()), np.abs(_offset_degrees(source, edited, agent, times))
+
+
 def _shot(folder, agents):
     stage = examples.build_crowd_stage(folder / "shot.usda", agents, fps=FPS)
     return stage, Usd.Stage.Open(stage.GetRootLayer())
@@ -55,12 +64,8 @@ def test_an_in_place_clip_moved_aside_by_handles_keeps_its_facing(tmp_path):
     stage.GetRootLayer().Save()
     result = solve(str(tmp_path / "shot.usda"), output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"))
     assert all(c.met for c in result.report.constraints)
-    edited = Usd.Stage.Open(str(tmp_path / "c.usda"))
-    times = np.arange(FRAMES, dtype=np.float64)
-    moved = np.linalg.norm(evaluate.agent_root_positions(edited, agent, times)
-                           - evaluate.agent_root_positions(source, agent, times), axis=1)
-    assert moved.max() > 0.35                              # it was moved aside
-    offset = np.abs(_offset_degrees(source, edited, agent, times))
+    moved, offset = _moved_and_turned(source, Usd.Stage.Open(str(tmp_path / "c.usda")), agent)
+    assert moved > 0.35                                    # it was moved aside
     assert offset.max() < 15.0 and offset.mean() < 4.0, (offset.max(), offset.mean())
 
 
@@ -101,11 +106,6 @@ def test_an_idler_that_avoidance_pushes_aside_keeps_its_facing(tmp_path):
     stage.GetRootLayer().Save()
     result = solve(str(tmp_path / "shot.usda"), output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"))
     assert result.report.stats["remainingOverlaps"] == 0
-    edited = Usd.Stage.Open(str(tmp_path / "c.usda"))
-    agent = "/World/Crowd/idler"
-    times = np.arange(FRAMES, dtype=np.float64)
-    moved = np.linalg.norm(evaluate.agent_root_positions(edited, agent, times)
-                           - evaluate.agent_root_positions(source, agent, times), axis=1)
-    assert moved.max() > 0.15                              # it was pushed aside
-    offset = np.abs(_offset_degrees(source, edited, agent, times))
+    moved, offset = _moved_and_turned(source, Usd.Stage.Open(str(tmp_path / "c.usda")), "/World/Crowd/idler")
+    assert moved > 0.15                                    # it was pushed aside
     assert offset.max() < 10.0 and offset.mean() < 2.0, (offset.max(), offset.mean())
