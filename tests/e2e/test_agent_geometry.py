@@ -142,3 +142,41 @@ def test_the_skeleton_the_agents_geometry_binds_outranks_one_inherited_from_abov
     assert result.report.stats["editedAgents"] == 2
     for agent in AGENTS:
         np.testing.assert_allclose(_joints(composed, agent), _joints(plain, agent), atol=1e-6, err_msg=agent)
+
+
+def _instanced(tmp_path, pinned: bool) -> str:
+    """A walker made the prototype of a PointInstancer that plays it at three points."""
+    from pxr import UsdGeom
+
+    folder = tmp_path / "instancer"
+    folder.mkdir()
+    clip = walker.walk(frames=48, name="walk")
+    stage = examples.build_crowd_stage(folder / "shot.usda", [examples.AgentSpec("proto", clip)])
+    instancer = UsdGeom.PointInstancer.Define(stage, "/World/Instancer")
+    proto = stage.DefinePrim("/World/Instancer/Prototypes/walker")
+    proto.GetReferences().AddInternalReference("/World/Crowd/proto")
+    stage.GetPrimAtPath("/World/Crowd").SetActive(False)
+    instancer.CreatePrototypesRel().SetTargets([proto.GetPath()])
+    instancer.CreateProtoIndicesAttr([0, 0, 0])
+    instancer.CreatePositionsAttr([(0, 0, 0), (2, 0, 0), (4, 0, 0)])
+    if pinned:
+        examples.add_position_constraint(stage, "/Edits/pin", str(proto.GetPath()), 47, (1.0, 0.0, 2.7))
+    stage.GetRootLayer().Save()
+    return str(folder / "shot.usda")
+
+
+def test_a_point_instancer_prototype_is_not_edited_as_an_agent(tmp_path):
+    """Its instances play at the instancer's points, which cannot be edited one by one: before,
+    the prototype was solved where it stands (a pin 'met' there, where nothing plays) and its
+    edit moved every instance alike."""
+    result = solve(_instanced(tmp_path, pinned=False), output=str(tmp_path / "e.usda"))
+    assert result.report.stats["agents"] == 0
+    notes = [n for n in result.report.notes if "PointInstancer" in n]
+    assert len(notes) == 1 and "</World/Instancer/Prototypes/walker>" in notes[0], result.report.notes
+    # A constraint on it cannot be met where it plays: an error naming the instancer.
+    (tmp_path / "pinned").mkdir()
+    proc = run_cli("solve", _instanced(tmp_path / "pinned", pinned=True), "-o", tmp_path / "out.usda")
+    assert proc.returncode == 1, proc.stderr
+    assert "</Edits/pin>.agent: targets </World/Instancer/Prototypes/walker>, which is a prototype of " \
+           "PointInstancer </World/Instancer>" in proc.stderr, proc.stderr
+    assert "Traceback" not in proc.stderr and not (tmp_path / "out.usda").exists()

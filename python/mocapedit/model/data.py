@@ -243,6 +243,8 @@ class StageData:
     # Outermost SkelRoot and Skeleton prims that no agent is, holds or is held by (no
     # MocapAgentAPI): left as they are.
     skel_roots_without_agent: list[str] = field(default_factory=list)
+    #: agents inside a PointInstancer (its prototypes): they play at its points, not edited
+    point_instanced_agents: list[str] = field(default_factory=list)
 
     def clip_of(self, agent: Agent) -> Clip:
         return self.clips[agent.clip_key]

@@ -348,6 +348,13 @@ class SolveResult:
     data: StageData
 
 
+def _left_as_authored(paths: list[str], noun: str, which: str) -> str:
+    """"2 skeletons without X are left as authored (<a>, <b>)": the count and the first three."""
+    many = len(paths) > 1
+    return (f"{len(paths)} {noun}{'s' if many else ''} {which} {'are' if many else 'is'} left as authored ("
+            + ", ".join(f"<{r}>" for r in paths[:3]) + (", ..." if len(paths) > 3 else "") + ")")
+
+
 def solve(stage_or_path, output: str | None = None, composed: str | None = None,
           guides: bool = True, collisions: bool | None = None, progress: Progress | None = None,
           report_json: str | None = None, bake_timing: bool = False, components=None,
@@ -399,16 +406,17 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
     timings["read"] = time.perf_counter() - t0
 
     report = Report(input=input_name, output=output)
-    if not data.agents and not data.skel_roots_without_agent:
+    if not data.agents and not data.skel_roots_without_agent and not data.point_instanced_agents:
         report.note("the stage has no agents: no SkelRoot or Skeleton prim on it, and none with MocapAgentAPI; "
                     "check that this is the shot you meant")
     if data.skel_roots_without_agent:
-        roots = data.skel_roots_without_agent
-        report.note(f"{len(roots)} skeleton{'s' if len(roots) > 1 else ''} without MocapAgentAPI "
-                    f"{'are' if len(roots) > 1 else 'is'} left as authored ("
-                    + ", ".join(f"<{r}>" for r in roots[:3]) + (", ..." if len(roots) > 3 else "")
-                    + "); apply MocapAgentAPI to the SkelRoot or Skeleton prim of each agent to edit "
+        report.note(_left_as_authored(data.skel_roots_without_agent, "skeleton", "without MocapAgentAPI")
+                    + "; apply MocapAgentAPI to the SkelRoot or Skeleton prim of each agent to edit "
                     "it (`mocapedit import-bvh --agent` writes clips that have it)")
+    if data.point_instanced_agents:
+        report.note(_left_as_authored(data.point_instanced_agents, "agent", "inside a PointInstancer")
+                    + ": a prototype plays at the instancer's points, which cannot be edited one by one; "
+                    "make each instance an agent of its own to edit it")
     ctx = SolveContext(data=data, options=SolveOptions(guides=guides, collisions=collisions,
                                                        overrides=overrides, bake_timing=bake_timing,
                                                        components=components),

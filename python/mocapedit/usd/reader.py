@@ -618,6 +618,10 @@ class StageReader:
             return "does not exist"
         if not found.IsActive() or not found.IsLoaded():
             return "is inactive (active = false)" if not found.IsActive() else "is not loaded"
+        instancer = _point_instancer(found)
+        if instancer is not None:
+            return (f"is a prototype of PointInstancer <{instancer.GetPath()}>: it plays at the instancer's "
+                    "points, which cannot be edited one by one; make each instance an agent of its own to edit it")
         return "is not an agent (no MocapAgentAPI)"
 
     def _frame(self, prim: Usd.Prim, prop: str, agent: str) -> int:
@@ -800,6 +804,9 @@ class StageReader:
             if type_name.startswith("Mocap"):
                 typed.setdefault(type_name, []).append(prim)
         agent_prims.sort(key=lambda p: str(p.GetPath()))
+        # A PointInstancer's prototypes play at its points, which cannot be edited one by one.
+        instanced = [p for p in agent_prims if _point_instancer(p) is not None]
+        agent_prims = [p for p in agent_prims if _point_instancer(p) is None]
         task = self.progress.task("read agents", len(agent_prims)) if self.progress else None
         for i, prim in enumerate(agent_prims):
             agent = self.read_agent(prim)
@@ -810,7 +817,8 @@ class StageReader:
             task.done()
 
         data = model.StageData(info=self.info, agents=self.agents, clips=self.clips,
-                               skel_roots_without_agent=_without_agent(skel_roots, agent_prims))
+                               skel_roots_without_agent=_without_agent(skel_roots, agent_prims + instanced),
+                               point_instanced_agents=[str(p.GetPath()) for p in instanced])
         readers = {
             "MocapPositionConstraint": (self.read_position, data.position_constraints),
             "MocapRelativeConstraint": (self.read_relative, data.relative_constraints),
@@ -834,6 +842,16 @@ class StageReader:
             if agent.path_curve and agent.path_curve not in data.curves:
                 data.curves[agent.path_curve] = self.read_curve(agent.path, agent.path_curve)
         return data
+
+
+def _point_instancer(prim: Usd.Prim) -> Usd.Prim | None:
+    """The PointInstancer the prim is inside (a prototype, or below one), or None."""
+    p = prim.GetParent()
+    while p and not p.IsPseudoRoot():
+        if p.IsA(UsdGeom.PointInstancer):
+            return p
+        p = p.GetParent()
+    return None
 
 
 def _op_order(prim: Usd.Prim) -> list[str]:
