@@ -67,6 +67,7 @@ __all__: list[str] = [
     'sample_clip',
     'skeleton_space',
     'smooth_delay',
+    'spot_weight',
     'subtree_joint_weights',
     'tangent_headings',
     'time_warp',
@@ -888,6 +889,12 @@ def smooth_delay(times: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[
     """
     (F,) the time map `times` with `delay` time codes taken up between shot times start and end
     by a smoothstep (no interval shrinks; every one after `end` is unchanged).
+    """
+def spot_weight(*, source: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], window: typing.SupportsInt | typing.SupportsIndex = 2, min_travel: typing.SupportsFloat | typing.SupportsIndex = 0.0, max_step: typing.SupportsFloat | typing.SupportsIndex = 0.0) -> float:
+    """
+    How far the path (N,2) stays about one spot, in [0, 1], as deformation_turns holds it when no frame
+    travels far enough to be sure of its own turn: 1 minus the whole path's straightness (chord over
+    distance walked: 0 at most 0.4, 1 from 0.7); 0 when some frame is sure or min_travel is 0.
     """
 def subtree_joint_weights(parents: collections.abc.Sequence[typing.SupportsInt | typing.SupportsIndex], root: typing.SupportsInt | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.float32]:
     """

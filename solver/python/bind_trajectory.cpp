@@ -40,4 +40,13 @@ MOCAPEDIT_BINDINGS(BindTrajectory) {
       "`window` frames each side; frames whose source moves less than `min_travel` across the window take\n"
       "it from the moving frames around them; `fixed` inclusive ranges turn by their `fixed_turn`;\n"
       "source steps longer than `max_step` (0: none) are cuts and count for nothing.");
+  m.def(
+      "spot_weight",
+      [](const Eigen::Ref<const Trajectory2>& source, int window, double min_travel, double max_step) {
+        return mocapedit::SpotWeight(source, window, min_travel, max_step);
+      },
+      py::kw_only(), py::arg("source"), py::arg("window") = 2, py::arg("min_travel") = 0.0, py::arg("max_step") = 0.0,
+      "How far the path (N,2) stays about one spot, in [0, 1], as deformation_turns holds it when no frame\n"
+      "travels far enough to be sure of its own turn: 1 minus the whole path's straightness (chord over\n"
+      "distance walked: 0 at most 0.4, 1 from 0.7); 0 when some frame is sure or min_travel is 0.");
 }

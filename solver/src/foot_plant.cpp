@@ -22,6 +22,9 @@ using Vec = Eigen::Vector3d;
 using Quat = Eigen::Quaterniond;
 
 constexpr double kPi = 3.141592653589793;
+// Rounds that settle a step's length: the body drifts while the foot is in the air, so the landing
+// moves further the longer the step (as footplant.STEP_ROUNDS).
+constexpr int kStepRounds = 12;
 
 Vec V(const double* p) { return Vec(p[0], p[1], p[2]); }
 Quat Q(const double* p) { return Quat(p[3], p[0], p[1], p[2]); }
@@ -508,7 +511,7 @@ struct Agent {
         if (far || turned) {
           std::optional<Step> plan;
           int n = shortest;
-          for (int round = 0; round < 3; ++round) {  // the landing depends on the step's length, and the length on the landing
+          for (int round = 0; round < kStepRounds; ++round) {  // the landing depends on the step's length, and the length on the landing
             if (n > longest || !may_step(k, c, t, t + n)) break;
             Vec to;
             double y1;

@@ -95,6 +95,46 @@ double Straightness(double chord, double walked) {
   return std::clamp((chord / walked - kStraightFrom) / kStraightRamp, 0.0, 1.0);
 }
 
+// How far each frame's own turn counts (`weight`): 0 where the source travels less than
+// min_travel from `h` frames before to `h` after, 1 from kConfidentTravel times that, in
+// proportion between; with `spot`, times the straightness of the path around it. Also the
+// distance walked and the displacement from the first frame, cuts left out of both (a clip's
+// first frame left at its rest pose at the origin must not make the frames near it look as if
+// they go somewhere).
+struct Confidence {
+  Eigen::VectorXd weight, walked;
+  Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor> moved;
+
+  Confidence(const Eigen::Ref<const Trajectory2>& source, Eigen::Index h, double min_travel, double max_step,
+             bool spot) {
+    const Eigen::Index n = source.rows();
+    weight = Eigen::VectorXd::Zero(n);
+    walked = Eigen::VectorXd::Zero(n);
+    moved = Eigen::MatrixX2d::Zero(n, 2);
+    for (Eigen::Index k = 0; k + 1 < n; ++k) {
+      const Eigen::RowVector2d s = source.row(k + 1) - source.row(k);
+      const bool cut = max_step > 0.0 && s.squaredNorm() > max_step * max_step;
+      walked[k + 1] = walked[k] + (cut ? 0.0 : s.norm());
+      moved.row(k + 1) = moved.row(k) + (cut ? Eigen::RowVector2d::Zero() : s);
+    }
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const Eigen::Index lo = std::max<Eigen::Index>(i - h, 0), hi = std::min<Eigen::Index>(i + h, n - 1);
+      const double travel = (source.row(hi) - source.row(lo)).norm();
+      if (travel >= min_travel)
+        weight[i] = min_travel > 0.0 ? std::min(1.0, (travel - min_travel) / ((kConfidentTravel - 1.0) * min_travel))
+                                     : 1.0;
+      if (spot && weight[i] > 0.0) weight[i] *= StraightnessAt(i, h);
+    }
+  }
+
+  // The straightness of the path over kStraightWindows windows of `h` frames each side of frame i.
+  double StraightnessAt(Eigen::Index i, Eigen::Index h) const {
+    const Eigen::Index n = walked.size(), wide = kStraightWindows * h;
+    const Eigen::Index wlo = std::max<Eigen::Index>(i - wide, 0), whi = std::min<Eigen::Index>(i + wide, n - 1);
+    return Straightness((moved.row(whi) - moved.row(wlo)).norm(), walked[whi] - walked[wlo]);
+  }
+};
+
 // The frames that are not keys: each pulled towards its own turn by its weight, and held to
 // its neighbours by springs of stiffness window^2 (so a frame sure of itself bends the turn
 // over about `window` frames, and a noisy, barely moving one over many more, diluted). Keys
@@ -168,33 +208,15 @@ Eigen::VectorXd DeformationTurns(const Eigen::Ref<const Trajectory2>& source,
   // frames from i - h to i + h.
   Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor> once(n + 1, 2);
   once.row(0).setZero();
-  // How far each frame's own turn counts: 0 below min_travel, 1 from kConfidentTravel times
-  // that, in proportion between.
-  Eigen::VectorXd weight = Eigen::VectorXd::Zero(n);
   std::vector<char> in_range(static_cast<size_t>(n), 0);
-  // Distance walked and displacement from the first frame, cuts left out of both (a clip's
-  // first frame left at its rest pose at the origin must not make the frames near it look as
-  // if they go somewhere).
-  Eigen::VectorXd walked = Eigen::VectorXd::Zero(n);
-  Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor> moved = Eigen::MatrixX2d::Zero(n, 2);
-  for (Eigen::Index k = 0; k + 1 < n; ++k) {
-    const Eigen::RowVector2d s = source.row(k + 1) - source.row(k);
-    const bool cut = max_step > 0.0 && s.squaredNorm() > max_step * max_step;
-    walked[k + 1] = walked[k] + (cut ? 0.0 : s.norm());
-    moved.row(k + 1) = moved.row(k) + (cut ? Eigen::RowVector2d::Zero() : s);
-  }
-  const Eigen::Index wide = kStraightWindows * h;
   const bool spot = keep_spot && min_travel > 0.0;
+  Confidence sure(source, h, min_travel, max_step, spot);
+  Eigen::VectorXd& weight = sure.weight;
+  const Eigen::VectorXd& walked = sure.walked;
+  const auto& moved = sure.moved;
   for (Eigen::Index i = 0; i < n; ++i) {
     const Eigen::Index lo = std::max<Eigen::Index>(i - h, 0), hi = std::min<Eigen::Index>(i + h, n - 1);
     once.row(i + 1) = once.row(i) + (steps.row(hi) - steps.row(lo));
-    const double travel = (source.row(hi) - source.row(lo)).norm();
-    if (travel >= min_travel)
-      weight[i] = min_travel > 0.0 ? std::min(1.0, (travel - min_travel) / ((kConfidentTravel - 1.0) * min_travel)) : 1.0;
-    if (spot && weight[i] > 0.0) {
-      const Eigen::Index wlo = std::max<Eigen::Index>(i - wide, 0), whi = std::min<Eigen::Index>(i + wide, n - 1);
-      weight[i] *= Straightness((moved.row(whi) - moved.row(wlo)).norm(), walked[whi] - walked[wlo]);
-    }
   }
   for (Eigen::Index i = 0; i < n; ++i) {
     const Eigen::Index lo = std::max<Eigen::Index>(i - h, 0), hi = std::min<Eigen::Index>(i + h, n - 1);
@@ -253,6 +275,14 @@ Eigen::VectorXd DeformationTurns(const Eigen::Ref<const Trajectory2>& source,
   for (Eigen::Index i : keys) key[static_cast<size_t>(i)] = 1;
   SmoothOwnTurns(own, weight, key, 0.0, static_cast<int>(h), turn);
   return turn;
+}
+
+double SpotWeight(const Eigen::Ref<const Trajectory2>& source, int window, double min_travel, double max_step) {
+  const Eigen::Index n = source.rows();
+  if (n < 2 || !(min_travel > 0.0)) return 0.0;
+  const Confidence sure(source, std::max(1, window), min_travel, max_step, true);
+  if ((sure.weight.array() == 1.0).any()) return 0.0;
+  return 1.0 - Straightness(sure.moved.row(n - 1).norm(), sure.walked[n - 1]);
 }
 
 }  // namespace mocapedit

@@ -185,3 +185,25 @@ TEST(Trajectory, APathAboutOneSpotKeepsItsFacingUnlessItTurnsWithAGroup) {
   const Eigen::VectorXd cut = mocapedit::DeformationTurns(q, f, {}, Eigen::VectorXd(), 12, 0.04, 0.25);
   EXPECT_LT(cut.tail(cut.size() - 1).cwiseAbs().maxCoeff(), 10.0 * M_PI / 180.0);
 }
+
+TEST(Trajectory, ASpotWeighsAsFarAsThePathStaysAboutOneSpot) {
+  // 60 fps, metres: windows of 12 frames, 4 cm of travel, cuts beyond 25 cm a frame.
+  const Trajectory2 wander = Wander(720);
+  EXPECT_GT(mocapedit::SpotWeight(wander, 12, 0.04, 0.25), 0.95);
+  // Its first frame left at the rest pose at the origin, 2 m away (a cut): still about one spot.
+  Trajectory2 cut = wander;
+  cut.rowwise() += Eigen::RowVector2d(2.0, 1.0);
+  cut.row(0).setZero();
+  EXPECT_GT(mocapedit::SpotWeight(cut, 12, 0.04, 0.25), 0.95);
+  // A walk at 1.4 m/s, even one that sways, goes somewhere.
+  Trajectory2 walk(240, 2);
+  for (int i = 0; i < 240; ++i) walk.row(i) << 1.4 * i / 60.0, 0.03 * std::sin(2.0 * M_PI * i / 60.0);
+  EXPECT_EQ(mocapedit::SpotWeight(walk, 12, 0.04, 0.25), 0.0);
+  // The wander drifting 1 m over its 12 s: some frames travel far enough to be sure of their turn.
+  Trajectory2 drift = wander;
+  for (int i = 0; i < 720; ++i) drift(i, 0) += 1.0 * i / 719.0;
+  EXPECT_LT(mocapedit::SpotWeight(drift, 12, 0.04, 0.25), 0.5);
+  // No travel threshold: no spot (as DeformationTurns keeps a spot's facing only with one).
+  EXPECT_EQ(mocapedit::SpotWeight(wander, 12, 0.0, 0.25), 0.0);
+  EXPECT_EQ(mocapedit::SpotWeight(Trajectory2(1, 2), 12, 0.04, 0.25), 0.0);
+}

@@ -69,6 +69,27 @@ def test_an_in_place_clip_moved_aside_by_handles_keeps_its_facing(tmp_path):
     assert offset.max() < 15.0 and offset.mean() < 4.0, (offset.max(), offset.mean())
 
 
+def test_an_in_place_clip_moved_aside_by_handles_slides_as_a_whole(tmp_path):
+    """The bounce (within 10 cm) moved 40 cm aside at its middle, its ends held: it slides aside
+    and back as a whole and bounces as its source does, its root within 2 cm of the source's
+    carried by the handles' displacement (eased from one to the next). The shape terms alone
+    turned each wiggle its own way, unfolding the tangle into swings up to 12 cm off that."""
+    stage, source = _shot(tmp_path, [examples.AgentSpec("boxer", _wandering("bounce", 0.0))])
+    agent = "/World/Crowd/boxer"
+    frames = (0, FRAMES // 2, FRAMES - 1)
+    for k, f in enumerate(frames):
+        p = evaluate.agent_root_positions(source, agent, [float(f)])[0] + (0.4 * (k == 1), 0.0, 0.0)
+        examples.add_position_constraint(stage, f"/Edits/handle{k}", agent, f, tuple(map(float, p)))
+    stage.GetRootLayer().Save()
+    solve(str(tmp_path / "shot.usda"), output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"))
+    times = np.arange(FRAMES, dtype=np.float64)
+    moved = (evaluate.agent_root_positions(Usd.Stage.Open(str(tmp_path / "c.usda")), agent, times)
+             - evaluate.agent_root_positions(source, agent, times))
+    carried = np.interp(times, frames, [0.0, 0.4, 0.0])
+    off = np.hypot(moved[:, 0] - carried, moved[:, 2])
+    assert off.max() < 0.02, (off.max(), off.mean())
+
+
 def test_in_place_agents_in_a_group_turn_with_their_formation(tmp_path):
     """A group turned by a handle turns its members' bodies, those about one spot too."""
     specs = [examples.AgentSpec("a", _wandering("bounce_a", 0.0)),

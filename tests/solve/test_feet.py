@@ -669,6 +669,38 @@ def _dragged_stand(tmp_path, along=0.5, idle=96):
     return stage, a, (first, last)
 
 
+def _steady_drift(speed_m_s: float, frames: int = 960, fps: float = 120.0):
+    """:func:`footplant.replant` on both feet planted through ``frames`` poses while the edit
+    drags the body steadily at ``speed_m_s`` along x; the source moves each foot at up to
+    0.6 m/s (a CMU punch take's feet), the leash is 15 cm. Returns (steps, metres the plants
+    of both feet slide on the ground)."""
+    dt = 1.0 / fps
+    contact, movable = np.zeros((frames, 2), dtype=np.int64), np.ones((frames, 2), dtype=bool)
+    offset = np.zeros((frames, 2, 3))
+    offset[..., 0] = (speed_m_s * dt * np.arange(frames))[:, None]
+    turn = np.zeros((frames, 2))
+    out = footplant.replant(contact, movable, offset, np.full((frames, 2), 0.15), turn, offset.copy(), turn.copy(),
+                            np.radians(15.0), seconds=dt, shortest=int(0.25 * fps), longest=int(1.5 * fps),
+                            height=0.05, bend=np.zeros((frames, 2)), speed=np.array([0.6, 0.6]),
+                            spin=np.array([10.0, 10.0]), knee_spin=np.array([10.0, 10.0]))
+    down = (out.lift[1:] == 0) & (out.lift[:-1] == 0)
+    return out.steps, float(np.linalg.norm(np.diff(out.shift, axis=0), axis=-1)[down].sum())
+
+
+def test_a_steady_drift_that_carries_each_landing_further_still_steps():
+    """A body dragged at 5 cm/s through 8 s on both feet: while a foot is in the air the body
+    drifts on, so each step must land further and take longer, and its length settles only
+    after several rounds. Three rounds left it unsettled and each foot slid at the leash's
+    length all the way, 25 cm (the CMU punch take bent 40 cm by handles: 2 steps where it now
+    takes 6, +0.9 cm/s over its source's skate where it now is +0.2). Now the feet step, and
+    slide half as far. A drag faster than the source's feet can follow still slides: 65 cm
+    each at 10 cm/s."""
+    steps, slid = _steady_drift(0.05)
+    assert steps >= 2 and slid < 0.35, (steps, slid)
+    steps, slid = _steady_drift(0.1)
+    assert steps == 0 and slid == pytest.approx(2 * (0.8 - 0.15), abs=0.02), (steps, slid)
+
+
 def test_a_standing_body_dragged_further_than_a_leg_reaches_steps_instead_of_sliding(tmp_path):
     """The stand dragged 50 cm over 4 s: each foot takes steps, one at a time while the other
     bears the weight, lifted 5 cm, and its plants never slide; before, the plants slid at the

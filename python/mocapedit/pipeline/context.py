@@ -12,7 +12,7 @@ from typing import Callable, Iterable, Protocol
 
 import numpy as np
 
-from mocapedit.geometry import animation, trajectory
+from mocapedit.geometry import animation, contacts, ground, trajectory
 from mocapedit.model.data import StageData
 from mocapedit.model.progress import Progress
 from mocapedit.model.report import Report
@@ -94,6 +94,30 @@ class SolveContext:
     edits: dict[str, writer.AgentEdit] = field(default_factory=dict)
     #: Guide geometry the passes and the inspection add.
     guides: list = field(default_factory=list)
+    #: Foot contacts of the source clips (:meth:`source_contacts`), by clip and placement.
+    contacts_cache: dict = field(default_factory=dict)
+
+    def source_contacts(self, path: str) -> list[list[tuple[int, int]]]:
+        """Per leg of the agent (``agent.legs``), the inclusive frame ranges of its foot contacts
+        on its source clip: the artist's (``agent.foot_contacts``), else detected. Agents that
+        play one clip the same way share them."""
+        agent = self.data.agents[path]
+        place = agent.skel_to_world
+        # A static placement's translation and turn about up change neither the contacts nor the
+        # skate: what matters is how it maps the skeleton to height (its up column) and its scale.
+        up = ground.up_index(self.data.info.up_axis)
+        placement = (np.round(place[0, :3, up], 12).tobytes(), round(float(np.linalg.norm(place[0, 0, :3])), 12)) \
+            if place.shape[0] == 1 else place.tobytes()
+        key = (agent.clip_key, tuple(agent.joints), tuple(leg.joints for leg in agent.legs),
+               tuple(agent.foot_contacts or ()), placement)
+        hit = self.contacts_cache.get(key)
+        if hit is None:
+            if agent.foot_contacts is not None:
+                hit = [[(a, b) for _, ankle, a, b in agent.foot_contacts if ankle == leg.ankle] for leg in agent.legs]
+            else:
+                hit = contacts.detect_agent(agent, self.data.clip_of(agent), self.data.info)
+            self.contacts_cache[key] = hit
+        return hit
 
     def touched(self) -> list[str]:
         """The agents some pass edited (path, time or pose), sorted. A path a solve gave back

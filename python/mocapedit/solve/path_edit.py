@@ -8,6 +8,10 @@ per frame:
 - each agent's path keeps its local shape (triangle terms) and its step lengths (edge
   terms), widening the local frame around frames that stand still;
 - each stationary range moves rigidly, turned by the rotation the solve gives it;
+- where an agent's whole path stays about one spot (``_solver.spot_weight``: a bounce, a dance,
+  an idle's shuffle), soft terms keep each step as its source's turned by the body's turn (the
+  heading's, below), so the wiggles move as a whole instead of each turning its own way
+  (``SPOT_WEIGHT``); group members turn with their formation and take none;
 - position constraints are handles, relative constraints links (hard ones eliminated,
   so they hold exactly);
 - a group joins its members' paths at sampled shared times (every ``group_step`` time
@@ -61,6 +65,19 @@ GAUGE_WEIGHT = 0.01
 #: Target-space links: re-solve until the target headings change less than this (radians).
 HEADING_TOLERANCE = 1e-12
 MAX_HEADING_ITERATIONS = 30
+#: Weight, against the shape terms, of the terms that keep the steps of a path about one spot
+#: as its source's, turned only by the body's turn: a boxer's bounce, a dance or an idle's
+#: shuffle moved by an edit slides as a whole and keeps its wiggles, where the shape terms alone
+#: turned each wiggle its own way, unfolding the tangle into a path that swings about. Scaled by
+#: ``_solver.spot_weight`` (1 for a path about one spot, 0 for any path with a frame sure of its turn).
+SPOT_WEIGHT = 10.0
+#: Those terms weigh this many times as much where every foot of the source is planted: the clip
+#: moves aside as it steps, not while it stands on its feet.
+SPOT_STANCE = 10.0
+#: Re-solves that bring the turn of those terms to the body's (the turn of the edited path).
+SPOT_ITERATIONS = 3
+#: Radians: the turn of those terms has settled when it changes less than this.
+SPOT_TOLERANCE = 1e-3
 #: Metres: the local frames of the shape terms along an agent's path are at least this long
 #: (the frame of a frame that stands still or sways widens to the walk around it), in path
 #: editing and in collision avoidance alike (solver/src/energy/two_step_energy.h).
@@ -81,6 +98,9 @@ class AgentInput:
     # The windows of the edit's turn at this agent's own sample rate (turn_settings); None: the
     # Settings' (a clip sampled at the stage's rate).
     turn: dict | None = None
+    # (F,) bool: every foot of the source planted at the frame (a path about one spot moves aside
+    # as it steps, not while it stands on its feet: see SPOT_STANCE); None: not known.
+    stance: np.ndarray | None = None
 
     @property
     def frames(self) -> int:
@@ -154,6 +174,16 @@ def turn_args(a: AgentInput, settings: "Settings") -> tuple[int, float, float]:
     return int(t["turn_window"]), float(t["turn_min_travel"]), float(t["turn_max_step"])
 
 
+def spot_weight(a: AgentInput, settings: "Settings | None" = None) -> float:
+    """How far agent ``a``'s path stays about one spot (``_solver.spot_weight``), 0 for an agent
+    with stationary ranges (they turn it): the weight of its spot terms (``SPOT_WEIGHT``).
+    ``settings``: the turn windows, when ``a.turn`` does not give them."""
+    if a.stationary or a.frames < 2:
+        return 0.0
+    window, min_travel, max_step = turn_args(a, settings)
+    return _solver.spot_weight(source=a.source, window=window, min_travel=min_travel, max_step=max_step)
+
+
 def turn_settings(fps: float, meters_per_unit: float) -> dict:
     """``turn_window``, ``turn_min_travel`` and ``turn_max_step`` of :class:`Settings` for a clip at
     ``fps``: the source is slow where it walks slower than ``trajectory.TURN_MIN_SPEED_M`` over the
@@ -210,6 +240,7 @@ class ComponentProblem:
         self._keys()
         self._build_terms()
         self._resolve_freedom()
+        self._spot_links()
         self._needs_headings = any(k.space == "target" for k in self.links)
         self._rest_headings: dict[int, np.ndarray] = {}
         self._source_full: np.ndarray | None = None   # every agent's source path, concatenated
@@ -465,6 +496,97 @@ class ComponentProblem:
             if self._similarity_kernel(bodies):
                 self.notes.append("the constraints leave some agents free to move; add a position constraint")
 
+    def _spot_links(self) -> None:
+        """Soft links between consecutive frames of each agent whose path stays about one spot
+        (``SPOT_WEIGHT``): link (f + 1, f) keeps the source step from f to f + 1, turned by the
+        body's turn there (``_spot_turn``, settled by :meth:`solve`). Not on group members (they
+        turn with their formation), agents moved by one translation or with stationary ranges
+        (which turn them), or cuts. Sets ``_spot``: per agent with any, its index, its
+        links' first frames and source steps; None without any."""
+        self._spot: list[tuple[int, np.ndarray, np.ndarray]] | None = None
+        self._spot_turn: dict[int, np.ndarray] = {}
+        members = set(self._members)
+        found, verts, weights = [], [], []
+        for i, a in enumerate(self._inputs):
+            if i in self.translate_only or i in members or a.frames < 2:
+                continue
+            weight = spot_weight(a, self.settings)
+            if weight <= 0.0:
+                continue
+            max_step = turn_args(a, self.settings)[2]
+            keep = np.ones(a.frames - 1, dtype=bool)
+            step = np.diff(a.source, axis=0)
+            if max_step > 0:
+                keep &= np.einsum("ij,ij->i", step, step) <= max_step * max_step
+            frames = np.flatnonzero(keep)
+            if not len(frames):
+                continue
+            found.append((i, frames, np.ascontiguousarray(step[frames])))
+            v = self._red_offset[i] + frames
+            verts.append(np.stack([v + 1, v], axis=1))
+            weights.append(np.full(len(frames), SPOT_WEIGHT * weight))
+            if a.stance is not None:
+                weights[-1][a.stance[frames] & a.stance[frames + 1]] *= SPOT_STANCE
+        if not found:
+            return
+        self._spot = found
+        self.link_vertex = np.concatenate([self.link_vertex.reshape(-1, 2)] + verts).astype(np.int32)
+        self.link_weight = np.concatenate([self.link_weight] + weights)
+        self.link_refs.extend([None] * sum(len(f) for _, f, _ in found))
+
+    def _spot_offsets(self) -> list[np.ndarray]:
+        """The offsets of the spot links: each source step turned by the mean of the body's turn
+        at its two frames."""
+        out = []
+        for i, frames, step in self._spot:
+            turn = self._spot_turn.get(i)
+            if turn is None:
+                out.append(step)
+                continue
+            t = 0.5 * (turn[frames] + turn[frames + 1])
+            c, s = np.cos(t), np.sin(t)
+            out.append(np.stack([c * step[:, 0] - s * step[:, 1], s * step[:, 0] + c * step[:, 1]], axis=1))
+        return out
+
+    def _start_spot_turn(self, hp: np.ndarray) -> None:
+        """The spot links' turn before the first solve: the handles' rotation when one rigid
+        motion of the rest path meets them all (the solve is then that motion), else none."""
+        self._spot_turn = {}
+        w = self.handle_weight > 0
+        z, p = self.rest[self.handle_vertex[w]], hp[w]
+        if len(z) < 2:
+            return
+        z, p = z - z.mean(axis=0), p - p.mean(axis=0)
+        zc, pc = z[:, 0] + 1j * z[:, 1], p[:, 0] + 1j * p[:, 1]
+        cross = np.sum(np.conj(zc) * pc)
+        if abs(cross) == 0:
+            return
+        rot = cross / abs(cross)
+        scale = max(np.abs(zc).max(), np.abs(pc).max(), 1e-300)
+        if np.abs(rot * zc - pc).max() <= 1e-9 * scale and rot != 1:
+            angle = float(np.angle(rot))
+            self._spot_turn = {i: np.full(self._inputs[i].frames, angle) for i, _, _ in self._spot}
+
+    def _settle_spot(self, result, hp: np.ndarray, offsets: np.ndarray):
+        """Re-solves until the spot links' turn is the body's turn on the edited path."""
+        agents = [i for i, _, _ in self._spot]
+        for _ in range(SPOT_ITERATIONS):
+            if result.rigid_motion:
+                break
+            ground, turn_of = self._ground(result)
+            headings = self._headings(ground, result, {i: self._turn(i, result, turn_of) for i in agents})
+            change = 0.0
+            for i in agents:
+                turn = headings[i] - np.asarray(self._inputs[i].source_heading, dtype=np.float64)
+                old = self._spot_turn.get(i)
+                change = max(change, float(np.abs(turn - (0.0 if old is None else old)).max(initial=0.0)))
+                self._spot_turn[i] = turn
+            if change <= SPOT_TOLERANCE:
+                break
+            offsets = self._link_offsets(None)
+            result = _solver.path_edit_solve(self.data, hp, offsets)
+        return result, offsets
+
     def _count_places(self, sets: list[list[int]]) -> list[int]:
         """How many distinct rest positions each list of vertices has."""
         many = [k for k, verts in enumerate(sets) if len(verts) > 1]
@@ -565,7 +687,7 @@ class ComponentProblem:
         return np.concatenate([own, np.array(self.extra_handle_positions, dtype=np.float64).reshape(-1, 2)])
 
     def _link_offsets(self, headings: dict[str, np.ndarray] | None) -> np.ndarray:
-        if not self.links and not self.extra_links:
+        if not self.links and not self.extra_links and self._spot is None:
             return np.zeros((0, 2))
         out = []
         for k in self.links:
@@ -578,13 +700,20 @@ class ComponentProblem:
                 o = np.array([c * o[0] - s * o[1], s * o[0] + c * o[1]])
             out.append(o)
         out.extend(offset for _, _, offset in self.extra_links)
-        return np.array(out, dtype=np.float64).reshape(-1, 2)
+        out = np.array(out, dtype=np.float64).reshape(-1, 2)
+        if self._spot is not None:
+            out = np.concatenate([out] + self._spot_offsets())
+        return out
 
     def solve(self, handle_positions: np.ndarray | None = None) -> ComponentResult:
         """Solves for the handles' positions (default: their own), ``(H,2)`` in handle order."""
         hp = self.handle_positions(handle_positions)
+        if self._spot is not None:
+            self._start_spot_turn(hp)
         offsets = self._link_offsets(None)
         result = _solver.path_edit_solve(self.data, hp, offsets)
+        if self._spot is not None:
+            result, offsets = self._settle_spot(result, hp, offsets)
         if self._needs_headings:
             targets = {self.index[k.target] for k in self.links if k.space == "target"}
             for iteration in range(MAX_HEADING_ITERATIONS):

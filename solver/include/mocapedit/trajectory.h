@@ -85,6 +85,13 @@ Eigen::VectorXd DeformationTurns(const Eigen::Ref<const Trajectory2>& source,
                                  const Eigen::Ref<const Eigen::VectorXd>& fixed_turn, int window,
                                  double min_travel, double max_step = 0.0, bool keep_spot = true);
 
+// How far a path stays about one spot, in [0, 1], as DeformationTurns (with keep_spot) holds it
+// when no frame travels far enough to be sure of its own turn: 1 minus the straightness of the
+// whole path (its chord over the distance walked, 0 at most 0.4 of it, 1 from 0.7); 0 when some
+// frame is sure, or min_travel is 0. A boxer's bounce, a dance, an idle's shuffle: near 1.
+// Same arguments as DeformationTurns (the fixed ranges aside: a path with any has them to turn by).
+double SpotWeight(const Eigen::Ref<const Trajectory2>& source, int window, double min_travel, double max_step = 0.0);
+
 // Adds multiples of 2*pi so consecutive angles differ by at most pi.
 void UnwrapAngles(Eigen::Ref<Eigen::VectorXd> angles);
 

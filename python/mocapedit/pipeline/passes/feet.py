@@ -534,29 +534,6 @@ def _feet_of(agent: Agent, pose: animation.Pose) -> np.ndarray:
 
 
 
-def _source(ctx, agent: Agent, cache: dict) -> tuple[list[list[tuple[int, int]]], float]:
-    """(per leg, the inclusive frame ranges of its foot contacts on the source clip; the source
-    foot skate over them, stage units per second). Agents that play one clip share them."""
-    place = agent.skel_to_world
-    # A static placement's translation and turn about up change neither the contacts nor the
-    # skate: what matters is how it maps the skeleton to height (its up column) and its scale.
-    up = ground.up_index(ctx.data.info.up_axis)
-    placement = (np.round(place[0, :3, up], 12).tobytes(), round(float(np.linalg.norm(place[0, 0, :3])), 12)) \
-        if place.shape[0] == 1 else place.tobytes()
-    key = (agent.clip_key, tuple(agent.joints), tuple(leg.joints for leg in agent.legs),
-           tuple(agent.foot_contacts or ()), placement)
-    hit = cache.get(key)
-    if hit is None:
-        info = ctx.data.info
-        clip = ctx.data.clip_of(agent)
-        if agent.foot_contacts is not None:
-            found = [[(a, b) for _, ankle, a, b in agent.foot_contacts if ankle == leg.ankle] for leg in agent.legs]
-        else:
-            found = contacts.detect_agent(agent, clip, info)
-        hit = cache[key] = found
-    return hit
-
-
 @dataclass
 class AgentLocking:
     """What foot locking decided for one edited agent (see :func:`lock_agents`)."""
@@ -582,7 +559,6 @@ def lock_agents(ctx: SolveContext) -> list[AgentLocking]:
     of one agent depends on nothing else, so a shot's agents can be locked in runs elsewhere
     (``SolveOptions.components``) and merged in order."""
     data = ctx.data
-    cache: dict = {}
     shared: dict = {}
     out: list[AgentLocking] = []
     locks: list[tuple[_AgentLock, AgentLocking]] = []
@@ -595,7 +571,7 @@ def lock_agents(ctx: SolveContext) -> list[AgentLocking]:
         elif len(agent.legs) != 2:
             result.note = "foot locking skipped: legs not found by name; set mocap:leftLegJoints and mocap:rightLegJoints"
         else:
-            lock = _AgentLock(ctx, path, _source(ctx, agent, cache), shared)
+            lock = _AgentLock(ctx, path, ctx.source_contacts(path), shared)
             why = lock.writable()
             if why:
                 result.note = f"foot locking skipped: {why}"
