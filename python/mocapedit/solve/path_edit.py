@@ -175,10 +175,11 @@ def turn_args(a: AgentInput, settings: "Settings") -> tuple[int, float, float]:
 
 
 def spot_weight(a: AgentInput, settings: "Settings | None" = None) -> float:
-    """How far agent ``a``'s path stays about one spot (``_solver.spot_weight``), 0 for an agent
-    with stationary ranges (they turn it): the weight of its spot terms (``SPOT_WEIGHT``).
-    ``settings``: the turn windows, when ``a.turn`` does not give them."""
-    if a.stationary or a.frames < 2:
+    """How far agent ``a``'s path stays about one spot (``_solver.spot_weight``): the weight of
+    its spot terms (``SPOT_WEIGHT``). 0 for an agent with stationary ranges (they turn it) or laid
+    along a path curve (its rest path is the artist's shape). ``settings``: the turn windows, when
+    ``a.turn`` does not give them."""
+    if a.stationary or a.frames < 2 or a.rest_turn is not None:
         return 0.0
     window, min_travel, max_step = turn_args(a, settings)
     return _solver.spot_weight(source=a.source, window=window, min_travel=min_travel, max_step=max_step)
@@ -500,15 +501,15 @@ class ComponentProblem:
         """Soft links between consecutive frames of each agent whose path stays about one spot
         (``SPOT_WEIGHT``): link (f + 1, f) keeps the source step from f to f + 1, turned by the
         body's turn there (``_spot_turn``, settled by :meth:`solve`). Not on group members (they
-        turn with their formation), agents moved by one translation or with stationary ranges
-        (which turn them), or cuts. Sets ``_spot``: per agent with any, its index, its
+        turn with their formation), agents moved by one translation, laid on a path curve, or with
+        stationary ranges (which turn them), or cuts. Sets ``_spot``: per agent with any, its index, its
         links' first frames and source steps; None without any."""
         self._spot: list[tuple[int, np.ndarray, np.ndarray]] | None = None
         self._spot_turn: dict[int, np.ndarray] = {}
         members = set(self._members)
         found, verts, weights = [], [], []
         for i, a in enumerate(self._inputs):
-            if i in self.translate_only or i in members or a.frames < 2:
+            if i in self.translate_only or i in members:
                 continue
             weight = spot_weight(a, self.settings)
             if weight <= 0.0:
