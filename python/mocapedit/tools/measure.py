@@ -47,8 +47,9 @@ def plausibility(source_stage, edited_stage, agent_path, joint: Union[int, str, 
     layer on top) against its source on ``source_stage``, both by UsdSkel FK at their own composed
     samples. An agent whose animation re-times its clip by a value clip (time edits, locked legs:
     :func:`~mocapedit.usd.evaluate.played_frames`) is paired with its source by the frame it plays
-    at each time, and its feet are measured against the source played on that timing, per second
-    of the shot, as the solve's report measures them; others pair by frame. Foot skate is measured
+    at each time, and its feet are measured against the source played on that timing at the
+    shot's whole frames, per second of the shot, as the solve's report measures them; others pair
+    by frame. Foot skate is measured
     over the source's planted samples, less those where the edited foot is lifted more than 2 cm
     above the source's (a step, :func:`~mocapedit.inspect.metrics.on_ground`). ``joint``: the
     facing joint (default :func:`~mocapedit.model.names.default_facing_joint`)."""
@@ -57,15 +58,26 @@ def plausibility(source_stage, edited_stage, agent_path, joint: Union[int, str, 
     feet_s = evaluate.foot_positions(source_stage, agent_path, None, foot_joints)
     source, edited = evaluate.stage_units(source_stage), evaluate.stage_units(edited_stage)
     frames = evaluate.played_frames(edited_stage, agent_path, te)
+    # The times the feet are measured at, and the source frame each plays.
+    tf, ff = te, frames
+    if frames is not None and len(te) > 1:
+        # A re-timed agent's composed samples mix its value clip's own (the source samples
+        # through the new timing) with the frames its pose edits are baked on, each attribute
+        # interpolated between its own: a 60 fps clip under legs locked on a 30 fps shot's frames
+        # moved its planted feet by a centimetre between frames, which the skate counted at
+        # +3 cm/s. Its feet are judged at the shot's whole frames, as the solve's report judges them.
+        whole = np.arange(np.ceil(te[0] - 1e-9), np.floor(te[-1] + 1e-9) + 1.0)
+        if len(whole) > 1:
+            tf, ff = whole, evaluate.played_frames(edited_stage, agent_path, whole)
     played = feet_s
-    if frames is not None and len(feet_s.times) > 1:
+    if ff is not None and len(feet_s.times) > 1:
         # The source's feet as the edited timing plays them (between two of its samples, where
         # the timing falls, as USD interpolates a clip's joints: near enough for skate).
         x = np.arange(len(feet_s.times), dtype=np.float64)
         flat = feet_s.positions.reshape(len(x), -1)
-        at = np.stack([np.interp(frames, x, flat[:, c]) for c in range(flat.shape[1])], axis=1)
-        played = evaluate.FootSamples(te, at.reshape((len(te),) + feet_s.positions.shape[1:]), feet_s.joints,
-                                      np.ones(len(te), dtype=bool))
+        at = np.stack([np.interp(ff, x, flat[:, c]) for c in range(flat.shape[1])], axis=1)
+        played = evaluate.FootSamples(tf, at.reshape((len(tf),) + feet_s.positions.shape[1:]), feet_s.joints,
+                                      np.ones(len(tf), dtype=bool))
     # What plays in the shot (the source stage's start and end time codes), as the solve's report
     # measures it.
     start, end = evaluate.shot_range(source_stage)
@@ -73,9 +85,9 @@ def plausibility(source_stage, edited_stage, agent_path, joint: Union[int, str, 
     planted = skate_s.contact & metrics.in_shot(played.times, start, end)[:, None]
     skate_s = metrics.foot_skate_of_positions(played.positions, played.times, *source, played.joints, played.in_clip,
                                               contact=planted)
-    if len(skate_s.times) == len(te):
+    if len(skate_s.times) == len(tf):
         # Over the source's contacts, less where the edited foot is lifted (a step).
-        feet_e = evaluate.foot_positions(edited_stage, agent_path, te, foot_joints)
+        feet_e = evaluate.foot_positions(edited_stage, agent_path, tf, foot_joints)
         contact = metrics.on_ground(skate_s.contact, played.positions, feet_e.positions, source.up_axis,
                                     source.meters_per_unit)
         skate_e = metrics.foot_skate_of_positions(feet_e.positions, feet_e.times, *edited, feet_e.joints,
