@@ -14,9 +14,9 @@ from mocapedit.tools import measure
 from mocapedit.usd import bvh_usd, evaluate
 
 
-def _edit_turn(folder, stage_fps: float) -> tuple[np.ndarray, np.ndarray]:
-    """(seconds, degrees the edit turns the body) of a 120 fps walk, stand and walk, referenced
-    into a stage at ``stage_fps`` and bent by four hard handles at 0, 1, 2.5 and 4 s."""
+def _take_shot(folder, stage_fps: float, after: float = 0.0):
+    """(stage, agent): a 120 fps walk, stand and walk, referenced into a centimetre Y-up stage at
+    ``stage_fps`` whose time range covers it and ``after`` more stage frames."""
     folder.mkdir(parents=True, exist_ok=True)
     rig, values, _ = walk_idle_walk(fps=120.0, walk1=2.0, idle=1.0, walk2=2.0)
     write_bvh(folder / "take.bvh", rig, values, frame_time="0.00833333")
@@ -28,9 +28,16 @@ def _edit_turn(folder, stage_fps: float) -> tuple[np.ndarray, np.ndarray]:
     UsdGeom.SetStageMetersPerUnit(stage, 0.01)
     stage.SetTimeCodesPerSecond(stage_fps)
     stage.SetStartTimeCode(0)
-    stage.SetEndTimeCode(clip.GetEndTimeCode() * stage_fps / 120.0)
+    stage.SetEndTimeCode(clip.GetEndTimeCode() * stage_fps / 120.0 + after)
     agent = "/World/take"
     stage.DefinePrim(agent).GetReferences().AddReference("./clip.usda")
+    return stage, agent
+
+
+def _edit_turn(folder, stage_fps: float) -> tuple[np.ndarray, np.ndarray]:
+    """(seconds, degrees the edit turns the body) of a 120 fps walk, stand and walk, referenced
+    into a stage at ``stage_fps`` and bent by four hard handles at 0, 1, 2.5 and 4 s."""
+    stage, agent = _take_shot(folder, stage_fps)
     times, hips = evaluate.joint_world_matrices(stage, agent)
     for k, (second, move) in enumerate(((0.0, (0, 0)), (1.0, (40, 0)), (2.5, (-40, 30)), (4.0, (30, -20)))):
         frame = int(np.argmin(np.abs(times - second * stage_fps)))     # the clip's sample index
@@ -59,19 +66,7 @@ def test_a_fast_clip_retimed_and_locked_on_a_slow_stage_is_measured_as_the_repor
     attribute interpolated between its own, so its planted feet moved between frames. Measured
     by UsdSkel FK at every composed sample, the feet slid 36.1 cm/s where the report says 27.8;
     judged at the shot's frames, as the report judges them, the two agree."""
-    rig, values, _ = walk_idle_walk(fps=120.0, walk1=2.0, idle=1.0, walk2=2.0)
-    write_bvh(tmp_path / "take.bvh", rig, values, frame_time="0.00833333")
-    bvh_usd.import_bvh(str(tmp_path / "take.bvh"), str(tmp_path / "clip.usda"),
-                       bvh_usd.ImportSettings(scale=1.0, up_axis="Y", agent=True))
-    clip = Usd.Stage.Open(str(tmp_path / "clip.usda"))
-    stage = Usd.Stage.CreateNew(str(tmp_path / "shot.usda"))
-    UsdGeom.SetStageUpAxis(stage, "Y")
-    UsdGeom.SetStageMetersPerUnit(stage, 0.01)
-    stage.SetTimeCodesPerSecond(24.0)
-    stage.SetStartTimeCode(0)
-    stage.SetEndTimeCode(clip.GetEndTimeCode() * 24.0 / 120.0 + 12.0)
-    agent = "/World/take"
-    stage.DefinePrim(agent).GetReferences().AddReference("./clip.usda")
+    stage, agent = _take_shot(tmp_path, 24.0, after=12.0)
     times, hips = evaluate.joint_world_matrices(stage, agent)
     for k, (second, move) in enumerate(((0.0, (0, 0)), (2.0, (40, 0)), (4.5, (0, 0)))):
         frame = int(np.argmin(np.abs(times - second * 24.0)))
