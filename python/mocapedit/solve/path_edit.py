@@ -706,15 +706,27 @@ class ComponentProblem:
             out = np.concatenate([out] + self._spot_offsets())
         return out
 
-    def solve(self, handle_positions: np.ndarray | None = None) -> ComponentResult:
-        """Solves for the handles' positions (default: their own), ``(H,2)`` in handle order."""
-        hp = self.handle_positions(handle_positions)
+    @property
+    def settles(self) -> bool:
+        """Whether a solve re-solves until something settles (spot links): :meth:`solve_positions`
+        then does more than one solver call."""
+        return self._spot is not None
+
+    def solve_positions(self, hp: np.ndarray):
+        """The solver's result for handle positions ``hp`` (:meth:`handle_positions`: the gauge
+        pins' too), the spot links' turn settled; and the link offsets it was solved with."""
         if self._spot is not None:
             self._start_spot_turn(hp)
         offsets = self._link_offsets(None)
         result = _solver.path_edit_solve(self.data, hp, offsets)
         if self._spot is not None:
             result, offsets = self._settle_spot(result, hp, offsets)
+        return result, offsets
+
+    def solve(self, handle_positions: np.ndarray | None = None) -> ComponentResult:
+        """Solves for the handles' positions (default: their own), ``(H,2)`` in handle order."""
+        hp = self.handle_positions(handle_positions)
+        result, offsets = self.solve_positions(hp)
         if self._needs_headings:
             targets = {self.index[k.target] for k in self.links if k.space == "target"}
             for iteration in range(MAX_HEADING_ITERATIONS):

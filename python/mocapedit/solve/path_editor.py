@@ -78,6 +78,7 @@ class PathEditor:
         self._positions = self.problem.handle_positions()
         self._links = np.zeros((len(self.problem.link_vertex), 2))
         self._links[:] = self.problem._link_offsets(None)
+        self._spot = self.problem.settles
         self._result = None
         self._solve()
 
@@ -97,12 +98,19 @@ class PathEditor:
         return editor
 
     def _solve(self) -> None:
-        self._result = _solver.path_edit_solve(self._data, self._positions, self._links)
+        if self._spot:
+            # A path about one spot: its spot links turn with the body, settled by re-solving.
+            self._result = self.problem.solve_positions(self._positions)[0]
+        else:
+            self._result = _solver.path_edit_solve(self._data, self._positions, self._links)
         self._heading = None
 
     def move(self, handle: int, position) -> np.ndarray:
         """Moves one handle (index into ``frames``) to a ground position; returns the (F,2) path."""
         self._positions[handle] = position
+        if self._spot:
+            self._solve()
+            return self._result.positions
         # As _solve, inlined: a drag calls this for every mouse move.
         self._result = result = _solver.path_edit_solve(self._data, self._positions, self._links)
         self._heading = None
