@@ -218,3 +218,23 @@ def test_a_held_pose_an_avoid_region_pushes_gets_a_note_saying_why_no_pin_can_ke
     assert _moved(shot, edits, [200.0], agents=("/World/Crowd/a",)) > 0.25
     notes = " ".join(report.agents["/World/Crowd/a"]["notes"])
     assert "avoid region </Edits/fountain>'s clearance" in notes and "MocapPositionConstraint" not in notes
+
+
+def test_a_constraint_at_a_frame_that_plays_before_the_shot_gets_a_note(tmp_path):
+    """A take referenced 100 frames early into a 100-frame shot: a pin at its frame 5 holds at
+    time code -95, where nobody sees it; the solve says so, naming the constraint and the time
+    (before, nothing said why the walker moved). A pin at a frame the shot plays gets no note."""
+    clip = walker.walk(frames=FRAMES, fps=FPS, speed=SPEED, name="walk")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip, time_offset=-100.0)],
+                                       fps=FPS)
+    stage.SetStartTimeCode(0)
+    stage.SetEndTimeCode(100)
+    a = "/World/Crowd/a"
+    for name, frame in (("early", 5), ("seen", 150)):
+        p = evaluate.agent_root_positions(stage, a, [frame - 100.0])[0] + (0.5, 0.0, 0.0)
+        examples.add_position_constraint(stage, f"/Edits/{name}", a, frame, tuple(map(float, p)))
+    stage.GetRootLayer().Save()
+    result = solve(str(tmp_path / "shot.usda"), output=str(tmp_path / "e.usda"))
+    notes = [n for n in result.report.notes if "outside the shot" in n]
+    assert len(notes) == 1 and "</Edits/early>: frame 5 of </World/Crowd/a> plays at time code -95" in notes[0], notes
+    assert "seen" not in notes[0]

@@ -16,6 +16,7 @@ from mocapedit.inspect import metrics
 from mocapedit.tools import measure
 from mocapedit.usd import evaluate
 from mocapedit.model.errors import MocapEditError
+from mocapedit.model.report import foot_locking_lines
 from mocapedit.solve.layering import trs_from_matrices
 from mocapedit.pipeline.processor import solve
 
@@ -606,6 +607,9 @@ def test_an_edit_that_keeps_the_feet_planted_is_not_locked_nor_baked(tmp_path, w
     assert entry["footSkateEdited"] == entry["footSkateUnlocked"]
     assert result.report.stats["footLockedAgents"] == 0 and result.report.stats["footLockingNotNeeded"] == 1
     assert "SkelAnimation" not in result.layer.ExportToString()
+    # The printed figures say why no legs changed (before: "N contacts locked on 0 agents").
+    line = "\n".join(foot_locking_lines(result.report.stats))
+    assert "legs locked on 0 agents, left as they were on 1 (as planted as the source's)" in line, line
 
     _bent_path_stage(tmp_path, walk_clip)
     result, _ = _solve(tmp_path, "bent")

@@ -313,7 +313,12 @@ def foot_locking_lines(stats: Stats) -> list[str]:
     if stats.foot_contacts_locked is None:
         return []
     steps = f", {stats.foot_steps} steps taken" if stats.foot_steps else ""
-    return [f"feet: {stats.foot_contacts_locked} contacts locked on {stats.foot_locked_agents or 0} agents{steps}; "
+    # Agents whose feet the edits left as planted as the source's keep their legs: their
+    # contacts count, their legs are not changed.
+    kept = f", left as they were on {stats.foot_locking_not_needed} (as planted as the source's)" \
+        if stats.foot_locking_not_needed else ""
+    return [f"feet: {stats.foot_contacts_locked} contacts; legs locked on {stats.foot_locked_agents or 0} "
+            f"agents{kept}{steps}; "
             f"skate {_num(stats.foot_skate_source)} source, {_num(stats.foot_skate_unlocked)} after the "
             f"edits, {_num(stats.foot_skate_edited)} locked (stage units/s, mean over agents); "
             f"largest pelvis drop {_num(stats.max_pelvis_drop)}, "

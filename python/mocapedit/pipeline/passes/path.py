@@ -62,6 +62,31 @@ def _validate(ctx: SolveContext) -> None:
             raise prim_error(g.path, f"a group needs at least two members, got {len(g.members)}", "members")
 
 
+def _note_outside_shot(ctx: SolveContext) -> None:
+    """One note for the shot on the position and relative constraints whose frame plays outside
+    the stage's start and end time codes (its clip referenced with a time offset): they hold
+    there, where nobody sees them, and the shot shows only what they carry into it."""
+    info, agents = ctx.data.info, ctx.data.agents
+    if info.start_time is None or info.end_time is None:
+        return
+    start, end = float(info.start_time), float(info.end_time)
+    outside = []
+    for c in list(ctx.data.position_constraints) + list(ctx.data.relative_constraints):
+        held = [(c.agent, c.frame)] + ([(c.target, c.target_frame)] if hasattr(c, "target") else [])
+        for agent, frame in held:
+            time = float(agents[agent].sample_times[frame])
+            if not start - 1e-6 <= time <= end + 1e-6:
+                outside.append(f"<{c.path}>: frame {frame} of <{agent}> plays at time code {time:g}")
+                break
+    if outside:
+        named = "; ".join(outside[:3]) + (f"; and {len(outside) - 3} more" if len(outside) > 3 else "")
+        many = len(outside) != 1
+        ctx.report.note(f"{len(outside)} constraint{'s hold at frames' if many else ' holds at a frame'} that "
+                        f"play{'' if many else 's'} outside the shot (time codes {start:g} to {end:g}): {named}; "
+                        f"the shot shows only what {'they carry' if many else 'it carries'} into it (check the "
+                        "frame against the clip's time offset)")
+
+
 def _components(ctx: SolveContext) -> list[list[str]]:
     """Agents tied by relative constraints and groups, each component sorted, in order."""
     data = ctx.data
@@ -336,6 +361,7 @@ def _run_on_pool(ctx: SolveContext, comps: list[_Component], task) -> None:
 
 def run(ctx: SolveContext) -> None:
     _validate(ctx)
+    _note_outside_shot(ctx)
     members = _components(ctx)
     if not members:
         return
