@@ -71,9 +71,6 @@ MAX_HEADING_ITERATIONS = 30
 #: turned each wiggle its own way, unfolding the tangle into a path that swings about. Scaled by
 #: ``_solver.spot_weight`` (1 for a path about one spot, 0 for any path with a frame sure of its turn).
 SPOT_WEIGHT = 10.0
-#: Those terms weigh this many times as much where every foot of the source is planted: the clip
-#: moves aside as it steps, not while it stands on its feet.
-SPOT_STANCE = 10.0
 #: Re-solves that bring the turn of those terms to the body's (the turn of the edited path).
 SPOT_ITERATIONS = 3
 #: Radians: the turn of those terms has settled when it changes less than this.
@@ -98,9 +95,6 @@ class AgentInput:
     # The windows of the edit's turn at this agent's own sample rate (turn_settings); None: the
     # Settings' (a clip sampled at the stage's rate).
     turn: dict | None = None
-    # (F,) bool: every foot of the source planted at the frame (a path about one spot moves aside
-    # as it steps, not while it stands on its feet: see SPOT_STANCE); None: not known.
-    stance: np.ndarray | None = None
 
     @property
     def frames(self) -> int:
@@ -526,8 +520,6 @@ class ComponentProblem:
             v = self._red_offset[i] + frames
             verts.append(np.stack([v + 1, v], axis=1))
             weights.append(np.full(len(frames), SPOT_WEIGHT * weight))
-            if a.stance is not None:
-                weights[-1][a.stance[frames] & a.stance[frames + 1]] *= SPOT_STANCE
         if not found:
             return
         self._spot = found

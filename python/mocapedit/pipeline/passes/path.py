@@ -19,7 +19,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from mocapedit.geometry import contacts, curves, ground, trajectory
+from mocapedit.geometry import curves, ground, trajectory
 from mocapedit.geometry.components import UnionFind
 from mocapedit.inspect import metrics
 from mocapedit.solve import path_edit
@@ -159,14 +159,10 @@ def _agent_input(ctx: SolveContext, path: str, fps: float) -> path_edit.AgentInp
         remapped = on_curve(ctx, path)
         rest, turn = remapped.ground, remapped.range_turn
     refs = [f"{agent.animation_path}.stationary:{'/'.join(n)}:frames" for n in names]
-    out = path_edit.AgentInput(path=path, rest=np.ascontiguousarray(rest, dtype=np.float64), source=traj.ground,
-                               source_heading=traj.heading, stationary=ranges, stationary_refs=refs,
-                               rest_turn=turn, sample_times=agent.sample_times,
-                               turn=path_edit.turn_settings(rate, info.meters_per_unit))
-    if len(agent.legs) == 2 and path_edit.spot_weight(out) > 0.0:
-        found = ctx.source_contacts(path)
-        out.stance = np.logical_and.reduce([contacts.mask_of(ranges, agent.frame_count) for ranges in found])
-    return out
+    return path_edit.AgentInput(path=path, rest=np.ascontiguousarray(rest, dtype=np.float64), source=traj.ground,
+                                source_heading=traj.heading, stationary=ranges, stationary_refs=refs,
+                                rest_turn=turn, sample_times=agent.sample_times,
+                                turn=path_edit.turn_settings(rate, info.meters_per_unit))
 
 
 class _Component:
