@@ -186,5 +186,6 @@ class SolveContext:
 
     def release(self) -> None:
         """Drops the per-agent results (the edits layer holds them once it is built)."""
-        for part in (self.edits, self.guides, self.paths, self.time_maps, self.pose_edits, self.trajectories):
+        for part in (self.edits, self.guides, self.paths, self.time_maps, self.pose_edits, self.trajectories,
+                     self.contacts_cache):
             part.clear()
