@@ -225,8 +225,17 @@ shot("layer-up-axis", "", r"base\.usda: sublayer says upAxis = Z, but the root l
      header=SHOT_HEADER.replace('upAxis = "Z"', 'upAxis = "Y"'))
 shot("layer-meters-per-unit", "", r"base\.usda: sublayer says metersPerUnit = 0\.01.*root layer.*says metersPerUnit = 1",
      header=SHOT_HEADER.replace("metersPerUnit = 0.01", "metersPerUnit = 1"))
-shot("layer-time-codes", "", r"base\.usda: sublayer says timeCodesPerSecond = 24.*root layer.*timeCodesPerSecond = 30",
-     header=SHOT_HEADER.replace("timeCodesPerSecond = 24", "timeCodesPerSecond = 30"))
+
+
+def _base_at_30_fps(folder: Path) -> None:
+    from bad_base import _base_text
+    (folder / "base.usda").write_text(_base_text().replace("timeCodesPerSecond = 24", "timeCodesPerSecond = 30"))
+
+
+# A root layer that authors another rate than its sublayer's is fine (USD rescales the sublayer);
+# one that authors none counts time at USD's default 24 a second, which the sublayer did not mean.
+shot("layer-time-codes", "", r"base\.usda: sublayer says timeCodesPerSecond = 30.*root layer.*does not author "
+     r"timeCodesPerSecond", header=SHOT_HEADER.replace("    timeCodesPerSecond = 24\n", ""), base=_base_at_30_fps)
 shot("layer-unauthored-up-axis", "", r"base\.usda: sublayer says upAxis = Z.*does not author upAxis",
      header=SHOT_HEADER.replace('    upAxis = "Z"\n', ""))
 shot("layer-not-usd", "", r"shot\.usda: cannot be read as a USD stage", header="this is not usd\n")

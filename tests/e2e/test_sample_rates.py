@@ -7,7 +7,7 @@ import numpy as np
 from pxr import Usd, UsdGeom
 
 from bvhgen import walk_idle_walk, write_bvh
-from mocapedit.data import examples
+from mocapedit.data import examples, walker
 from mocapedit.inspect import metrics
 from mocapedit.pipeline.processor import solve
 from mocapedit.tools import measure
@@ -82,3 +82,33 @@ def test_a_fast_clip_retimed_and_locked_on_a_slow_stage_is_measured_as_the_repor
     assert evaluate.played_frames(edited, agent, np.array([10.0])) is not None     # a value clip
     fk = measure.plausibility(stage, edited, agent)
     assert abs(fk.foot_skate_edited - entry.foot_skate_edited) < 0.1, (fk.foot_skate_edited, entry.foot_skate_edited)
+
+
+def test_a_crowd_at_24_fps_under_a_shot_counted_in_240_ticks_a_second(tmp_path):
+    """A shot's root layer counts 240 time codes a second (24 frames a second) over a sublayer
+    crowd at 24: USD plays the sublayer rescaled, and so does the solve. A pin at frame 95 holds
+    at time code 950, and frame 48 of a walker re-timed to 600 plays there as its source plays
+    it at 480. Before, the reader refused the sublayer's rate."""
+    walk = walker.walk(frames=96, fps=24.0, name="walk")
+    examples.build_crowd_stage(tmp_path / "crowd.usda", [examples.AgentSpec("a", walk),
+                                                         examples.AgentSpec("b", walk, (2.0, 0.0, 0.0))], fps=24.0)
+    stage = Usd.Stage.CreateNew(str(tmp_path / "shot.usda"))
+    stage.GetRootLayer().subLayerPaths.append("./crowd.usda")
+    stage.SetTimeCodesPerSecond(240.0)
+    stage.SetFramesPerSecond(24.0)
+    stage.SetStartTimeCode(0)
+    stage.SetEndTimeCode(950)
+    UsdGeom.SetStageUpAxis(stage, "Y")
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    a, b = "/World/Crowd/a", "/World/Crowd/b"
+    ends = evaluate.agent_root_positions(stage, a, [0.0, 950.0])
+    examples.add_position_constraint(stage, "/Edits/a0", a, 0, tuple(map(float, ends[0])))
+    examples.add_position_constraint(stage, "/Edits/a1", a, 95, tuple(map(float, ends[1] + (0.5, 0.0, 0.0))))
+    examples.add_time_constraint(stage, "/Edits/later", b, 48, 600.0)
+    stage.GetRootLayer().Save()
+    result = solve(str(tmp_path / "shot.usda"), output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"))
+    assert all(c.met for c in result.report.constraints)
+    edited = Usd.Stage.Open(str(tmp_path / "c.usda"))
+    assert np.abs(evaluate.agent_root_positions(edited, a, [950.0])[0] - (ends[1] + (0.5, 0.0, 0.0)))[[0, 2]].max() < 1e-6
+    played = evaluate.agent_root_positions(edited, b, [600.0])[0]
+    assert np.abs(played - evaluate.agent_root_positions(stage, b, [480.0])[0]).max() < 1e-6

@@ -45,8 +45,12 @@ def open_stage(path: str) -> Usd.Stage:
 def check_composition(stage: Usd.Stage) -> None:
     """Raises a MocapEditError when the stage did not compose as authored: a sublayer,
     reference or payload whose file cannot be opened (USD only warns and goes on without
-    it), or a sublayer that says another ``upAxis``, ``metersPerUnit`` or
-    ``timeCodesPerSecond`` than the root layer, which the stage follows alone."""
+    it), or a sublayer that says another ``upAxis`` or ``metersPerUnit`` than the root layer,
+    which the stage follows alone. A sublayer at another ``timeCodesPerSecond`` than the one
+    the root layer authors is fine: USD plays it rescaled to the root's (a 24 fps crowd under
+    a shot counted in 240 ticks a second); only a root layer that does not author one, over a
+    sublayer that does, is an error (the stage then counts time in USD's default 24 a second,
+    which the sublayer's author did not mean)."""
     errors = stage.GetCompositionErrors()
     if errors:
         # One missing clip file referenced by a thousand agents is one problem: group by
@@ -72,6 +76,8 @@ def check_composition(stage: Usd.Stage) -> None:
             if not layer.pseudoRoot.HasInfo(key):
                 continue
             says = layer.pseudoRoot.GetInfo(key)
+            if key == "timeCodesPerSecond" and root.pseudoRoot.HasInfo(key):
+                continue    # rescaled by USD to the root's
             if (says != value) if key == "upAxis" else not np.isclose(float(says), value, rtol=1e-9, atol=0.0):
                 shown = lambda v: v if isinstance(v, str) else f"{float(v):g}"  # noqa: E731
                 root_says = (f"says {key} = {shown(value)}" if root.pseudoRoot.HasInfo(key) else
