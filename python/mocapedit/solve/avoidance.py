@@ -552,21 +552,30 @@ def _walks_backward(state: "_State", flat: np.ndarray) -> np.ndarray:
     direction it walks in on the path it came in with, on any chord of ``CHORD_SECONDS``
     where that path travels ``CHORD_MIN_M`` or more."""
     s = state.s
-    out = np.zeros(len(state.p.names), dtype=bool)
+    agents = len(state.p.names)
     least = CHORD_MIN_M / s.meters_per_unit
+    # Each agent's chords (first, last frame) as rows of the concatenated paths; agents that
+    # play their frames at the same times share the search.
+    chords: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+    first, last, owner = [], [], []
     for a, times in enumerate(state.p.frame_times):
-        lo, hi = int(state.starts[a]), int(state.starts[a + 1])
-        if hi - lo < 2:
-            continue
-        seconds = np.asarray(times, dtype=np.float64) / s.time_codes_per_second
-        end = np.searchsorted(seconds, seconds + CHORD_SECONDS)
-        ok = end < len(seconds)
-        start, end = np.flatnonzero(ok), end[ok]
-        rest, edited = state.rest[lo:hi], flat[lo:hi]
-        was, now = rest[end] - rest[start], edited[end] - edited[start]
-        moving = np.linalg.norm(was, axis=1) >= least
-        out[a] = bool(np.any(np.einsum("ij,ij->i", was[moving], now[moving]) < 0.0))
-    return out
+        times = np.asarray(times, dtype=np.float64)
+        key = times.tobytes()
+        if key not in chords:
+            seconds = times / s.time_codes_per_second
+            end = np.searchsorted(seconds, seconds + CHORD_SECONDS)
+            ok = end < len(seconds)
+            chords[key] = (np.flatnonzero(ok), end[ok])
+        start, end = chords[key]
+        first.append(start + state.starts[a])
+        last.append(end + state.starts[a])
+        owner.append(np.full(len(start), a))
+    if not first:
+        return np.zeros(agents, dtype=bool)
+    first, last, owner = np.concatenate(first), np.concatenate(last), np.concatenate(owner)
+    was, now = state.rest[last] - state.rest[first], flat[last] - flat[first]
+    back = (np.linalg.norm(was, axis=1) >= least) & (np.einsum("ij,ij->i", was, now) < 0.0)
+    return np.bincount(owner[back], minlength=agents) > 0
 
 
 def _detours(problem: Problem, settings: Settings, strategy, progress):
@@ -948,6 +957,7 @@ class _Forward:
         across = np.stack((-d[:, 1], d[:, 0]), axis=1)
         sin, cos = np.sin(np.radians(cone_degrees)), np.cos(np.radians(cone_degrees))
         self.normal = np.stack((d, sin * d - cos * across, sin * d + cos * across), axis=1)   # (C, 3, 2)
+        self.nx, self.ny = np.ascontiguousarray(self.normal[:, :, 0]), np.ascontiguousarray(self.normal[:, :, 1])
         self.rhs = np.zeros((len(d), 3))
         self.rhs[:, 0] = keep * length
         self.on = np.zeros((len(d), 3), bool)
@@ -957,8 +967,9 @@ class _Forward:
     def watch(self, flat: np.ndarray) -> int:
         """Turns on the rows of the chords ``flat`` breaks or nearly breaks; returns how many
         broken ones were new."""
-        chord = flat[self.u] - flat[self.v]
-        value = np.einsum("ckj,cj->ck", self.normal, chord)
+        chord = np.take(flat, self.u, axis=0) - np.take(flat, self.v, axis=0)
+        value = self.nx * chord[:, 0, None]
+        value += self.ny * chord[:, 1, None]
         fresh = ~self.on & (value < self.rhs)
         self.on |= fresh | (value < self.rhs + self.slack)
         return int(fresh.sum())
@@ -1196,7 +1207,9 @@ def _waits(problem: Problem, settings: Settings, fixed: np.ndarray) -> _Waits:
                 taken.add(w)
         if not taken:
             break
-        for w in taken:   # only the agents that waited move in the sampling
+        moved = np.array(sorted(taken), dtype=np.int64)   # only the agents that waited move in the sampling
+        for w in moved:
             sampling.frames[:, w] = collisions.frames_at(times[w], st)
-            sampling.positions[:, w] = collisions.positions_at(paths[w], sampling.frames[:, w])
+        collisions.Resampler(sampling, np.concatenate([[0], np.cumsum([len(paths[w]) for w in moved])]), moved)(
+            np.concatenate([paths[w] for w in moved]))
     return out

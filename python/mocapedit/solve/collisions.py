@@ -86,11 +86,13 @@ def sample(agents: list[str], frame_times: dict[str, np.ndarray], paths: dict[st
     ranges = [(float(frame_times[a][0]), float(frame_times[a][-1])) for a in agents]
     times = sample_times(ranges if span is None else [span], step)
     frames = np.empty((len(times), len(agents)))
-    positions = np.empty((len(times), len(agents), 2))
     for i, a in enumerate(agents):
         frames[:, i] = frames_at(frame_times[a], times)
-        positions[:, i] = positions_at(paths[a], frames[:, i])
-    return Sampling(agents=list(agents), times=times, frames=frames, positions=positions)
+    out = Sampling(agents=list(agents), times=times, frames=frames, positions=np.empty((len(times), len(agents), 2)))
+    if len(agents):
+        flat = [np.asarray(paths[a], dtype=np.float64).reshape(-1, 2) for a in agents]
+        Resampler(out, np.concatenate([[0], np.cumsum([len(g) for g in flat])]))(np.concatenate(flat))
+    return out
 
 
 class Resampler:
@@ -100,12 +102,15 @@ class Resampler:
     Args:
       sampling: the sampling to update in place (its frames stay)
       starts: #A+1 first row of each agent (in sampling order) in the paths, then #V
+      columns: only these agents (sampling columns) are re-read; ``starts`` and the paths
+        then hold those agents alone, in this order
     """
 
-    def __init__(self, sampling: Sampling, starts: np.ndarray):
+    def __init__(self, sampling: Sampling, starts: np.ndarray, columns: np.ndarray | None = None):
         starts = np.asarray(starts, dtype=np.int64)
+        self.columns = None if columns is None else np.asarray(columns, dtype=np.int64)
         last = (starts[1:] - starts[:-1] - 1)[None, :]
-        f = np.clip(sampling.frames, 0.0, last)
+        f = np.clip(sampling.frames if columns is None else sampling.frames[:, self.columns], 0.0, last)
         i0 = np.floor(f).astype(np.int64)
         base = starts[:-1][None, :]
         w1 = (f - i0).ravel()
@@ -118,11 +123,16 @@ class Resampler:
 
     def __call__(self, paths: np.ndarray) -> None:
         """paths: #V by 2 ground positions, agent i's frames at rows starts[i] .. starts[i+1]-1."""
-        out = self.sampling.positions.reshape(-1, 2)
+        if self.columns is not None:
+            out = np.empty((len(self.i0), 2))
+        else:
+            out = self.sampling.positions.reshape(-1, 2)
         np.take(paths, self.i0, axis=0, out=out)
         if len(self.blend):
             p0 = out[self.blend]
             out[self.blend] = p0 + (paths[self.i1] - p0) * self.w1
+        if self.columns is not None:
+            self.sampling.positions[:, self.columns] = out.reshape(len(self.sampling.times), len(self.columns), 2)
 
 
 def resample(sampling: Sampling, paths: np.ndarray, starts: np.ndarray) -> None:
