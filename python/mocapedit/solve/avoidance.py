@@ -133,7 +133,7 @@ class Settings:
     spread: int = 3                     # relinearize constrains every n-th sample of an interval
     keep_degrees: float = 5.0           # relinearize keeps a row's direction while it turns less
     sweeps: int = 20                    # Gauss-Seidel sweeps per solve step at least (warm-started)
-    sweep_budget: float = 1e6           # rows x sweeps per step allowed beyond that (up to 10x sweeps)
+    sweep_budget: float = 3e5           # rows x sweeps per step allowed beyond that (up to 10x sweeps)
     relaxation: float = 1.0             # over-relaxation of the Gauss-Seidel sweeps, in (0, 2)
     tolerance: float = 1e-3             # of the clearance: Gauss-Seidel stops when no row moves more
     patience: int = 6                   # stop after this many iterations without progress
