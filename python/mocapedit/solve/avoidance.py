@@ -324,7 +324,7 @@ class _State:
 
     def sample_terms(self, agents: np.ndarray, samples: np.ndarray):
         """Vertices (N,2) and weights (N,2) of agents' positions at samples (interpolated)."""
-        f = self.sampling.frames[samples, agents]
+        f = self.sampling.frames_at(samples, agents)
         counts = self.starts[agents + 1] - self.starts[agents]
         f = np.clip(f, 0.0, counts - 1)
         i0 = np.floor(f).astype(np.int64)
@@ -398,10 +398,10 @@ def _unit(d: np.ndarray, fallback: np.ndarray) -> np.ndarray:
 
 def _fallback_normals(state: _State, a: np.ndarray, b: np.ndarray, k: np.ndarray) -> np.ndarray:
     """Where two points coincide: sideways to their relative motion (or along x)."""
-    pos = state.sampling.positions
+    at = state.sampling.at
     k1 = np.minimum(k + 1, len(state.sampling.times) - 1)
     k0 = np.maximum(k - 1, 0)
-    rel = (pos[k1, a] - pos[k0, a]) - (pos[k1, b] - pos[k0, b])
+    rel = (at(k1, a) - at(k0, a)) - (at(k1, b) - at(k0, b))
     side = np.stack([-rel[:, 1], rel[:, 0]], axis=1)
     n = np.linalg.norm(side, axis=1)
     return np.where((n > 1e-12)[:, None], side / np.where(n > 1e-12, n, 1.0)[:, None], [[1.0, 0.0]])
@@ -419,11 +419,11 @@ def _separation_normals(state: _State, a: np.ndarray, b: np.ndarray, k: np.ndarr
     the distance). The vote is taken again at each iteration (among the samples that still
     overlap), so a pair that other pushes moved to the other side is not pulled back through.
     """
-    pos = state.sampling.positions
-    rel = pos[k, a] - pos[k, b]
+    at = state.sampling.at
+    rel = at(k, a) - at(k, b)
     k1 = np.minimum(k + 1, len(state.sampling.times) - 1)
     k0 = np.maximum(k - 1, 0)
-    motion = (pos[k1, a] - pos[k0, a]) - (pos[k1, b] - pos[k0, b])
+    motion = (at(k1, a) - at(k0, a)) - (at(k1, b) - at(k0, b))
     speed = np.linalg.norm(motion, axis=1)
     # Passing, not walking together: over two samples they move by a fair part of a clearance.
     moving = speed > 0.05 * _clearance(state, a, b)
@@ -697,7 +697,7 @@ def _accumulate(state: _State, run: _Run):
         # an edge of the clearance's length, along the line between them.
         a, b, k = (found.agent_a.astype(np.int64), found.agent_b.astype(np.int64),
                    found.deepest.astype(np.int64))
-        pa, pb = state.sampling.positions[k, a], state.sampling.positions[k, b]
+        pa, pb = state.sampling.at(k, a), state.sampling.at(k, b)
         offset = _unit(pa - pb, _fallback_normals(state, a, b, k)) * \
             (_clearance(state, a, b) * (1.0 + s.overshoot))[:, None]
         va, wa = state.sample_terms(a, k)
@@ -746,7 +746,7 @@ class _Candidates:
     def prune(self, state: _State, reach: float) -> None:
         """Forgets watched samples that do not push and whose agents are now far apart."""
         a, b, k = self.split()
-        gap = np.linalg.norm(state.sampling.positions[k, a] - state.sampling.positions[k, b], axis=1) \
+        gap = np.linalg.norm(state.sampling.at(k, a) - state.sampling.at(k, b), axis=1) \
             - _clearance(state, a, b)
         keep = (self.force > 0.0) | (self.force1 > 0.0) | self.blocked | (gap < reach)
         self.keys, self.force, self.force1, self.blocked, self.normal = (
@@ -947,11 +947,13 @@ class _Forward:
         owner = np.repeat(np.arange(len(counts)), chords)
         v = np.arange(int(chords.sum()), dtype=np.int64) - np.repeat(np.cumsum(chords) - chords, chords) + starts[:-1][owner]
         hv = h[owner]
-        c = state.rest[v + hv] - state.rest[v]
+        c = np.take(state.rest, v + hv, axis=0) - np.take(state.rest, v, axis=0)
         n = np.linalg.norm(c, axis=1)
         moving = n > moving_m_s / s.meters_per_unit * hv * dt[owner]
-        self.v, self.u = v[moving], (v + hv)[moving]
-        d, length = c[moving] / n[moving, None], n[moving]
+        moving = np.flatnonzero(moving)
+        self.v, self.u = np.take(v, moving), np.take(v + hv, moving)
+        length = np.take(n, moving)
+        d = np.take(c, moving, axis=0) / length[:, None]
         self.slack = watch * length[:, None]
         # Three rows per chord: d.c >= keep |c_source|, and the cone's two edges n.c >= 0.
         across = np.stack((-d[:, 1], d[:, 0]), axis=1)
