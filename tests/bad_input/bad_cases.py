@@ -239,6 +239,17 @@ shot("layer-time-codes", "", r"base\.usda: sublayer says timeCodesPerSecond = 30
 shot("layer-unauthored-up-axis", "", r"base\.usda: sublayer says upAxis = Z.*does not author upAxis",
      header=SHOT_HEADER.replace('    upAxis = "Z"\n', ""))
 shot("layer-not-usd", "", r"shot\.usda: cannot be read as a USD stage", header="this is not usd\n")
+# A text layer that breaks off: USD's parser says where (file, line and column).
+shot("layer-syntax", 'def Xform "Broken" (\n', r"shot\.usda: cannot be read as a USD stage: .*shot\.usda:\d+:\d+: Expected")
+
+
+def _broken_base(folder: Path) -> None:
+    from bad_base import write_base
+    write_base(folder)
+    (folder / "base.usda").write_text((folder / "base.usda").read_text() + 'def "x" (\n')
+
+
+shot("layer-sublayer-syntax", "", r"shot\.usda: .*base\.usda:\d+:\d+: ", base=_broken_base)
 shot("settings-two-prims", prim("MocapSolveSettings", "S1", SETTINGS) + prim("MocapSolveSettings", "S2", SETTINGS),
      r"more than one MocapSolveSettings prim: </S1>, </S2>")
 
@@ -545,6 +556,12 @@ def command(id: str, needle: str, argv: Callable[[Path], list[str]], outputs: tu
 
 
 command("report-no-report", r"shot\.usda: holds no mocapedit report", lambda f: ["report", str(f / "shot.usda")])
+command("report-syntax", r"broken\.usda: cannot be read as a USD layer: .*broken\.usda:\d+:\d+: Expected",
+        lambda f: ((f / "broken.usda").write_text('#usda 1.0\ndef Xform "World" {\n  def Xform "a" (\n'),
+                   ["report", str(f / "broken.usda")])[1])
+command("solve-input-folder", r"case: is a folder; give the shot's stage file",
+        lambda f: ["solve", str(f), "-o", str(f / "out.usda")])
+command("report-folder", r"case: is a folder", lambda f: ["report", str(f)])
 command("report-missing-file", r"gone\.usda: no such file", lambda f: ["report", str(f / "gone.usda")])
 command("detect-max-speed-negative", r"max-speed", lambda f: ["detect-stationary", str(f / "shot.usda"), "-o",
                                                               str(f / "out.usda"), "--max-speed", "-1"])

@@ -16,6 +16,7 @@ from pxr import Sdf, Usd, Vt
 
 from mocapedit import __version__
 from mocapedit.model.errors import MocapEditError
+from mocapedit.usd.errors import usd_messages
 
 __all__ = ["KEY", "VERSION", "INPUTS", "CONTENT_HASH", "OPTIONS", "STATS", "REPORT",
            "write", "layer_value", "report_text", "data", "edits_layer", "content_hash", "recorded",
@@ -134,11 +135,13 @@ def read_report(path_or_layer) -> dict:
         path = os.fspath(path_or_layer)
         if not os.path.exists(path):
             raise MocapEditError(f"{path}: no such file")
+        if os.path.isdir(path):
+            raise MocapEditError(f"{path}: is a folder; give an edits layer or a composed stage file")
         try:
             layer = Sdf.Layer.FindOrOpen(path)
         except Exception as exc:  # pxr raises Tf.ErrorException
             raise MocapEditError(f"{path}: cannot be read as a USD layer: "
-                                 f"{str(exc).strip().splitlines()[-1]}") from None
+                                 f"{'; '.join(usd_messages(str(exc)))}") from None
         if layer is None:
             raise MocapEditError(f"{path}: cannot be read as a USD layer")
     found = _with_report(layer)

@@ -17,6 +17,7 @@ from mocapedit.geometry import contacts
 from mocapedit.model import data as model
 from mocapedit.model.errors import MocapEditError, prim_error
 from mocapedit.model.names import hips_joint, resolve_joint
+from mocapedit.usd.errors import usd_messages
 from mocapedit.usd.evaluate import shot_range, skeleton_candidates
 
 AGENT_API = "MocapAgentAPI"
@@ -32,11 +33,12 @@ def open_stage(path: str) -> Usd.Stage:
     import os
     if not os.path.exists(path):
         raise MocapEditError(f"{path}: no such file")
+    if os.path.isdir(path):
+        raise MocapEditError(f"{path}: is a folder; give the shot's stage file (.usda, .usdc or .usd)")
     try:
         stage = Usd.Stage.Open(str(path))
     except Exception as exc:  # pxr raises Tf.ErrorException with a multi-line text
-        first = str(exc).strip().splitlines()
-        raise MocapEditError(f"{path}: cannot be read as a USD stage: {' '.join(first[-2:])}") from None
+        raise MocapEditError(f"{path}: cannot be read as a USD stage: {'; '.join(usd_messages(str(exc)))}") from None
     if stage is None:
         raise MocapEditError(f"{path}: cannot be read as a USD stage")
     return stage
