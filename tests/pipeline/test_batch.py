@@ -80,6 +80,35 @@ def test_the_plan_is_checked_before_any_work(tmp_path, shots):
     assert not out.exists() and time.perf_counter() - started < 10
 
 
+def test_no_output_of_a_batch_overwrites_a_file_any_shot_uses(tmp_path, shots):
+    """The summary and every edits layer are checked against every file every shot reads
+    (its clips too), and against each other, before any work: a summary named like a shot,
+    a shot's clip or an edits layer was written over it after the batch had run."""
+    out = tmp_path / "out"
+    clip = next((shots[0].parent / "clips").glob("*.usd*"))
+    for target in (shots[1], clip, out / "s1.edits.usdc"):
+        before = target.read_bytes() if target.exists() else None
+        with pytest.raises(MocapEditError, match="summary"):
+            batch.plan([str(shots[0]), str(shots[1])], str(out), summary=str(target))
+        proc = run_cli("batch", shots[0], shots[1], "-o", out, "--summary", target, "--workers", "1")
+        assert proc.returncode == 1 and "--summary" in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
+        assert (target.read_bytes() if target.exists() else None) == before
+        assert not out.exists()
+    # A folder as the summary, or one that cannot be made, is refused before any work too.
+    with pytest.raises(MocapEditError, match="--summary .*folder"):
+        batch.plan([str(shots[0])], str(out), summary=str(tmp_path))
+    if os.path.isdir("/proc/self"):   # a file system that makes no folders, whatever the permissions
+        with pytest.raises(MocapEditError, match="cannot make the folder /proc/mocapedit-nowhere"):
+            batch.plan([str(shots[0])], "/proc/mocapedit-nowhere")
+    # An edits layer of one shot named like a file another shot reads: shot "walk" would
+    # write clips/walk.usda, the clip s1 plays.
+    other = tmp_path / "other"
+    other.mkdir()
+    walk = _shot(other, clip.stem, 1.0)
+    with pytest.raises(MocapEditError, match="names a file the input uses"):
+        batch.plan([str(shots[0]), str(walk)], str(clip.parent), suffix=clip.suffix)
+
+
 def test_an_unreachable_scheduler_is_a_clear_error_within_ten_seconds(tmp_path, shots):
     with socket.socket() as s:   # a port nobody listens on
         s.bind(("127.0.0.1", 0))
@@ -195,6 +224,37 @@ def test_a_local_cluster_starts_when_the_dashboard_port_is_taken():
 
 
 # ---- a shot split over workers by path component ---------------------------------------------
+
+@pytest.mark.slow
+def test_a_batch_stopped_by_sigterm_names_every_edits_layer_it_left(tmp_path):
+    """SIGTERM while shots run: the workers' shots that finish writing are whole, and the
+    message names each of them (it said "nothing was written" over two complete layers)."""
+    folder = tmp_path / "shots"
+    folder.mkdir()
+    shots = [_shot(folder, f"s{i}", 1.0 + i) for i in range(6)]
+    out = tmp_path / "out"
+    exe = Path(sys.executable).with_name("mocapedit")
+    proc = subprocess.Popen([str(exe), "batch", *map(str, shots), "-o", str(out), "--workers", "1"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not list(out.glob("*.edits.usdc")) and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    if proc.returncode == 0:
+        pytest.skip("the batch ended before the signal")
+    assert proc.returncode == 128 + signal.SIGTERM, err
+    assert "Traceback" not in err
+    left = sorted(out.glob("*.edits.usdc"))
+    assert left, err
+    message = [l for l in err.splitlines() if "stopped by signal" in l]
+    assert message and "nothing was written" not in message[-1], err
+    for layer in left:
+        assert str(layer) in message[-1], (layer, message[-1])
+        assert batch.output_name(str(folder / layer.name.replace(".edits.usdc", ".usda")), ".edits.usdc") == layer.name
+    # Whole layers only, no temporaries.
+    assert all(".mocapedit~" not in p.name for p in out.iterdir())
+
 
 def _components_shot(folder: Path, contradiction: bool = False) -> Path:
     """Nine walkers, five path components: a0 tied to a1 by a relative constraint; a group

@@ -56,12 +56,17 @@ def output_name(shot: str, suffix: str) -> str:
     return os.path.splitext(os.path.basename(shot))[0] + suffix
 
 
-def plan(shots: list[str], outdir: str, suffix: str = ".edits.usdc") -> list[Job]:
+def plan(shots: list[str], outdir: str, suffix: str = ".edits.usdc", summary: str | None = None) -> list[Job]:
     """The jobs of a batch, checked before any work starts.
+
+    ``summary``: where the summary will be written (default ``OUTDIR/batch-summary.json``);
+    checked with the edits layers.
 
     Raises:
       MocapEditError: no shots, a shot path that is not a file, two shots that would
-        write the same output, or an output that would overwrite a shot.
+        write the same output, or an output (an edits layer or the summary) that would
+        overwrite a file some shot reads (the shot, its sub-layers, clips and other
+        dependencies) or another output.
     """
     if not shots:
         raise MocapEditError("batch: no shots given")
@@ -80,8 +85,12 @@ def plan(shots: list[str], outdir: str, suffix: str = ".edits.usdc") -> list[Job
     for job in jobs:
         if job.output in inputs:
             raise MocapEditError(f"{job.output}: the output would overwrite an input shot")
-    # Extensions and folders; each solve checks its output against every layer its shot uses.
-    outputs.check_outputs([outputs.Output(j.output, "-o/--suffix") for j in jobs])
+    # Every output against every file any shot reads (each solve checks its own shot's
+    # layers again, as it opens them).
+    reads = sorted({f for j in jobs for f in outputs.dependency_files(j.shot)})
+    outputs.check_outputs([outputs.Output(j.output, "-o/--suffix") for j in jobs] +
+                          [outputs.Output(summary or os.path.join(outdir, SUMMARY), "--summary", kind="text",
+                                          extensions=(".json",))], reads)
     return jobs
 
 
@@ -220,6 +229,18 @@ def run(jobs: list[Job], options: dict, client, force: bool = False, on_result=N
         if on_result:
             on_result(result, done, failed, len(jobs) - done)
     return results
+
+
+def written_since(jobs: list[Job], since: float) -> list[str]:
+    """The jobs' edits layers written at or after ``since`` (a ``time.time()``), in job order."""
+    out = []
+    for job in jobs:
+        try:
+            if os.stat(job.output).st_mtime >= since - 1.0:   # file systems keep coarse times
+                out.append(job.output)
+        except OSError:
+            pass
+    return out
 
 
 def summary(results: list[ShotResult], options: dict, seconds: float) -> dict:

@@ -45,6 +45,13 @@ def committed() -> list[str]:
     return list(_committed)
 
 
+def record_committed(path: str) -> None:
+    """Counts a complete file another process (a batch's worker) put in place for this one."""
+    path = os.path.abspath(path)
+    if path not in _committed:
+        _committed.append(path)
+
+
 class Terminated(BaseException):
     """Raised in the main thread when the process is asked to stop (SIGTERM, SIGHUP).
 
@@ -85,21 +92,26 @@ def input_files(stage) -> list[str]:
     Takes the layers the stage has opened, and walks the root layer's dependencies as
     USD resolves them, so unloaded payloads and value-clip files are included.
     """
-    from pxr import UsdUtils
-
-    files: set[str] = set()
-    for layer in stage.GetUsedLayers():
-        if layer.realPath:
-            files.add(_real(layer.realPath))
+    files = {_real(layer.realPath) for layer in stage.GetUsedLayers() if layer.realPath}
     root = stage.GetRootLayer()
     if root.realPath:
-        files.add(_real(root.realPath))
-        try:
-            layers, assets, _unresolved = UsdUtils.ComputeAllDependencies(root.identifier)
-        except Exception:   # a broken dependency is the reader's to report; the opened layers still count
-            layers, assets = [], []
-        files.update(_real(l.realPath) for l in layers if l.realPath)
-        files.update(_real(a) for a in assets if a)
+        files.update(dependency_files(root.realPath))
+    return sorted(files)
+
+
+def dependency_files(path: str) -> list[str]:
+    """Real paths of the layer file ``path`` and of every file it depends on, as USD
+    resolves them (sub-layers, references, payloads, value clips), without composing a
+    stage. A dependency USD cannot open is left for the reader to report."""
+    from pxr import UsdUtils
+
+    files = {_real(path)}
+    try:
+        layers, assets, _unresolved = UsdUtils.ComputeAllDependencies(path)
+    except Exception:
+        layers, assets = [], []
+    files.update(_real(l.realPath) for l in layers if l.realPath)
+    files.update(_real(a) for a in assets if a)
     return sorted(files)
 
 
@@ -165,6 +177,19 @@ def _check_folder(out: Output) -> None:
         raise MocapEditError(f"{out.option} {out.path}: {probe} is a file, not a folder")
     if probe and os.path.isdir(probe) and not os.access(probe, os.W_OK | os.X_OK):
         raise MocapEditError(f"{out.option} {out.path}: the folder {probe} is not writable")
+    if not os.path.isdir(folder):
+        # Made when the file is written; try the first folder to make now (and remove it):
+        # some file systems (/proc, read-only mounts) refuse whatever the permissions say.
+        missing = folder
+        while os.path.dirname(missing) and os.path.dirname(missing) != missing and \
+                not os.path.exists(os.path.dirname(missing)):
+            missing = os.path.dirname(missing)
+        try:
+            os.mkdir(missing)
+            os.rmdir(missing)
+        except OSError as exc:
+            raise MocapEditError(f"{out.option} {out.path}: cannot make the folder {missing} "
+                                 f"({exc.strerror or exc})") from None
     if os.path.isdir(folder):
         # The only sure test (read-only mounts, ACLs, root on a network share) is to try.
         try:

@@ -51,7 +51,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--split-components", action="store_true",
                    help="solve each shot's path components and foot locking as tasks of their own (same bytes)")
     p.add_argument("--force", action="store_true", help="solve shots whose outputs are up to date too")
-    p.add_argument("--summary", metavar="JSON", help="where to write the summary (default OUTDIR/batch-summary.json)")
+    p.add_argument("--summary", metavar="JSON",
+                   help="where to write the summary, a .json file (default OUTDIR/batch-summary.json); "
+                        "like the edits layers, it may not name a file any shot reads")
     add_solve_options(p)
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(run=run)
@@ -60,11 +62,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args) -> int:
     from mocapedit.pipeline import batch
     from mocapedit.model.errors import MocapEditError
-    from mocapedit.usd.outputs import save_text
+    from mocapedit.usd.outputs import record_committed, save_text
 
     if args.workers is not None and args.workers < 1:
         raise MocapEditError(f"--workers must be at least 1, got {args.workers}")
-    jobs = batch.plan(args.shots, args.outdir, args.suffix)
+    jobs = batch.plan(args.shots, args.outdir, args.suffix, summary=args.summary)
     options = {"guides": args.guides, "collisions": args.collisions}
     if args.match_speed is not None:
         options["match_speed"] = args.match_speed
@@ -80,6 +82,7 @@ def run(args) -> int:
         print(f"batch: {done - failed} done, {failed} failed, {remaining} remaining  "
               f"[{os.path.basename(result.shot)} {what}]", file=sys.stderr, flush=True)
 
+    started = time.time()
     try:
         results = batch.run(jobs, options, client, force=args.force, on_result=report,
                             split=args.split_components)
@@ -87,6 +90,10 @@ def run(args) -> int:
         client.close()
         if cluster is not None:
             cluster.close()
+        # The workers write the edits layers (each whole, or not at all): a stop names those
+        # written by now, as the files this process wrote are named.
+        for path in batch.written_since(jobs, started):
+            record_committed(path)
     summary = batch.summary(results, options, time.perf_counter() - t)
     path = args.summary or os.path.join(args.outdir, batch.SUMMARY)
     save_text(path, json.dumps(summary, indent=2, sort_keys=True) + "\n")
