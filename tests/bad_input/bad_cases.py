@@ -238,6 +238,8 @@ shot("layer-time-codes", "", r"base\.usda: sublayer says timeCodesPerSecond = 30
      r"timeCodesPerSecond", header=SHOT_HEADER.replace("    timeCodesPerSecond = 24\n", ""), base=_base_at_30_fps)
 shot("layer-unauthored-up-axis", "", r"base\.usda: sublayer says upAxis = Z.*does not author upAxis",
      header=SHOT_HEADER.replace('    upAxis = "Z"\n', ""))
+shot("layer-shot-range-inverted", "", r"shot\.usda: endTimeCode -50 is before startTimeCode 0",
+     header=SHOT_HEADER.replace("endTimeCode = 23", "endTimeCode = -50"))
 shot("layer-not-usd", "", r"shot\.usda: cannot be read as a USD stage", header="this is not usd\n")
 # A text layer that breaks off: USD's parser says where (file, line and column).
 shot("layer-syntax", 'def Xform "Broken" (\n', r"shot\.usda: cannot be read as a USD stage: .*shot\.usda:\d+:\d+: Expected")

@@ -94,6 +94,9 @@ def check_composition(stage: Usd.Stage) -> None:
 def stage_info(stage: Usd.Stage) -> model.StageInfo:
     root = stage.GetRootLayer()
     start, end = shot_range(stage)
+    if start is not None and end is not None and end < start:
+        raise MocapEditError(f"{root.identifier}: endTimeCode {end:g} is before startTimeCode {start:g}; "
+                             f"the shot plays from its start to its end: author them in that order")
     return model.StageInfo(
         up_axis=str(UsdGeom.GetStageUpAxis(stage)),
         meters_per_unit=float(UsdGeom.GetStageMetersPerUnit(stage)),
