@@ -564,6 +564,21 @@ command("report-syntax", r"broken\.usda: cannot be read as a USD layer: .*broken
 command("solve-input-folder", r"case: is a folder; give the shot's stage file",
         lambda f: ["solve", str(f), "-o", str(f / "out.usda")])
 command("report-folder", r"case: is a folder", lambda f: ["report", str(f)])
+
+
+def _bvhs(folder: Path, *names: str) -> list[str]:
+    for name in names:
+        (folder / name).write_text(GOOD_BVH)
+    return [str(folder / name) for name in names]
+
+
+command("import-several-into-a-layer", r"-o .*two\.usda: 2 clips are written into a folder",
+        lambda f: ["import-bvh", *_bvhs(f, "a.bvh", "b.bvh"), "-o", str(f / "two.usda")], outputs=("two.usda",))
+command("import-one-into-a-bvh", r"-o .*out\.bvh: a clip is written as a USD layer",
+        lambda f: ["import-bvh", *_bvhs(f, "a.bvh"), "-o", str(f / "out.bvh")], outputs=("out.bvh",))
+command("import-one-onto-a-text-file", r"-o .*notes\.txt: a clip is written as a USD layer",
+        lambda f: ((f / "notes.txt").write_text("keep me"),
+                   ["import-bvh", *_bvhs(f, "a.bvh"), "-o", str(f / "notes.txt")])[1], outputs=())
 command("report-missing-file", r"gone\.usda: no such file", lambda f: ["report", str(f / "gone.usda")])
 command("detect-max-speed-negative", r"max-speed", lambda f: ["detect-stationary", str(f / "shot.usda"), "-o",
                                                               str(f / "out.usda"), "--max-speed", "-1"])

@@ -105,7 +105,16 @@ def _inputs(args) -> tuple[list[str], bool]:
             files.append(item)
         else:
             raise MocapEditError(f"{item}: no such file or folder")
-    if os.path.isdir(args.output) or not args.output.lower().endswith(USD_EXTENSIONS):
+    out = args.output
+    is_layer = out.lower().endswith(USD_EXTENSIONS)
+    if folder and is_layer and not os.path.isdir(out):
+        raise MocapEditError(f"-o {out}: {len(files)} clips are written into a folder, one layer each; "
+                             f"give a folder (a name without {', '.join(USD_EXTENSIONS)}), or one .bvh for this layer")
+    if not folder and not is_layer and not os.path.isdir(out) and \
+            (os.path.isfile(out) or os.path.splitext(out.rstrip("/" + os.sep))[1]):
+        raise MocapEditError(f"-o {out}: a clip is written as a USD layer ({', '.join(USD_EXTENSIONS)}); "
+                             f"give such a file, or a folder to write it into")
+    if os.path.isdir(out) or not is_layer:
         folder = True
     return files, folder
 
