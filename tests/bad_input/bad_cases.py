@@ -604,6 +604,7 @@ preview("resolution-huge-height", r"--resolution: at most 8192 pixels a side", "
 preview("bounds-inverted", r"--bounds: the maximum must exceed the minimum", "--bounds", "5", "5", "1", "1")
 preview("step-zero", r"--step must be positive", "--step", "0")
 preview("step-nan", r"--step must be positive", "--step", "nan")
+preview("step-tiny", r"--step: 1e-09 time codes between samples asks for .* use at least", "--step", "1e-9")
 preview("edits-missing", r"nothere\.usda: no such file", "--edits", "nothere.usda")
 preview("output-jpg", r"out\.jpg: this file is written as \.png or \.exr", output="out.jpg")
 

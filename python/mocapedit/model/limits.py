@@ -36,13 +36,22 @@ def check_settings(data: StageData) -> None:
         raise prim_error(where, f"{s.max_iterations} is more than the {MAX_ITERATIONS} collision iterations a "
                          "solve may take; a crowd that is not clear after a few dozen will not be clear after "
                          "more (look at the report's remaining collisions)", "maxIterations")
-    samples = sum(float(a.sample_times[-1] - a.sample_times[0]) / s.sample_step + 1.0
+    too_many = sample_step_problem(data, s.sample_step)
+    if too_many:
+        raise prim_error(where, too_many, "sampleStep")
+
+
+def sample_step_problem(data: StageData, step: float) -> str | None:
+    """What is wrong with ``step`` time codes between the overlap checks' samples of the
+    shot ``data`` (more samples than :data:`MAX_SAMPLES`), or None when it is fine."""
+    samples = sum(float(a.sample_times[-1] - a.sample_times[0]) / step + 1.0
                   for a in data.agents.values() if len(a.sample_times))
-    if samples > MAX_SAMPLES:
-        least = s.sample_step * samples / MAX_SAMPLES
-        raise prim_error(where, f"{s.sample_step:g} time codes between samples asks for {samples:.3g} collision "
-                         f"samples over {len(data.agents)} agents, more than the {MAX_SAMPLES:.0e} a solve may "
-                         f"take; use at least {_round_up(least):g}", "sampleStep")
+    if samples <= MAX_SAMPLES:
+        return None
+    least = step * samples / MAX_SAMPLES
+    return (f"{step:g} time codes between samples asks for {samples:.3g} collision samples over "
+            f"{len(data.agents)} agents, more than the {MAX_SAMPLES:.0e} a solve may take; use at least "
+            f"{_round_up(least):g}")
 
 
 def check_constraint_times(data: StageData) -> None:

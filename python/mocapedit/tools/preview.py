@@ -33,6 +33,7 @@ from mocapedit.geometry import ground, trajectory
 from mocapedit.inspect import inspection, overlaps
 from mocapedit.solve import collisions
 from mocapedit.usd import edits_format, outputs, reader
+from mocapedit.model import limits
 from mocapedit.model.errors import MocapEditError
 from mocapedit.inspect.inspection import Crowd, Remaining
 from mocapedit.model.progress import Progress, Silent
@@ -110,6 +111,9 @@ def load(stage_path: str, edits_path: str | None = None, progress: Progress | No
 
     progress.message(f"reading {os.path.basename(stage_path)}")
     source = reader.read_stage(source_stage, progress)
+    too_many = sample_step and limits.sample_step_problem(source, float(sample_step))
+    if too_many:
+        raise MocapEditError(f"--step: {too_many}")
     source_traj = _trajectories(source, progress, "source paths")
     edited = edited_traj = None
     if edited_stage is not None:
