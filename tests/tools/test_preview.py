@@ -188,6 +188,27 @@ def test_preview_errors_name_the_problem(tmp_path, toy_stage):
     assert not list(tmp_path.glob("*.png")) and not list(tmp_path.glob(".x*"))
 
 
+def test_edits_of_another_shot_or_an_older_input_are_named(tmp_path, toy_stage):
+    """An edits layer solved for another shot is refused (it drew that shot's constraints over
+    this one, with USD warnings); one solved before the input changed is previewed with a note."""
+    from conftest import write_toy_stage
+    other = write_toy_stage(tmp_path / "other" / "crowd.usda", agents=5)
+    edits = tmp_path / "other" / "crowd.edits.usda"
+    solve(str(other), output=str(edits))
+    proc = run_cli("preview", toy_stage, "--edits", edits, "-o", tmp_path / "x.png")
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert "was solved for" in proc.stderr and "crowd.usda" in proc.stderr and "shot.usda" in proc.stderr
+    assert not (tmp_path / "x.png").exists()
+    # The same shot, changed after its solve: previewed, with a note that says so.
+    own = tmp_path / "shot.edits.usda"
+    solve(str(toy_stage), output=str(own))
+    assert "solved from" not in run_cli("preview", toy_stage, "--edits", own, "-o", tmp_path / "a.png").stderr
+    toy_stage.write_text(toy_stage.read_text() + "\n")
+    proc = run_cli("preview", toy_stage, "--edits", own, "-o", tmp_path / "b.png")
+    assert proc.returncode == 0, proc.stderr
+    assert "has changed since" in proc.stderr
+
+
 def test_a_stage_without_edits_previews_its_source_paths(tmp_path, toy_stage):
     out = tmp_path / "src.png"
     proc = run_cli("preview", toy_stage, "-o", out)

@@ -32,7 +32,7 @@ import numpy as np
 from mocapedit.geometry import ground, trajectory
 from mocapedit.inspect import inspection, overlaps
 from mocapedit.solve import collisions
-from mocapedit.usd import edits_format, outputs, reader
+from mocapedit.usd import edits_format, outputs, reader, stage_io
 from mocapedit.model import limits
 from mocapedit.model.errors import MocapEditError
 from mocapedit.inspect.inspection import Crowd, Remaining
@@ -77,6 +77,31 @@ def _trajectories(data, progress: Progress, name: str) -> dict:
     return out
 
 
+def _check_edits_match(stage_path: str, source_stage, edits_layer, progress: Progress) -> None:
+    """Raises MocapEditError when ``edits_layer`` was solved for another shot (another root
+    layer name and other content); notes when it was solved from this shot before it changed."""
+    from pxr import Usd
+
+    recorded = edits_format.content_hash(edits_layer)
+    if not recorded or recorded == stage_io.content_hash(source_stage):
+        return
+    inputs = [str(x) for x in (edits_format.data(edits_layer) or {}).get(edits_format.INPUTS, [])]
+    solved_for = inputs[0] if inputs else "another input"
+    name = os.path.basename(edits_layer.realPath or edits_layer.identifier)
+    # A composed stage sub-layers the input it was solved for: its hash is that layer's stage's.
+    used = {os.path.basename(l.realPath or l.identifier): l for l in source_stage.GetUsedLayers()}
+    if inputs and os.path.basename(solved_for) not in used:
+        raise MocapEditError(f"{name} was solved for {solved_for}, not {stage_path}; preview it over the "
+                             f"shot it was solved for (or solve {stage_path} to get its own edits layer)")
+    root = used.get(os.path.basename(solved_for))
+    if root is not None and root != source_stage.GetRootLayer() and \
+            stage_io.content_hash(Usd.Stage.Open(root)) == recorded:
+        return
+    progress.message(f"note: {name} was solved from {solved_for} as it was then, and its content has "
+                     f"changed since; the preview shows those edits over the shot as it is now (solve again "
+                     f"to see what it gets now)")
+
+
 def load(stage_path: str, edits_path: str | None = None, progress: Progress | None = None,
          sample_step: float | None = None) -> Scene:
     """Reads what a preview shows.
@@ -109,6 +134,8 @@ def load(stage_path: str, edits_path: str | None = None, progress: Progress | No
             source_stage = Usd.Stage.Open(source_stage.GetRootLayer())
             source_stage.MuteLayer(edits_layer.identifier)
 
+    if edits_layer is not None:
+        _check_edits_match(stage_path, source_stage, edits_layer, progress)
     progress.message(f"reading {os.path.basename(stage_path)}")
     source = reader.read_stage(source_stage, progress)
     too_many = sample_step and limits.sample_step_problem(source, float(sample_step))
