@@ -1,11 +1,12 @@
 """USD's own errors as a user reads them: what the CLI prints when USD refuses a file."""
 from __future__ import annotations
 
+import contextlib
 import re
 
 from pxr import Tf
 
-__all__ = ["USD_ERRORS", "usd_error_text", "usd_messages"]
+__all__ = ["USD_ERRORS", "usd_error_text", "usd_messages", "usd_diagnostics_held"]
 
 #: The exceptions USD raises (Tf errors turned into Python exceptions).
 USD_ERRORS = (Tf.ErrorException,)
@@ -35,3 +36,21 @@ def usd_error_text(exc: BaseException) -> str | None:
     if isinstance(exc, USD_ERRORS):
         return "; ".join(usd_messages(str(exc))) or str(exc).strip()
     return None
+
+
+@contextlib.contextmanager
+def usd_diagnostics_held():
+    """Holds the warnings and status messages USD would print to stderr (with the C++
+    function and source line of each) while the block runs, and yields the list they go
+    to (their texts), for the caller to report as it sees fit: opening a stage whose
+    sub-layer is missing prints "Warning: in _ReportErrors at line 3326 of stage.cpp"
+    before the reader's own error says which file is missing and where."""
+    from pxr import UsdUtils
+
+    held: list[str] = []
+    delegate = UsdUtils.CoalescingDiagnosticDelegate()
+    try:
+        yield held
+    finally:
+        held.extend(d.commentary for d in delegate.TakeUncoalescedDiagnostics())
+        del delegate

@@ -105,9 +105,12 @@ def dependency_files(path: str) -> list[str]:
     stage. A dependency USD cannot open is left for the reader to report."""
     from pxr import UsdUtils
 
+    from mocapedit.usd.errors import usd_diagnostics_held
+
     files = {_real(path)}
     try:
-        layers, assets, _unresolved = UsdUtils.ComputeAllDependencies(path)
+        with usd_diagnostics_held():   # what cannot be resolved is the reader's to report
+            layers, assets, _unresolved = UsdUtils.ComputeAllDependencies(path)
     except Exception:
         layers, assets = [], []
     files.update(_real(l.realPath) for l in layers if l.realPath)

@@ -9,6 +9,7 @@ raises :class:`~mocapedit.model.errors.MocapEditError` naming the prim and prope
 from __future__ import annotations
 
 import re
+import sys
 
 import numpy as np
 from pxr import Sdf, Usd, UsdGeom, UsdSkel
@@ -17,7 +18,7 @@ from mocapedit.geometry import contacts
 from mocapedit.model import data as model
 from mocapedit.model.errors import MocapEditError, prim_error
 from mocapedit.model.names import hips_joint, resolve_joint
-from mocapedit.usd.errors import usd_messages
+from mocapedit.usd.errors import usd_diagnostics_held, usd_messages
 from mocapedit.usd.evaluate import shot_range, skeleton_candidates
 
 AGENT_API = "MocapAgentAPI"
@@ -36,11 +37,15 @@ def open_stage(path: str) -> Usd.Stage:
     if os.path.isdir(path):
         raise MocapEditError(f"{path}: is a folder; give the shot's stage file (.usda, .usdc or .usd)")
     try:
-        stage = Usd.Stage.Open(str(path))
+        with usd_diagnostics_held() as said:
+            stage = Usd.Stage.Open(str(path))
     except Exception as exc:  # pxr raises Tf.ErrorException with a multi-line text
         raise MocapEditError(f"{path}: cannot be read as a USD stage: {'; '.join(usd_messages(str(exc)))}") from None
     if stage is None:
         raise MocapEditError(f"{path}: cannot be read as a USD stage")
+    if not stage.GetCompositionErrors():   # those are check_composition's to report, file by file
+        for text in said:
+            print(f"USD: {text}", file=sys.stderr)
     return stage
 
 
