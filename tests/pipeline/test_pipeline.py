@@ -157,6 +157,16 @@ def test_cli_help_and_plugin_path():
     assert proc.stdout.strip() == mocapedit.plugin_path()
 
 
+@pytest.mark.parametrize("command", ["solve", "batch"])
+@pytest.mark.parametrize("pair", [("--collisions", "--no-collisions"), ("--match-speed", "--no-match-speed")])
+def test_a_switch_and_its_opposite_together_are_a_usage_error(tmp_path, toy_stage, command, pair):
+    """Given both, the last one won, silently."""
+    out = tmp_path / "out"
+    proc = run_cli(command, toy_stage, "-o", out / "e.usda" if command == "solve" else out, *pair)
+    assert proc.returncode == 2 and "not allowed with argument" in proc.stderr, proc.stderr
+    assert not out.exists()
+
+
 def test_python_api_accepts_an_open_stage(toy_stage):
     stage = Usd.Stage.Open(str(toy_stage))
     result = solve(stage)
