@@ -336,7 +336,8 @@ def build_layer(content: LayerContent) -> Sdf.Layer:
     edits_format.write(layer, data)
     with Sdf.ChangeBlock():
         root = Sdf.PrimSpec(layer.pseudoRoot, ROOT.name, Sdf.SpecifierDef, "Scope")
-        Sdf.PrimSpec(root, GUIDES.name, Sdf.SpecifierDef, "Scope")
+        if content.guides:   # none with guides off: no empty scope
+            Sdf.PrimSpec(root, GUIDES.name, Sdf.SpecifierDef, "Scope")
         # Names an earlier solve's layer in the input already uses: a prim of the same name here
         # would compose with it.
         taken: set[str] = set(info.taken_animation_names)
