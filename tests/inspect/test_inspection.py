@@ -241,6 +241,10 @@ def test_report_cli_json_and_agent_filter(scene):
     assert [c["prim"] for c in data["constraints"]] == ["/Edits/rel"]
     assert data["metersPerUnit"] == 0.01 and data["stats"]["remainingOverlaps"] == 1
     assert len(data["contentHash"]) == 64
+    # A pattern that matches nobody says so (it printed an empty report, exit 0).
+    proc = run_cli("report", edits, "--agent", "/nomatch*")
+    assert proc.returncode == 1 and "--agent /nomatch*: matches no agent" in proc.stderr, proc.stderr
+    assert "/World/agent" in proc.stderr
 
 
 def test_report_cli_fails_clearly_without_a_report(tmp_path, toy_stage):

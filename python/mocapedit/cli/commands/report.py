@@ -33,9 +33,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args) -> int:
     from mocapedit.model import report
+    from mocapedit.model.errors import MocapEditError
     from mocapedit.usd.report_io import read_report
 
-    stored = report.select(read_report(args.edits), args.agent)
+    whole = read_report(args.edits)
+    stored = report.select(whole, args.agent)
+    if args.agent and not stored.report.agents:
+        some = sorted(whole.report.agents)[:2]
+        raise MocapEditError(f"--agent {' --agent '.join(args.agent)}: matches no agent of the report"
+                             + (f" (its agents are like {', '.join(some)})" if some else " (it lists none)"))
     if args.json:
         print(json.dumps(stored.to_dict(), indent=2, sort_keys=True))
     else:
