@@ -226,6 +226,11 @@ def test_quiet_silences_solve_and_preview(tmp_path, toy_stage):
     assert proc.returncode == 0 and proc.stderr == "" and proc.stdout == ""
     loud = run_cli("preview", toy_stage, "--edits", edits, "-o", tmp_path / "p.png")
     assert "source paths: 3 agents in" in loud.stderr
+    # A small image of a long, narrow shot: the equal aspect widens a fixed limit, and
+    # matplotlib's log line about it was printed through -q.
+    for resolution in ("300", "600", "200x800"):
+        proc = run_cli("preview", toy_stage, "-o", tmp_path / "n.png", "-q", "--resolution", resolution)
+        assert proc.returncode == 0 and proc.stderr == "", proc.stderr
 
 
 def test_preview_reports_progress_through_the_given_progress(solved, tmp_path):

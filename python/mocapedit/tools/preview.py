@@ -23,7 +23,9 @@ as USD matrices). Channels, all 32-bit float:
 """
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
 import os
 from dataclasses import dataclass, field
 
@@ -75,6 +77,19 @@ def _trajectories(data, progress: Progress, name: str) -> dict:
         task.update(i + 1)
     task.done()
     return out
+
+
+@contextlib.contextmanager
+def _fixed_limits_widened():
+    """Both plot limits are set on purpose and the equal aspect widens one of them
+    (``adjustable="datalim"``): matplotlib's log line saying so is not for the user."""
+    log = logging.getLogger("matplotlib.axes._base")
+    level = log.level
+    log.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        log.setLevel(level)
 
 
 def _check_edits_match(stage_path: str, source_stage, edits_layer, progress: Progress) -> None:
@@ -644,14 +659,16 @@ def write_png(scene: Scene, path: str, resolution=None, bounds: np.ndarray | Non
     fig.legend(handles=legend, loc="upper left", bbox_to_anchor=(1.0 - legend_frac + 0.015, 1.0 - margin),
                fontsize=8.5 * scale, frameon=False, title="legend", title_fontsize=9.5 * scale,
                alignment="left")
-    fig.canvas.draw()
-    ax.apply_aspect()   # the base canvas does not draw: settle the equal-aspect limits savefig will use
+    with _fixed_limits_widened():
+        fig.canvas.draw()
+        ax.apply_aspect()   # the base canvas does not draw: settle the equal-aspect limits savefig will use
     affine = ax.transData.get_affine().get_matrix()       # [xd, yd, 1] = A @ [a, b, 1], origin bottom left
     flip = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, fig.bbox.height], [0.0, 0.0, 1.0]])
     to_pixel = (flip @ affine).T                           # row-vector convention, row 0 at the top
     meta = {"mocapedit:worldToPixel": json.dumps(to_pixel.tolist()),
             "mocapedit:planAxes": "x z" if up == "Y" else "x y", "Software": "mocapedit"}
-    outputs.save_with(path, lambda tmp: fig.savefig(tmp, format="png", dpi=dpi, metadata=meta))
+    with _fixed_limits_widened():
+        outputs.save_with(path, lambda tmp: fig.savefig(tmp, format="png", dpi=dpi, metadata=meta))
     task.done()
     return to_pixel
 
