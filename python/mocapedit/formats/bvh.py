@@ -360,7 +360,7 @@ def _header_line(path: str, lines: _Lines, pattern: re.Pattern, what: str) -> tu
 def _parse_motion_header(path: str, lines: _Lines, skeleton: BvhSkeleton) -> None:
     number, value = _header_line(path, lines, _FRAMES, "Frames")
     if not _WHOLE.fullmatch(value):
-        raise _error(path, number, f"frame count '{value[:20]}' is not a whole number")
+        raise _error(path, number, f"frame count '{value[:20]}' is not a whole number of frames (0 or more)")
     skeleton.frame_count = int(value)
     skeleton.frames_line = number
     number, value = _header_line(path, lines, _FRAME_TIME, "Frame Time")
