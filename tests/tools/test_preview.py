@@ -233,6 +233,41 @@ def test_quiet_silences_solve_and_preview(tmp_path, toy_stage):
         assert proc.returncode == 0 and proc.stderr == "", proc.stderr
 
 
+@pytest.mark.parametrize("resolution", ["600", "300", "400x900", "1200x300"])
+def test_small_and_narrow_images_keep_the_legend_inside(solved, tmp_path, resolution):
+    """The legend's column is wide enough for its text at any size (at 600 pixels it was cut
+    at the image's right edge: "collision left (1 pai")."""
+    scene, *_ = solved
+    out = tmp_path / "p.png"
+    preview.write(scene, str(out), resolution)
+    with Image.open(out) as im:
+        rgb = np.asarray(im.convert("RGB")).astype(int)
+    edge = rgb[:, -3:]
+    assert (edge > 230).all(), "something is drawn at the right edge"
+
+
+@pytest.mark.parametrize("resolution", ["800", "600", "300", "1200x300", "1600"])
+def test_the_title_and_its_subtitle_do_not_overlap(solved, tmp_path, resolution):
+    """Above the plot, the title and the line under it are two runs of ink with paper between
+    (at 800 pixels the subtitle was drawn over the title's descenders)."""
+    scene, *_ = solved
+    out = tmp_path / "p.png"
+    preview.write(scene, str(out), resolution)
+    with Image.open(out) as im:
+        grey = np.asarray(im.convert("L")).astype(int)
+    h, w = grey.shape
+    # The plot's frame: the first row, from the top, dark over a third of the image's width.
+    frame = next(r for r in range(h) if (grey[r, : int(0.7 * w)] < 100).sum() > w / 3)
+    ink = (grey[:frame - 1, : int(0.6 * w)] < 200).any(axis=1)
+    runs = np.flatnonzero(np.diff(np.concatenate([[0], ink.astype(int), [0]])) == 1)
+    assert len(runs) >= 2, f"one run of text rows above the plot ({ink.sum()} rows)"
+    # Below the plot, the tick labels and the axis label, clear of the image's edge.
+    last = max(r for r in range(h) if (grey[r, : int(0.7 * w)] < 100).sum() > w / 3)
+    ink = (grey[last + 2:, : int(0.6 * w)] < 200).any(axis=1)
+    runs = np.flatnonzero(np.diff(np.concatenate([[0], ink.astype(int), [0]])) == 1)
+    assert len(runs) >= 2 and not ink[-1], "the axis label is cut at the bottom"
+
+
 def test_preview_reports_progress_through_the_given_progress(solved, tmp_path):
     scene, stage, edits, _ = solved
     stream = io.StringIO()

@@ -79,6 +79,16 @@ def _trajectories(data, progress: Progress, name: str) -> dict:
     return out
 
 
+#: Width of the legend's column, in pixels at font scale 1 (its longest line, "collision
+#: left (N pairs)", with its marker and the column's padding).
+LEGEND_PIXELS = 230.0
+
+
+def _font_scale(w: int, h: int) -> float:
+    """How much the fonts and strokes of a w by h image are scaled from their sizes at 900 pixels."""
+    return max(min(w, h) / 900.0, 0.6)
+
+
 @contextlib.contextmanager
 def _fixed_limits_widened():
     """Both plot limits are set on purpose and the equal aspect widens one of them
@@ -513,14 +523,25 @@ def write_png(scene: Scene, path: str, resolution=None, bounds: np.ndarray | Non
             plot_h = h * (1.0 - 2 * margin)
             w = int(round(plot_h / aspect / (1.0 - legend_frac - margin)))
             w = max(w, int(0.6 * h))
+    # The legend's text needs about LEGEND_PIXELS at the scale of the fonts below, whatever
+    # the image's width: a narrow image gives its column a larger share.
+    legend_frac = max(legend_frac, LEGEND_PIXELS * _font_scale(w, h) / w)
     dpi = 100.0
     fig = Figure(figsize=(w / dpi, h / dpi), dpi=dpi)
     # Draw on the canvas savefig uses, so the limits the aspect fixes at the draw below are
     # the ones saved (a narrow view has one axis widened, and the matrix must know it).
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     FigureCanvasAgg(fig)
-    scale = max(min(w, h) / 900.0, 0.6)       # fonts and strokes follow the image size
-    ax = fig.add_axes((margin, margin, 1.0 - legend_frac - margin, 1.0 - 2 * margin))
+    scale = _font_scale(w, h)                 # fonts and strokes follow the image size
+    # The title block above the plot, laid out in pixels: the title's line, a gap, the
+    # subtitle's line, a gap; the plot starts below it (or at the usual margin, if lower).
+    pt = dpi / 72.0
+    title_top = 0.25 * margin * h
+    sub_top = title_top + 1.3 * 12 * scale * pt + 2.0
+    top = max(margin * h, sub_top + 1.3 * 9 * scale * pt + 4.0) / h
+    # Below it, the tick labels and the axis label (9 points each, and the ticks).
+    bottom = max(margin * h, 2 * 1.4 * 9 * scale * pt + 18.0) / h
+    ax = fig.add_axes((margin, bottom, 1.0 - legend_frac - margin, 1.0 - bottom - top))
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
@@ -652,11 +673,11 @@ def write_png(scene: Scene, path: str, resolution=None, bounds: np.ndarray | Non
 
     counts = (f"{len(agents)} agents, {len(changed)} edited" if scene.edited else
               f"{len(agents)} agents (no edits)")
-    fig.suptitle(f"{scene.title}: top view", x=margin, ha="left", y=1.0 - 0.25 * margin,
+    fig.suptitle(f"{scene.title}: top view", x=margin, ha="left", va="top", y=1.0 - title_top / h,
                  fontsize=12 * scale, fontweight="bold")
-    fig.text(margin, 1.0 - 0.62 * margin, counts + f"; looking down {up}", fontsize=9 * scale,
+    fig.text(margin, 1.0 - sub_top / h, counts + f"; looking down {up}", va="top", fontsize=9 * scale,
              color=(0.3, 0.3, 0.3))
-    fig.legend(handles=legend, loc="upper left", bbox_to_anchor=(1.0 - legend_frac + 0.015, 1.0 - margin),
+    fig.legend(handles=legend, loc="upper left", bbox_to_anchor=(1.0 - legend_frac + 0.015, 1.0 - top),
                fontsize=8.5 * scale, frameon=False, title="legend", title_fontsize=9.5 * scale,
                alignment="left")
     with _fixed_limits_widened():
