@@ -42,6 +42,7 @@ def write_scene(path, up_axis="Z"):
     r.CreateFrameAttr(20)
     r.CreateTargetRel().SetTargets(["/World/agent3"])
     r.CreateTargetFrameAttr(20)
+    r.CreateOffsetAttr((0.0, 0.0, 0.0))   # on top of each other: the soft link the group pulls apart
     g = schema.AgentGroup.Define(stage, "/Edits/group")
     g.CreateMembersRel().SetTargets(["/World/agent2", "/World/agent3"])
     region = schema.AvoidRegion.Define(stage, "/Edits/fountain")

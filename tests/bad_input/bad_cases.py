@@ -304,6 +304,7 @@ OWN = {
         "targetframe-double": ("targetFrame", "uniform double targetFrame = 4.5", r"targetFrame: is authored as double"),
         "offset-nan": ("offset", "uniform vector3d offset = (nan, 0, 0)", r"offset: must be a finite number"),
         "offset-float": ("offset", "uniform float offset = 2", r"offset: is authored as float"),
+        "no-offset": ("offset", None, r"offset: has no offset; author the agent's root position"),
         "space": ("space", 'uniform token space = "local"', r"space: space must be 'world' or 'target'"),
     },
     ("MocapTimeConstraint", "Beat", TIME): {

@@ -672,11 +672,14 @@ class StageReader:
         space = str(_get(prim, "space", "world"))
         if space not in ("world", "target"):
             raise prim_error(prim.GetPath(), f"space must be 'world' or 'target', got '{space}'", "space")
+        offset = _get(prim, "offset")
+        if offset is None:   # the schema gives it no fallback: (0, 0, 0) would stack the two agents
+            raise prim_error(prim.GetPath(), "has no offset; author the agent's root position at frame minus "
+                             "the target's at targetFrame, in stage units (it has no default)", "offset")
         return model.RelativeConstraint(
             path=str(prim.GetPath()), agent=agent, frame=self._frame(prim, "frame", agent), target=target,
             target_frame=self._frame(prim, "targetFrame", target),
-            offset=np.array(_get(prim, "offset", (0, 0, 0)), dtype=np.float64), space=space, hard=hard,
-            weight=weight)
+            offset=np.array(offset, dtype=np.float64), space=space, hard=hard, weight=weight)
 
     def read_time(self, prim):
         agent = self._agent_target(prim, "agent")
