@@ -142,6 +142,15 @@ shot("agent-pathcurve-one-point", agent_over("rel mocap:pathCurve = </Curves/c>"
      'def Scope "Curves"\n{\n' + _indent(prim("BasisCurves", "c", 'uniform token type = "linear"\n'
                                              "point3f[] points = [(0, 0, 0)]\nint[] curveVertexCounts = [1]"), 4) + "\n}\n",
      r"</Curves/c>\.points: path curve needs at least two points")
+# All points in one place: as a linear curve it had no length; as a cubic B-spline its
+# evaluation's rounding gave it a direction (the agent walked off at 45 degrees).
+for _basis in ("bspline", "catmullRom"):
+    shot(f"agent-pathcurve-cubic-{_basis}-coincident", agent_over("rel mocap:pathCurve = </Curves/c>") +
+         'def Scope "Curves"\n{\n' + _indent(prim("BasisCurves", "c", f'uniform token type = "cubic"\n'
+                                                 f'uniform token basis = "{_basis}"\n'
+                                                 "point3f[] points = [(1, 0, 1), (1, 0, 1), (1, 0, 1), (1, 0, 1)]\n"
+                                                 "int[] curveVertexCounts = [4]"), 4) + "\n}\n",
+         r"</Curves/c>\.points: .*path curve has no length")
 shot("agent-pathcurve-inactive", agent_over("rel mocap:pathCurve = </Curves/c>") +
      'def Scope "Curves"\n{\n' + _indent(prim("BasisCurves", "c", 'uniform token type = "linear"\n'
                                              "point3f[] points = [(0, 0, 0), (100, 0, 0)]", 'active = false'), 4) + "\n}\n",

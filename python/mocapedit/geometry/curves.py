@@ -210,7 +210,10 @@ def remap(uv: np.ndarray, curve: np.ndarray, stationary: list[tuple[int, int]], 
     s = arc + along
 
     # The curve by arc length, with its tangent angle interpolated so normals turn smoothly.
-    keep = np.concatenate([[True], np.linalg.norm(np.diff(curve, axis=0), axis=1) > 0])
+    # Steps below the rounding of the evaluation (a B-spline of coincident points comes out
+    # as a few ulps of noise, pointing anywhere) are no steps.
+    tiny = 1e-9 * max(1.0, float(np.abs(curve).max(initial=0.0)))
+    keep = np.concatenate([[True], np.linalg.norm(np.diff(curve, axis=0), axis=1) > tiny])
     poly = curve[keep]
     if len(poly) < 2:
         raise ValueError("the path curve has no length")
