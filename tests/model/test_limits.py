@@ -41,6 +41,25 @@ def test_endless_iterations_are_refused(crowd):
         solve(crowd, max_iterations=limits.MAX_ITERATIONS + 1)
 
 
+@pytest.mark.parametrize("key, value, needle", [
+    ("sample_step", 0, r"solve\(sample_step=0\): must be positive"),          # ZeroDivisionError
+    ("sample_step", -1.0, r"solve\(sample_step=-1\.0\): must be positive"),   # IndexError
+    ("sample_step", float("nan"), r"sample_step=nan\): must be a finite number"),
+    ("max_wait", float("nan"), r"max_wait=nan\): must be a finite number of seconds"),  # from the C++ solver
+    ("max_wait", -1.0, r"max_wait=-1\.0\): must be a finite number of seconds, 0 or more"),  # solved silently
+    ("max_iterations", "10", r"max_iterations='10'\): must be a whole number"),      # TypeError
+    ("margin", -0.5, r"margin=-0\.5\): must not be negative"),
+    ("min_time_interval", 2.0, r"min_time_interval=2\.0\): must be in \(0, 1\]"),
+    ("foot_locking", "yes", r"foot_locking='yes'\): must be True or False"),
+    ("speed", 1.0, r"unknown solve setting 'speed'"),
+])
+def test_solve_keyword_settings_are_held_to_the_prims_rules(crowd, key, value, needle):
+    """``solve(max_wait=...)`` and the other settings by keyword skipped the checks a
+    MocapSolveSettings prim gets, and failed later with unrelated exceptions, or not at all."""
+    with pytest.raises(MocapEditError, match=needle):
+        solve(crowd, collisions=True, **{key: value})
+
+
 @pytest.mark.parametrize("time", [1e308, -1e12])
 def test_a_time_beyond_any_shot_is_refused(crowd, time):
     examples.add_time_constraint(crowd, "/Edits/t", "/World/Crowd/a0", 20, time)

@@ -9,12 +9,13 @@ clips of hours at 120 fps).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 
-from mocapedit.model.errors import prim_error
-from mocapedit.model.data import StageData
+from mocapedit.model.errors import MocapEditError, prim_error
+from mocapedit.model.data import SolveSettings, StageData
 
 #: Largest magnitude of a shot time code a constraint may name (at 120 fps, 96 days).
 MAX_TIME_CODE = 1e9
@@ -26,6 +27,56 @@ MAX_SAMPLES = 20_000_000
 MAX_STRETCH = 100.0
 #: ... or this many time codes more than its source, whichever is larger.
 MAX_EXTRA_TIME = 100_000.0
+
+
+#: MocapSolveSettings properties by their Python names (``solve(max_wait=...)``).
+SETTING_NAMES = {"collision_avoidance": "collisionAvoidance", "max_iterations": "maxIterations",
+                 "sample_step": "sampleStep", "margin": "margin", "match_speed": "matchSpeed",
+                 "collision_strategy": "collisionStrategy", "min_time_interval": "minTimeInterval",
+                 "max_wait": "maxWait", "foot_locking": "footLocking"}
+
+
+def setting_problem(s: SolveSettings) -> tuple[str, str] | None:
+    """(property, what is wrong) for the first solve setting of ``s`` out of its range, or
+    None: what a MocapSolveSettings prim and ``solve()``'s keyword arguments are both held to."""
+    finite = lambda x: isinstance(x, (int, float)) and math.isfinite(x)  # noqa: E731
+    if not (finite(s.max_wait) and s.max_wait >= 0):
+        return "maxWait", f"must be a finite number of seconds, 0 or more, got {s.max_wait:g}"
+    if s.max_iterations < 0:
+        return "maxIterations", "must not be negative"
+    if not finite(s.sample_step):
+        return "sampleStep", f"must be a finite number, got {s.sample_step:g}"
+    if not s.sample_step > 0:
+        return "sampleStep", f"must be positive, got {s.sample_step:g}"
+    if not (finite(s.margin) and s.margin >= 0):
+        return "margin", f"must not be negative, got {s.margin:g}"
+    if not (finite(s.min_time_interval) and 0.0 < s.min_time_interval <= 1.0):
+        return "minTimeInterval", (f"must be in (0, 1] (a fraction of the source frame interval), "
+                                   f"got {s.min_time_interval:g}")
+    return None
+
+
+def check_overrides(settings: SolveSettings, overrides: dict) -> None:
+    """Sets ``solve()``'s keyword arguments on ``settings``; raises MocapEditError naming the
+    argument for an unknown name, a value of the wrong type, or one out of range."""
+    kinds = {f.name: f.type for f in dataclasses.fields(SolveSettings)}
+    for key, value in overrides.items():
+        if key not in SETTING_NAMES:
+            raise MocapEditError(f"unknown solve setting '{key}' (the settings are {', '.join(SETTING_NAMES)})")
+        kind = kinds[key]
+        ok = {"bool": isinstance(value, bool), "int": isinstance(value, int) and not isinstance(value, bool),
+              "float": isinstance(value, (int, float)) and not isinstance(value, bool),
+              "str": isinstance(value, str)}[kind]
+        if not ok:
+            what = {"bool": "True or False", "int": "a whole number", "float": "a number", "str": "a string"}[kind]
+            raise MocapEditError(f"solve({key}={value!r}): must be {what} (MocapSolveSettings.{SETTING_NAMES[key]})")
+        setattr(settings, key, float(value) if kind == "float" else value)
+    problem = setting_problem(settings)
+    if problem is not None:
+        prop, message = problem
+        key = next(k for k, v in SETTING_NAMES.items() if v == prop)
+        if key in overrides:
+            raise MocapEditError(f"solve({key}={overrides[key]!r}): {message}")
 
 
 def check_settings(data: StageData) -> None:

@@ -397,10 +397,7 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
                           outputs.input_files(stage))
 
     data = reader.read_stage(stage, progress)
-    for key, value in overrides.items():
-        if not hasattr(data.settings, key):
-            raise MocapEditError(f"unknown solve setting '{key}'")
-        setattr(data.settings, key, value)
+    limits.check_overrides(data.settings, overrides)
     limits.check_settings(data)
     limits.check_constraint_times(data)
     timings["read"] = time.perf_counter() - t0

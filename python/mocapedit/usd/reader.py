@@ -16,6 +16,7 @@ from pxr import Sdf, Usd, UsdGeom, UsdSkel
 
 from mocapedit.geometry import contacts
 from mocapedit.model import data as model
+from mocapedit.model import limits
 from mocapedit.model.errors import MocapEditError, prim_error
 from mocapedit.model.names import hips_joint, resolve_joint
 from mocapedit.usd.errors import usd_diagnostics_held, usd_messages
@@ -779,14 +780,10 @@ class StageReader:
         s.collision_strategy = str(_get(prim, "collisionStrategy", s.collision_strategy))
         s.min_time_interval = float(_get(prim, "minTimeInterval", s.min_time_interval))
         s.max_wait = float(_get(prim, "maxWait", s.max_wait))
-        if not (np.isfinite(s.max_wait) and s.max_wait >= 0):
-            raise prim_error(prim.GetPath(), f"must be a finite number of seconds, 0 or more, got {s.max_wait:g}",
-                             "maxWait")
         s.foot_locking = bool(_get(prim, "footLocking", s.foot_locking))
-        if s.max_iterations < 0:
-            raise prim_error(prim.GetPath(), "must not be negative", "maxIterations")
-        if not s.sample_step > 0:
-            raise prim_error(prim.GetPath(), f"must be positive, got {s.sample_step:g}", "sampleStep")
+        problem = limits.setting_problem(s)
+        if problem is not None:
+            raise prim_error(prim.GetPath(), problem[1], problem[0])
         return s
 
     def read_curve(self, agent_path: str, curve_path: str) -> dict:

@@ -70,11 +70,7 @@ def _settings(ctx: SolveContext):
     if s.collision_strategy not in avoidance.STRATEGIES:
         raise prim_error(where, f"must be one of {', '.join(avoidance.STRATEGIES)}, got "
                          f"'{s.collision_strategy}'", "collisionStrategy")
-    if not (np.isfinite(s.margin) and s.margin >= 0):
-        raise prim_error(where, f"must not be negative, got {s.margin:g}", "margin")
-    if s.max_iterations < 0:
-        raise prim_error(where, "must not be negative", "maxIterations")
-    return s
+    return s   # the other values were checked as they were read (limits.setting_problem)
 
 
 def run(ctx: SolveContext) -> None:

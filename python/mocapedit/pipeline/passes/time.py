@@ -33,11 +33,7 @@ MET = 1e-6  # time codes: a hard constraint's residual within this is met
 
 def _validate(ctx: SolveContext) -> float:
     data = ctx.data
-    fraction = float(data.settings.min_time_interval)
-    if not (0.0 < fraction <= 1.0):
-        raise prim_error(data.settings.path or "MocapSolveSettings",
-                         f"must be in (0, 1] (a fraction of the source frame interval), got {fraction:g}",
-                         "minTimeInterval")
+    fraction = float(data.settings.min_time_interval)   # in (0, 1]: limits.setting_problem
     for c in data.time_constraints:
         if not np.isfinite(c.time):
             raise prim_error(c.path, f"time must be a finite time code, got {c.time:g}", "time")
