@@ -280,6 +280,8 @@ for vid, (line, needle) in {
 # ---- constraints: what all four kinds share, then each kind's own -------------------------------
 SHARED = {
     "no-agent": ("agent", None, r"agent: has no target"),
+    "agent-as-attribute": ("agent", 'uniform string agent = "/World/agent0"',
+                           r"agent: is authored as an attribute; it is a relationship"),
     "agent-missing": ("agent", "rel agent = </World/agent9>", r"agent: targets </World/agent9>, which does not exist"),
     "agent-not-agent": ("agent", "rel agent = </World>", r"agent: .*not an agent \(no MocapAgentAPI\)"),
     "agent-two": ("agent", "rel agent = [</World/agent0>, </World/agent1>]", r"agent: has 2 targets"),
@@ -314,6 +316,8 @@ OWN = {
         "offset-nan": ("offset", "uniform vector3d offset = (nan, 0, 0)", r"offset: must be a finite number"),
         "offset-float": ("offset", "uniform float offset = 2", r"offset: is authored as float"),
         "no-offset": ("offset", None, r"offset: has no offset; author the agent's root position"),
+        "target-as-attribute": ("target", 'uniform string target = "/World/agent1"',
+                                r"target: is authored as an attribute; it is a relationship"),
         "space": ("space", 'uniform token space = "local"', r"space: space must be 'world' or 'target'"),
     },
     ("MocapTimeConstraint", "Beat", TIME): {

@@ -19,7 +19,7 @@ from mocapedit.model import data as model
 from mocapedit.model import limits
 from mocapedit.model.errors import MocapEditError, prim_error
 from mocapedit.model.names import hips_joint, resolve_joint
-from mocapedit.usd.errors import usd_diagnostics_held, usd_messages
+from mocapedit.usd.errors import USD_ERRORS, usd_diagnostics_held, usd_messages
 from mocapedit.usd.evaluate import shot_range, skeleton_candidates
 
 AGENT_API = "MocapAgentAPI"
@@ -120,7 +120,11 @@ def _targets(prim: Usd.Prim, name: str) -> list[str]:
     rel = prim.GetRelationship(name)
     if not rel:
         return []
-    return [str(t) for t in rel.GetForwardedTargets()]
+    try:
+        return [str(t) for t in rel.GetForwardedTargets()]
+    except USD_ERRORS:   # some layer authors it as an attribute: USD cannot compose its targets
+        raise prim_error(prim.GetPath(), f"is authored as an attribute; it is a relationship: author "
+                         f"`rel {name} = </path/to/prim>`", name) from None
 
 
 def _authored_type(attr: Usd.Attribute) -> Sdf.ValueTypeName | None:
