@@ -56,6 +56,21 @@ def test_an_edits_layer_reads_back(solved):
     assert edits_format.edits_layer(Usd.Stage.Open(str(shot))) is None
 
 
+def test_the_hash_of_an_open_stage_with_unsaved_changes_is_of_what_was_solved(tmp_path):
+    """solve(stage) on a stage changed in memory recorded the hash of the file on disk: once
+    the change was saved, the layer said its input had changed since, and a batch re-solved."""
+    shot = write_toy_stage(tmp_path / "shot.usda", agents=2)
+    on_disk = processor.content_hash(Usd.Stage.Open(str(shot)))
+    stage = Usd.Stage.Open(str(shot))
+    stage.GetRootLayer().customLayerData = {"note": "changed in memory"}
+    result = processor.solve(stage, output=str(tmp_path / "shot.edits.usda"))
+    recorded = edits_format.content_hash(Sdf.Layer.FindOrOpen(str(tmp_path / "shot.edits.usda")))
+    assert recorded != on_disk
+    stage.GetRootLayer().Save()
+    assert processor.content_hash(Usd.Stage.Open(str(shot))) == recorded
+    assert result.report is not None
+
+
 def test_what_is_not_an_edits_layer_says_so(solved, tmp_path):
     tmp, shot, _ = solved
     assert edits_format.recorded(str(tmp_path / "missing.usda")) == (None, None)

@@ -42,18 +42,23 @@ def is_anonymous(identifier: str) -> bool:
 
 
 def content_hash(stage: Usd.Stage) -> str:
-    """SHA-256 over the content of every layer the input uses, in identifier order."""
+    """SHA-256 over the content of every layer the input uses, in identifier order: a layer
+    with unsaved changes by what it holds in memory (a text layer as the bytes it would save as)."""
     session = stage.GetSessionLayer()
     digests = []
     for layer in stage.GetUsedLayers():
         if layer == session:
             continue
         h = hashlib.sha256()
-        if layer.realPath and os.path.isfile(layer.realPath):
+        if layer.realPath and os.path.isfile(layer.realPath) and not layer.dirty:
             h.update(os.path.basename(layer.realPath).encode())
             with open(layer.realPath, "rb") as f:
                 for block in iter(lambda: f.read(1 << 20), b""):
                     h.update(block)
+        elif layer.realPath and os.path.splitext(layer.realPath)[1].lower() == ".usda":
+            # Changed in memory: what it would save as (the file's bytes once saved).
+            h.update(os.path.basename(layer.realPath).encode())
+            h.update(layer.ExportToString().encode())
         else:
             h.update(layer.ExportToString().encode())
         digests.append(h.hexdigest())
