@@ -167,6 +167,24 @@ def test_a_switch_and_its_opposite_together_are_a_usage_error(tmp_path, toy_stag
     assert not out.exists()
 
 
+def test_python_api_argument_types_are_checked(tmp_path, toy_stage):
+    """Each gave an unrelated exception or a misleading message: an Sdf.Layer ("Sdf.Find(...):
+    no such file"), output=5 (TypeError), progress=3 (AttributeError), a bytes output path
+    ("written as .usda, not 'b'.usda''")."""
+    layer = Sdf.Layer.FindOrOpen(str(toy_stage))
+    assert solve(layer).report.stats["agents"] == 3          # a layer is its stage's root
+    with pytest.raises(MocapEditError, match=r"the input is a int; give a Usd\.Stage"):
+        solve(5)
+    with pytest.raises(MocapEditError, match=r"edits layer: the output path is 5, a int"):
+        solve(str(toy_stage), output=5)
+    with pytest.raises(MocapEditError, match=r"the output path is b'.*', a bytes"):
+        solve(str(toy_stage), output=str(tmp_path / "o.usda").encode())
+    with pytest.raises(MocapEditError, match=r"progress is a int"):
+        solve(str(toy_stage), progress=3)
+    assert solve(toy_stage, output=tmp_path / "p.usda").report.stats["agents"] == 3   # a pathlib.Path
+    assert not (tmp_path / "o.usda").exists()
+
+
 def test_python_api_accepts_an_open_stage(toy_stage):
     stage = Usd.Stage.Open(str(toy_stage))
     result = solve(stage)

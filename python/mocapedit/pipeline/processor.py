@@ -381,6 +381,9 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
       MocapEditError: bad input, naming the prim and property; an output path that names
         the input, a layer it uses, another output or a folder. Nothing is written.
     """
+    if progress is not None and not isinstance(progress, Progress):
+        raise MocapEditError(f"progress is a {type(progress).__name__}; give a mocapedit.model.progress.Progress "
+                             f"(or None for silence)")
     progress = progress or Silent()
     timings: dict[str, float] = {}
     t0 = time.perf_counter()

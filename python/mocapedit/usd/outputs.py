@@ -145,6 +145,10 @@ def check_outputs(outputs: Iterable[Output], inputs: Iterable[str] = ()) -> None
     """
     outputs = [o for o in outputs if o.path is not None]
     inputs = list(inputs)
+    for out in outputs:
+        if not isinstance(out.path, (str, os.PathLike)) or isinstance(os.fspath(out.path), bytes):
+            raise MocapEditError(f"{out.option}: the output path is {out.path!r}, a {type(out.path).__name__}; "
+                                 f"give it as a str (or a pathlib.Path)")
     for i, out in enumerate(outputs):
         if not str(out.path).strip():
             raise MocapEditError(f"{out.option}: the output path is empty")

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 from pxr import Sdf, Usd, Vt
 
+from mocapedit.model.errors import MocapEditError
 from mocapedit.usd import edits_format, reader
 
 
@@ -28,11 +29,19 @@ class SolveInput:
 
 
 def open_input(stage_or_path) -> SolveInput:
-    """A ``Usd.Stage`` as given, or the stage file at a path opened by the reader."""
+    """A ``Usd.Stage`` as given, a stage on an ``Sdf.Layer`` (its root layer), or the stage
+    file at a path (``str`` or ``os.PathLike``) opened by the reader."""
+    if isinstance(stage_or_path, Sdf.Layer):
+        stage_or_path = Usd.Stage.Open(stage_or_path)
     if isinstance(stage_or_path, Usd.Stage):
         stage = stage_or_path
         return SolveInput(stage, stage.GetRootLayer().identifier, stage.GetRootLayer().realPath)
-    name = str(stage_or_path)
+    if not isinstance(stage_or_path, (str, os.PathLike)):
+        raise MocapEditError(f"the input is a {type(stage_or_path).__name__}; give a Usd.Stage, an Sdf.Layer "
+                             f"or the path of a stage file")
+    name = os.fspath(stage_or_path)
+    if isinstance(name, bytes):
+        raise MocapEditError(f"the input path {name!r} is bytes; give it as a str")
     return SolveInput(reader.open_stage(name), name, name)
 
 
