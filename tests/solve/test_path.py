@@ -470,3 +470,21 @@ def test_a_curve_drawn_against_the_walk_is_not_a_reversal(tmp_path, walk_clip):
                                    foot_skate_edited=1.0, foot_skate_ratio=1.0, max_turned_deviation=10.0,
                                    max_edit_turn=170.0, max_turn_off_curve=170.0)
     assert figures.reverses
+
+
+def test_a_relative_constraint_on_the_agent_itself_sets_how_far_it_goes(tmp_path):
+    """Target the constrained agent at another frame: the offset is its travel between the two
+    frames (the schema allows it; the same frame is an error)."""
+    from mocapedit.usd import evaluate
+    clip = walker.walk(frames=72, name="walk")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip, (0, 0, 0), 0.0)])
+    agent = "/World/Crowd/a"
+    source = evaluate.agent_root_positions(stage, [agent], [10.0, 60.0])[0]
+    travel = source[1] - source[0]
+    examples.add_relative_constraint(stage, "/Edits/further", agent, 60, agent, 10, tuple(1.25 * travel))
+    stage.GetRootLayer().Save()
+    solve(str(tmp_path / "shot.usda"), output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"),
+          collisions=False, foot_locking=False)
+    edited = evaluate.agent_root_positions(Usd.Stage.Open(str(tmp_path / "c.usda")), [agent], [10.0, 60.0])[0]
+    ground_axes = [0, 2]   # Y-up
+    np.testing.assert_allclose((edited[1] - edited[0])[ground_axes], 1.25 * travel[ground_axes], atol=1e-6)
