@@ -194,6 +194,8 @@ def _check_folder(out: Output) -> None:
         try:
             os.mkdir(missing)
             os.rmdir(missing)
+        except FileExistsError:
+            pass   # made meanwhile (another batch writing beside this one)
         except OSError as exc:
             raise MocapEditError(f"{out.option} {out.path}: cannot make the folder {missing} "
                                  f"({exc.strerror or exc})") from None
