@@ -130,3 +130,38 @@ def test_an_idler_that_avoidance_pushes_aside_keeps_its_facing(tmp_path):
     moved, offset = _moved_and_turned(source, Usd.Stage.Open(str(tmp_path / "c.usda")), "/World/Crowd/idler")
     assert moved > 0.15                                    # it was pushed aside
     assert offset.max() < 10.0 and offset.mean() < 2.0, (offset.max(), offset.mean())
+
+
+def _reaching(name: str) -> walker.Clip:
+    """The wandering idle, reaching out three times: 30 cm away and back within a second
+    (fast enough for its path to say which way it turns there)."""
+    clip = _wandering(name, 0.3)
+    t = np.arange(FRAMES) / FPS
+    translations = clip.translations.copy()
+    for k, (centre, angle) in enumerate(((2.0, 0.3), (5.0, 2.0), (8.0, 4.0))):
+        bump = 0.3 * np.exp(-0.5 * ((t - centre) / 0.2) ** 2)
+        translations[:, 0, 0] += (bump * np.cos(angle)).astype(np.float32)
+        translations[:, 0, 2] += (bump * np.sin(angle)).astype(np.float32)
+    return dataclasses.replace(clip, translations=translations)
+
+
+def test_an_in_place_clip_dragged_by_two_handles_drifts_without_turning(tmp_path):
+    """Its first frame held where it was and its last pinned 1 m away (aside, or back): the idle
+    drifts there and faces as its source does. Its source's first and last frames are a few
+    centimetres apart, and their direction is its sway's: the turn from that direction onto
+    the 1 m drag turned the whole clip 90 or 180 degrees (a CMU idle that reaches out, 22 s)."""
+    for k, drag in enumerate(((1.0, 0.0, 0.0), (0.0, 0.0, -1.0), (-0.7, 0.0, 0.7))):
+        folder = tmp_path / f"drag{k}"
+        folder.mkdir()
+        stage, source = _shot(folder, [examples.AgentSpec("idle", _reaching("idle"))])
+        agent = "/World/Crowd/idle"
+        first, last = evaluate.agent_root_positions(source, agent, [0.0, float(FRAMES - 1)])
+        examples.add_position_constraint(stage, "/Edits/held", agent, 0, tuple(map(float, first)))
+        examples.add_position_constraint(stage, "/Edits/dragged", agent, FRAMES - 1,
+                                         tuple(map(float, last + np.array(drag))))
+        stage.GetRootLayer().Save()
+        result = solve(str(folder / "shot.usda"), output=str(folder / "e.usda"), composed=str(folder / "c.usda"))
+        assert all(c.met for c in result.report.constraints)
+        moved, offset = _moved_and_turned(source, Usd.Stage.Open(str(folder / "c.usda")), agent)
+        assert moved > 0.9
+        assert offset.max() < 2.0, (drag, offset.max(), offset.mean())

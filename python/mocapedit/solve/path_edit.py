@@ -75,6 +75,12 @@ SPOT_WEIGHT = 10.0
 SPOT_ITERATIONS = 3
 #: Radians: the turn of those terms has settled when it changes less than this.
 SPOT_TOLERANCE = 1e-3
+#: Metres: an agent's handles whose source positions all lie closer together than this say
+#: nothing of its turn. Their direction is its sway's (an idle's first and last frames are a
+#: few centimetres apart): the turn from it onto the handles' drag turned a whole idle 90 or
+#: 180 degrees. Such an agent drifts: its spot terms hold every step to its source step,
+#: unturned (SPOT_WEIGHT), so it slides from one handle's displacement to the next.
+DRIFT_SPREAD_M = 0.5
 #: Metres: the local frames of the shape terms along an agent's path are at least this long
 #: (the frame of a frame that stands still or sways widens to the walk around it), in path
 #: editing and in collision avoidance alike (solver/src/energy/two_step_energy.h).
@@ -156,6 +162,7 @@ class Settings:
     turn_window: int = 2                  # frames: half-width of the windows of the edit's turn
     turn_min_travel: float = 0.0          # stage units: less source travel in a window is slow
     turn_max_step: float = 0.0            # stage units: a longer source step is a cut (0: none)
+    drift_spread: float = 0.0             # stage units: closer handles cannot turn an agent (DRIFT_SPREAD_M)
     group_step: float = 12.0              # time codes between the sampled times of a group mesh
     group_neighbours: int = 3
 
@@ -185,7 +192,8 @@ def turn_settings(fps: float, meters_per_unit: float) -> dict:
     window, and a step faster than ``trajectory.CUT_SPEED_M`` is a cut."""
     h = trajectory.turn_window(fps)
     return {"turn_window": h, "turn_min_travel": trajectory.TURN_MIN_SPEED_M / meters_per_unit * 2 * h / fps,
-            "turn_max_step": trajectory.CUT_SPEED_M / meters_per_unit / fps}
+            "turn_max_step": trajectory.CUT_SPEED_M / meters_per_unit / fps,
+            "drift_spread": DRIFT_SPREAD_M / meters_per_unit}
 
 
 @dataclass
@@ -500,12 +508,13 @@ class ComponentProblem:
         links' first frames and source steps; None without any."""
         self._spot: list[tuple[int, np.ndarray, np.ndarray]] | None = None
         self._spot_turn: dict[int, np.ndarray] = {}
+        self._drift = self._drifting()
         members = set(self._members)
         found, verts, weights = [], [], []
         for i, a in enumerate(self._inputs):
             if i in self.translate_only or i in members:
                 continue
-            weight = spot_weight(a, self.settings)
+            weight = 1.0 if i in self._drift else spot_weight(a, self.settings)
             if weight <= 0.0:
                 continue
             max_step = turn_args(a, self.settings)[2]
@@ -526,6 +535,31 @@ class ComponentProblem:
         self.link_vertex = np.concatenate([self.link_vertex.reshape(-1, 2)] + verts).astype(np.int32)
         self.link_weight = np.concatenate([self.link_weight] + weights)
         self.link_refs.extend([None] * sum(len(f) for _, f, _ in found))
+
+    def _drifting(self) -> set[int]:
+        """The agents whose handles cannot turn them (``DRIFT_SPREAD_M``): held at two places or
+        more, all closer together in the source than ``Settings.drift_spread``; alone in their
+        body (no group, no relative constraint), without stationary ranges or a path curve."""
+        if self.settings.drift_spread <= 0:
+            return set()
+        tied = set(self._members) | {self.index[k.agent] for k in self.links} | \
+            {self.index[k.target] for k in self.links}
+        held: dict[int, list[int]] = {}
+        for h, v in zip(self.handles, self._hv):
+            if h.weight > 0:
+                held.setdefault(self.index[h.agent], []).append(v)
+        out = set()
+        for i, verts in held.items():
+            a = self._inputs[i]
+            if i in self.translate_only or i in tied or a.stationary or a.rest_turn is not None:
+                continue
+            p = self.rest[np.unique(verts)]
+            if len(p) < 2:
+                continue
+            spread = float(np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1).max())
+            if spread < self.settings.drift_spread:
+                out.add(i)
+        return out
 
     def _spot_offsets(self) -> list[np.ndarray]:
         """The offsets of the spot links: each source step turned by the mean of the body's turn
@@ -562,7 +596,9 @@ class ComponentProblem:
 
     def _settle_spot(self, result, hp: np.ndarray, offsets: np.ndarray):
         """Re-solves until the spot links' turn is the body's turn on the edited path."""
-        agents = [i for i, _, _ in self._spot]
+        agents = [i for i, _, _ in self._spot if i not in self._drift]   # drifting ones keep their steps unturned
+        if not agents:
+            return result, offsets
         for _ in range(SPOT_ITERATIONS):
             if result.rigid_motion:
                 break
@@ -772,8 +808,9 @@ class ComponentProblem:
         out, turned, fixed, fixed_turn = {}, [], [], []
         for i, turn in turns.items():
             a = self._inputs[i]
-            if i in self.translate_only:
-                # Moved by one translation: the heading is the rest path's.
+            if i in self.translate_only or i in self._drift:
+                # Moved by one translation, or drifting (its handles cannot turn it): the
+                # heading is the rest path's.
                 if i not in self._rest_headings:
                     self._rest_headings[i] = rest_heading(a, self.settings)
                 out[i] = self._rest_headings[i].copy()
