@@ -184,20 +184,14 @@ def _check_folder(out: Output) -> None:
         raise MocapEditError(f"{out.option} {out.path}: {probe} is a file, not a folder")
     if probe and os.path.isdir(probe) and not os.access(probe, os.W_OK | os.X_OK):
         raise MocapEditError(f"{out.option} {out.path}: the folder {probe} is not writable")
-    if not os.path.isdir(folder):
-        # Made when the file is written; try the first folder to make now (and remove it):
-        # some file systems (/proc, read-only mounts) refuse whatever the permissions say.
-        missing = folder
-        while os.path.dirname(missing) and os.path.dirname(missing) != missing and \
-                not os.path.exists(os.path.dirname(missing)):
-            missing = os.path.dirname(missing)
+    if not os.path.isdir(folder) and probe and os.path.isdir(probe):
+        # Made when the file is written. Some file systems (/proc, read-only mounts) refuse
+        # whatever the permissions say: try a file where the first folder would be made (a
+        # folder made and removed here would race with another process writing into it).
         try:
-            os.mkdir(missing)
-            os.rmdir(missing)
-        except FileExistsError:
-            pass   # made meanwhile (another batch writing beside this one)
+            remove_temporary(temporary_beside(os.path.join(probe, "folder")))
         except OSError as exc:
-            raise MocapEditError(f"{out.option} {out.path}: cannot make the folder {missing} "
+            raise MocapEditError(f"{out.option} {out.path}: cannot make the folder {folder} in {probe} "
                                  f"({exc.strerror or exc})") from None
     if os.path.isdir(folder):
         # The only sure test (read-only mounts, ACLs, root on a network share) is to try.
