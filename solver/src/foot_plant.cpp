@@ -465,13 +465,13 @@ struct Agent {
         if (contact[at(i, 1 - k)] < 0 || stepping[at(i, 1 - k)]) return false;
       return true;
     };
-    auto landing = [&](int k, long t, long t1, Vec& to, double& y1) {
+    auto landing = [&](int k, long t, long t1, double ahead, Vec& to, double& y1) {
       const Vec drift = offset[at(t1, k)] - offset[at(t, k)];
       const double norm = Norm(drift);
       to = offset[at(t1, k)];
-      if (norm > 1e-3 * radius[at(t, k)]) to = to + drift * (lead * radius[at(t1, k)] / norm);
+      if (norm > 1e-3 * radius[at(t, k)]) to = to + drift * (ahead * radius[at(t1, k)] / norm);
       const double spun = Wrap(turn[at(t1, k)] - turn[at(t, k)]);
-      y1 = turn[at(t1, k)] + (std::abs(spun) > 1e-3 * turn_radius ? Sign(spun) * lead * turn_radius : 0.0);
+      y1 = turn[at(t1, k)] + (std::abs(spun) > 1e-3 * turn_radius ? Sign(spun) * ahead * turn_radius : 0.0);
     };
 
     for (long t = 0; t < count; ++t) {
@@ -510,20 +510,25 @@ struct Agent {
         const bool turned = std::abs(Wrap(turn[i] - s.yaw)) > trigger * turn_radius;
         if (far || turned) {
           std::optional<Step> plan;
-          int n = shortest;
-          for (int round = 0; round < kStepRounds; ++round) {  // the landing depends on the step's length, and the length on the landing
-            if (n > longest || !may_step(k, c, t, t + n)) break;
-            Vec to;
-            double y1;
-            landing(k, t, t + n, to, y1);
-            int need = StepFrames(Norm(Vec(to - s.plant)), Wrap(y1 - s.yaw), height, bend[i], speed[k], spin[k],
-                                  knee_spin[k], seconds, shortest);
-            need = std::max(shortest, static_cast<int>(std::ceil(need * stretch[k])));
-            if (need <= n) {
-              plan = Step{t, s.plant, to, s.yaw, y1, n};
-              break;
+          // Landing `lead` ahead of the drift; where the foot cannot get there in time, landing
+          // where the foot is then (as footplant.replant).
+          const double aheads[2] = {lead, 0.0};
+          for (int a = lead > 0 ? 0 : 1; a < 2 && !plan; ++a) {
+            int n = shortest;
+            for (int round = 0; round < kStepRounds; ++round) {  // the landing depends on the step's length, and the length on the landing
+              if (n > longest || !may_step(k, c, t, t + n)) break;
+              Vec to;
+              double y1;
+              landing(k, t, t + n, aheads[a], to, y1);
+              int need = StepFrames(Norm(Vec(to - s.plant)), Wrap(y1 - s.yaw), height, bend[i], speed[k], spin[k],
+                                    knee_spin[k], seconds, shortest);
+              need = std::max(shortest, static_cast<int>(std::ceil(need * stretch[k])));
+              if (need <= n) {
+                plan = Step{t, s.plant, to, s.yaw, y1, n};
+                break;
+              }
+              n = need;
             }
-            n = need;
           }
           if (plan) {
             for (long j = t; j <= t + plan->n; ++j) stepping[at(j, k)] = 1;

@@ -697,12 +697,18 @@ def test_a_steady_drift_that_carries_each_landing_further_still_steps():
     after several rounds. Three rounds left it unsettled and each foot slid at the leash's
     length all the way, 25 cm (the CMU punch take bent 40 cm by handles: 2 steps where it now
     takes 6, +0.9 cm/s over its source's skate where it now is +0.2). Now the feet step, and
-    slide half as far. A drag faster than the source's feet can follow still slides: 65 cm
-    each at 10 cm/s."""
+    slide half as far.
+
+    A drag nearly as fast as the source's feet can follow (10 cm/s; a CMU punch take pushed 1 m
+    aside and back drifts at 13): a step landing half a leash ahead of the drift cannot get there
+    in time, and the feet slid at the leash's length all the way, 65 cm each, without a step.
+    Now such a step lands where the foot is then: shorter steps, and half the slide."""
     steps, slid = _steady_drift(0.05)
     assert steps >= 2 and slid < 0.35, (steps, slid)
     steps, slid = _steady_drift(0.1)
-    assert steps == 0 and slid == pytest.approx(2 * (0.8 - 0.15), abs=0.02), (steps, slid)
+    assert steps >= 3 and slid < 0.5 * 2 * (0.8 - 0.15), (steps, slid)
+    steps, slid = _steady_drift(0.13)
+    assert steps >= 2 and slid < 0.6 * 2 * (1.04 - 0.15), (steps, slid)
 
 
 def test_a_standing_body_dragged_further_than_a_leg_reaches_steps_instead_of_sliding(tmp_path):

@@ -209,12 +209,12 @@ def replant(contact: np.ndarray, movable: np.ndarray, offset: np.ndarray, radius
         return (t1 + 1 < count and bool(np.all(contact[t:t1 + 2, k] == c)) and bool(movable[t:t1 + 2, k].all())
                 and bool(np.all(contact[window, 1 - k] >= 0)) and not stepping[window, 1 - k].any())
 
-    def landing(k: int, t: int, t1: int) -> tuple[np.ndarray, float]:
+    def landing(k: int, t: int, t1: int, ahead: float) -> tuple[np.ndarray, float]:
         drift = offset[t1, k] - offset[t, k]
         norm = float(np.linalg.norm(drift))
-        to = offset[t1, k] + (drift * (lead * radius[t1, k] / norm) if norm > 1e-3 * radius[t, k] else 0.0)
+        to = offset[t1, k] + (drift * (ahead * radius[t1, k] / norm) if norm > 1e-3 * radius[t, k] else 0.0)
         spun = _angle(turn[t1, k] - turn[t, k])
-        y1 = float(turn[t1, k]) + (np.sign(spun) * lead * turn_radius if abs(spun) > 1e-3 * turn_radius else 0.0)
+        y1 = float(turn[t1, k]) + (np.sign(spun) * ahead * turn_radius if abs(spun) > 1e-3 * turn_radius else 0.0)
         return to, y1
 
     for t in range(count):
@@ -245,19 +245,26 @@ def replant(contact: np.ndarray, movable: np.ndarray, offset: np.ndarray, radius
             far = np.linalg.norm(o - s["plant"]) > trigger * r
             turned = abs(_angle(turn[t, k] - s["yaw"])) > trigger * turn_radius
             if far or turned:
-                plan, n = None, shortest
-                for _ in range(STEP_ROUNDS):   # the landing depends on the step's length, and the length on the landing
-                    if n > longest or not may_step(k, c, t, t + n):
+                plan = None
+                # Landing ``lead`` ahead of the drift; where the foot cannot get there in time
+                # (a drag nearly as fast as the source's feet move: a boxer's), landing where
+                # the foot is then: shorter steps, more of them.
+                for ahead in ((lead, 0.0) if lead > 0 else (0.0,)):
+                    n = shortest
+                    for _ in range(STEP_ROUNDS):   # the landing depends on the step's length, and the length on the landing
+                        if n > longest or not may_step(k, c, t, t + n):
+                            break
+                        to, y1 = landing(k, t, t + n, ahead)
+                        need = step_frames(float(np.linalg.norm(to - s["plant"])), _angle(y1 - s["yaw"]), height,
+                                           float(bend[t, k]), float(speed[k]), float(spin[k]), float(knee_spin[k]),
+                                           seconds, shortest)
+                        need = max(shortest, int(np.ceil(need * stretch[k])))
+                        if need <= n:
+                            plan = (n, to, y1)
+                            break
+                        n = need
+                    if plan is not None:
                         break
-                    to, y1 = landing(k, t, t + n)
-                    need = step_frames(float(np.linalg.norm(to - s["plant"])), _angle(y1 - s["yaw"]), height,
-                                       float(bend[t, k]), float(speed[k]), float(spin[k]), float(knee_spin[k]),
-                                       seconds, shortest)
-                    need = max(shortest, int(np.ceil(need * stretch[k])))
-                    if need <= n:
-                        plan = (n, to, y1)
-                        break
-                    n = need
                 if plan is not None:
                     n, to, y1 = plan
                     s["step"] = (t, s["plant"].copy(), to, s["yaw"], y1)
