@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from pxr import Sdf, Usd, UsdGeom, UsdSkel, Vt
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
 
 from mocapedit.geometry import curves, ground
 from mocapedit.data import examples, walker
@@ -488,3 +488,35 @@ def test_a_relative_constraint_on_the_agent_itself_sets_how_far_it_goes(tmp_path
     edited = evaluate.agent_root_positions(Usd.Stage.Open(str(tmp_path / "c.usda")), [agent], [10.0, 60.0])[0]
     ground_axes = [0, 2]   # Y-up
     np.testing.assert_allclose((edited[1] - edited[0])[ground_axes], 1.25 * travel[ground_axes], atol=1e-6)
+
+
+def test_three_hard_pins_on_a_stationary_range_that_one_rigid_motion_meets_solve(tmp_path):
+    """A stationary range held by three hard pins at their source places (or all moved 1 m
+    the same way): one rigid motion meets them all, so the range moves by it. The solve said
+    "hard constraints contradict each other: a rotating rigid range holds hard constraints at 3
+    vertices", naming no prim. Three pins no rigid motion meets are still a contradiction,
+    named by their prims."""
+    from mocapedit.usd import evaluate
+    clip, _ = walker.walk_idle_walk(frames=240, name="wiw")
+    agent = "/World/Crowd/w"
+    for case, shift in (("still", (0.0, 0.0, 0.0)), ("moved", (1.0, 0.0, 0.0)), ("bent", None)):
+        folder = tmp_path / case
+        folder.mkdir()
+        stage = examples.build_crowd_stage(folder / "shot.usda", [examples.AgentSpec("w", clip)])
+        roots = evaluate.agent_root_positions(stage, agent, np.arange(240.0)) * [1, 0, 1]
+        anim = stage.GetPrimAtPath(agent + "/Skel/Anim")
+        anim.AddAppliedSchema("MocapStationaryAPI:r")
+        anim.CreateAttribute("stationary:r:frames", Sdf.ValueTypeNames.Int2,
+                             variability=Sdf.VariabilityUniform).Set(Gf.Vec2i(140, 200))
+        for f in (140, 170, 200):
+            p = roots[f] + (shift if shift is not None else (0.0, 0.0, 0.5 * (f == 170)))
+            examples.add_position_constraint(stage, f"/Edits/pin{f}", agent, f, tuple(map(float, p)))
+        stage.GetRootLayer().Save()
+        if shift is None:
+            with pytest.raises(MocapEditError, match=r"</Edits/pin1[47]0>.*contradict"):
+                solve(str(folder / "shot.usda"))
+            continue
+        result = solve(str(folder / "shot.usda"), output=str(folder / "e.usda"), composed=str(folder / "c.usda"))
+        assert all(c.met for c in result.report.constraints), [(c.prim, c.residual) for c in result.report.constraints]
+        edited = evaluate.agent_root_positions(Usd.Stage.Open(str(folder / "c.usda")), agent, np.arange(240.0))
+        np.testing.assert_allclose((edited - roots)[140:201] * [1, 0, 1], np.tile(shift, (61, 1)), atol=1e-6)

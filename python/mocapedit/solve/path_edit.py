@@ -247,12 +247,16 @@ class ComponentProblem:
         self._needs_headings = any(k.space == "target" for k in self.links)
         self._rest_headings: dict[int, np.ndarray] = {}
         self._source_full: np.ndarray | None = None   # every agent's source path, concatenated
-        self.data = _solver.path_edit_precompute(
-            rest=self.rest, triangles=self.triangles, triangle_weights=self.triangle_weights, edges=self.edges,
-            edge_weights=self.edge_weights, rigid=self.rigid, handles=self.handle_vertex,
-            handle_weights=self.handle_weight, links=self.link_vertex, link_weights=self.link_weight,
-            rigid_min_extent=settings.rigid_min_extent, precompute_responses=precompute_responses,
-            vertex_times=self._vertex_times())
+        try:
+            self.data = _solver.path_edit_precompute(
+                rest=self.rest, triangles=self.triangles, triangle_weights=self.triangle_weights, edges=self.edges,
+                edge_weights=self.edge_weights, rigid=self.rigid, handles=self.handle_vertex,
+                handle_weights=self.handle_weight, links=self.link_vertex, link_weights=self.link_weight,
+                rigid_min_extent=settings.rigid_min_extent, precompute_responses=precompute_responses,
+                vertex_times=self._vertex_times())
+        except ContradictionError as exc:
+            exc.problem = self   # its handle, link and rigid references name the constraints
+            raise
 
     # ---- key frames --------------------------------------------------------------------
 
@@ -856,6 +860,33 @@ class ComponentProblem:
         return {a.path: AgentResult(ground=ground[fo[i]:fo[i + 1]], heading=headings[i], range_turn=turns[i],
                                     translate_only=i in self.translate_only)
                 for i, a in enumerate(self._inputs)}
+
+
+def implied_handles(agents: list[AgentInput], handles: list[Handle], tolerance: float) -> list[int]:
+    """Indices of hard handles that one rigid motion of a stationary range already meets: a
+    range holds at most two hard handles (its rigid motion has three freedoms), and more that
+    one rigid motion meets (within ``tolerance`` stage units) say no more than the two farthest
+    apart. Those two are kept; the range then meets the others."""
+    by_agent = {a.path: a for a in agents}
+    out: list[int] = []
+    for a in agents:
+        for first, last in a.stationary:
+            mine = [k for k, h in enumerate(handles)
+                    if h.agent == a.path and h.weight == HARD and first <= h.frame <= last]
+            if len(mine) < 3:
+                continue
+            z = np.array([by_agent[a.path].rest[handles[k].frame] for k in mine], dtype=np.float64)
+            p = np.array([handles[k].position for k in mine], dtype=np.float64)
+            zc, pc = z - z.mean(axis=0), p - p.mean(axis=0)
+            cross = np.sum((zc[:, 0] - 1j * zc[:, 1]) * (pc[:, 0] + 1j * pc[:, 1]))
+            rot = cross / abs(cross) if abs(cross) > 0 else 1.0
+            moved = (zc[:, 0] + 1j * zc[:, 1]) * rot + (p.mean(axis=0) @ [1.0, 1j])
+            if np.abs(moved - (p[:, 0] + 1j * p[:, 1])).max() > tolerance:
+                continue   # no rigid motion meets them: the solve says which contradict
+            gap = np.linalg.norm(z[:, None, :] - z[None, :, :], axis=-1)
+            i, j = np.unravel_index(int(np.argmax(gap)), gap.shape)
+            out.extend(k for n, k in enumerate(mine) if n not in (i, j))
+    return sorted(out)
 
 
 def rest_heading(a: AgentInput, settings: Settings) -> np.ndarray:

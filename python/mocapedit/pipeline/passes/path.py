@@ -181,6 +181,9 @@ class _Component:
                         for c in self.positions]
         self.links = [path_edit.Link(c.agent, c.frame, c.target, c.target_frame, ground.to_ground(c.offset, up),
                                      c.space, _weight(c), c.path) for c in self.relatives]
+        # Hard pins on a stationary range beyond two that its rigid motion meets anyway.
+        implied = set(path_edit.implied_handles(self.inputs, self.handles, MET))
+        self.handles = [h for k, h in enumerate(self.handles) if k not in implied]
         self.curve_only = not self.handles and not self.links
         # Frames where this component's constraints act on each agent.
         held: dict[str, list[int]] = {}
@@ -223,7 +226,7 @@ class _Component:
             raise self._contradiction(exc) from None
 
     def _contradiction(self, exc) -> MocapEditError:
-        p = self.problem
+        p = self.problem or getattr(exc, "problem", None)
         prims, stationary, held = [], [], []
         for kind, index in exc.constraints:
             if kind == "handle" and p is not None and index < len(p.handle_refs) and p.handle_refs[index]:
