@@ -415,6 +415,8 @@ def _author(stage, path, name, type_name, value):
     ("mocap:leftLegJoints", ["LeftUpLeg", "LeftKnee", "LeftFoot"], "'LeftKnee' is not in the skeleton"),
     ("mocap:leftLegJoints", ["LeftUpLeg", "LeftFoot", "LeftToe"], "is not a child of"),
     ("mocap:rightLegJoints", ["RightUpLeg", "RightLeg"], "hip, knee, ankle"),
+    # The left leg on both sides: the right foot was never locked, silently.
+    ("mocap:rightLegJoints", ["LeftUpLeg", "LeftLeg", "LeftFoot"], "shares joint '[^']*LeftUpLeg' with the left leg"),
 ])
 def test_bad_legs_name_the_agent_and_property(tmp_path, walk_clip, prop, value, message):
     stage, a = _bent_path_stage(tmp_path, walk_clip)

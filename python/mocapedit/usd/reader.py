@@ -531,7 +531,17 @@ class StageReader:
             if why:
                 raise prim_error(prim.GetPath(), why, prop)
             found[side] = contacts.Leg(side, *indices[:3], indices[3] if len(indices) > 3 else None)
-        return [found[s] for s in contacts.SIDES if s in found]
+        legs = [found[s] for s in contacts.SIDES if s in found]
+        if len(legs) == 2:
+            shared = {j for j in (legs[0].hip, legs[0].knee, legs[0].ankle, legs[0].toe) if j is not None} & \
+                {j for j in (legs[1].hip, legs[1].knee, legs[1].ankle, legs[1].toe) if j is not None}
+            if shared:
+                authored = [s for s in contacts.SIDES if _get(prim, f"mocap:{s}LegJoints")]
+                side = authored[-1] if authored else contacts.SIDES[-1]
+                raise prim_error(prim.GetPath(), f"shares joint '{joints[min(shared)]}' with the "
+                                 f"{'left' if side != 'left' else 'right'} leg; each leg is its own hip, knee "
+                                 f"and ankle", f"mocap:{side}LegJoints")
+        return legs
 
     def _foot_contacts(self, anim: Usd.Prim, joints: list[str], frame_count: int, legs: list):
         prefix = FOOT_CONTACT_API + ":"
