@@ -276,6 +276,13 @@ for vid, (line, needle) in {
     "sampled": ("int2 stationary:pause:frames.timeSamples = {0: (2, 7)}", ST + r"is authored only as time samples"),
 }.items():
     shot(f"stationary-{vid}", anim_over(line, 'prepend apiSchemas = ["MocapStationaryAPI:pause"]'), needle)
+# A clip's tag on the agent or its skeleton was silently read as nothing.
+for _where, _body in (("agent", 'over "World"\n{\n    over "agent0" (prepend apiSchemas = ["MocapStationaryAPI:pause"])\n'
+                                '    {\n        uniform int2 stationary:pause:frames = (2, 7)\n    }\n}\n'),
+                      ("skeleton", agent_over('over "Skel" (prepend apiSchemas = ["MocapFootContactAPI:l"])\n{\n'
+                                              '    uniform token footContact:l:joint = "LeftFoot"\n}'))):
+    shot(f"tag-on-the-{_where}", _body, r"apiSchemas: has Mocap(Stationary|FootContact)API:\w+ applied, .*apply it "
+         r"to the agent's SkelAnimation </World/agent0/Skel/Anim>")
 
 # ---- constraints: what all four kinds share, then each kind's own -------------------------------
 SHARED = {

@@ -568,6 +568,14 @@ class StageReader:
         path = str(prim.GetPath())
         skel = self._find_skeleton(prim)
         anim = self._find_animation(prim, skel)
+        # The clip's tags apply to its SkelAnimation alone; on the agent or its skeleton they
+        # were silently read as nothing.
+        for holder in (prim, skel.GetPrim()):
+            for applied in holder.GetAppliedSchemas():
+                if applied.split(":", 1)[0] in (STATIONARY_API, FOOT_CONTACT_API):
+                    raise prim_error(holder.GetPath(), f"has {applied} applied, which tags frames of a clip: "
+                                     f"apply it to the agent's SkelAnimation <{anim.GetPath()}>",
+                                     "apiSchemas")
         joints, parents, rest = self._skeleton_data(skel)
         key, times = self._clip(anim)
         clip = self.clips[key]
