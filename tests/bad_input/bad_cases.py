@@ -425,6 +425,8 @@ prop_cases("MocapAnimationLayer", "Nodding", LAYER, {
     "no-animation": ("animation", None, L + r"animation: has no animation"),
     "animation-missing": ("animation", "rel animation = </Shake>", L + r"animation: targets </Shake>, which does not exist"),
     "animation-wrong-type": ("animation", "rel animation = </World/agent0/Skel>", L + r"animation: .*not a SkelAnimation"),
+    "animation-two": ("animation", "rel animation = [</Nod>, </World/agent0/Skel/Anim>]",
+                      L + r"animation: targets 2 animations \(</Nod>, </World/agent0/Skel/Anim>\); a layer plays one"),
     "agents-missing": ("agents", "rel agents = </World/agent5>", L + r"agents: targets </World/agent5>, which does not exist"),
     "mode": ("mode", 'uniform token mode = "multiply"', L + r"mode: must be one of blend, additive, got 'multiply'"),
     "wrap": ("mode", 'uniform token wrap = "bounce"', L + r"wrap: must be one of loop, clamp"),

@@ -766,6 +766,9 @@ class StageReader:
         anims = _targets(prim, "animation")
         if not anims:
             raise prim_error(prim.GetPath(), "has no animation", "animation")
+        if len(anims) > 1:   # the second was dropped, silently
+            raise prim_error(prim.GetPath(), f"targets {len(anims)} animations ({', '.join(f'<{a}>' for a in anims)}); "
+                             "a layer plays one: make a layer for each", "animation")
         anim = self._target_prim(prim, "animation", anims[0], UsdSkel.Animation, "SkelAnimation")
         try:
             key, times = self._clip(anim, all_channels=False)
