@@ -668,3 +668,28 @@ def test_a_partial_layer_between_full_ones_keeps_the_channels_of_the_layers_belo
     others = np.arange(len(joints)) != chest
     assert _rotation_difference(with_nod[1][:, others], without[1][:, others]) < 1e-6
     assert _rotation_difference(with_nod[1][:, chest], without[1][:, chest]) > 0.05
+
+
+def test_a_blended_joint_that_hangs_from_another_parent_in_the_layer_clip_is_noted(tmp_path):
+    """A layer clip of another rig, rooted at Hips where the agents' skeleton has Root above
+    Hips: its joints match by bare name, and Hips' transform, relative to nothing in its clip,
+    is taken relative to Root: a body rooted elsewhere lies a metre away on the ground (a CMU
+    punch blended over a CC walk), with no word. The report now says which joint and why."""
+    path, walk = street(tmp_path)
+    stage = Usd.Stage.Open(str(path))
+    idle = walker.idle(frames=FRAMES, phase=0.3)
+    keep = [k for k, j in enumerate(idle.joints) if j != "Root"]
+    add_clip(stage, "/Layers/Other", [idle.joints[k][len("Root/"):] for k in keep],
+             idle.translations[:, keep], idle.rotations[:, keep])
+    add_layer(stage, "/Layers/Blend", ["/World/Crowd/a0"], "/Layers/Other", "", "blend")
+    result, _ = compose(tmp_path, stage)
+    notes = result.report.agents["/World/Crowd/a0"].get("notes") or []
+    assert any("'Hips' hangs from nothing in the layer's clip but from 'Root'" in n for n in notes), notes
+    # A clip of the same rig says nothing of it.
+    (tmp_path / "same").mkdir()
+    path2, _ = street(tmp_path / "same")
+    stage2 = Usd.Stage.Open(str(path2))
+    add_clip(stage2, "/Layers/Idle", idle.joints, idle.translations, idle.rotations)
+    add_layer(stage2, "/Layers/Blend", ["/World/Crowd/a0"], "/Layers/Idle", "", "blend")
+    result2, _ = compose(tmp_path / "same", stage2)
+    assert not any("hangs from" in n for n in result2.report.agents["/World/Crowd/a0"].get("notes") or [])

@@ -161,6 +161,9 @@ class PreparedLayer:
     clip_columns: np.ndarray    # (K,) layer clip joint of each layered joint
     pose_columns: np.ndarray    # (K,) its column in the (extended) source pose
     joint_name: str             # the subtree's top joint, for reports
+    #: (joint, its parent in the layer clip or None, its parent in the skeleton or None) of the
+    #: top blended joint whose parents differ by bare name, for reports; None when none does
+    rehung: tuple | None = None
     _samples: dict = field(default_factory=dict, repr=False)
 
     @property
@@ -176,6 +179,11 @@ class PreparedLayer:
             keeps = "stay as below" if self.layer.mode == "blend" else "get nothing added"
             text += (f"; the clip authors {' and '.join(c for c in CHANNELS if c not in self.missing)} only: "
                      f"{' and '.join(self.missing)} {keeps}")
+        if self.rehung is not None:
+            joint, in_clip, here = self.rehung
+            text += (f"; '{joint}' hangs from {repr(in_clip) if in_clip else 'nothing'} in the layer's clip but from "
+                     f"{repr(here) if here else 'nothing'} here: its transform is taken as it is (a clip of a rig "
+                     f"rooted elsewhere puts the body elsewhere; layer below that joint)")
         return text
 
     def sample(self, times: np.ndarray, width: int) -> tuple[PoseArrays, np.ndarray, np.ndarray]:
@@ -312,6 +320,20 @@ def resolve_layer(agent: Agent, layer: AnimationLayer, clip: Clip) -> tuple[int,
     return root, skel_of
 
 
+def _rehung(agent: Agent, clip: Clip, skel_of: np.ndarray, used: np.ndarray) -> tuple | None:
+    """(joint, parent in the clip, parent in the skeleton), bare names, of the top blended joint
+    (fewest ancestors in the clip) whose parent differs between the two; None if none does."""
+    bare = lambda path: path.rsplit("/", 1)[-1] if path else None  # noqa: E731
+    for k in sorted(used.tolist(), key=lambda k: clip.joints[k].count("/")):
+        path = clip.joints[k]
+        in_clip = bare(path.rsplit("/", 1)[0]) if "/" in path else None
+        p = int(agent.parents[int(skel_of[k])])
+        here = bare(agent.joints[p]) if p >= 0 else None
+        if in_clip != here:
+            return bare(path), in_clip, here
+    return None
+
+
 def plan_agent(agent: Agent, source: Clip, layers: list[tuple[AnimationLayer, Clip]],
                delta_cache: dict) -> AgentLayers:
     """The layers of one agent, in stacking order, made ready for poses of its source clip.
@@ -348,6 +370,7 @@ def plan_agent(agent: Agent, source: Clip, layers: list[tuple[AnimationLayer, Cl
         prepared.append(PreparedLayer(
             layer=layer, clip=data, clip_columns=used,
             pose_columns=np.array([pose_column[int(skel_of[k])] for k in used], dtype=np.int64),
-            joint_name=agent.joints[root] if root >= 0 else "(whole skeleton)"))
+            joint_name=agent.joints[root] if root >= 0 else "(whole skeleton)",
+            rehung=_rehung(agent, clip, skel_of, used) if layer.mode == "blend" else None))
     return AgentLayers(source.joints, [agent.joints[s] for s in extra],
                        trs_from_matrices(agent.rest_transforms[extra]), prepared)
