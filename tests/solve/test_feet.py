@@ -406,6 +406,31 @@ def test_authored_contacts_replace_detection(tmp_path, walk_clip):
     assert result.report.agents[a]["footContactsLocked"] == 1
 
 
+def test_heel_and_toe_contacts_that_overlap_are_one_plant(tmp_path, walk_clip):
+    """Each detected contact authored as a heel strike on the ankle and a toe-off on the toe that
+    overlap it: the foot is planted once, where it was two plants fighting over the same frames
+    (locked skate 4.7 -> 6.8 cm/s)."""
+    _bent_path_stage(tmp_path, walk_clip)
+    detected = solve(str(tmp_path / "shot.usda")).report.agents[f"{CROWD}/a"]
+    assert run_cli("detect-contacts", tmp_path / "shot.usda", "-o", tmp_path / "contacts.usda",
+                   "--composed", tmp_path / "reviewed.usda").returncode == 0
+    stage = Usd.Stage.Open(str(tmp_path / "reviewed.usda"))
+    anim = next(p for p in stage.Traverse() if p.IsA(UsdSkel.Animation))
+    for name in [s.split(":", 1)[1] for s in anim.GetAppliedSchemas() if s.startswith("MocapFootContactAPI:")]:
+        first, last = anim.GetAttribute(f"footContact:{name}:frames").Get()
+        toe = "LeftToe" if "Left" in anim.GetAttribute(f"footContact:{name}:joint").Get() else "RightToe"
+        middle = (first + last) // 2
+        anim.GetAttribute(f"footContact:{name}:frames").Set(Gf.Vec2i(first, min(last, middle + 3)))
+        anim.ApplyAPI("MocapFootContactAPI", name + "toe")
+        _author(stage, anim.GetPath(), f"footContact:{name}toe:joint", Sdf.ValueTypeNames.Token, toe)
+        _author(stage, anim.GetPath(), f"footContact:{name}toe:frames", Sdf.ValueTypeNames.Int2,
+                Gf.Vec2i(max(first, middle - 3), last))
+    stage.Save()
+    split = solve(str(tmp_path / "reviewed.usda")).report.agents[f"{CROWD}/a"]
+    assert split["footContactsLocked"] == detected["footContactsLocked"]
+    assert split["footSkateEdited"] == pytest.approx(detected["footSkateEdited"], abs=1e-6)
+
+
 def _author(stage, path, name, type_name, value):
     stage.GetPrimAtPath(path).CreateAttribute(name, type_name, False, Sdf.VariabilityUniform).Set(value)
     stage.GetRootLayer().Save()

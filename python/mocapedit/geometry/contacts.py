@@ -207,6 +207,15 @@ def detect_agent(agent: Agent, clip: Clip, info: StageInfo,
     return out
 
 
+def leg_ranges(authored, legs, frame_count: int) -> list[list[tuple[int, int]]]:
+    """Per leg, the inclusive frame ranges of an artist's contacts ``authored`` ((name, ankle,
+    first, last), as the reader gives them): a leg's contacts that overlap or touch are one, as
+    detection joins its ankle's and toe's (a heel strike on the ankle and a toe-off on the toe
+    that overlap it are one plant of the foot)."""
+    return [runs(mask_of([(a, b) for _, ankle, a, b in authored if ankle == leg.ankle], frame_count))
+            for leg in legs]
+
+
 def mask_of(ranges, frame_count: int) -> np.ndarray:
     """(F,) bool mask of inclusive frame ranges."""
     out = np.zeros(frame_count, dtype=bool)
@@ -216,4 +225,4 @@ def mask_of(ranges, frame_count: int) -> np.ndarray:
 
 
 __all__ = ["Leg", "SIDES", "find_legs", "chain_problem", "DetectSettings", "detect_leg", "detect_joint", "detect_agent",
-           "clean_ranges", "mask_of", "ground_speed", "takes"]
+           "clean_ranges", "leg_ranges", "mask_of", "ground_speed", "takes"]

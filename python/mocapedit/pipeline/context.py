@@ -113,7 +113,7 @@ class SolveContext:
         hit = self.contacts_cache.get(key)
         if hit is None:
             if agent.foot_contacts is not None:
-                hit = [[(a, b) for _, ankle, a, b in agent.foot_contacts if ankle == leg.ankle] for leg in agent.legs]
+                hit = contacts.leg_ranges(agent.foot_contacts, agent.legs, agent.frame_count)
             else:
                 hit = contacts.detect_agent(agent, self.data.clip_of(agent), self.data.info)
             self.contacts_cache[key] = hit
