@@ -431,6 +431,22 @@ def test_heel_and_toe_contacts_that_overlap_are_one_plant(tmp_path, walk_clip):
     assert split["footSkateEdited"] == pytest.approx(detected["footSkateEdited"], abs=1e-6)
 
 
+def test_an_arm_given_as_a_leg_is_not_planted_and_is_named(tmp_path, walk_clip):
+    """mocap:leftLegJoints naming the arm: its hand never comes near the ground the body stands
+    on, so it gets no contacts (it had 7, its hand held in the air by the lock) and the agent's
+    notes say which leg and property; detect-contacts finds none on it and says why."""
+    stage, a = _bent_path_stage(tmp_path, walk_clip)
+    both = solve(str(tmp_path / "shot.usda")).report.agents[a]["footContactsLocked"]
+    _author(stage, a, "mocap:leftLegJoints", Sdf.ValueTypeNames.TokenArray,
+            Vt.TokenArray(["LeftArm", "LeftForeArm", "LeftHand"]))
+    stage.GetRootLayer().Save()
+    entry = solve(str(tmp_path / "shot.usda")).report.agents[a]
+    assert 0 < entry["footContactsLocked"] < both - 4
+    assert any("left leg" in n and "mocap:leftLegJoints" in n and "LeftHand" in n for n in entry["notes"])
+    out = run_cli("detect-contacts", tmp_path / "shot.usda", "-o", tmp_path / "contacts.usda")
+    assert out.returncode == 0 and "contacts left 0, right" in out.stderr and "LeftHand" in out.stderr
+
+
 def _author(stage, path, name, type_name, value):
     stage.GetPrimAtPath(path).CreateAttribute(name, type_name, False, Sdf.VariabilityUniform).Set(value)
     stage.GetRootLayer().Save()

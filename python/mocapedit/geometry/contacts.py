@@ -28,6 +28,9 @@ from mocapedit.model.names import joint_leaf, side_and_role
 from mocapedit.geometry.stationary import runs
 
 SIDES = ("left", "right")
+#: A leg whose foot never comes within this of the lowest point the body reaches in its clip
+#: (metres) does not stand on the ground there: see :func:`raised_legs`.
+GROUND_REACH_M = 0.3
 
 @dataclass(frozen=True)
 class Leg:
@@ -195,12 +198,45 @@ def detect_leg(seconds: np.ndarray, ankle: np.ndarray, toe: np.ndarray | None, u
     return [(a + x, a + y) for a, b in pieces for x, y in clean_ranges(mask[a:b], seconds[a:b], settings)]
 
 
-def detect_agent(agent: Agent, clip: Clip, info: StageInfo,
-                 settings: DetectSettings | None = None) -> list[list[tuple[int, int]]]:
-    """Detected contact ranges of each leg of an agent (``agent.legs``), on its source clip."""
+def raised_legs(agent: Agent, clip: Clip, info: StageInfo) -> dict[int, float]:
+    """The legs (index into ``agent.legs``) whose foot never comes within :data:`GROUND_REACH_M`
+    of the lowest point the body reaches in the clip, and how far above it their foot's lowest
+    is (metres): an arm given as a leg, the feet of a handstand. No contact is found on them."""
+    h = ground.height(trajectory.skel_world(agent, clip)[..., 3, :3], info.up_axis) * info.meters_per_unit
+    lowest = float(h.min()) if h.size else 0.0
+    out = {}
+    for k, leg in enumerate(agent.legs):
+        foot = min(float(h[:, j].min()) for j in (leg.ankle, leg.toe) if j is not None)
+        if foot - lowest > GROUND_REACH_M:
+            out[k] = foot - lowest
+    return out
+
+
+def raised_note(agent: Agent, raised: dict[int, float]) -> str | None:
+    """What :func:`raised_legs` found, for the agent's notes; None when every leg is on the ground."""
+    if not raised:
+        return None
+    parts = []
+    for k, metres in raised.items():
+        leg = agent.legs[k]
+        parts.append(f"the {leg.side} leg's foot '{agent.joints[leg.ankle]}' is never within "
+                     f"{GROUND_REACH_M * 100:.0f} cm of the lowest point of the body (it stays {metres:.2f} m above it): "
+                     f"no contacts on it; check mocap:{leg.side}LegJoints")
+    return "; ".join(parts)
+
+
+def detect_agent(agent: Agent, clip: Clip, info: StageInfo, settings: DetectSettings | None = None,
+                 raised: dict[int, float] | None = None) -> list[list[tuple[int, int]]]:
+    """Detected contact ranges of each leg of an agent (``agent.legs``), on its source clip;
+    none on the legs ``raised`` (default :func:`raised_legs`)."""
     seconds = agent.sample_times / info.time_codes_per_second
+    if raised is None:
+        raised = raised_legs(agent, clip, info)
     out = []
-    for leg in agent.legs:
+    for k, leg in enumerate(agent.legs):
+        if k in raised:
+            out.append([])
+            continue
         ankle = trajectory.joint_world(agent, clip, leg.ankle)[:, 3, :3]
         toe = trajectory.joint_world(agent, clip, leg.toe)[:, 3, :3] if leg.toe is not None else None
         out.append(detect_leg(seconds, ankle, toe, info.up_axis, info.meters_per_unit, settings))
@@ -224,5 +260,5 @@ def mask_of(ranges, frame_count: int) -> np.ndarray:
     return out
 
 
-__all__ = ["Leg", "SIDES", "find_legs", "chain_problem", "DetectSettings", "detect_leg", "detect_joint", "detect_agent",
+__all__ = ["Leg", "SIDES", "find_legs", "chain_problem", "DetectSettings", "detect_leg", "detect_joint", "detect_agent", "raised_legs", "raised_note", "GROUND_REACH_M",
            "clean_ranges", "leg_ranges", "mask_of", "ground_speed", "takes"]

@@ -64,6 +64,11 @@ def joint_skel_space(agent: Agent, clip: Clip, joint: int) -> np.ndarray:
     return m
 
 
+def skel_world(agent: Agent, clip: Clip) -> np.ndarray:
+    """(F,J,4,4) world matrices of every joint at every source frame."""
+    return kinematics.skel_space(local_transforms(agent, clip), agent.parents) @ agent.skel_to_world[:, None]
+
+
 def joint_world(agent: Agent, clip: Clip, joint: int, cache: dict | None = None) -> np.ndarray:
     """(F,4,4) world matrices of one joint at every source frame.
 

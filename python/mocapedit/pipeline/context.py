@@ -101,6 +101,13 @@ class SolveContext:
         """Per leg of the agent (``agent.legs``), the inclusive frame ranges of its foot contacts
         on its source clip: the artist's (``agent.foot_contacts``), else detected. Agents that
         play one clip the same way share them."""
+        return self._contacts(path)[0]
+
+    def contacts_note(self, path: str) -> str | None:
+        """Why a leg of the agent has no contacts detected (:func:`contacts.raised_note`), or None."""
+        return self._contacts(path)[1]
+
+    def _contacts(self, path: str) -> tuple[list[list[tuple[int, int]]], str | None]:
         agent = self.data.agents[path]
         place = agent.skel_to_world
         # A static placement's translation and turn about up change neither the contacts nor the
@@ -112,10 +119,13 @@ class SolveContext:
                tuple(agent.foot_contacts or ()), placement)
         hit = self.contacts_cache.get(key)
         if hit is None:
-            if agent.foot_contacts is not None:
-                hit = contacts.leg_ranges(agent.foot_contacts, agent.legs, agent.frame_count)
+            if agent.foot_contacts is not None:   # the artist's, as authored
+                hit = (contacts.leg_ranges(agent.foot_contacts, agent.legs, agent.frame_count), None)
             else:
-                hit = contacts.detect_agent(agent, self.data.clip_of(agent), self.data.info)
+                clip = self.data.clip_of(agent)
+                raised = contacts.raised_legs(agent, clip, self.data.info)
+                hit = (contacts.detect_agent(agent, clip, self.data.info, raised=raised),
+                       contacts.raised_note(agent, raised))
             self.contacts_cache[key] = hit
         return hit
 

@@ -30,6 +30,7 @@ class ClipContacts:
     joint_names: list[str]                           # the skeleton's joints
     ranges: list[list[tuple[int, int]]] = field(default_factory=list)  # per leg
     names: list[list[str]] = field(default_factory=list)               # instance name of each range
+    note: str | None = None                          # why a leg has none (contacts.raised_note)
 
 
 def detect(stage: Usd.Stage, settings: contacts.DetectSettings | None = None, animation: str | None = None,
@@ -51,10 +52,13 @@ def detect(stage: Usd.Stage, settings: contacts.DetectSettings | None = None, an
         if not agent.legs:
             raise MocapEditError(f"<{path}>: no legs found by name in skeleton <{agent.skeleton_path}>; set "
                                  "mocap:leftLegJoints and mocap:rightLegJoints")
-        found = contacts.detect_agent(agent, data.clip_of(agent), data.info, settings)
+        clip = data.clip_of(agent)
+        raised = contacts.raised_legs(agent, clip, data.info)
+        found = contacts.detect_agent(agent, clip, data.info, settings, raised)
         names = [[f"{prefix or ''}{leg.side}{k + 1}" for k in range(len(r))] for leg, r in zip(agent.legs, found)]
         out.append(ClipContacts(animation=agent.animation_path, agent=path, frames=agent.frame_count,
-                                legs=list(agent.legs), joint_names=list(agent.joints), ranges=found, names=names))
+                                legs=list(agent.legs), joint_names=list(agent.joints), ranges=found, names=names,
+                                note=contacts.raised_note(agent, raised)))
     return sorted(out, key=lambda c: c.animation), data.info
 
 

@@ -62,7 +62,8 @@ def run(args) -> int:
     save_review(args, stage, contact_tags.build_layer(clips, info, settings), info)
     for clip in clips:
         counts = ", ".join(f"{leg.side} {len(r)}" for leg, r in zip(clip.legs, clip.ranges))
-        progress.message(f"<{clip.animation}> ({clip.frames} frames): contacts {counts}")
+        progress.message(f"<{clip.animation}> ({clip.frames} frames): contacts {counts}"
+                         + (f"; {clip.note}" if clip.note else ""))
     if not args.quiet:
         print(f"wrote {os.path.abspath(args.output)}", file=sys.stderr)
     return 0

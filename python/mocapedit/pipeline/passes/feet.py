@@ -577,6 +577,8 @@ def lock_agents(ctx: SolveContext) -> list[AgentLocking]:
                 result.note = f"foot locking skipped: {why}"
             elif lock.locked:
                 locks.append((lock, result))
+            if not why and ctx.contacts_note(path):
+                result.note = f"foot locking: {ctx.contacts_note(path)}"
         if len(locks) >= LOCK_RUN:
             _lock_run(ctx, locks)
             # Posed legs are shared by the agents of a run only: a crowd's retimed agents each
