@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import io
 
-from mocapedit.model.progress import Progress, format_duration, format_rate
+from mocapedit.model.progress import Progress, counted, format_duration, format_rate
 
 
 class Clock:
@@ -37,6 +37,14 @@ def test_a_short_task_prints_only_its_summary():
     clock, stream = Clock(), io.StringIO()
     _run(Progress(stream=stream, tty=False, clock=clock), clock, steps=3, dt=0.01)
     assert stream.getvalue().splitlines() == ["solve paths: 3 agents in 0.03 s (100 agents/s), 3 fallbacks"]
+
+
+def test_one_of_a_thing_is_said_in_the_singular():
+    clock, stream = Clock(), io.StringIO()
+    _run(Progress(stream=stream, tty=False, clock=clock), clock, steps=1, dt=0.01)
+    assert stream.getvalue().startswith("solve paths: 1 agent in 0.01 s")
+    assert counted(1, "agent pairs") == "1 agent pair" and counted(0, "agents") == "0 agents"
+    assert counted(2, "agents") == "2 agents"
 
 
 def test_terminal_bar_is_redrawn_in_place_and_replaced_by_the_summary():

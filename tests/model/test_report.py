@@ -92,3 +92,10 @@ def test_walking_figures_of_a_shot_where_no_moved_source_walks_read_as_such(unkn
                                     if unknown is None else r))
     assert "nan" not in text.lower()
     assert "no walking direction to compare" in text
+
+
+def test_the_shot_lines_say_one_agent_in_the_singular():
+    from mocapedit.model.report import ShotPlausibility, Stats, foot_locking_lines, plausibility_lines
+    stats = Stats(foot_contacts_locked=1, foot_locked_agents=1)
+    assert "legs locked on 1 agent;" in foot_locking_lines(stats)[0] and "1 contact;" in foot_locking_lines(stats)[0]
+    assert plausibility_lines(ShotPlausibility(agents=1))[0].startswith("plausibility of 1 moved agent:")

@@ -40,6 +40,11 @@ def format_rate(per_second: float, unit: str = "") -> str:
     return f"{text} {unit}/s".replace("  ", " ") if unit else f"{text}/s"
 
 
+def counted(count: int, plural: str) -> str:
+    """``count`` things, said in the singular for one: ``counted(1, "agent pairs")`` is "1 agent pair"."""
+    return f"{count} {plural[:-1] if count == 1 and plural.endswith('s') else plural}"
+
+
 class Progress:
     """Reports named tasks to a stream (stderr by default). ``quiet`` silences everything.
 
@@ -141,7 +146,7 @@ class Task:
         now = p.clock()
         self.count = max(self.count, self.total) if count is None else int(count)
         f = self.figures(now)
-        line = f"{self.name}: {self.count}{' ' + self.unit if self.unit else ''} in {format_duration(f['elapsed'])}"
+        line = f"{self.name}: {counted(self.count, self.unit) if self.unit else self.count} in {format_duration(f['elapsed'])}"
         if f["rate"] and f["elapsed"] >= 0.01:
             line += f" ({format_rate(f['rate'], self.unit)})"
         if extra:

@@ -13,6 +13,8 @@ import math
 from dataclasses import dataclass, field, fields
 from typing import Any, ClassVar
 
+from mocapedit.model.progress import counted
+
 
 def key(name: str, always: bool = False, default: Any = None):
     """A report field stored under JSON key ``name``; ``always``: written even when None."""
@@ -317,8 +319,8 @@ def foot_locking_lines(stats: Stats) -> list[str]:
     # contacts count, their legs are not changed.
     kept = f", left as they were on {stats.foot_locking_not_needed} (as planted as the source's)" \
         if stats.foot_locking_not_needed else ""
-    return [f"feet: {stats.foot_contacts_locked} contacts; legs locked on {stats.foot_locked_agents or 0} "
-            f"agents{kept}{steps}; "
+    return [f"feet: {counted(stats.foot_contacts_locked, 'contacts')}; legs locked on "
+            f"{counted(stats.foot_locked_agents or 0, 'agents')}{kept}{steps}; "
             f"skate {_num(stats.foot_skate_source)} source, {_num(stats.foot_skate_unlocked)} after the "
             f"edits, {_num(stats.foot_skate_edited)} locked (stage units/s, mean over agents); "
             f"largest pelvis drop {_num(stats.max_pelvis_drop)}, "
@@ -333,7 +335,7 @@ def plausibility_lines(p: ShotPlausibility | None) -> list[str]:
     lo, hi = p.length_ratio_range or (None, None)
     wlo, whi = p.time_warp_range or (None, None)
     return [
-        f"plausibility of {p.agents} moved agents: largest extra turn {_fixed(p.max_extra_turn_per_frame_at_60fps, 1)} "
+        f"plausibility of {counted(p.agents, 'moved agents')}: largest extra turn {_fixed(p.max_extra_turn_per_frame_at_60fps, 1)} "
         f"deg/frame at 60 fps ({p.max_extra_facing_rate_agent}), {p.spinning_agents} spinning (over 15)",
         ("  no walking direction to compare (no moved agent's source walks)" if not _known(p.max_direction_deviation)
          else f"  largest walking direction change {p.max_direction_deviation:.1f} deg"
