@@ -101,7 +101,7 @@ def test_a_real_crowd_crossing_is_parted_without_loops_and_keeps_its_feet(tmp_pa
     bases = evaluate.agent_root_positions(edited, names, times)
     bases[..., metrics.ground_axes("Z")[0]] = 0.0
     sep = metrics.min_separation(bases, RADIUS, 180.0, "Z")
-    assert sep.overlaps == 0, sep.pair
+    assert sep.overlaps == 0, (sep.agents, sep.clearance)
     moved = [p for p in names if p in result.report.agents and result.report.agents[p].edited]
     figures = measure.shot_plausibility(stage, edited, moved)
     assert not [f.agent for f in figures if f.reverses]

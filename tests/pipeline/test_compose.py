@@ -98,8 +98,8 @@ def test_a_time_map_and_a_pose_edit_are_baked_on_shot_frames(tmp_path, with_pass
 
 def test_the_passes_run_in_the_listed_order_and_time_each(tmp_path, monkeypatch):
     from mocapedit.pipeline import passes
-    assert [p.name for p in processor.PASSES] == ["layering-check", "path", "time", "collisions", "layering",
-                                                  "foot locking"]
+    assert [p.name for p in processor.PASSES] == ["layering-check", "path", "time", "collisions", "stance",
+                                                  "layering", "foot locking"]
     ran = []
     monkeypatch.setattr(processor, "PASSES", tuple(
         Pass(p.name, lambda ctx, p=p: (ran.append(p.name), p.run(ctx))) for p in reversed(passes.PASSES)))

@@ -751,7 +751,7 @@ def test_progress_notes_summary_and_report_give_the_same_figures(tmp_path):
     assert stats["collisionIterations"] == 1 and stats["remainingOverlaps"] > 0
     left = report.describe_left(stats["remainingOverlaps"], stats["regionFramesLeft"])
     # Progress stops at the iteration it reached (not the maxIterations it was given).
-    assert "collision avoidance: 1 iterations in" in stream.getvalue()
+    assert "collision avoidance: 1 iteration in" in stream.getvalue()
     assert f", {left}\n" in stream.getvalue()
     assert any(left + " after 1 iteration" in n for n in result.report.notes)
     summary = result.report.summary()

@@ -117,6 +117,7 @@ CONTRACT: dict[str, dict[str, object]] = {
         "minTimeInterval": ("double", UNIFORM, 0.1, None),
         "maxWait": ("double", UNIFORM, 3.0, None),
         "footLocking": ("bool", UNIFORM, True, None),
+        "pivotOnFeet": ("bool", UNIFORM, True, None),
     },
 }
 
@@ -484,7 +485,7 @@ SAMPLES = {
     "collisionStrategy": "accumulate", "minTimeInterval": 0.25, "maxWait": 1.5,
     "mocap:leftLegJoints": Vt.TokenArray(["Hips/LUpLeg", "Hips/LUpLeg/LLeg", "Hips/LUpLeg/LLeg/LFoot"]),
     "mocap:rightLegJoints": Vt.TokenArray(["RUpLeg", "RLeg", "RFoot", "RToe"]),
-    "mocap:footLocking": False, "footLocking": False,
+    "mocap:footLocking": False, "footLocking": False, "pivotOnFeet": False,
     "footContact:__INSTANCE_NAME__:joint": "LeftToe",
     "footContact:__INSTANCE_NAME__:frames": Gf.Vec2i(3, 9),
 }

@@ -221,6 +221,7 @@ class SolveSettings:
     min_time_interval: float = 0.1
     max_wait: float = 3.0             # seconds collision avoidance may delay one agent
     foot_locking: bool = True
+    pivot_on_feet: bool = True
 
 
 @dataclass

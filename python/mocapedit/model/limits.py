@@ -33,7 +33,7 @@ MAX_EXTRA_TIME = 100_000.0
 SETTING_NAMES = {"collision_avoidance": "collisionAvoidance", "max_iterations": "maxIterations",
                  "sample_step": "sampleStep", "margin": "margin", "match_speed": "matchSpeed",
                  "collision_strategy": "collisionStrategy", "min_time_interval": "minTimeInterval",
-                 "max_wait": "maxWait", "foot_locking": "footLocking"}
+                 "max_wait": "maxWait", "foot_locking": "footLocking", "pivot_on_feet": "pivotOnFeet"}
 
 
 def setting_problem(s: SolveSettings) -> tuple[str, str] | None:

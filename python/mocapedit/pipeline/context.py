@@ -96,6 +96,9 @@ class SolveContext:
     guides: list = field(default_factory=list)
     #: Foot contacts of the source clips (:meth:`source_contacts`), by clip and placement.
     contacts_cache: dict = field(default_factory=dict)
+    #: Whether the moved agents' paths pivot on their feet already (the stance pass; collision
+    #: avoidance runs it before its last solve, so that the solve clears what it moves).
+    pivoted: bool = False
 
     def source_contacts(self, path: str) -> list[list[tuple[int, int]]]:
         """Per leg of the agent (``agent.legs``), the inclusive frame ranges of its foot contacts

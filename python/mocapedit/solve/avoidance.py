@@ -121,6 +121,9 @@ class Problem:
     collide_agents: bool = True         # False: regions only
     fixed_timing: np.ndarray | None = None  # (A,) bool: time constraints fix the agent's timing
     span: tuple[float, float] | None = None  # shot times compared (default: all the frames play)
+    #: (F_a,2) per agent: the paths whose way the walkers keep (the rows against walking back),
+    #: when it is not ``paths``' (a solve resumed from an earlier one's result keeps the source's way)
+    way: list[np.ndarray] | None = None
 
 
 @dataclass
@@ -264,6 +267,8 @@ class _State:
         counts = np.array([len(g) for g in problem.paths], dtype=np.int64)
         self.starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
         self.rest = np.concatenate(problem.paths).astype(np.float64) if len(counts) else np.zeros((0, 2))
+        self.way = self.rest if problem.way is None or not len(counts) else \
+            np.concatenate(problem.way).astype(np.float64)
         self.rigid = [(int(self.starts[a] + f), int(self.starts[a] + l)) for a, f, l in problem.rigid]
         self.times = {i: t for i, t in enumerate(problem.frame_times)}
         idx = list(range(len(problem.names)))
@@ -573,7 +578,7 @@ def _walks_backward(state: "_State", flat: np.ndarray) -> np.ndarray:
     if not first:
         return np.zeros(agents, dtype=bool)
     first, last, owner = np.concatenate(first), np.concatenate(last), np.concatenate(owner)
-    was, now = state.rest[last] - state.rest[first], flat[last] - flat[first]
+    was, now = state.way[last] - state.way[first], flat[last] - flat[first]
     back = (np.linalg.norm(was, axis=1) >= least) & (np.einsum("ij,ij->i", was, now) < 0.0)
     return np.bincount(owner[back], minlength=agents) > 0
 
@@ -947,7 +952,7 @@ class _Forward:
         owner = np.repeat(np.arange(len(counts)), chords)
         v = np.arange(int(chords.sum()), dtype=np.int64) - np.repeat(np.cumsum(chords) - chords, chords) + starts[:-1][owner]
         hv = h[owner]
-        c = np.take(state.rest, v + hv, axis=0) - np.take(state.rest, v, axis=0)
+        c = np.take(state.way, v + hv, axis=0) - np.take(state.way, v, axis=0)
         n = np.linalg.norm(c, axis=1)
         moving = n > moving_m_s / s.meters_per_unit * hv * dt[owner]
         moving = np.flatnonzero(moving)

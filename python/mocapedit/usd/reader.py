@@ -806,6 +806,7 @@ class StageReader:
         s.min_time_interval = float(_get(prim, "minTimeInterval", s.min_time_interval))
         s.max_wait = float(_get(prim, "maxWait", s.max_wait))
         s.foot_locking = bool(_get(prim, "footLocking", s.foot_locking))
+        s.pivot_on_feet = bool(_get(prim, "pivotOnFeet", s.pivot_on_feet))
         problem = limits.setting_problem(s)
         if problem is not None:
             raise prim_error(prim.GetPath(), problem[1], problem[0])

@@ -483,7 +483,7 @@ class SolveSettings(_Typed):
 
     ATTRIBUTES = (
         "collisionAvoidance", "maxIterations", "sampleStep", "margin", "matchSpeed",
-        "collisionStrategy", "minTimeInterval", "maxWait", "footLocking",
+        "collisionStrategy", "minTimeInterval", "maxWait", "footLocking", "pivotOnFeet",
     )
 
 

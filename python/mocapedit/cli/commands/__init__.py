@@ -22,3 +22,6 @@ def add_solve_options(p: argparse.ArgumentParser) -> None:
                        help="keep the source timing on edited paths even if MocapSolveSettings asks to match speed")
     p.add_argument("--no-foot-locking", dest="foot_locking", action="store_false", default=None,
                    help="leave the feet as the edits put them (MocapSolveSettings.footLocking off)")
+    p.add_argument("--no-pivot-on-feet", dest="pivot_on_feet", action="store_false", default=None,
+                   help="carry each frame's pose rigidly along the edited path, turned about the root, instead "
+                        "of turning between steps and pivoting on the planted feet (MocapSolveSettings.pivotOnFeet off)")

@@ -70,8 +70,9 @@ def run(args) -> int:
     options = {"guides": args.guides, "collisions": args.collisions}
     if args.match_speed is not None:
         options["match_speed"] = args.match_speed
-    if args.foot_locking is not None:
-        options["foot_locking"] = args.foot_locking
+    for name in ("foot_locking", "pivot_on_feet"):
+        if getattr(args, name) is not None:
+            options[name] = getattr(args, name)
     t = time.perf_counter()
     client, cluster = batch.connect(args.scheduler, args.workers)
 

@@ -44,8 +44,9 @@ def run(args) -> int:
 
     progress = Progress(quiet=args.quiet)
     overrides = {} if args.match_speed is None else {"match_speed": args.match_speed}
-    if args.foot_locking is not None:
-        overrides["foot_locking"] = args.foot_locking
+    for name in ("foot_locking", "pivot_on_feet"):
+        if getattr(args, name) is not None:
+            overrides[name] = getattr(args, name)
     result = solve(args.stage, output=args.output, composed=args.composed, guides=args.guides,
                    collisions=args.collisions, progress=progress, report_json=args.report, **overrides)
     if not args.quiet:

@@ -19,6 +19,11 @@ with ``mocap:collide = false`` are left alone. Walkers that wait (``maxWait``) g
 map that plays them slower before the crossing and later from there on; agents that a
 time, sync or relative constraint or a hard position constraint names keep their timing.
 
+With ``MocapSolveSettings.pivotOnFeet`` on, the moved agents then turn between steps and pivot on
+their planted feet (the stance pass, :mod:`mocapedit.pipeline.passes.stance`), which moves their
+roots by a few centimetres, and the paths are solved once more from there, so that the overlaps
+the pivot makes are cleared like any other.
+
 Report: ``stats`` ``collisionStrategy``, ``collisionIterations``, ``collisionsPerIteration``
 (collision intervals found before each solve, then after the last), ``remainingOverlaps``,
 ``regionFramesLeft``, ``minSeparation``, ``delayedAgents`` and ``largestDelay`` (seconds),
@@ -49,6 +54,8 @@ from mocapedit.geometry import ground, trajectory
 from mocapedit.usd import writer
 from mocapedit.model.errors import prim_error
 from mocapedit.pipeline.context import EditedPath, SolveContext
+from mocapedit.pipeline.passes import stance
+from mocapedit.model.progress import Silent
 from mocapedit.model.report import ConstraintEntry, describe_left
 
 #: Clearance (metres) up to which each agent's nearest neighbour is measured for the report.
@@ -87,12 +94,16 @@ def run(ctx: SolveContext) -> None:
     _check_radii(ctx, names)
     problem = _problem(ctx, names, footprints, enabled)
     _check_pins_outside_regions(ctx, problem)
-    outcome = avoidance.resolve(problem, avoidance.Settings(
+    solve_settings = avoidance.Settings(
         strategy=settings.collision_strategy, max_iterations=int(settings.max_iterations),
         meters_per_unit=info.meters_per_unit, max_wait_s=float(settings.max_wait),
-        time_codes_per_second=float(info.time_codes_per_second)), ctx.progress)
+        time_codes_per_second=float(info.time_codes_per_second))
+    outcome = avoidance.resolve(problem, solve_settings, ctx.progress)
     _check_refused_waits(ctx, problem, outcome)
     _apply(ctx, problem, outcome)
+    if settings.pivot_on_feet and outcome.converged:
+        outcome = _pivot_and_clear(ctx, problem, footprints, enabled, solve_settings, outcome)
+    ctx.pivoted = True
     _report(ctx, problem, outcome, enabled)
     _held_pose_notes(ctx, problem, outcome)
     _soft_timing_given_way(ctx, problem, outcome)
@@ -345,6 +356,58 @@ def _problem(ctx: SolveContext, names: list[str], footprints, enabled: bool) -> 
         problem.regions.append(avoidance.Region(region.path, footprint, members,
                                                 problem.radius[members] + region.margin))
     return problem
+
+
+def _pivot_and_clear(ctx: SolveContext, problem: avoidance.Problem, footprints, enabled: bool,
+                     solve_settings: avoidance.Settings, outcome: avoidance.Outcome) -> avoidance.Outcome:
+    """The moved agents pivot on their feet (the stance pass), which moves their roots by a few
+    centimetres, and the paths are solved again from there, so that what the pivot moves into
+    another agent (or a region) is cleared as any overlap is. Pairs that hard constraints hold
+    closer than their clearance keep their paths (their partings are tight already); a shot that
+    the second solve does not clear as well as the first keeps the first's paths."""
+    names = problem.names
+    held = {names[i] for _, a, b, _, _, _ in outcome.link_held for i in (a, b)}
+    held |= {names[i] for a, b, _ in outcome.blocked for i in (a, b)}
+    kept = (dict(ctx.paths), dict(ctx.time_maps), dict(ctx.out_times))
+    # The walkers keep their way as the first solve was given it, not as it left them.
+    first_paths = problem.paths
+    stance.pivot_moved(ctx, keep=held)
+    again = _problem(ctx, names, footprints, enabled)
+    again.way = first_paths
+    second = avoidance.resolve(again, solve_settings, Silent())
+    if len(second.remaining) > len(outcome.remaining) or len(second.region_left) > len(outcome.region_left):
+        for now, before in zip((ctx.paths, ctx.time_maps, ctx.out_times), kept):
+            now.clear()
+            now.update(before)
+        return outcome
+    _apply(ctx, again, second)
+    return _merged(outcome, second)
+
+
+def _merged(first: avoidance.Outcome, second: avoidance.Outcome) -> avoidance.Outcome:
+    """The outcome of two solves, the second from where the first left the paths: the final
+    state, with the iterations, delays and moves of both."""
+    def added(a: dict, b: dict) -> dict:
+        return {k: a.get(k, 0) + b.get(k, 0) for k in {**a, **b}}
+    return dataclasses.replace(
+        second, iterations=first.iterations + second.iterations[1:], moved=first.moved | second.moved,
+        delays=first.delays + second.delays, solves=first.solves + second.solves,
+        seconds=first.seconds + second.seconds, timing=added(first.timing, second.timing),
+        work=added(first.work, second.work), kept_direction=sorted(set(first.kept_direction) | set(second.kept_direction)),
+        link_held=_held_over_both(first.link_held, second.link_held),
+        wait_refused=first.wait_refused | second.wait_refused,
+        detour_iterations=first.detour_iterations + second.detour_iterations[1:])
+
+
+def _held_over_both(first: list, second: list) -> list:
+    """Hard links that hold a pair closer than its clearance in either solve, each over the times
+    either holds it."""
+    out: dict = {}
+    for name, a, b, t0, t1, distance in first + second:
+        held = out.get((name, a, b))
+        out[(name, a, b)] = (name, a, b, t0, t1, distance) if held is None else \
+            (name, a, b, min(held[3], t0), max(held[4], t1), min(held[5], distance))
+    return list(out.values())
 
 
 def _apply(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Outcome) -> None:
