@@ -192,3 +192,25 @@ def test_a_solve_resumed_from_an_earlier_result_keeps_the_sources_way():
     # Turned 110 degrees from the way (70 from the bent path it was given): sent back.
     turned = _rotate(straight, np.radians(110.0))
     assert avoidance._walks_backward(state, turned)[0]
+
+
+def test_a_pair_held_together_by_the_artist_does_not_keep_the_rest_from_pivoting(tmp_path):
+    """Head-on walkers, and far from them two walkers that a hard relative constraint holds 40 cm
+    apart (closer than their clearance: an overlap avoidance must leave): the walkers still pivot
+    on their feet; the held pair keeps its paths."""
+    (walk,) = STAGES._walks(1)
+    agents = [examples.AgentSpec("agent_0000", walk, (0.0, 0.0, -4.0), 0.0),
+              examples.AgentSpec("agent_0001", walk, (0.0, 0.0, 4.0), 180.0),
+              examples.AgentSpec("host", walk, (20.0, 0.0, 0.0), 0.0),
+              examples.AgentSpec("guest", walk, (22.0, 0.0, 0.0), 0.0)]
+    stage = STAGES._stage(tmp_path, "held.usda", agents)
+    examples.add_relative_constraint(stage, "/Edits/hold", "/World/Crowd/guest", 40, "/World/Crowd/host", 40,
+                                     (0.4, 0.0, 0.0))
+    stage.GetRootLayer().Save()
+    src = Usd.Stage.Open(str(tmp_path / "held.usda"))
+    ratio = {}
+    for pivot in (False, True):
+        result, out = _solved(tmp_path, tmp_path / "held.usda", pivot)
+        assert any("/Edits/hold" in n for n in result.report.notes)
+        ratio[pivot] = measure.plausibility(src, out, "/World/Crowd/agent_0000").foot_skate_ratio
+    assert ratio[True] < ratio[False] - 0.2, ratio

@@ -101,7 +101,7 @@ def run(ctx: SolveContext) -> None:
     outcome = avoidance.resolve(problem, solve_settings, ctx.progress)
     _check_refused_waits(ctx, problem, outcome)
     _apply(ctx, problem, outcome)
-    if settings.pivot_on_feet and outcome.converged:
+    if settings.pivot_on_feet and _cleared(outcome):
         outcome = _pivot_and_clear(ctx, problem, footprints, enabled, solve_settings, outcome)
     ctx.pivoted = True
     _report(ctx, problem, outcome, enabled)
@@ -356,6 +356,15 @@ def _problem(ctx: SolveContext, names: list[str], footprints, enabled: bool) -> 
         problem.regions.append(avoidance.Region(region.path, footprint, members,
                                                 problem.radius[members] + region.margin))
     return problem
+
+
+def _cleared(outcome: avoidance.Outcome) -> bool:
+    """Whether the solve cleared everything it could: no avoid-region frame left, and no overlap
+    but those of pairs that hard constraints hold together."""
+    held = {(min(a, b), max(a, b)) for a, b, _ in outcome.blocked}
+    held |= {(min(a, b), max(a, b)) for _, a, b, _, _, _ in outcome.link_held}
+    left = zip(outcome.remaining.agent_a.tolist(), outcome.remaining.agent_b.tolist())
+    return not outcome.region_left and all((min(a, b), max(a, b)) in held for a, b in left)
 
 
 def _pivot_and_clear(ctx: SolveContext, problem: avoidance.Problem, footprints, enabled: bool,
