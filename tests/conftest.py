@@ -141,11 +141,12 @@ def world_joints(stage: Usd.Stage, skel_path: str, times) -> np.ndarray:
     return np.array(out)
 
 
-def run_cli(*args, cwd=None):
-    """Runs the installed `mocapedit` command and returns the CompletedProcess."""
+def run_cli(*args, cwd=None, timeout=None):
+    """Runs the installed `mocapedit` command and returns the CompletedProcess (``timeout``:
+    seconds, after which it raises ``subprocess.TimeoutExpired``)."""
     exe = Path(sys.executable).with_name("mocapedit")
     return subprocess.run([str(exe), *map(str, args)], capture_output=True, text=True, cwd=cwd,
-                          env={**os.environ, "PYTHONWARNINGS": "error"})
+                          env={**os.environ, "PYTHONWARNINGS": "error"}, timeout=timeout)
 
 
 @pytest.fixture

@@ -10,6 +10,7 @@ import json
 import os
 import signal
 import socket
+import threading
 import subprocess
 import sys
 import time
@@ -118,6 +119,44 @@ def test_an_unreachable_scheduler_is_a_clear_error_within_ten_seconds(tmp_path, 
     assert time.perf_counter() - started < 10
     assert proc.returncode == 1, proc.stderr
     assert f"cannot reach a Dask scheduler" in proc.stderr and "Traceback" not in proc.stderr
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("answer", [None, b"HTTP/1.0 400 Bad Request\r\n\r\n"], ids=["silent", "not dask"])
+def test_a_scheduler_address_that_is_not_a_dask_scheduler_is_a_clear_error_within_ten_seconds(tmp_path, shots, answer):
+    """A port that accepts and never answers (it hung for ever) or answers with something else
+    than Dask (a web server, the dashboard's port by mistake: it said "out of memory")."""
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(8)
+    port = server.getsockname()[1]
+    held = []
+
+    def serve():
+        while True:
+            try:
+                conn, _ = server.accept()
+            except OSError:
+                return
+            if answer is not None:
+                conn.sendall(answer)
+                conn.close()
+            else:
+                held.append(conn)
+
+    threading.Thread(target=serve, daemon=True).start()
+    try:
+        started = time.perf_counter()
+        proc = run_cli("batch", shots[0], "-o", tmp_path / "out", "--scheduler", f"tcp://127.0.0.1:{port}",
+                       timeout=30)
+        assert time.perf_counter() - started < 10
+    finally:
+        server.close()
+        for conn in held:
+            conn.close()
+    assert proc.returncode == 1, proc.stderr
+    assert "Dask scheduler" in proc.stderr and "check the address" in proc.stderr, proc.stderr
+    assert "memory" not in proc.stderr and "Traceback" not in proc.stderr
     assert not (tmp_path / "out").exists()
 
 

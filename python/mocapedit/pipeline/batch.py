@@ -27,6 +27,8 @@ from mocapedit.model.errors import MocapEditError
 
 #: Seconds to wait for a scheduler given by address before giving up.
 CONNECT_TIMEOUT = 5.0
+#: Seconds more for a reached scheduler to answer the handshake.
+HANDSHAKE_SLACK = 3.0
 #: Dask's configuration of the environment its nannies give new worker processes.
 WORKER_ENVIRON = "distributed.nanny.pre-spawn-environ"
 #: File name of the summary written in the output folder.
@@ -169,6 +171,40 @@ def solve_shot(job: Job, options: dict, force: bool = False, split: bool = False
     return result
 
 
+def _client_of(client_type, scheduler: str):
+    """A client connected to ``scheduler`` within :data:`CONNECT_TIMEOUT` seconds (and a few more
+    for the handshake, which Dask's own timeout does not bound: a port that accepts and never
+    answers held it for ever), or a MocapEditError that says what the address is not."""
+    import queue
+    import threading
+    got: queue.Queue = queue.Queue()
+
+    def attempt() -> None:
+        try:
+            got.put((client_type(scheduler, timeout=CONNECT_TIMEOUT), None))
+        except BaseException as exc:   # whatever the bytes there made Dask raise, said below
+            got.put((None, exc))
+
+    threading.Thread(target=attempt, name="mocapedit-connect", daemon=True).start()
+    try:
+        client, exc = got.get(timeout=CONNECT_TIMEOUT + HANDSHAKE_SLACK)
+    except queue.Empty:
+        raise MocapEditError(f"--scheduler {scheduler}: something listens there but did not answer as a Dask "
+                             f"scheduler within {CONNECT_TIMEOUT + HANDSHAKE_SLACK:g} s; check the address "
+                             "(the scheduler's port, 8786 by default, not its dashboard's)") from None
+    if exc is None:
+        return client
+    if isinstance(exc, (OSError, TimeoutError)):
+        raise MocapEditError(f"--scheduler {scheduler}: cannot reach a Dask scheduler there within "
+                             f"{CONNECT_TIMEOUT:g} s ({type(exc).__name__}); start one with "
+                             "`dask scheduler` or check the address") from None
+    if isinstance(exc, ValueError) and "://" not in scheduler:
+        raise MocapEditError(f"--scheduler {scheduler}: {exc}") from None
+    raise MocapEditError(f"--scheduler {scheduler}: what answered there is not a Dask scheduler "
+                         f"({type(exc).__name__}); check the address (the scheduler's port, 8786 by default, "
+                         "not its dashboard's)") from None
+
+
 def connect(scheduler: str | None, workers: int | None):
     """A ``distributed.Client``: to ``scheduler`` (``tcp://host:port``) or to a new local
     cluster of ``workers`` single-threaded processes. Returns (client, cluster or None).
@@ -182,14 +218,7 @@ def connect(scheduler: str | None, workers: int | None):
         raise MocapEditError("mocapedit batch runs on dask.distributed, which is not installed: "
                              "pip install 'mocapedit[batch]' (or dask[distributed])") from None
     if scheduler:
-        try:
-            return Client(scheduler, timeout=CONNECT_TIMEOUT), None
-        except (OSError, TimeoutError) as exc:
-            raise MocapEditError(f"--scheduler {scheduler}: cannot reach a Dask scheduler there within "
-                                 f"{CONNECT_TIMEOUT:g} s ({type(exc).__name__}); start one with "
-                                 "`dask scheduler` or check the address") from None
-        except ValueError as exc:
-            raise MocapEditError(f"--scheduler {scheduler}: {exc}") from None
+        return _client_of(Client, scheduler), None
     import dask
     n = workers or max(1, min(os.cpu_count() or 1, 8))
     # Workers forked from a fresh server process start in about a second; spawned ones, which
