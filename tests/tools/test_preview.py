@@ -233,6 +233,16 @@ def test_quiet_silences_solve_and_preview(tmp_path, toy_stage):
         assert proc.returncode == 0 and proc.stderr == "", proc.stderr
 
 
+@pytest.mark.parametrize("resolution", ["10", "3x2", "1000x1", "150x800"])
+def test_a_png_too_small_for_its_legend_is_an_error_that_says_so(toy_stage, tmp_path, resolution):
+    """It was an internal error (matplotlib: "Width and height specified must be non-negative")."""
+    proc = run_cli("preview", toy_stage, "-o", tmp_path / "p.png", "--resolution", resolution)
+    assert proc.returncode == 1 and "--resolution" in proc.stderr and "at least" in proc.stderr, proc.stderr
+    assert "internal error" not in proc.stderr and not (tmp_path / "p.png").exists()
+    exr = run_cli("preview", toy_stage, "-o", tmp_path / "p.exr", "--resolution", resolution, "-q")
+    assert exr.returncode == 0, exr.stderr
+
+
 @pytest.mark.parametrize("resolution", ["600", "300", "400x900", "1200x300"])
 def test_small_and_narrow_images_keep_the_legend_inside(solved, tmp_path, resolution):
     """The legend's column is wide enough for its text at any size (at 600 pixels it was cut

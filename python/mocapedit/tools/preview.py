@@ -82,6 +82,8 @@ def _trajectories(data, progress: Progress, name: str) -> dict:
 #: Width of the legend's column, in pixels at font scale 1 (its longest line, "collision
 #: left (N pairs)", with its marker and the column's padding).
 LEGEND_PIXELS = 230.0
+#: The smallest PNG (width, height) its plot, legend column and labels fit in.
+MIN_PNG = (200, 100)
 
 
 def _font_scale(w: int, h: int) -> float:
@@ -517,12 +519,16 @@ def write_png(scene: Scene, path: str, resolution=None, bounds: np.ndarray | Non
         if plot_w is not None:
             w = longest
             h = int(round(plot_w * aspect / (1.0 - 2 * margin)))
-            h = max(h, int(0.45 * w))
+            h = max(h, int(0.45 * w), MIN_PNG[1])
         else:
             h = longest
             plot_h = h * (1.0 - 2 * margin)
             w = int(round(plot_h / aspect / (1.0 - legend_frac - margin)))
-            w = max(w, int(0.6 * h))
+            w = max(w, int(0.6 * h), MIN_PNG[0])
+    if w < MIN_PNG[0] or h < MIN_PNG[1]:
+        raise MocapEditError(f"--resolution: a PNG preview needs at least {MIN_PNG[0]} x {MIN_PNG[1]} pixels for "
+                             f"its plot, legend and labels (this one would be {w} x {h}); ask for more, or write "
+                             "an .exr, which has no legend")
     # The legend's text needs about LEGEND_PIXELS at the scale of the fonts below, whatever
     # the image's width: a narrow image gives its column a larger share.
     legend_frac = max(legend_frac, LEGEND_PIXELS * _font_scale(w, h) / w)
