@@ -209,6 +209,40 @@ def test_edits_of_another_shot_or_an_older_input_are_named(tmp_path, toy_stage):
     assert "has changed since" in proc.stderr
 
 
+def test_edits_of_a_shot_of_the_same_name_in_another_folder_are_refused(tmp_path, toy_stage):
+    """seqA/shot.usda's edits over seqB/shot.usda: a note that the input changed, and the other
+    shot's constraints drawn over this one; the inputs are told apart by where they are."""
+    from conftest import write_toy_stage
+    other = write_toy_stage(tmp_path / "seqB" / "shot.usda", agents=5)
+    edits = tmp_path / "seqB" / "shot.edits.usda"
+    solve(str(other), output=str(edits))
+    proc = run_cli("preview", toy_stage, "--edits", edits, "-o", tmp_path / "x.png")
+    assert proc.returncode == 1 and "was solved for" in proc.stderr and "seqB" in proc.stderr, proc.stderr
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_a_composed_stage_with_edits_given_shows_those_edits_over_its_input(solved, tmp_path):
+    """A composed stage and an edits layer given with --edits: the stage's own edits layer is left
+    out and the given one shown over its input (it drew the composed stage as the source, "0
+    edited"); given its own edits layer, the same picture as without --edits."""
+    scene, stage, edits, composed = solved
+    alone = preview.load(str(composed))
+    again = preview.load(str(composed), str(edits))
+    for got in (alone, again):
+        assert got.edited
+        for a, b in zip(got.crowd.agents, scene.crowd.agents):
+            np.testing.assert_allclose(a.source.ground, b.source.ground, atol=1e-9)
+            np.testing.assert_allclose(a.edited.ground, b.edited.ground, atol=1e-9)
+    # Another edits layer of the same input, solved with other options, over the composed stage.
+    other = tmp_path / "other.edits.usda"
+    solve(str(stage), output=str(other), collisions=False, foot_locking=False)
+    over = preview.load(str(composed), str(other))
+    direct = preview.load(str(stage), str(other))
+    for a, b in zip(over.crowd.agents, direct.crowd.agents):
+        np.testing.assert_allclose(a.source.ground, b.source.ground, atol=1e-9)
+        np.testing.assert_allclose(a.edited.ground, b.edited.ground, atol=1e-9)
+
+
 def test_a_stage_without_edits_previews_its_source_paths(tmp_path, toy_stage):
     out = tmp_path / "src.png"
     proc = run_cli("preview", toy_stage, "-o", out)

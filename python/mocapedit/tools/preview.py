@@ -116,11 +116,17 @@ def _check_edits_match(stage_path: str, source_stage, edits_layer, progress: Pro
     solved_for = inputs[0] if inputs else "another input"
     name = os.path.basename(edits_layer.realPath or edits_layer.identifier)
     # A composed stage sub-layers the input it was solved for: its hash is that layer's stage's.
-    used = {os.path.basename(l.realPath or l.identifier): l for l in source_stage.GetUsedLayers()}
-    if inputs and os.path.basename(solved_for) not in used:
+    # Inputs recorded by where they are (a solve given an absolute path) are told apart by it
+    # (seqA/shot.usda from seqB/shot.usda); a relative one only by its name (the solve ran
+    # from a folder not recorded).
+    def key(path: str) -> str:
+        return os.path.realpath(path) if os.path.isabs(solved_for) else os.path.basename(path)
+
+    used = {key(l.realPath or l.identifier): l for l in source_stage.GetUsedLayers()}
+    if inputs and key(solved_for) not in used:
         raise MocapEditError(f"{name} was solved for {solved_for}, not {stage_path}; preview it over the "
                              f"shot it was solved for (or solve {stage_path} to get its own edits layer)")
-    root = used.get(os.path.basename(solved_for))
+    root = used.get(key(solved_for))
     if root is not None and root != source_stage.GetRootLayer() and \
             stage_io.content_hash(Usd.Stage.Open(root)) == recorded:
         return
@@ -145,15 +151,26 @@ def load(stage_path: str, edits_path: str | None = None, progress: Progress | No
     progress = progress or Silent()
     source_stage = reader.open_stage(stage_path)
     edits_layer, edited_stage = None, None
+    # A composed stage sub-layers its edits layer: the source is the stage without it.
+    own = edits_format.edits_layer(source_stage)
+    own = own.identifier if own is not None else None   # muting it may release the layer
     if edits_path:
         if not os.path.exists(edits_path):
             raise MocapEditError(f"{edits_path}: no such file")
-        edited_stage = reader.open_stage(stage_path)
-        edited_stage.GetSessionLayer().subLayerPaths.append(os.path.abspath(edits_path))
-        edits_layer = edits_format.edits_layer(edited_stage)
-        if edits_layer is None:
+        given = reader.open_layer(edits_path)
+        if edits_format.content_hash(given) is None:
             raise MocapEditError(f"{edits_path}: not an edits layer written by `mocapedit solve` "
                                  "(no customLayerData mocapedit)")
+        if own == given.identifier:
+            edits_path = None   # the stage's own: as without --edits
+    if edits_path:
+        if own is not None:
+            source_stage.MuteLayer(own)
+        edited_stage = reader.open_stage(stage_path)
+        if own is not None:
+            edited_stage.MuteLayer(own)
+        edited_stage.GetSessionLayer().subLayerPaths.append(os.path.abspath(edits_path))
+        edits_layer = given
     else:
         edits_layer = edits_format.edits_layer(source_stage)
         if edits_layer is not None:

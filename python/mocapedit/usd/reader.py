@@ -50,6 +50,21 @@ def open_stage(path: str) -> Usd.Stage:
     return stage
 
 
+def open_layer(path: str) -> Sdf.Layer:
+    """Opens one layer, turning USD's failure into a clear error naming the file."""
+    import os
+    if not os.path.isfile(path):
+        raise MocapEditError(f"{path}: no such file")
+    try:
+        with usd_diagnostics_held():
+            layer = Sdf.Layer.FindOrOpen(os.path.abspath(path))
+    except Exception as exc:  # pxr raises Tf.ErrorException with a multi-line text
+        raise MocapEditError(f"{path}: cannot be read as a USD layer: {'; '.join(usd_messages(str(exc)))}") from None
+    if layer is None:
+        raise MocapEditError(f"{path}: cannot be read as a USD layer")
+    return layer
+
+
 def check_composition(stage: Usd.Stage) -> None:
     """Raises a MocapEditError when the stage did not compose as authored: a sublayer,
     reference or payload whose file cannot be opened (USD only warns and goes on without
