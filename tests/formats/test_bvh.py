@@ -168,6 +168,28 @@ def test_position_modes_read_a_hip_rooted_rig_relative_to_its_offset(tmp_path):
     np.testing.assert_allclose(t2, t, atol=1e-5)
 
 
+@pytest.mark.parametrize("written", ["absolute", "relative"])
+def test_a_clip_that_falls_and_lies_reads_its_hips_where_its_body_touches_the_ground(tmp_path, written):
+    """A humanoid standing for a quarter of a second, then lying for the rest, its hips 10 cm up:
+    most of its frames are low, so the median of its Yposition (10) lay nearer zero than its
+    OFFSET (95) and an absolute file read relative, standing a metre above the floor. Read so
+    that its body reaches the ground, either way the file is written."""
+    from bvhgen import _humanoid
+    rig = _humanoid()
+    frames = 60
+    values = np.zeros((frames, sum(len(c) for c in rig.channels)))
+    lying = np.arange(frames) >= 15
+    values[:, 1] = np.where(lying, 10.0, 95.0) - (95.0 if written == "relative" else 0.0)
+    values[:, 4] = np.where(lying, -90.0, 0.0)          # Hips Xrotation: lie on the back
+    write_bvh(tmp_path / "fall.bvh", rig, values)
+    motion = bvh.load(tmp_path / "fall.bvh")
+    assert bvh.position_modes(motion.skeleton, motion.values)[0] == written
+    pose, t, r = bvh.convert(motion)
+    heights = kinematics.skel_space(kinematics.compose_trs(t, r), pose.parents)[..., 3, 1]
+    assert abs(heights.min()) < 6.0 and abs(heights[0].min()) < 6.0
+    np.testing.assert_allclose(t[:, 0, 1], np.where(lying, 10.0, 95.0), atol=1e-6)
+
+
 GOOD = """HIERARCHY
 ROOT Hips
 {

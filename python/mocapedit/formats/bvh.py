@@ -474,9 +474,12 @@ def position_modes(skeleton: BvhSkeleton, values: np.ndarray | None, mode: str =
     ``relative``: they are added to it, as some exporters write a hip-rooted rig whose
     OFFSET holds the standing hip height and whose channels move about it. ``auto``
     decides per joint on the vertical (Y) channel, where the two readings differ by the
-    height in the OFFSET however far the clip travels: ``relative`` when the median of
-    ``Yposition`` over the given frames lies nearer zero than the OFFSET's Y. Joints
-    without a ``Yposition`` channel read ``absolute``.
+    height in the OFFSET however far the clip travels. A root with a body below it (legs)
+    reads the way that puts the lowest point the body reaches over the frames nearest the
+    ground (Y = 0): a clip that falls and lies, crawls or sits on the floor spends most of
+    its frames low, whatever the reading. Any other joint reads ``relative`` when the median
+    of its ``Yposition`` lies nearer zero than the OFFSET's Y. Joints without a
+    ``Yposition`` channel read ``absolute``.
     """
     if mode not in ("auto", "absolute", "relative"):
         raise ValueError(f"position mode must be auto, absolute or relative, not {mode!r}")
@@ -491,7 +494,58 @@ def position_modes(skeleton: BvhSkeleton, values: np.ndarray | None, mode: str =
             continue
         median = float(np.median(values[:, cols[0]]))
         modes.append("relative" if abs(median) < abs(median - skeleton.offsets[j, 1]) else "absolute")
+    if values is not None and len(values):
+        for root in np.flatnonzero(skeleton.parents < 0):
+            if modes[root] == "absolute" and "yposition" not in (lab.lower() for lab in skeleton.channels[root]):
+                continue
+            if _depth_below(skeleton, int(root)) >= GROUND_TEST_DEPTH * max(abs(skeleton.offsets[root, 1]), 1e-9):
+                modes[root] = _nearest_ground(skeleton, values, modes, int(root))
     return modes
+
+
+#: A root whose body reaches below it by at least this share of the height in its OFFSET
+#: (a humanoid's legs: about all of it) is read the way that keeps that body on the ground.
+GROUND_TEST_DEPTH = 0.5
+#: Frames of the first chunk the ground test poses, at most.
+GROUND_TEST_FRAMES = 240
+
+
+def _depth_below(skeleton: BvhSkeleton, root: int) -> float:
+    """How far the rest pose reaches below a root along Y (file units, from the OFFSETs)."""
+    y = np.zeros(skeleton.joint_count)
+    below = 0.0
+    for j in range(skeleton.joint_count):
+        p = int(skeleton.parents[j])
+        if j == root:
+            y[j] = 0.0
+        elif p >= 0:
+            y[j] = y[p] + skeleton.offsets[j, 1]
+            if _root_of(skeleton, j) == root:
+                below = max(below, -y[j])
+    return below
+
+
+def _root_of(skeleton: BvhSkeleton, j: int) -> int:
+    while int(skeleton.parents[j]) >= 0:
+        j = int(skeleton.parents[j])
+    return j
+
+
+def _nearest_ground(skeleton: BvhSkeleton, values: np.ndarray, modes: list[str], root: int) -> str:
+    """The reading of the root's position channels that puts the lowest point its body reaches
+    over (a sample of) the frames nearest Y = 0."""
+    from mocapedit.geometry.kinematics import compose_trs, skel_space
+    sample = values[::max(1, len(values) // GROUND_TEST_FRAMES)]
+    body = [j for j in range(skeleton.joint_count) if _root_of(skeleton, j) == root]
+    lowest = {}
+    for reading in ("absolute", "relative"):
+        trial = list(modes)
+        trial[root] = reading
+        converter = Converter(skeleton, modes=trial)
+        translations, rotations = converter(sample)
+        y = skel_space(compose_trs(translations, rotations), converter.pose.parents)[..., 3, 1]
+        lowest[reading] = abs(float(y[:, [converter.pose.names.index(skeleton.names[j]) for j in body]].min()))
+    return "relative" if lowest["relative"] < lowest["absolute"] else "absolute"
 
 
 @dataclass
