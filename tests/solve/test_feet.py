@@ -406,6 +406,29 @@ def test_authored_contacts_replace_detection(tmp_path, walk_clip):
     assert result.report.agents[a]["footContactsLocked"] == 1
 
 
+def test_detect_contacts_skips_an_agent_without_legs_and_says_so(tmp_path, walk_clip):
+    """A prop agent (a rig without legs) among walkers: the walkers' contacts are written and
+    the prop named (the whole shot was refused over it, though solve takes it)."""
+    from mocapedit.data import walker as walkers
+    prop = walkers.walk(frames=48, fps=FPS, name="prop")
+    keep = [i for i, j in enumerate(prop.joints) if "Leg" not in j and "Foot" not in j and "Toe" not in j]
+    prop = dataclasses.replace(prop, joints=[prop.joints[i] for i in keep],
+                               parents=np.array([keep.index(p) if p >= 0 else -1 for p in prop.parents[keep]]),
+                               rest_translations=prop.rest_translations[keep], rest_rotations=prop.rest_rotations[keep],
+                               translations=prop.translations[:, keep], rotations=prop.rotations[:, keep])
+    examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", walk_clip),
+                                                        examples.AgentSpec("prop", prop, (3.0, 0.0, 0.0))],
+                               up_axis="Y", fps=FPS, clips_dir=tmp_path / "clips")
+    out = run_cli("detect-contacts", tmp_path / "shot.usda", "-o", tmp_path / "contacts.usda")
+    assert out.returncode == 0, out.stderr
+    assert "/World/Crowd/prop" in out.stderr and "no legs" in out.stderr
+    layer = Sdf.Layer.FindOrOpen(str(tmp_path / "contacts.usda"))
+    paths = []
+    layer.Traverse(Sdf.Path.absoluteRootPath, paths.append)
+    assert any(p.name == "footContact:left1:frames" for p in paths if p.IsPropertyPath())
+    assert not any("prop" in str(p) for p in paths)
+
+
 def test_heel_and_toe_contacts_that_overlap_are_one_plant(tmp_path, walk_clip):
     """Each detected contact authored as a heel strike on the ankle and a toe-off on the toe that
     overlap it: the foot is planted once, where it was two plants fighting over the same frames

@@ -34,8 +34,9 @@ class ClipContacts:
 
 
 def detect(stage: Usd.Stage, settings: contacts.DetectSettings | None = None, animation: str | None = None,
-           prefix: str | None = None) -> tuple[list[ClipContacts], object]:
-    """Detects the foot contacts of each clip on the stage (only its session layer is touched).
+           prefix: str | None = None) -> tuple[list[ClipContacts], object, list[str]]:
+    """Detects the foot contacts of each clip on the stage (only its session layer is touched);
+    returns (the clips' contacts, the stage's info, the agents left out for having no legs).
 
     Instance names are ``<side><k>`` (``left1``, ``right1``, ...), or ``<prefix><side><k>``.
     """
@@ -48,10 +49,15 @@ def detect(stage: Usd.Stage, settings: contacts.DetectSettings | None = None, an
         raise MocapEditError(f"contact name prefix '{prefix}' is not a valid identifier")
     data, measured = tags.clips_to_measure(stage, None, animation)
     out = []
+    legless = [(path, agent) for path, agent in measured if not agent.legs]
+    if legless and len(legless) == len(measured):
+        path, agent = legless[0]
+        raise MocapEditError(f"<{path}>: no legs found by name in skeleton <{agent.skeleton_path}>; set "
+                             "mocap:leftLegJoints and mocap:rightLegJoints")
+    skipped = [path for path, _ in legless]
     for path, agent in measured:
         if not agent.legs:
-            raise MocapEditError(f"<{path}>: no legs found by name in skeleton <{agent.skeleton_path}>; set "
-                                 "mocap:leftLegJoints and mocap:rightLegJoints")
+            continue
         clip = data.clip_of(agent)
         raised = contacts.raised_legs(agent, clip, data.info)
         found = contacts.detect_agent(agent, clip, data.info, settings, raised)
@@ -59,7 +65,7 @@ def detect(stage: Usd.Stage, settings: contacts.DetectSettings | None = None, an
         out.append(ClipContacts(animation=agent.animation_path, agent=path, frames=agent.frame_count,
                                 legs=list(agent.legs), joint_names=list(agent.joints), ranges=found, names=names,
                                 note=contacts.raised_note(agent, raised)))
-    return sorted(out, key=lambda c: c.animation), data.info
+    return sorted(out, key=lambda c: c.animation), data.info, skipped
 
 
 def build_layer(clips: list[ClipContacts], info, settings: contacts.DetectSettings) -> Sdf.Layer:

@@ -58,8 +58,11 @@ def run(args) -> int:
     settings = DetectSettings(**{field: getattr(args, field) for field, _, _ in THRESHOLDS})
     stage = reader.open_stage(args.stage)
     check_review_outputs(args, stage)
-    clips, info = contact_tags.detect(stage, settings, animation=args.animation, prefix=args.prefix)
+    clips, info, legless = contact_tags.detect(stage, settings, animation=args.animation, prefix=args.prefix)
     save_review(args, stage, contact_tags.build_layer(clips, info, settings), info)
+    for path in legless:
+        progress.message(f"<{path}>: no legs found by name, left out; set mocap:leftLegJoints and "
+                         "mocap:rightLegJoints on it to find its contacts")
     for clip in clips:
         counts = ", ".join(f"{leg.side} {len(r)}" for leg, r in zip(clip.legs, clip.ranges))
         progress.message(f"<{clip.animation}> ({clip.frames} frames): contacts {counts}"
