@@ -107,6 +107,43 @@ def test_scale_and_z_up_turn_the_world_about_x_at_the_roots(tmp_path):
                                atol=1e-12)
 
 
+def test_blocks_written_on_one_line(tmp_path):
+    """End Sites and short joints written compactly, '{ OFFSET 0 1 0 }' or 'End Site { OFFSET 0 1 0 }'
+    (it said "OFFSET needs 3 values, found 4" over the closing brace)."""
+    text = """HIERARCHY
+ROOT Hips
+{
+  OFFSET 0 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+  JOINT Leg
+  {
+    OFFSET 0 -10 0
+    CHANNELS 3 Zrotation Xrotation Yrotation
+    End Site
+    { OFFSET 0 -10 0 }
+  }
+  JOINT Arm
+  {
+    OFFSET 5 0 0
+    CHANNELS 3 Zrotation Xrotation Yrotation }
+  JOINT Head
+  {
+    OFFSET 0 10 0 CHANNELS 3 Zrotation Xrotation Yrotation
+    End Site { OFFSET 0 2 0 } }
+}
+MOTION
+Frames: 1
+Frame Time: 0.0333333
+0 90 0 0 0 0 0 0 0 0 0 0 0 0 0
+"""
+    (tmp_path / "c.bvh").write_text(text)
+    sk = bvh.load(tmp_path / "c.bvh").skeleton
+    assert sk.names == ["Hips", "Leg", "Arm", "Head"] and list(sk.parents) == [-1, 0, 0, 0]
+    assert [p for p, _ in sk.end_sites] == [1, 3]
+    np.testing.assert_allclose([o for _, o in sk.end_sites], [[0, -10, 0], [0, 2, 0]])
+    np.testing.assert_allclose(sk.offsets[2], [5, 0, 0])
+
+
 def test_syntax_variants_end_sites_windows_lines_and_frame_time_without_zero(tmp_path):
     rng = np.random.default_rng(5)
     rig = random_rig(rng, 6, names=["Hips", "Left Up Leg", "1st joint", "Left Up Leg", "spine.001", "ÄÖÜ"])

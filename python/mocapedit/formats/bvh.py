@@ -153,8 +153,16 @@ class _Lines:
     def __init__(self, f: io.TextIOBase):
         self.f = f
         self.number = 0
+        self.back: list[tuple[int, list[str]]] = []
+
+    def push(self, number: int, tokens: list[str]) -> None:
+        """Gives back the rest of a line, to be read next as a line of its own (a statement
+        that another follows on the same line: '{ OFFSET 0 1 0 }')."""
+        self.back.append((number, tokens))
 
     def next(self) -> tuple[int, list[str]] | None:
+        if self.back:
+            return self.back.pop()
         for line in self.f:
             self.number += 1
             tokens = line.split()
@@ -267,6 +275,9 @@ def _parse_hierarchy(path: str, lines: _Lines) -> BvhSkeleton:
         elif key == "END":
             if not stack or stack[-1][0] != "joint":
                 raise _error(path, number, "End Site outside a joint")
+            if len(tokens) > 3 and tokens[2] == "{":
+                lines.push(number, tokens[3:])
+                tokens = tokens[:3]
             if len(tokens) < 2 or tokens[1].upper() != "SITE" or len(tokens) > 3 or \
                     (len(tokens) == 3 and tokens[2] != "{"):
                 raise _error(path, number, f"expected 'End Site', found '{' '.join(tokens)[:40]}'")
@@ -278,6 +289,9 @@ def _parse_hierarchy(path: str, lines: _Lines) -> BvhSkeleton:
         elif key == "OFFSET":
             if not stack:
                 raise _error(path, number, "OFFSET outside a joint")
+            if len(tokens) > 4 and not _is_float(tokens[4]):   # another statement follows
+                lines.push(number, tokens[4:])
+                tokens = tokens[:4]
             if len(tokens) != 4:
                 raise _error(path, number, f"OFFSET needs 3 values, found {len(tokens) - 1}")
             value = _floats(path, number, tokens[1:], "OFFSET")
@@ -299,6 +313,10 @@ def _parse_hierarchy(path: str, lines: _Lines) -> BvhSkeleton:
                 raise _error(path, number, f"second CHANNELS for joint '{names[index]}'")
             if len(tokens) < 2 or not _WHOLE.fullmatch(tokens[1]):
                 raise _error(path, number, "CHANNELS needs a channel count")
+            rest = tokens[2 + int(tokens[1]):]
+            if rest and rest[0] in ("}", "{") or rest and rest[0].upper() in ("JOINT", "END"):
+                lines.push(number, rest)   # another statement follows on the line
+                tokens = tokens[:2 + int(tokens[1])]
             count, labels = int(tokens[1]), tokens[2:]
             if count != len(labels):
                 raise _error(path, number, f"CHANNELS declares {count} channels but lists {len(labels)}")
