@@ -110,16 +110,7 @@ def test_scale_and_z_up_turn_the_world_about_x_at_the_roots(tmp_path):
 def test_blocks_written_on_one_line(tmp_path):
     """End Sites and short joints written compactly, '{ OFFSET 0 1 0 }' or 'End Site { OFFSET 0 1 0 }'
     (it said "OFFSET needs 3 values, found 4" over the closing brace)."""
-    text = """HIERARCHY
-ROOT Hips
-{
-  OFFSET 0 0 0
-  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
-  JOINT Leg
-  {
-    OFFSET 0 -10 0
-    CHANNELS 3 Zrotation Xrotation Yrotation
-    End Site
+    compact = """    End Site
     { OFFSET 0 -10 0 }
   }
   JOINT Arm
@@ -131,11 +122,10 @@ ROOT Hips
     OFFSET 0 10 0 CHANNELS 3 Zrotation Xrotation Yrotation
     End Site { OFFSET 0 2 0 } }
 }
-MOTION
-Frames: 1
-Frame Time: 0.0333333
-0 90 0 0 0 0 0 0 0 0 0 0 0 0 0
 """
+    # GOOD's hierarchy down to the Leg's CHANNELS, then the compact blocks.
+    text = "\n".join(_lines()[:9]) + "\n" + compact + "MOTION\nFrames: 1\nFrame Time: 0.0333333\n" + \
+        " ".join(["0"] * 15) + "\n"
     (tmp_path / "c.bvh").write_text(text)
     sk = bvh.load(tmp_path / "c.bvh").skeleton
     assert sk.names == ["Hips", "Leg", "Arm", "Head"] and list(sk.parents) == [-1, 0, 0, 0]
