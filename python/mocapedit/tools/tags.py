@@ -99,6 +99,8 @@ def detect(stage: Usd.Stage, settings: stationary.DetectSettings | None = None,
         heading = stationary.facing(world, info.up_axis)
         seconds = agent.sample_times / info.time_codes_per_second
         ranges = stationary.detect(seconds, traj.ground * info.meters_per_unit, heading, settings)
+        # A range a tag on the clip already covers is not proposed again (a run over a tagged stage).
+        ranges = [r for r in ranges if not any(a <= r.first and r.last <= b for _, a, b in agent.stationary)]
         taken = {name for name, _, _ in agent.stationary}
         names, k = [], 0
         for _ in ranges:

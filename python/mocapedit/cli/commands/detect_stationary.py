@@ -93,8 +93,10 @@ def run(args) -> int:
     save_review(args, stage, tags.build_layer(clips, info, settings), info)
     fps = info.time_codes_per_second
     for clip in clips:
+        tagged = ", ".join(f"{name} ({a}-{b})" for name, a, b in clip.existing)
         progress.message(f"<{clip.animation}> ({clip.frames} frames, measured on {clip.joint.rsplit('/', 1)[-1]}): "
-                         f"{len(clip.ranges)} stationary range{'s' if len(clip.ranges) != 1 else ''}")
+                         f"{len(clip.ranges)} stationary range{'s' if len(clip.ranges) != 1 else ''}"
+                         + (f"; already tagged: {tagged}" if tagged else ""))
         for name, r in zip(clip.names, clip.ranges):
             bridged = (f"; bridges {r.bridged} frame{'s' if r.bridged != 1 else ''} of shorter gaps (--max-gap) "
                        f"reaching {r.bridged_max_speed:.3f} m/s, {r.bridged_max_turn:.1f} deg/s") if r.bridged else ""
