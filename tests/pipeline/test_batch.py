@@ -175,6 +175,23 @@ def test_solve_shot_reports_failures_and_skips_up_to_date_outputs(tmp_path, shot
     assert batch.solve_shot(jobs[1], options).status == "solved"
 
 
+def test_a_shot_without_agents_keeps_its_note_in_the_batch(tmp_path, shots):
+    """An empty stage among shots: solved, and the note solve prints ("the stage has no agents")
+    is in its summary entry and on stderr (the batch said only "solved", agents: 0)."""
+    empty = tmp_path / "empty.usda"
+    empty.write_text("#usda 1.0\n")
+    jobs = batch.plan([str(shots[0]), str(empty)], str(tmp_path / "out"))
+    result = batch.solve_shot(jobs[1], {"guides": True, "collisions": None})
+    assert result.status == "solved" and any("no agents" in n for n in result.notes), result
+    assert not any("no agents" in n for n in batch.solve_shot(jobs[0], {"guides": True, "collisions": None}).notes)
+    proc = run_cli("batch", shots[0], empty, "-o", tmp_path / "cli", "--workers", "1")
+    assert proc.returncode == 0, proc.stderr
+    assert "empty.usda" in proc.stderr and "no agents" in proc.stderr
+    summary = json.loads((tmp_path / "cli" / batch.SUMMARY).read_text())
+    entry = next(r for r in summary["shots"] if r["shot"].endswith("empty.usda"))
+    assert any("no agents" in n for n in entry["notes"])
+
+
 @pytest.fixture
 def cluster(tmp_path):
     """A `dask scheduler` and two `dask worker` processes on 127.0.0.1."""

@@ -51,6 +51,7 @@ class ShotResult:
     contentHash: str | None = None
     figures: dict = field(default_factory=dict)
     componentTasks: int = 0          # tasks its path components were solved in (0: in its own)
+    notes: list[str] = field(default_factory=list)   # the shot's notes, as solve prints them
 
 
 def output_name(shot: str, suffix: str) -> str:
@@ -161,6 +162,7 @@ def solve_shot(job: Job, options: dict, force: bool = False, split: bool = False
             result.componentTasks = pool.tasks if pool is not None else 0
         result.status = "solved"
         result.figures = _figures(solved.report)
+        result.notes = list(solved.report.notes)
         result.contentHash = edits_format.content_hash(solved.layer)
     except MocapEditError as exc:
         result.error = str(exc)

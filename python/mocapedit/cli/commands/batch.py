@@ -82,6 +82,10 @@ def run(args) -> int:
         what = result.status + (f": {result.error}" if result.error else f" in {result.seconds:.2f} s")
         print(f"batch: {done - failed} done, {failed} failed, {remaining} remaining  "
               f"[{os.path.basename(result.shot)} {what}]", file=sys.stderr, flush=True)
+        if result.status == "solved" and not result.figures.get("agents"):
+            # Solved with nothing to solve: what solve would have said (all notes are in the summary).
+            for note in result.notes:
+                print(f"  {os.path.basename(result.shot)}: note: {note}", file=sys.stderr, flush=True)
 
     started = time.time()
     try:
