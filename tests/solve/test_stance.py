@@ -214,3 +214,34 @@ def test_a_pair_held_together_by_the_artist_does_not_keep_the_rest_from_pivoting
         assert any("/Edits/hold" in n for n in result.report.notes)
         ratio[pivot] = measure.plausibility(src, out, "/World/Crowd/agent_0000").foot_skate_ratio
     assert ratio[True] < ratio[False] - 0.2, ratio
+
+
+def test_a_gait_that_hands_over_from_foot_to_foot_keeps_the_shift_smooth():
+    """A walk whose feet hand over with no frame of double support (as real takes often read):
+    the frames between two contacts are not a flight to pay the shift back in (it moved the hips
+    5-16 cm in one frame there, once a step)."""
+    root, feet, _ = _gait()
+    frames = len(root)
+    phase = (np.arange(frames) % 24) / 24.0
+    planted = np.stack([phase < 0.5, phase >= 0.5], axis=1)
+    turn = 0.8 * np.clip((np.arange(frames) - 24) / 48.0, 0.0, 1.0)
+    step = _rotate(np.diff(root, axis=0), turn[1:])
+    edited = np.concatenate([root[:1], root[:1] + np.cumsum(step, axis=0)]) * 1.1   # and 10% longer
+    fixed = np.zeros(frames, dtype=bool)
+    fixed[[0, frames - 1]] = True
+    (uv, _), = stance.pivot([root], [edited], [turn], [feet], [planted], [fixed], [1 / FPS])
+    jumps = np.linalg.norm(np.diff(uv - edited, axis=0), axis=1)
+    assert jumps.max() < 0.02, jumps.max()     # 4.3 cm in the last frame, before
+
+
+def test_the_turn_between_steps_eases_in_and_out():
+    """The turn taken over a free stretch starts and stops gradually: its rate changes from frame
+    to frame by no more than the edit's whole rate (it stepped from 0 to twice the edit's rate,
+    and back, in one frame: a visible jerk at 24 fps)."""
+    _, _, planted = _gait()
+    frames = len(planted)
+    turn = np.linspace(0.0, 1.0, frames)
+    gated = stance.gated_turn(turn, planted.all(axis=1), np.zeros(frames, dtype=bool))
+    rate = np.diff(gated)
+    assert np.abs(np.diff(rate)).max() <= np.abs(np.diff(turn)).max() + 1e-12
+    assert gated[0] == turn[0] and gated[-1] == pytest.approx(turn[-1])

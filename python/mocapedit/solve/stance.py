@@ -50,7 +50,9 @@ def gated_turn(turn: np.ndarray, double: np.ndarray, fixed: np.ndarray) -> np.nd
     """(F,) the edit's turn of each frame held while both feet are planted (``double``, (F,)
     bool) and caught up over the next stretch of frames that are not, so that it equals ``turn``
     at the end of each such stretch, at the first and last frame and at every ``fixed`` frame;
-    where that would turn more than :data:`MAX_SPEEDUP` times as fast, as the edit turns."""
+    where that would turn more than :data:`MAX_SPEEDUP` times as fast, as the edit turns. Each
+    catching up eases in and out (a half cosine), so that the turn never starts or stops within
+    a frame."""
     n = len(turn)
     if n < 3:
         return np.array(turn, dtype=np.float64)
@@ -64,7 +66,9 @@ def gated_turn(turn: np.ndarray, double: np.ndarray, fixed: np.ndarray) -> np.nd
     a, b = sync[k], sync[k + 1]
     span = progress[b] - progress[a]
     moving = span * MAX_SPEEDUP >= (b - a)
-    at = np.where(moving, a + (b - a) * (progress - progress[a]) / np.where(moving, span, 1.0), frames)
+    share = (progress - progress[a]) / np.where(moving, span, 1.0)
+    eased = 0.5 - 0.5 * np.cos(np.pi * np.clip(share, 0.0, 1.0))
+    at = np.where(moving, a + (b - a) * eased, frames)
     return np.interp(at, frames, turn)
 
 
@@ -91,7 +95,9 @@ def tridiagonal(lower: np.ndarray, diag: np.ndarray, upper: np.ndarray, rhs: np.
 def _slide_steps(source: np.ndarray, edited: np.ndarray, turn: np.ndarray, feet: np.ndarray,
                  planted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """((F-1,2) the root shift from each frame to the next that makes the feet planted over both
-    move as they do in the source (the mean over them), (F-1,) whether any is)."""
+    move as they do in the source (the mean over them), (F-1,) whether a foot is on the ground
+    at either frame: a step from one foot's contact to the other's, with no frame that both
+    are down, is no flight)."""
     lever = feet - source[:, None]                                    # (F,L,2)
     moved = _rotate(lever, turn[:, None]) + edited[:, None]           # where the edit puts the feet
     wanted = _rotate(feet[1:] - feet[:-1], turn[1:, None])           # the source's own motion, turned
@@ -99,7 +105,7 @@ def _slide_steps(source: np.ndarray, edited: np.ndarray, turn: np.ndarray, feet:
     both = planted[1:] & planted[:-1]                                 # (F-1,L)
     count = both.sum(axis=1)
     step = -(extra * both[..., None]).sum(axis=1) / np.maximum(count, 1)[:, None]
-    return step, count > 0
+    return step, planted[1:].any(axis=1) | planted[:-1].any(axis=1)
 
 
 def shifts(steps: list[np.ndarray], planted: list[np.ndarray], fixed: list[np.ndarray],

@@ -383,7 +383,9 @@ def _pivot_and_clear(ctx: SolveContext, problem: avoidance.Problem, footprints, 
     stance.pivot_moved(ctx, keep=held)
     again = _problem(ctx, names, footprints, enabled)
     again.way = first_paths
-    second = avoidance.resolve(again, solve_settings, Silent())
+    # What a pivot moves is a few centimetres: stepped aside from, never waited for (a wait
+    # plays a walker in slow motion).
+    second = avoidance.resolve(again, dataclasses.replace(solve_settings, max_wait_s=0.0), Silent())
     if len(second.remaining) > len(outcome.remaining) or len(second.region_left) > len(outcome.region_left):
         for now, before in zip((ctx.paths, ctx.time_maps, ctx.out_times), kept):
             now.clear()
