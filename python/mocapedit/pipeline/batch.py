@@ -28,7 +28,7 @@ from mocapedit.model.errors import MocapEditError
 #: Seconds to wait for a scheduler given by address before giving up.
 CONNECT_TIMEOUT = 5.0
 #: Seconds more for a reached scheduler to answer the handshake.
-HANDSHAKE_SLACK = 3.0
+HANDSHAKE_SLACK = 1.0
 #: Dask's configuration of the environment its nannies give new worker processes.
 WORKER_ENVIRON = "distributed.nanny.pre-spawn-environ"
 #: File name of the summary written in the output folder.
