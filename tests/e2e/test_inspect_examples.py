@@ -58,6 +58,19 @@ def test_guides_validate_and_show_every_agent(solved_examples):
             assert prim.GetAttribute("extent").HasAuthoredValue(), prim.GetPath()
 
 
+def test_every_agent_keeps_its_feet_within_the_bar_of_its_source_on_every_example(solved_examples):
+    """Issue #17's bar, agent by agent, as solved by default (foot locking on): the feet slide
+    during contacts no more than the source's plus 0.5 cm/s, whatever moved the agent (a path
+    edit, avoidance, a stand walked off in a new direction)."""
+    for stage_path, _, _, result in solved_examples:
+        metres = Usd.Stage.Open(str(stage_path)).GetMetadata("metersPerUnit")
+        for path, entry in result.report.agents.items():
+            if entry.foot_skate_edited is None:
+                continue
+            over = (entry.foot_skate_edited - entry.foot_skate_source) * metres
+            assert over <= 0.005 + 1e-9, f"{stage_path.name}: {path} slides {100 * over:.2f} cm/s over its source"
+
+
 def test_report_reads_back_on_every_example(solved_examples):
     for stage_path, edits, _, result in solved_examples:
         stored = read_report(str(edits))

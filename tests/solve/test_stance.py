@@ -245,3 +245,26 @@ def test_the_turn_between_steps_eases_in_and_out():
     rate = np.diff(gated)
     assert np.abs(np.diff(rate)).max() <= np.abs(np.diff(turn)).max() + 1e-12
     assert gated[0] == turn[0] and gated[-1] == pytest.approx(turn[-1])
+
+
+def test_a_turn_on_the_way_off_a_fixed_range_waits_for_the_steps_and_is_shared_by_them():
+    """A body leaves a stationary range on both feet while the edit turns it 40 degrees: it stands
+    until a foot is free, then each of its next steps takes part of the turn, no step all of it."""
+    fps = 30.0
+    frames = 60
+    t = np.arange(frames)
+    turn = np.radians(40.0) * np.clip((t - 10) / 14.0, 0.0, 1.0)
+    double = np.zeros(frames, dtype=bool)
+    double[:20] = double[28:36] = double[44:] = True          # free: 20-27 and 36-43
+    fixed = t <= 10                                             # the stationary range
+    gated = stance.gated_turn(turn, double, fixed, 1.0 / fps)
+    assert np.all(gated[:20] == 0.0)                            # no turn on both feet
+    assert gated[43] == pytest.approx(turn[43])
+    first, second = gated[27] - gated[19], gated[43] - gated[35]
+    assert first > np.radians(10.0) and second > np.radians(10.0)
+    assert np.all(np.diff(gated) >= -1e-12)
+    assert np.abs(np.diff(gated)).max() * fps < stance.STEP_TURN_RATE * np.pi / 2 + 1e-9
+    # Without a frame rate (or well inside a walk) the turn catches up over the next stretch.
+    plain = stance.gated_turn(turn, double, fixed)
+    assert np.array_equal(plain[:20], turn[:20])
+

@@ -14,7 +14,8 @@ rigid motion of each frame, and nothing else:
 - **The turn waits for a free foot.** While both feet are planted the edit's turn is held; over
   the next stretch with one foot or none down it catches up, so that it is the edit's turn
   again at the end of that stretch (:func:`gated_turn`). The body turns as much and as far as
-  before, only at other moments.
+  before, only at other moments. A body that leaves a stationary range (or a pin) on both feet
+  takes the turn the edit gives it there over its first steps.
 - **The body pivots on the planted foot.** A small shift of the root, added to the edited path,
   makes the planted feet move as they do in the source (the least-squares shift of
   :func:`shifts`, small everywhere, paid back where no foot is planted, and zero at the frames
@@ -27,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["EASE_SECONDS", "AIR_WEIGHT", "MAX_SPEEDUP", "gated_turn", "shifts", "pivot", "tridiagonal"]
+__all__ = ["EASE_SECONDS", "AIR_WEIGHT", "MAX_SPEEDUP", "STEP_TURN_RATE", "CATCH_UP_SECONDS", "gated_turn", "shifts", "pivot", "tridiagonal"]
 
 #: The shift pays itself back over about this long (seconds): the weight that keeps it small.
 EASE_SECONDS = 2.0
@@ -35,6 +36,12 @@ EASE_SECONDS = 2.0
 #: fast as the edit does (a walk's double support is a fifth of its steps or less: 1.25); where
 #: both feet stay planted longer (standing, shuffling on the spot) it turns as the edit does.
 MAX_SPEEDUP = 2.0
+#: A turn that a body leaving a fixed frame on both feet would take on them is shared by the
+#: steps after it, as many as keep it this slow on average (radians per second: a quarter turn a
+#: second, a brisk walker's turn; its eased peak stays far below a spin) ...
+STEP_TURN_RATE = np.pi / 2
+#: ... within this long (seconds).
+CATCH_UP_SECONDS = 1.5
 #: Weight of the shift's motion where no foot is planted, against 1 where one is: a body in the
 #: air (a run's flight) takes the shift back there first.
 AIR_WEIGHT = 0.05
@@ -46,21 +53,29 @@ def _rotate(v: np.ndarray, angle: np.ndarray) -> np.ndarray:
     return np.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1]], axis=-1)
 
 
-def gated_turn(turn: np.ndarray, double: np.ndarray, fixed: np.ndarray) -> np.ndarray:
+def gated_turn(turn: np.ndarray, double: np.ndarray, fixed: np.ndarray, frame_seconds: float = 0.0) -> np.ndarray:
     """(F,) the edit's turn of each frame held while both feet are planted (``double``, (F,)
     bool) and caught up over the next stretch of frames that are not, so that it equals ``turn``
     at the end of each such stretch, at the first and last frame and at every ``fixed`` frame;
     where that would turn more than :data:`MAX_SPEEDUP` times as fast, as the edit turns. Each
     catching up eases in and out (a half cosine), so that the turn never starts or stops within
-    a frame."""
+    a frame.
+
+    A body that leaves a fixed frame (the end of a stationary range, a pin) on both feet would
+    otherwise turn on them there, as the edit turns it on its way off: that turn is shared
+    evenly by the stretches off double support that follow instead, as many as it takes (within
+    :data:`CATCH_UP_SECONDS`, up to the next fixed frame) to turn no faster than
+    :data:`STEP_TURN_RATE` on average (``frame_seconds``: seconds per frame; 0 leaves it out)."""
     n = len(turn)
+    turn = np.asarray(turn, dtype=np.float64)
     if n < 3:
-        return np.array(turn, dtype=np.float64)
+        return turn.copy()
     free = ~np.asarray(double, dtype=bool)
     progress = np.cumsum(np.concatenate([[0.0], free[1:].astype(np.float64)]))
     ends = free & ~np.concatenate([free[1:], [False]])    # last frame of each stretch off double support
-    sync = np.flatnonzero(ends | np.asarray(fixed, dtype=bool))
-    sync = np.unique(np.concatenate([[0], sync, [n - 1]]))
+    hard = np.asarray(fixed, dtype=bool).copy()
+    hard[[0, -1]] = True
+    sync = np.flatnonzero(ends | hard)
     frames = np.arange(n, dtype=np.float64)
     k = np.clip(np.searchsorted(sync, frames, side="right") - 1, 0, len(sync) - 2)
     a, b = sync[k], sync[k + 1]
@@ -68,8 +83,31 @@ def gated_turn(turn: np.ndarray, double: np.ndarray, fixed: np.ndarray) -> np.nd
     moving = span * MAX_SPEEDUP >= (b - a)
     share = (progress - progress[a]) / np.where(moving, span, 1.0)
     eased = 0.5 - 0.5 * np.cos(np.pi * np.clip(share, 0.0, 1.0))
-    at = np.where(moving, a + (b - a) * eased, frames)
-    return np.interp(at, frames, turn)
+    out = np.interp(np.where(moving, a + (b - a) * eased, frames), frames, turn)
+    if frame_seconds <= 0:
+        return out
+    pairs = len(sync) - 1
+    span = np.diff(progress[sync])
+    slow = np.flatnonzero(~(span * MAX_SPEEDUP >= np.diff(sync)) & hard[sync[:-1]])
+    longest = CATCH_UP_SECONDS / frame_seconds
+    after = -1
+    for i in slow:
+        if i < after:
+            continue
+        first = sync[i]
+        for j in range(i + 1, pairs + 1):
+            last = sync[j]
+            if last - first > longest:
+                break
+            steps = progress[last] - progress[first]
+            if j > i + 1 and steps > 0 and abs(turn[last] - turn[first]) <= STEP_TURN_RATE * steps * frame_seconds:
+                share = (progress[first:last + 1] - progress[first]) / steps
+                out[first:last + 1] = turn[first] + (turn[last] - turn[first]) * (0.5 - 0.5 * np.cos(np.pi * share))
+                after = j
+                break
+            if hard[last]:
+                break
+    return out
 
 
 def tridiagonal(lower: np.ndarray, diag: np.ndarray, upper: np.ndarray, rhs: np.ndarray) -> np.ndarray:
@@ -155,8 +193,8 @@ def pivot(source: list[np.ndarray], edited: list[np.ndarray], turn: list[np.ndar
       frame_seconds: seconds between two of the agent's frames
     """
     turns, steps, on = [], [], []
-    for src, ed, th, ft, pl, fix in zip(source, edited, turn, feet, planted, fixed):
-        gated = gated_turn(th, pl.all(axis=1), fix)
+    for src, ed, th, ft, pl, fix, dt in zip(source, edited, turn, feet, planted, fixed, frame_seconds):
+        gated = gated_turn(th, pl.all(axis=1), fix, dt)
         step, any_planted = _slide_steps(src, ed, gated, ft, pl)
         turns.append(gated)
         steps.append(step)
