@@ -14,6 +14,7 @@ keeps its source value.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -136,10 +137,17 @@ def is_cut(step: np.ndarray, seconds: np.ndarray, meters_per_unit: float) -> np.
 
 def samples_per_second(sample_times: np.ndarray, time_codes_per_second: float) -> float:
     """How many samples per second a path sampled at ``sample_times`` (shot time codes) has: a
-    120 fps clip on a 24 fps stage has five per time code (its median step)."""
-    step = np.diff(np.asarray(sample_times, dtype=np.float64))
+    120 fps clip on a 24 fps stage has five per time code (its median step). Agents that play
+    one clip share their sample times: the figure is computed once per distinct times."""
+    times = np.ascontiguousarray(sample_times, dtype=np.float64)
+    return _samples_per_second(times.tobytes(), times.shape, float(time_codes_per_second))
+
+
+@functools.lru_cache(maxsize=1024)
+def _samples_per_second(times: bytes, shape: tuple, time_codes_per_second: float) -> float:
+    step = np.diff(np.frombuffer(times, dtype=np.float64).reshape(shape))
     step = step[step > 0]
-    return float(time_codes_per_second) / float(np.median(step)) if len(step) else float(time_codes_per_second)
+    return time_codes_per_second / float(np.median(step)) if len(step) else time_codes_per_second
 
 
 def turn_window(fps: float) -> int:

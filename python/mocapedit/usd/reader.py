@@ -255,6 +255,7 @@ class _XformTimes:
         self._stage = stage
         self._caches: dict[float | None, UsdGeom.XformCache] = {}
         self._varying: dict[str, bool] = {}
+        self._own: dict[str, bool] = {}   # whether the prim's own transform ops are animated
 
     def cache(self, time: float | None) -> UsdGeom.XformCache:
         c = self._caches.get(time)
@@ -263,12 +264,20 @@ class _XformTimes:
             self._caches[time] = c
         return c
 
+    def own_varying(self, prim: Usd.Prim, key: str | None = None) -> bool:
+        """Whether the prim's own transform ops might be animated (asked of USD once a prim)."""
+        key = str(prim.GetPath()) if key is None else key
+        v = self._own.get(key)
+        if v is None:
+            xf = UsdGeom.Xformable(prim)
+            v = self._own[key] = bool(xf and xf.TransformMightBeTimeVarying())
+        return v
+
     def varying(self, prim: Usd.Prim) -> bool:
         key = str(prim.GetPath())
         v = self._varying.get(key)
         if v is None:
-            xf = UsdGeom.Xformable(prim)
-            v = bool(xf and xf.TransformMightBeTimeVarying())
+            v = self.own_varying(prim, key)
             parent = prim.GetParent()
             if not v and parent and not parent.IsPseudoRoot():
                 v = self.varying(parent)
@@ -283,9 +292,9 @@ class _XformTimes:
     def own_transform(self, prim: Usd.Prim, times: np.ndarray) -> np.ndarray | None:
         """(F,4,4) the prim's local transform at ``times`` when its own transform ops are
         animated, else None."""
-        xf = UsdGeom.Xformable(prim)
-        if not xf or not xf.TransformMightBeTimeVarying():
+        if not self.own_varying(prim):
             return None
+        xf = UsdGeom.Xformable(prim)
         return np.stack([np.array(xf.GetLocalTransformation(Usd.TimeCode(float(t)))) for t in times])
 
     def inner_animated(self, agent: Usd.Prim, skel: Usd.Prim) -> bool:
@@ -323,6 +332,7 @@ class StageReader:
         self._skeletons: dict = {}    # skeleton path, or the origin of its values -> (joints, parents, rest)
         self._anim_joints: dict = {}  # origin of a clip's joints -> its joints
         self._legs_by_name: dict = {}  # a skeleton's joints -> its legs found by name
+        self._hips: dict = {}          # (joints, parents, root joint) -> the hip joint guessed by name
         self._same_times: dict[tuple, bool] = {}
 
     # ---- agents ---------------------------------------------------------------------
@@ -513,10 +523,10 @@ class StageReader:
             clip.spec_times = own if own.size == n else None
         return clip
 
-    def _stationary(self, anim: Usd.Prim, frame_count: int):
+    def _stationary(self, anim: Usd.Prim, frame_count: int, schemas=None):
         tags = []
         prefix = STATIONARY_API + ":"
-        for schema in anim.GetAppliedSchemas():
+        for schema in (anim.GetAppliedSchemas() if schemas is None else schemas):
             if not schema.startswith(prefix):
                 continue
             name = schema[len(prefix):]
@@ -558,9 +568,10 @@ class StageReader:
                                  f"and ankle", f"mocap:{side}LegJoints")
         return legs
 
-    def _foot_contacts(self, anim: Usd.Prim, joints: list[str], frame_count: int, legs: list):
+    def _foot_contacts(self, anim: Usd.Prim, joints: list[str], frame_count: int, legs: list, schemas=None):
         prefix = FOOT_CONTACT_API + ":"
-        names = [s[len(prefix):] for s in anim.GetAppliedSchemas() if s.startswith(prefix)]
+        names = [s[len(prefix):] for s in (anim.GetAppliedSchemas() if schemas is None else schemas)
+                 if s.startswith(prefix)]
         if not names:
             return None
         feet = {j: leg for leg in legs for j in (leg.ankle, leg.toe) if j is not None}
@@ -615,7 +626,9 @@ class StageReader:
                 raise prim_error(path, f"joint '{hip_name}' is not in skeleton <{skel.GetPath()}>",
                                  "mocap:hipJoint")
         else:
-            hip_joint = _guess_hip(joints, parents, root_joint)
+            skeleton = (tuple(joints), parents.tobytes(), root_joint)
+            hip_joint = self._hips[skeleton] if skeleton in self._hips else \
+                self._hips.setdefault(skeleton, _guess_hip(joints, parents, root_joint))
 
         radius = _get(prim, "mocap:collisionRadius")
         radius = self.info.metres(DEFAULT_COLLISION_RADIUS_M) if radius is None else float(radius)
@@ -629,6 +642,7 @@ class StageReader:
         legs = self._legs(prim, joints, parents)
         curves = _targets(prim, "mocap:pathCurve")
         order = _op_order(prim)
+        anim_schemas = anim.GetAppliedSchemas()
         return model.Agent(
             path=path, skeleton_path=str(skel.GetPath()), animation_path=str(anim.GetPath()),
             clip_key=key, joints=joints, parents=parents, rest_transforms=rest,
@@ -640,9 +654,9 @@ class StageReader:
             collision_radius=radius, collision_height=height,
             collide=bool(_get(prim, "mocap:collide", True)),
             path_curve=curves[0] if curves else None,
-            stationary=self._stationary(anim, times.size),
+            stationary=self._stationary(anim, times.size, anim_schemas),
             legs=legs, foot_locking=bool(_get(prim, "mocap:footLocking", True)),
-            foot_contacts=self._foot_contacts(anim, joints, times.size, legs),
+            foot_contacts=self._foot_contacts(anim, joints, times.size, legs, anim_schemas),
             instances=_instances(prim, skel),
             own_transform=self.xforms.own_transform(prim, times),
             skeleton_transform=None if skel == prim else self.xforms.own_transform(skel, times),

@@ -303,7 +303,8 @@ def _author_guides(layer: Sdf.Layer, guides: list) -> None:
         spec.attributes["widths"].SetInfo("interpolation", "constant")
         # Boundables carry their extent so every USD tool frames them without computing it.
         compute = UsdGeom.Curves.ComputeExtent if is_curves else UsdGeom.Points.ComputeExtent
-        extent = compute(points, Vt.FloatArray([float(guide.width)] * len(pts)))
+        # (A crowd's paths are millions of points: the widths go over as one array, not a list.)
+        extent = compute(points, Vt.FloatArray.FromNumpy(np.full(len(pts), float(guide.width), dtype=np.float32)))
         sdf.attr(spec, "extent", Sdf.ValueTypeNames.Float3Array, extent)
         sdf.attr(spec, "purpose", Sdf.ValueTypeNames.Token, "guide", uniform=True)
         if guide.doc:

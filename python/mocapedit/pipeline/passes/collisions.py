@@ -428,24 +428,37 @@ def _apply(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Out
         ctx.time_maps[name] = outcome.frame_times[i]
         if name in ctx.out_times:
             ctx.out_times[name] = retime.shot_times(outcome.frame_times[i])
+    # The body turns by the rotation the avoidance applies to its path locally (the path
+    # editor's rule), each rigid range by its own angle: never by a tangent that the jitter
+    # of a standing root can flip. Agents whose turn windows are the same are turned in one call
+    # (each is a block of its own: the same turns as one call each).
+    rigid: dict[int, list[int]] = {}
+    for k, (a, _, _) in enumerate(problem.rigid):
+        rigid.setdefault(a, []).append(k)
+    by_window: dict[tuple, list[int]] = {}
     for i, name in enumerate(problem.names):
         if not outcome.moved[i]:
             continue
-        before = ctx.paths.get(name)
-        heading = before.heading if before is not None else ctx.trajectories[name].heading
-        # The body turns by the rotation the avoidance applies to its path locally (the path
-        # editor's rule), each rigid range by its own angle: never by a tangent that the jitter
-        # of a standing root can flip.
-        ranges = [(0, f, l) for a, f, l in problem.rigid if a == i]
-        angles = [outcome.rigid_angles[k] for k, (a, _, _) in enumerate(problem.rigid) if a == i]
         # Windows in seconds count this agent's own samples (a 120 fps clip on a 24 fps stage).
         window = path_edit.turn_settings(trajectory.samples_per_second(ctx.data.agents[name].sample_times,
                                                                        info.time_codes_per_second),
                                          info.meters_per_unit)
-        turn = trajectory.deformation_turns(problem.paths[i], outcome.paths[i], [0, len(outcome.paths[i])],
-                                            ranges, angles, window["turn_window"], window["turn_min_travel"],
-                                            window["turn_max_step"])
-        ctx.paths[name] = EditedPath(ground=outcome.paths[i], heading=np.asarray(heading) + turn)
+        key = (window["turn_window"], window["turn_min_travel"], window["turn_max_step"])
+        by_window.setdefault(key, []).append(i)
+    turned: dict[int, np.ndarray] = {}
+    for (turn_window, min_travel, max_step), members in by_window.items():
+        offsets = np.cumsum([0] + [len(outcome.paths[i]) for i in members])
+        ranges = [(b, problem.rigid[k][1], problem.rigid[k][2]) for b, i in enumerate(members) for k in rigid.get(i, ())]
+        angles = [outcome.rigid_angles[k] for i in members for k in rigid.get(i, ())]
+        turns = trajectory.deformation_turns(
+            np.concatenate([problem.paths[i] for i in members]), np.concatenate([outcome.paths[i] for i in members]),
+            offsets, ranges, angles, turn_window, min_travel, max_step)
+        turned.update((i, turns[offsets[b]:offsets[b + 1]]) for b, i in enumerate(members))
+    for i in sorted(turned):
+        name = problem.names[i]
+        before = ctx.paths.get(name)
+        heading = before.heading if before is not None else ctx.trajectories[name].heading
+        ctx.paths[name] = EditedPath(ground=outcome.paths[i], heading=np.asarray(heading) + turned[i])
 
 
 def _soft_timing_given_way(ctx: SolveContext, problem: avoidance.Problem, outcome: avoidance.Outcome) -> None:

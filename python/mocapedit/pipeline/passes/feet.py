@@ -182,8 +182,14 @@ class _AgentLock:
         self.ground = None
         if edited is not None:
             traj = ctx.trajectories[path]
-            self.ground = tuple(animation.interp_frames(values, self.frames)
-                                for values in (traj.ground, traj.heading, edited.ground, edited.heading))
+            parts = (traj.ground, traj.heading, edited.ground, edited.heading)
+            if all(np.asarray(v).dtype == np.float64 for v in parts):
+                # Interpolated as the columns of one array: the same values, one call.
+                columns = np.column_stack(parts)
+                at = animation.interp_frames(columns, self.frames)
+                self.ground = (at[:, 0:2], at[:, 2], at[:, 3:5], at[:, 5])
+            else:
+                self.ground = tuple(animation.interp_frames(values, self.frames) for values in parts)
         fps = self.agent_fps = info.time_codes_per_second
         key = ("step", agent.sample_times.tobytes())
         if key not in shared:
@@ -745,14 +751,16 @@ class LockedLegs:
         """``pose`` (the pose the legs were locked on) with the locked legs and lowered root."""
         if list(pose.joints) != self.joints or pose.rotations.shape[0] != self.rotations.shape[0]:
             raise MocapEditError(f"<{self.path}>: foot locking was computed for another pose")
-        rotations = pose.rotations.copy()
+        # One copy of each channel that changes (the pose's channels are float32 already: a
+        # second conversion copied a crowd's poses once more).
+        rotations = pose.rotations.astype(np.float32)
         rotations[:, self.columns] = self.rotations
         translations = pose.translations
         if self.root_shift is not None:
             translations = translations.copy()
             translations[:, self.root] += self.root_shift
-        return animation.Pose(joints=list(pose.joints), translations=translations.astype(np.float32),
-                              rotations=rotations.astype(np.float32), scales=pose.scales)
+        return animation.Pose(joints=list(pose.joints), translations=translations.astype(np.float32, copy=False),
+                              rotations=rotations, scales=pose.scales)
 
     def aligned(self) -> "LockedLegs":
         """A copy whose arrays are C-contiguous and aligned (arrays that crossed the network
