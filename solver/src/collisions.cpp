@@ -128,6 +128,8 @@ Problem Validate(const Eigen::Ref<const Trajectory2>& positions, int samples,
 
 // Uniform grid over one sample: agents sorted by cell; each occupied cell is tested
 // against itself and the four neighbours that follow it (the other four test it).
+// `cells`: empty, or the active agents sorted by cell at the previous sample (any order of
+// them would do); left sorted at this sample.
 void GridSample(const Problem& p, int sample, std::vector<std::pair<uint64_t, int>>* cells,
                 Partial* out) {
   const double inv = p.reach > 0.0 ? 1.0 / p.reach : 1.0;
@@ -136,15 +138,37 @@ void GridSample(const Problem& p, int sample, std::vector<std::pair<uint64_t, in
     return (static_cast<uint64_t>(cx + (int64_t(1) << 31)) << 32) |
            static_cast<uint64_t>(static_cast<uint32_t>(cy + (int64_t(1) << 31)));
   };
-  cells->clear();
-  for (int a = 0; a < p.agents; ++a) {
-    if (!IsActive(p.capsules, a)) continue;
+  auto cell_of = [&](int a) {
     const double* x = p.row(sample, a);
     const int64_t cx = static_cast<int64_t>(std::clamp(std::floor(x[0] * inv), -double(kLimit), double(kLimit)));
     const int64_t cy = static_cast<int64_t>(std::clamp(std::floor(x[1] * inv), -double(kLimit), double(kLimit)));
-    cells->emplace_back(key(cx, cy), a);
+    return key(cx, cy);
+  };
+  if (cells->empty()) {
+    for (int a = 0; a < p.agents; ++a)
+      if (IsActive(p.capsules, a)) cells->emplace_back(cell_of(a), a);
+    std::sort(cells->begin(), cells->end());
+  } else {
+    // The same agents as at the caller's previous sample, in that sample's order: agents
+    // move a little from one sample to the next, so the order is nearly sorted already and
+    // an insertion sort puts it right in a few moves per agent that changed cell (the same
+    // order a full sort gives: (cell, agent) pairs are distinct). A sample that moved
+    // everyone (a cut) falls back on the full sort.
+    for (auto& e : *cells) e.first = cell_of(e.second);
+    const size_t n = cells->size();
+    size_t moves = 0;
+    const size_t budget = 8 * n + 64;
+    auto& w = *cells;
+    for (size_t i = 1; i < n && moves <= budget; ++i) {
+      if (!(w[i] < w[i - 1])) continue;
+      const auto item = w[i];
+      size_t j = i;
+      for (; j > 0 && item < w[j - 1]; --j) w[j] = w[j - 1];
+      w[j] = item;
+      moves += i - j;
+    }
+    if (moves > budget) std::sort(cells->begin(), cells->end());
   }
-  std::sort(cells->begin(), cells->end());
   const auto& v = *cells;
   const size_t n = v.size();
   auto cell_end = [&](size_t i) {
@@ -204,11 +228,19 @@ CollisionResult Finish(const Problem& p, std::vector<Partial>& parts) {
       }
     }
   }
-  std::sort(records.begin(), records.end(), [](const Record& x, const Record& y) {
-    if (x.a != y.a) return x.a < y.a;
-    if (x.b != y.b) return x.b < y.b;
-    return x.sample < y.sample;
-  });
+  // By pair and sample: bucketed by first agent (a counting sort), then each bucket sorted.
+  {
+    std::vector<size_t> start(static_cast<size_t>(p.agents) + 1, 0);
+    for (const Record& r : records) ++start[static_cast<size_t>(r.a) + 1];
+    for (size_t a = 0; a < static_cast<size_t>(p.agents); ++a) start[a + 1] += start[a];
+    std::vector<Record> sorted(records.size());
+    std::vector<size_t> fill(start.begin(), start.end() - 1);
+    for (const Record& r : records) sorted[fill[static_cast<size_t>(r.a)]++] = r;
+    for (size_t a = 0; a < static_cast<size_t>(p.agents); ++a)
+      std::sort(sorted.begin() + static_cast<std::ptrdiff_t>(start[a]), sorted.begin() + static_cast<std::ptrdiff_t>(start[a + 1]),
+                [](const Record& x, const Record& y) { return x.b != y.b ? x.b < y.b : x.sample < y.sample; });
+    records.swap(sorted);
+  }
   // Runs of consecutive samples below `limit`, each one interval with its deepest sample.
   auto intervals = [&](double limit, std::vector<Collision>* out) {
     int64_t count = 0;
@@ -277,7 +309,7 @@ CollisionResult DetectCollisions(const Eigen::Ref<const Trajectory2>& positions,
   const Problem p = Validate(positions, samples, capsules, settings);
   const int threads = WorkerCount(settings, static_cast<int64_t>(samples) * p.agents);
   auto parts = OverSamples(p, threads, [&](int first, int last, Partial* out) {
-    std::vector<std::pair<uint64_t, int>> cells;
+    std::vector<std::pair<uint64_t, int>> cells;  // the last sample's order, the next one's start
     cells.reserve(static_cast<size_t>(p.agents));
     for (int k = first; k < last; ++k) GridSample(p, k, &cells, out);
   });

@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <cstring>
+#include <atomic>
 
 namespace mocapedit {
 namespace detail {
@@ -54,19 +55,26 @@ struct RowLists {
 };
 
 // Entries of an agent's K^-1 between some of its unknowns, grown as rows touch new ones.
+template <typename Scalar>
 struct InverseBlock {
+  using Matrix = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>;
   std::vector<int> unknowns;      // cached unknowns, in the order of `inverse`
   std::vector<int> slot;          // per unknown of the step: index into `unknowns`, -1 if absent
   // K^-1 restricted to `unknowns`: its top left corner of that size (the rest is room to
   // grow into without copying what is cached).
-  Eigen::MatrixXcd inverse;
+  Matrix inverse;
 
   // The last solve's rows of the agent (their terms), and their G and Schur block.
   RowLists terms, g;
   Eigen::MatrixXd s;
   int64_t columns = 0;  // back-substitutions done so far
 
-  Complex At(int i, int j) const { return inverse(slot[static_cast<size_t>(i)], slot[static_cast<size_t>(j)]); }
+  static Scalar Conj(const Scalar& v) {
+    if constexpr (std::is_same_v<Scalar, double>) return v;
+    else return std::conj(v);
+  }
+
+  Scalar At(int i, int j) const { return inverse(slot[static_cast<size_t>(i)], slot[static_cast<size_t>(j)]); }
 
   // Makes sure the entries between `needed` unknowns are cached. Returns false when the
   // entries cached before were dropped (and those needed worked out again).
@@ -93,16 +101,19 @@ struct InverseBlock {
     if (missing.empty()) return kept;
     int lowest = n;  // of the unknowns cached already
     for (int j : unknowns) lowest = std::min(lowest, j);
-    const Eigen::MatrixXcd x = solver.InverseColumns(missing, lowest);
+    const Matrix x = solver.InverseColumns(missing, lowest);
     columns += static_cast<int64_t>(missing.size());
     const Eigen::Index old = static_cast<Eigen::Index>(unknowns.size());
     const Eigen::Index total = old + static_cast<Eigen::Index>(missing.size());
     if (total > inverse.rows()) {
-      Eigen::MatrixXcd room(std::max(total, 2 * inverse.rows()), std::max(total, 2 * inverse.rows()));
+      // Half as much room again (no more than the step's unknowns): doubling made blocks
+      // four times the entries they held, gigabytes for a crowd of 10,000.
+      const Eigen::Index size = std::max(total, std::min<Eigen::Index>(n, inverse.rows() + inverse.rows() / 2));
+      Matrix room(size, size);
       room.topLeftCorner(old, old) = inverse.topLeftCorner(old, old);
       inverse = std::move(room);
     }
-    Eigen::MatrixXcd& grown = inverse;
+    Matrix& grown = inverse;
     for (int j : missing) {
       slot[static_cast<size_t>(j)] = static_cast<int>(unknowns.size());
       unknowns.push_back(j);
@@ -113,8 +124,8 @@ struct InverseBlock {
       const int j = missing[static_cast<size_t>(c)];
       for (Eigen::Index i = 0; i < total; ++i) {
         const int at = unknowns[static_cast<size_t>(i)];
-        grown(i, old + c) = at >= std::min(j, lowest) ? x(at, c) : std::conj(x(j, slot[static_cast<size_t>(at)] - old));
-        grown(old + c, i) = std::conj(grown(i, old + c));
+        grown(i, old + c) = at >= std::min(j, lowest) ? x(at, c) : Conj(x(j, slot[static_cast<size_t>(at)] - old));
+        grown(old + c, i) = Conj(grown(i, old + c));
       }
     }
     return kept;
@@ -125,31 +136,26 @@ struct InverseBlock {
 struct AgentRows {
   std::vector<int> rows;       // global rows, ascending
   RowLists terms;              // per local row: (local vertex, weight * direction)
-  Eigen::MatrixXd s;           // local rows by local rows: Re(g^H K^-1 g)
+  // The step's block, held by the agent's SeparationCache entry for the step:
+  const Eigen::MatrixXd* s = nullptr;  // local rows by local rows: Re(g^H K^-1 g)
+  const RowLists* g = nullptr;         // per local row: (unknown, coefficient)
   std::vector<double> base;    // per local row: its value without rows
   Eigen::VectorXcd y0;         // the step's unknowns without rows
-  RowLists g;                  // per local row: (unknown, coefficient)
 };
 
-// Fills the agent's Schur block for one step: S = Re(G^H K^-1 G). A row's value is
-// Re(sum conj(c) z) = Re(g^H y) + constant with g_j = c conj(a_j), so S only needs the
+// Fills the agent's Schur block for one step in `cache`: S = Re(G^H K^-1 G). A row's value
+// is Re(sum conj(c) z) = Re(g^H y) + constant with g_j = c conj(a_j), so S only needs the
 // entries of K^-1 between the unknowns the rows touch; those are kept in `cache` and
-// only new unknowns cost a back-substitution. G and S depend on the rows' terms alone: when
+// only new unknowns cost a back-substitution. G and S depend on the rows' terms alone (not on
+// y0 nor on the map's constants, so step 2's can be formed before step 1 is solved): when
 // the agent's rows are those of the last solve (as re-sent rows whose linearisation did
-// not change are), they are taken from `cache` as they are, and only the base values
-// (which follow y0 and the map's constants) are worked out again.
-template <typename Solver, typename MapFn>
-void AgentBlock(const Solver& solver, int n, MapFn map, InverseBlock* cache, AgentRows* ar) {
-  const int r = static_cast<int>(ar->rows.size());
-  ar->base.assign(static_cast<size_t>(r), 0.0);
-  const bool same = static_cast<int>(cache->slot.size()) == n && cache->terms == ar->terms;
-  if (same) {
-    ar->g = cache->g;
-    ar->s = cache->s;
-  } else {
-    ar->g.Clear();
-    ar->g.items.reserve(ar->terms.items.size() * 2);
-  }
+// not change are), they stay in `cache` as they are.
+template <typename Solver, typename MapFn, typename Scalar>
+void AgentMatrix(const Solver& solver, int n, MapFn map, const RowLists& terms, InverseBlock<Scalar>* cache) {
+  const int r = static_cast<int>(terms.rows());
+  if (static_cast<int>(cache->slot.size()) == n && cache->terms == terms) return;
+  RowLists g;
+  g.items.reserve(terms.items.size() * 2);
   std::vector<int> needed;
   std::vector<RowLists::Item> col;
   for (int k = 0; k < r; ++k) {
@@ -162,24 +168,15 @@ void AgentBlock(const Solver& solver, int n, MapFn map, InverseBlock* cache, Age
       col.emplace_back(j, v);
     };
     col.clear();
-    for (const auto& [i, c] : ar->terms.row(static_cast<size_t>(k))) {
+    for (const auto& [i, c] : terms.row(static_cast<size_t>(k))) {
       const Map m = map(i);
-      if (!same) {
-        add(m.j0, c * std::conj(m.a0));
-        if (m.j1 >= 0) add(m.j1, c * std::conj(m.a1));
-      }
-      ar->base[static_cast<size_t>(k)] += std::real(std::conj(c) * m.k);
+      add(m.j0, c * std::conj(m.a0));
+      if (m.j1 >= 0) add(m.j1, c * std::conj(m.a1));
     }
-    if (!same) {
-      ar->g.items.insert(ar->g.items.end(), col.begin(), col.end());
-      ar->g.CloseRow();
-    }
-    for (const auto& [j, gj] : ar->g.row(static_cast<size_t>(k))) {
-      ar->base[static_cast<size_t>(k)] += std::real(std::conj(gj) * ar->y0[j]);
-      if (!same) needed.push_back(j);
-    }
+    g.items.insert(g.items.end(), col.begin(), col.end());
+    g.CloseRow();
+    for (const auto& e : col) needed.push_back(e.first);
   }
-  if (same) return;
   std::sort(needed.begin(), needed.end());
   needed.erase(std::unique(needed.begin(), needed.end()), needed.end());
   const bool kept = cache->Ensure(solver, n, needed);
@@ -191,31 +188,64 @@ void AgentBlock(const Solver& solver, int n, MapFn map, InverseBlock* cache, Age
     for (size_t l = 0; l < known.size(); ++l) known[l] = {cache->terms.Hash(l), static_cast<int>(l)};
     std::sort(known.begin(), known.end());
     for (int k = 0; k < r; ++k) {
-      const uint64_t h = ar->terms.Hash(static_cast<size_t>(k));
+      const uint64_t h = terms.Hash(static_cast<size_t>(k));
       for (auto it = std::lower_bound(known.begin(), known.end(), std::make_pair(h, -1));
            it != known.end() && it->first == h; ++it)
-        if (ar->terms.SameRow(static_cast<size_t>(k), cache->terms, static_cast<size_t>(it->second))) {
+        if (terms.SameRow(static_cast<size_t>(k), cache->terms, static_cast<size_t>(it->second))) {
           old[static_cast<size_t>(k)] = it->second;
           break;
         }
     }
   }
-  ar->s.resize(r, r);
-  for (int k = 0; k < r; ++k)
-    for (int l = k; l < r; ++l) {
-      const int ok = old[static_cast<size_t>(k)], ol = old[static_cast<size_t>(l)];
+  // The upper triangle column by column (both blocks are column-major: the entries taken over
+  // from the last solve's block are read down its columns), then the lower one by symmetry.
+  Eigen::MatrixXd s(r, r);
+  for (int l = 0; l < r; ++l) {
+    const int ol = old[static_cast<size_t>(l)];
+    for (int k = 0; k <= l; ++k) {
+      const int ok = old[static_cast<size_t>(k)];
       if (ok >= 0 && ol >= 0) {
-        ar->s(k, l) = ar->s(l, k) = cache->s(ok, ol);
+        s(k, l) = cache->s(ok, ol);
         continue;
       }
-      Complex v = 0.0;
-      for (const auto& [i, gi] : ar->g.row(static_cast<size_t>(k)))
-        for (const auto& [j, gj] : ar->g.row(static_cast<size_t>(l))) v += std::conj(gi) * gj * cache->At(i, j);
-      ar->s(k, l) = ar->s(l, k) = std::real(v);
+      if constexpr (std::is_same_v<Scalar, double>) {
+        // A real K^-1: the real part of conj(gi) gj K^-1(i, j) is Re(conj(gi) gj) K^-1(i, j).
+        double v = 0.0;
+        for (const auto& [i, gi] : g.row(static_cast<size_t>(k)))
+          for (const auto& [j, gj] : g.row(static_cast<size_t>(l))) v += std::real(std::conj(gi) * gj) * cache->At(i, j);
+        s(k, l) = v;
+      } else {
+        Complex v = 0.0;
+        for (const auto& [i, gi] : g.row(static_cast<size_t>(k)))
+          for (const auto& [j, gj] : g.row(static_cast<size_t>(l))) v += std::conj(gi) * gj * cache->At(i, j);
+        s(k, l) = std::real(v);
+      }
     }
-  cache->terms = ar->terms;
-  cache->g = ar->g;
-  cache->s = ar->s;
+  }
+  constexpr int kTile = 32;
+  for (int l0 = 0; l0 < r; l0 += kTile)
+    for (int k0 = l0; k0 < r; k0 += kTile)
+      for (int l = l0; l < std::min(l0 + kTile, r); ++l)
+        for (int k = std::max(k0, l + 1); k < std::min(k0 + kTile, r); ++k) s(k, l) = s(l, k);
+  cache->terms = terms;
+  cache->g = std::move(g);
+  cache->s = std::move(s);
+}
+
+// The agent's block for one step, from `cache` (AgentMatrix filled it for these rows), and
+// each row's value without rows, which follows y0 and the map's constants.
+template <typename MapFn, typename Scalar>
+void AgentBlock(MapFn map, const InverseBlock<Scalar>& cache, AgentRows* ar) {
+  ar->g = &cache.g;
+  ar->s = &cache.s;
+  const int r = static_cast<int>(ar->rows.size());
+  ar->base.assign(static_cast<size_t>(r), 0.0);
+  for (int k = 0; k < r; ++k) {
+    for (const auto& [i, c] : ar->terms.row(static_cast<size_t>(k)))
+      ar->base[static_cast<size_t>(k)] += std::real(std::conj(c) * map(i).k);
+    for (const auto& [j, gj] : ar->g->row(static_cast<size_t>(k)))
+      ar->base[static_cast<size_t>(k)] += std::real(std::conj(gj) * ar->y0[j]);
+  }
 }
 
 // The agent's unknowns under the row forces: y0 + K^-1 G lambda.
@@ -223,7 +253,7 @@ template <typename Solver>
 Eigen::VectorXcd AgentResponse(const Solver& solver, const AgentRows& ar, const Eigen::VectorXd& forces) {
   Eigen::VectorXcd rhs = Eigen::VectorXcd::Zero(ar.y0.size());
   for (size_t k = 0; k < ar.rows.size(); ++k)
-    for (const auto& [j, gj] : ar.g.row(k)) rhs[j] += gj * forces[ar.rows[k]];
+    for (const auto& [j, gj] : ar.g->row(k)) rhs[j] += gj * forces[ar.rows[k]];
   return ar.y0 + solver.Solve(rhs).col(0);
 }
 
@@ -265,16 +295,38 @@ int SweepRows(const std::vector<AgentRows*>& blocks, const RowSlots& slots, cons
               Eigen::VectorXd& forces, bool* converged, int64_t* updates) {
   const int nr = static_cast<int>(in.rhs.size());
   auto unilateral = [&](int r) { return in.kind.size() && in.kind[r] != 0; };
-  std::vector<Eigen::VectorXd> u(blocks.size());
+  // Every agent's part u = S_a lambda_a, one after another in one array (a sweep visits
+  // the rows in time order, which jumps from agent to agent: the fewer pointers to follow
+  // per row, the fewer cache misses on a big crowd).
+  std::vector<Eigen::Index> offset(blocks.size() + 1, 0);
+  for (size_t b = 0; b < blocks.size(); ++b)
+    offset[b + 1] = offset[b] + static_cast<Eigen::Index>(blocks[b]->rows.size());
+  Eigen::VectorXd u(offset.back());
   for (size_t b = 0; b < blocks.size(); ++b) {
     const AgentRows* ar = blocks[b];
     Eigen::VectorXd f(static_cast<Eigen::Index>(ar->rows.size()));
     for (size_t k = 0; k < ar->rows.size(); ++k) f[static_cast<Eigen::Index>(k)] = forces[ar->rows[k]];
-    u[b] = ar->s * f;
+    const Eigen::VectorXd ub = *ar->s * f;
+    u.segment(offset[b], ub.size()) = ub;
+  }
+  // Per slot (as slots.items): its entry of u, its agent's part of u, and its column of S_a.
+  struct Slot {
+    double* part;
+    const double* column;
+    Eigen::Index length;
+    Eigen::Index entry;
+  };
+  std::vector<Slot> slot(slots.items.size());
+  for (size_t i = 0; i < slots.items.size(); ++i) {
+    const RowSlot& sl = slots.items[i];
+    const Eigen::MatrixXd& sa = *blocks[static_cast<size_t>(sl.agent)]->s;
+    slot[i] = {u.data() + offset[static_cast<size_t>(sl.agent)], sa.data() + static_cast<Eigen::Index>(sl.local) * sa.rows(),
+               sa.rows(), offset[static_cast<size_t>(sl.agent)] + sl.local};
   }
   auto value = [&](int r) {
     double sum = 0.0;
-    for (const RowSlot& sl : slots.row(r)) sum += u[static_cast<size_t>(sl.agent)][sl.local];
+    for (int i = slots.start[static_cast<size_t>(r)]; i < slots.start[static_cast<size_t>(r) + 1]; ++i)
+      sum += u[slot[static_cast<size_t>(i)].entry];
     return sum;
   };
   *converged = false;
@@ -290,16 +342,26 @@ int SweepRows(const std::vector<AgentRows*>& blocks, const RowSlots& slots, cons
   std::vector<double> root(slots.items.size()), then(slots.items.size(), 0.0);
   for (size_t i = 0; i < slots.items.size(); ++i) {
     const RowSlot& sl = slots.items[i];
-    root[i] = std::sqrt(std::max(blocks[static_cast<size_t>(sl.agent)]->s(sl.local, sl.local), 0.0));
+    root[i] = std::sqrt(std::max((*blocks[static_cast<size_t>(sl.agent)]->s)(sl.local, sl.local), 0.0));
   }
   std::vector<double> moved(blocks.size(), 0.0), residual(static_cast<size_t>(nr), 0.0);
   std::vector<char> known(static_cast<size_t>(nr), 0);
   const double relax = settings.relaxation, tol = settings.tolerance;
+  // Rows ahead whose entries of u and columns of S are fetched early (memory latency).
+  constexpr int kAhead = 8;
+  const int total_slots = static_cast<int>(slot.size());
   for (sweep = 1; sweep <= settings.max_sweeps; ++sweep) {
     double change = 0.0;
     for (int r = 0; r < nr; ++r) {
       if (!(diag[r] > 0.0)) continue;
       const int s0 = slots.start[static_cast<size_t>(r)], s1 = slots.start[static_cast<size_t>(r) + 1];
+      {
+        const int ahead = slots.start[static_cast<size_t>(std::min(r + kAhead, nr))];
+        for (int i = ahead, end = std::min(ahead + 2, total_slots); i < end; ++i) {
+          __builtin_prefetch(u.data() + slot[static_cast<size_t>(i)].entry);
+          __builtin_prefetch(slot[static_cast<size_t>(i)].column);
+        }
+      }
       if (known[static_cast<size_t>(r)]) {
         double reach = 0.0;
         for (int i = s0; i < s1; ++i)
@@ -328,9 +390,10 @@ int SweepRows(const std::vector<AgentRows*>& blocks, const RowSlots& slots, cons
       ++*updates;
       change = std::max(change, std::abs(delta) * diag[r]);
       for (int i = s0; i < s1; ++i) {
-        const RowSlot& sl = slots.items[static_cast<size_t>(i)];
-        u[static_cast<size_t>(sl.agent)].noalias() += blocks[static_cast<size_t>(sl.agent)]->s.col(sl.local) * delta;
-        moved[static_cast<size_t>(sl.agent)] += root[static_cast<size_t>(i)] * std::abs(delta);
+        const Slot& sl = slot[static_cast<size_t>(i)];
+        Eigen::Map<Eigen::VectorXd>(sl.part, sl.length).noalias() +=
+            Eigen::Map<const Eigen::VectorXd>(sl.column, sl.length) * delta;
+        moved[static_cast<size_t>(slots.items[static_cast<size_t>(i)].agent)] += root[static_cast<size_t>(i)] * std::abs(delta);
       }
       residual[static_cast<size_t>(r)] = res - diag[r] * delta;
       for (int i = s0; i < s1; ++i)
@@ -370,7 +433,7 @@ void SolveEqualities(const std::vector<AgentRows*>& blocks, const SeparationRows
       const int ek = eq_index[static_cast<size_t>(ar->rows[k])];
       if (ek < 0) continue;
       for (size_t l = 0; l < ar->rows.size(); ++l) {
-        const double skl = ar->s(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(l));
+        const double skl = (*ar->s)(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(l));
         const int el = eq_index[static_cast<size_t>(ar->rows[l])];
         if (el >= 0)
           trip.emplace_back(ek, el, skl);
@@ -410,7 +473,7 @@ int SolveRows(const std::vector<AgentRows*>& blocks, const RowSlots& slots,
   for (int r = 0; r < nr; ++r)
     for (const RowSlot& sl : slots.row(r)) {
       q[r] -= blocks[static_cast<size_t>(sl.agent)]->base[static_cast<size_t>(sl.local)];
-      diag[r] += blocks[static_cast<size_t>(sl.agent)]->s(sl.local, sl.local);
+      diag[r] += (*blocks[static_cast<size_t>(sl.agent)]->s)(sl.local, sl.local);
     }
   for (int r = 0; r < nr; ++r)
     if (in.kind.size() && in.kind[r] != 0) forces[r] = std::max(forces[r], 0.0);
@@ -423,7 +486,8 @@ int SolveRows(const std::vector<AgentRows*>& blocks, const RowSlots& slots,
 }  // namespace detail
 
 struct SeparationCache {
-  std::vector<detail::InverseBlock> step1, step2;
+  std::vector<detail::InverseBlock<detail::Complex>> step1;
+  std::vector<detail::InverseBlock<double>> step2;
 };
 
 namespace detail {
@@ -540,9 +604,22 @@ void ScaleBlocks(const SeparationState& data, const Gathered& g, int threads, Se
     std::vector<Complex> edges;
     data.Step2Targets(ag, y1, z1, edges, turn);
     ar->y0 = ag.step2.Solve(data.Step2Rhs(ag, edges, turn)).col(0);
-    AgentBlock(ag.step2, ag.n2, [&](int i) { return ag.Map2(i, turn); },
-               &cache.step2[static_cast<size_t>(g.involved[static_cast<size_t>(q)])], ar);
+    AgentBlock([&](int i) { return ag.Map2(i, turn); }, cache.step2[static_cast<size_t>(g.involved[static_cast<size_t>(q)])],
+               ar);
   });
+}
+
+// Step 2's G and S of the involved agents, taken in turn from `next` (shared by the threads
+// that work on them): they depend on the rows' terms alone, not on step 1's result.
+void Step2Matrices(const SeparationState& data, const Gathered& g, SeparationCache& cache, std::atomic<int>& next) {
+  const int nq = static_cast<int>(g.involved.size());
+  for (int q = next++; q < nq; q = next++) {
+    const int a = g.involved[static_cast<size_t>(q)];
+    const Agent& ag = data.agents[static_cast<size_t>(a)];
+    const std::vector<Complex> turn(ag.ranges.size(), 1.0);  // G does not depend on the turns
+    AgentMatrix(ag.step2, ag.n2, [&](int i) { return ag.Map2(i, turn); }, g.blocks[static_cast<size_t>(q)]->terms,
+                &cache.step2[static_cast<size_t>(a)]);
+  }
 }
 
 // After step 2's forces: every involved agent's positions and range angles, then each
@@ -598,8 +675,8 @@ void SeparationSolve(const SeparationData& handle, const SeparationRows& in, con
     clock = now;
   };
   if (cache.step1.size() != data.agents.size()) {
-    cache.step1.assign(data.agents.size(), InverseBlock());
-    cache.step2.assign(data.agents.size(), InverseBlock());
+    cache.step1.assign(data.agents.size(), InverseBlock<Complex>());
+    cache.step2.assign(data.agents.size(), InverseBlock<double>());
   }
   ValidateRows(data, in, settings);
   const Eigen::Index nr = in.rhs.size();
@@ -632,14 +709,29 @@ void SeparationSolve(const SeparationData& handle, const SeparationRows& in, con
     const Agent& ag = data.agents[static_cast<size_t>(g.involved[static_cast<size_t>(q)])];
     AgentRows* ar = g.blocks[static_cast<size_t>(q)];
     ar->y0 = ag.y1_rest;
-    AgentBlock(ag.step1, ag.n1, [&](int i) { return ag.Map1(i); },
-               &cache.step1[static_cast<size_t>(g.involved[static_cast<size_t>(q)])], ar);
+    auto& step1 = cache.step1[static_cast<size_t>(g.involved[static_cast<size_t>(q)])];
+    const auto map = [&](int i) { return ag.Map1(i); };
+    AgentMatrix(ag.step1, ag.n1, map, ar->terms, &step1);
+    AgentBlock(map, step1, ar);
   });
   bool converged = true;
   lap(0);
-  result.sweeps = SolveRows(g.blocks, g.slots, in, settings, result.shape_forces, &result.regularized, &converged,
-                            &result.updates);
-  lap(1);
+  // Step 1's forces (one thread), while the other forms step 2's blocks; then both finish those.
+  std::atomic<int> next{0};
+  double sweeps_end = 0.0;
+  auto step1_rows = [&] {
+    result.sweeps = SolveRows(g.blocks, g.slots, in, settings, result.shape_forces, &result.regularized, &converged,
+                              &result.updates);
+    sweeps_end = Seconds();
+    Step2Matrices(data, g, cache, next);
+  };
+  if (threads > 1)
+    OnTwoThreads(step1_rows, [&] { Step2Matrices(data, g, cache, next); });
+  else
+    step1_rows();
+  result.seconds[1] += sweeps_end - clock;
+  clock = sweeps_end;
+  lap(0);
   if (in.initial_shape_forces.size() && in.initial_forces.size()) result.forces = in.initial_forces;
   else result.forces = result.shape_forces;
   result.converged = converged;

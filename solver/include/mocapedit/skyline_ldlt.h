@@ -143,6 +143,42 @@ class SkylineLdlt {
     }
   }
 
+  // SolveFrom for K right-hand sides at once, interleaved as for Solve (x[i * K + c] is entry
+  // i of right-hand side c), right-hand side c zero above firsts[c]; the backward pass stops
+  // at `last` for all. Entries of right-hand side c from min(firsts[c], last_c) on, for any
+  // last_c >= last, are bit for bit those SolveFrom(x_c, firsts[c], last_c) gives: the products the shared passes add above an entry's first row
+  // multiply zeros, and the backward pass never carries what it does below last_c upwards.
+  // K independent recurrences run side by side (the one-column passes wait on each product).
+  template <typename T, int K>
+  void SolveFromBatch(T* x, const int* firsts, int last) const {
+    const int n = size();
+    int first = firsts[0];
+    for (int c = 1; c < K; ++c) first = std::min(first, firsts[c]);
+    const Scalar* val = val_.data();
+    for (int i = first; i < n; ++i) {  // L y = b
+      const int p0 = std::max(first_[i], first);
+      const Scalar* li = val + ptr_[i] - first_[i];
+      T s[K];
+      for (int c = 0; c < K; ++c) s[c] = x[static_cast<size_t>(i) * K + c];
+      for (int p = p0; p < i; ++p) {
+        const Scalar l = li[p];
+        for (int c = 0; c < K; ++c) s[c] -= l * x[static_cast<size_t>(p) * K + c];
+      }
+      for (int c = 0; c < K; ++c) x[static_cast<size_t>(i) * K + c] = s[c];
+    }
+    for (int i = first; i < n; ++i)  // D
+      for (int c = 0; c < K; ++c) x[static_cast<size_t>(i) * K + c] /= d_[i];
+    for (int i = n - 1; i >= last; --i) {  // L^H x = y, rows from `last` on
+      const Scalar* li = val + ptr_[i] - first_[i];
+      T xi[K];
+      for (int c = 0; c < K; ++c) xi[c] = x[static_cast<size_t>(i) * K + c];
+      for (int p = std::max(first_[i], last); p < i; ++p) {
+        const Scalar l = Conj(li[p]);
+        for (int c = 0; c < K; ++c) x[static_cast<size_t>(p) * K + c] -= l * xi[c];
+      }
+    }
+  }
+
  private:
   // K right-hand sides, interleaved (K known at compile time).
   template <typename T, int K>
