@@ -16,9 +16,10 @@ from mocapedit.pipeline.processor import solve
 from mocapedit.usd import bvh_usd, evaluate
 
 
-def _shot(tmp_path, cut: bool, walk1: float = 2.0, idle: float = 0.5):
+def _shot(tmp_path, cut: bool, walk1: float = 2.0, idle: float = 0.5, handles=None):
     """A generated walk (60 fps, centimetres, Y-up), its first frame a T-pose 3 m away when
-    ``cut``, bent by three hard handles."""
+    ``cut``, bent by hard handles: ``handles(n)`` gives {frame: ground move (cm)}, by default
+    four, the first at the take's first frame."""
     tmp_path.mkdir(parents=True, exist_ok=True)
     rig, values, _ = walk_idle_walk(fps=60.0, walk1=walk1, idle=idle, walk2=2.0)
     if cut:
@@ -38,7 +39,8 @@ def _shot(tmp_path, cut: bool, walk1: float = 2.0, idle: float = 0.5):
     stage.GetRootLayer().subLayerPaths.append("./clip.usda")
     times, hips = evaluate.joint_world_matrices(clip, agent)
     n = len(times)
-    for k, (f, move) in enumerate({1: (0.0, 0.0), 40: (50.0, 0.0), n // 2: (-60.0, 20.0), 4 * n // 5: (50.0, -30.0)}.items()):
+    moves = handles(n) if handles else {1: (0.0, 0.0), 40: (50.0, 0.0), n // 2: (-60.0, 20.0), 4 * n // 5: (50.0, -30.0)}
+    for k, (f, move) in enumerate(moves.items()):
         at = metrics.to_ground(hips[f, 3, :3], "Y") + np.array(move)
         p = metrics.from_ground(at, hips[f, 3, 1], "Y")
         examples.add_position_constraint(stage, f"/Edits/handle{k}", agent, int(f), tuple(map(float, p)))
@@ -85,3 +87,34 @@ def test_feet_locked_next_to_a_cut_do_not_pull_the_body_down(tmp_path):
     assert result.report.stats.foot_locked_agents == 1
     assert drop.max() < 8.0 + 1e-6, (int(np.argmax(drop)), float(drop.max()))
     assert result.report.stats.max_pelvis_drop < 8.0 + 1e-6
+
+
+def _bent_walk(tmp_path, cut: bool, hold_first: bool):
+    """(source, edited) hips ground paths (F,2) of a walk bent 1 m sideways at its middle,
+    held at its last frame, and at its first frame when ``hold_first``."""
+    def handles(n):
+        return {**({0: (0.0, 0.0)} if hold_first else {}), n // 2: (0.0, 100.0), n - 1: (0.0, 0.0)}
+    shot, agent = _shot(tmp_path, cut, walk1=4.0, idle=0.0, handles=handles)
+    solve(shot, output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"), foot_locking=False)
+    _, ms = evaluate.joint_world_matrices(Usd.Stage.Open(shot), agent)
+    _, me = evaluate.joint_world_matrices(Usd.Stage.Open(str(tmp_path / "c.usda")), agent)
+    return metrics.to_ground(ms[:, 3, :3], "Y"), metrics.to_ground(me[:, 3, :3], "Y")
+
+
+def test_a_handle_on_the_rest_frame_before_a_cut_holds_that_frame_and_leaves_the_take_its_shape(tmp_path):
+    """A handle on a clip's first frame, where the clip keeps its rest pose 3 m from the take,
+    holds that frame. The take after the cut is bent by its own handles as if the rest frame
+    were not there: the cut's 3.6 m step, kept rigid in the take's local frame, swung the rest
+    frame round as the bend turned the take, and the held frame dragged the take's start back,
+    squeezing its steps up to the bend to 0.77 of their length. (A CMU slow walk bent 1 m so
+    slid its locked feet 4.8 cm/s more than its source.)"""
+    source, cut = _bent_walk(tmp_path / "cut", True, hold_first=True)
+    _, clean = _bent_walk(tmp_path / "clean", False, hold_first=False)
+    assert np.linalg.norm(cut[0] - source[0]) < 1e-6                      # held
+    assert np.linalg.norm(cut[1:] - clean[1:], axis=1).max() < 1.0, np.linalg.norm(cut[1:] - clean[1:], axis=1).max()
+    # The take's steps up to the bend, a quarter second at a time, against the source's: free to
+    # turn about the bend, that part keeps its length.
+    def steps(path):
+        return np.linalg.norm(path[16:180:15] - path[1:165:15], axis=1)
+    ratio = steps(cut) / steps(source)
+    assert 0.98 < ratio.min() and ratio.max() < 1.02, (ratio.min(), ratio.max())

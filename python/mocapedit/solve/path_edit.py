@@ -81,6 +81,14 @@ SPOT_TOLERANCE = 1e-3
 #: 180 degrees. Such an agent drifts: its spot terms hold every step to its source step,
 #: unturned (SPOT_WEIGHT), so it slides from one handle's displacement to the next.
 DRIFT_SPREAD_M = 0.5
+#: Weight, against the other shape terms' 1, of those that span a cut in an agent's rest path
+#: (a step longer than its ``turn_max_step``: a rest pose left in a clip's first frame, a
+#: teleport). The jump is no motion to keep the shape of: held rigid in the take's local frame,
+#: a 3.6 m jump swung the rest frame round as an edit turned the take, and a handle on the rest
+#: frame then dragged the take's start, squeezing its first steps to two thirds of their length.
+#: Weak, the terms still carry a free rest frame along with its take (they alone place it), and a
+#: held one pulls on the take by a thousandth of a millimetre per metre it is off.
+CUT_WEIGHT = 1e-6
 #: Metres: the local frames of the shape terms along an agent's path are at least this long
 #: (the frame of a frame that stands still or sways widens to the walk around it), in path
 #: editing and in collision avoidance alike (solver/src/energy/two_step_energy.h).
@@ -239,6 +247,13 @@ class ComponentProblem:
             self._rest_full = np.ascontiguousarray(self._inputs[0].rest, dtype=np.float64)
         else:
             self._rest_full = np.concatenate([a.rest for a in self._inputs], dtype=np.float64)
+        # cut_into[f]: the rest step into frame f is a cut (longer than the agent's turn_max_step).
+        self._cut_into = np.zeros(len(self._rest_full), dtype=np.int64)
+        for i, a in enumerate(self._inputs):
+            max_step = turn_args(a, settings)[2]
+            if max_step > 0 and a.frames > 1:
+                steps = np.diff(self._rest_full[fo[i]:fo[i + 1]], axis=0)
+                self._cut_into[fo[i] + 1:fo[i + 1]] = np.hypot(steps[:, 0], steps[:, 1]) > max_step
         # Group members are solved on key frames; the frames between follow (see _keys).
         self._keys()
         self._build_terms()
@@ -305,6 +320,8 @@ class ComponentProblem:
         marks = []
         for i in members:
             marks += (fo[i], fo[i + 1] - 1)
+            for f in np.flatnonzero(self._cut_into[fo[i]:fo[i + 1]]):   # both sides of a cut
+                marks += (fo[i] + int(f) - 1, fo[i] + int(f))
             for first, last in self._inputs[i].stationary:
                 marks.extend(range(fo[i] + max(first - 1, 0), fo[i] + min(last + 2, fo[i + 1] - fo[i])))
         for h in self.handles:
@@ -367,6 +384,10 @@ class ComponentProblem:
         tri, edg = _solver.component_chain_terms(self.rest, self._offsets32, s.min_baseline)
         tw, ew = np.empty(len(tri)), np.empty(len(edg))
         tw.fill(1.0), ew.fill(1.0)   # as np.ones, without its Python-level wrapper
+        cuts = self._cuts_before()
+        if cuts is not None:
+            tw[cuts[tri.max(axis=1)] > cuts[tri.min(axis=1)]] = CUT_WEIGHT
+            ew[cuts[edg.max(axis=1)] > cuts[edg.min(axis=1)]] = CUT_WEIGHT
         tri, edg, tw, ew = [tri], [edg], [tw], [ew]
         for n, g in enumerate(self.groups):
             t, e, w = self._group_terms(n, g)
@@ -393,6 +414,15 @@ class ComponentProblem:
         self.link_refs = [k.ref for k in self.links]
         self.extra_links: list[tuple[int, int, np.ndarray]] = []   # gauge terms: (a, b, offset)
         self.extra_handle_positions: list[np.ndarray] = []          # gauge pins
+
+    def _cuts_before(self) -> np.ndarray | None:
+        """(V,) per solve vertex, how many cuts (``_cut_into``) come before it in the component's
+        concatenated rest paths; None without any. A term whose vertices have different counts
+        spans a cut."""
+        if not self._cut_into.any():
+            return None
+        before = np.cumsum(self._cut_into)
+        return before if self._sel is None else before[self._sel]
 
     def _group_terms(self, n: int, g: Group):
         """Triangles and edges joining the members of a group at every sampled shared time:
