@@ -289,11 +289,18 @@ class SeparationSolver:
     rest: (V, 2) agents' paths concatenated; starts: (A+1,) first vertex of each agent, then V;
     rigid: inclusive global vertex ranges that move rigidly (stationary ranges);
     anchor_weight: pull of every frame towards its rest position, relative to the shape terms;
+    rates: (A,) each agent's samples per unit of time, relative to the rate the weights hold at
+    (empty: 1 for all): an agent at k weighs its anchors 1/k, its shape terms k^3 and its edges k,
+    so that the same motion costs the same at any rate;
+    anchor_frames: (V,) how many frames' time each vertex's anchor stands for, >= 1 (empty: 1;
+    a pose held after its clip ends stands for the frames it is held);
+    cut_into: (V,) 1 where the rest step into the vertex is a cut (empty: none): no shape term
+    spans it;
     still_extent: ranges whose rest positions lie this close (stage units) only translate;
     min_baseline: each frame's shape term is framed by the nearest frames at least this far
     apart (stage units), as path_edit's chain terms.
     """
-    def __init__(self, *, rest: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], starts: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"], rigid: collections.abc.Sequence[tuple[typing.SupportsInt | typing.SupportsIndex, typing.SupportsInt | typing.SupportsIndex]] = [], anchor_weight: typing.SupportsFloat | typing.SupportsIndex = 0.001, still_extent: typing.SupportsFloat | typing.SupportsIndex = 1e-09, min_baseline: typing.SupportsFloat | typing.SupportsIndex = 0.0, threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
+    def __init__(self, *, rest: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], starts: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"], rigid: collections.abc.Sequence[tuple[typing.SupportsInt | typing.SupportsIndex, typing.SupportsInt | typing.SupportsIndex]] = [], anchor_weight: typing.SupportsFloat | typing.SupportsIndex = 0.001, rates: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"] = ..., anchor_frames: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"] = ..., cut_into: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"] = ..., still_extent: typing.SupportsFloat | typing.SupportsIndex = 1e-09, min_baseline: typing.SupportsFloat | typing.SupportsIndex = 0.0, threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
         ...
     def solve(self, *, direction: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], rhs: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], softness: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], term_row: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"], term_vertex: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"], term_weight: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], kind: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"] = ..., initial_forces: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"] = ..., tolerance: typing.SupportsFloat | typing.SupportsIndex = 1e-06, max_sweeps: typing.SupportsInt | typing.SupportsIndex = 500, initial_shape_forces: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"] = ..., relaxation: typing.SupportsFloat | typing.SupportsIndex = 1.0) -> SeparationResult:
         """

@@ -15,13 +15,18 @@ using mocapedit::Trajectory2;
 class SeparationSolver {
  public:
   SeparationSolver(const Eigen::Ref<const Trajectory2>& rest, const Eigen::VectorXi& starts,
-                   const std::vector<mocapedit::FrameRange>& rigid, double anchor_weight, double still_extent,
+                   const std::vector<mocapedit::FrameRange>& rigid, double anchor_weight,
+                   const Eigen::VectorXd& rates, const Eigen::VectorXd& anchor_frames, const Eigen::VectorXi& cut_into,
+                   double still_extent,
                    double min_baseline, int threads) {
     mocapedit::SeparationProblem problem;
     problem.rest = rest;
     problem.starts = starts;
     problem.rigid = rigid;
     problem.anchor_weight = anchor_weight;
+    problem.rates = rates;
+    problem.anchor_frames = anchor_frames;
+    problem.cut_into = cut_into;
     problem.still_extent = still_extent;
     problem.min_baseline = min_baseline;
     problem.threads = threads;
@@ -94,13 +99,22 @@ MOCAPEDIT_BINDINGS(BindSeparation) {
       "rest: (V, 2) agents' paths concatenated; starts: (A+1,) first vertex of each agent, then V;\n"
       "rigid: inclusive global vertex ranges that move rigidly (stationary ranges);\n"
       "anchor_weight: pull of every frame towards its rest position, relative to the shape terms;\n"
+      "rates: (A,) each agent's samples per unit of time, relative to the rate the weights hold at\n"
+      "(empty: 1 for all): an agent at k weighs its anchors 1/k, its shape terms k^3 and its edges k,\n"
+      "so that the same motion costs the same at any rate;\n"
+      "anchor_frames: (V,) how many frames' time each vertex's anchor stands for, >= 1 (empty: 1;\n"
+      "a pose held after its clip ends stands for the frames it is held);\n"
+      "cut_into: (V,) 1 where the rest step into the vertex is a cut (empty: none): no shape term\n"
+      "spans it;\n"
       "still_extent: ranges whose rest positions lie this close (stage units) only translate;\n"
       "min_baseline: each frame's shape term is framed by the nearest frames at least this far\n"
       "apart (stage units), as path_edit's chain terms.")
       .def(py::init<const Eigen::Ref<const Trajectory2>&, const Eigen::VectorXi&,
-                    const std::vector<mocapedit::FrameRange>&, double, double, double, int>(),
+                    const std::vector<mocapedit::FrameRange>&, double, const Eigen::VectorXd&,
+                    const Eigen::VectorXd&, const Eigen::VectorXi&, double, double, int>(),
            py::kw_only(), py::arg("rest"), py::arg("starts"), py::arg("rigid") = std::vector<mocapedit::FrameRange>{},
-           py::arg("anchor_weight") = 1e-3, py::arg("still_extent") = 1e-9,
+           py::arg("anchor_weight") = 1e-3, py::arg("rates") = Eigen::VectorXd(), py::arg("anchor_frames") = Eigen::VectorXd(),
+           py::arg("cut_into") = Eigen::VectorXi(), py::arg("still_extent") = 1e-9,
            py::arg("min_baseline") = 0.0, py::arg("threads") = 0)
       .def("solve", &SeparationSolver::Solve, py::kw_only(), py::arg("direction"), py::arg("rhs"), py::arg("softness"),
            py::arg("term_row"), py::arg("term_vertex"), py::arg("term_weight"),

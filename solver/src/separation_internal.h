@@ -173,6 +173,18 @@ struct Agent {
   std::vector<Range> ranges;
   std::vector<int> global_range;  // per range: index into SeparationProblem::rigid
   int n1 = 0, n2 = 0;
+  double anchor = 0;              // its frames' anchor weight
+  double shape_weight = 1.0;      // its step-1 shape terms' weight (SeparationProblem::rates)
+  double edge_weight = 1.0;       // its step-2 edges' weight
+  std::vector<double> anchor_frames;  // per local vertex (SeparationProblem::anchor_frames); empty: 1
+
+  double Anchor(int i) const { return anchor_frames.empty() ? anchor : anchor * anchor_frames[static_cast<size_t>(i)]; }
+  std::vector<int> cuts_before;   // per local vertex: cuts up to it (SeparationProblem::cut_into); empty: none
+
+  // Whether a shape term over local vertices lo .. hi spans a cut.
+  bool AcrossCut(int lo, int hi) const {
+    return !cuts_before.empty() && cuts_before[static_cast<size_t>(hi)] != cuts_before[static_cast<size_t>(lo)];
+  }
   StepSolver<Complex> step1;
   StepSolver<double> step2;
   Eigen::VectorXcd y1_rest;
@@ -262,7 +274,7 @@ struct SeparationState {
   Trajectory2 rest;
   Eigen::VectorXi starts;
   std::vector<FrameRange> rigid;
-  double anchor_weight = 0, still_extent = 0;
+  double still_extent = 0;
   int threads = 1;
   std::vector<Agent> agents;
   std::vector<int> agent_of;  // global vertex -> agent
@@ -276,11 +288,11 @@ struct SeparationState {
     const auto map = [&](int i) { return ag.Map2(i, turn); };
     const auto range_of = [&](int i) { return ag.RangeOf(i); };
     ChainEdges(ag.count, [&](int j, int k) {
-      if (!InOneRange(range_of, {j, k}))
-        normal.Add(Row(EdgeTerm{j, k}), map, edges.empty() ? 0.0 : edges[static_cast<size_t>(j)], 1.0);
+      if (!InOneRange(range_of, {j, k}) && !ag.AcrossCut(j, k))
+        normal.Add(Row(EdgeTerm{j, k}), map, edges.empty() ? 0.0 : edges[static_cast<size_t>(j)], ag.edge_weight);
     });
     for (int i = 0; i < ag.count; ++i)
-      normal.Add(AnchorRow(i), map, C(rest, ag.first + i), anchor_weight);
+      normal.Add(AnchorRow(i), map, C(rest, ag.first + i), ag.Anchor(i));
   }
 
   // Step 2's targets from step 1's result (unknowns y1, positions z1) of one agent: each

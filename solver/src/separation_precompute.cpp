@@ -24,6 +24,16 @@ void Validate(const SeparationProblem& problem) {
   if (!problem.rest.allFinite()) throw InvalidInput(kWhere, "rest positions must be finite");
   if (!(problem.anchor_weight > 0.0) || !std::isfinite(problem.anchor_weight))
     throw InvalidInput(kWhere, "anchor_weight must be positive");
+  if (problem.rates.size() != 0 && problem.rates.size() != na)
+    throw InvalidInput(kWhere, "rates must have one entry per agent, or none");
+  for (Eigen::Index a = 0; a < problem.rates.size(); ++a)
+    if (!(problem.rates[a] > 0.0) || !std::isfinite(problem.rates[a]))
+      throw InvalidInput(kWhere, "rates must be positive and finite (agent " + std::to_string(a) + ")");
+  if (problem.anchor_frames.size() != 0 &&
+      (problem.anchor_frames.size() != nv || !problem.anchor_frames.allFinite() || (problem.anchor_frames.array() < 1.0).any()))
+    throw InvalidInput(kWhere, "anchor_frames must have one finite entry >= 1 per vertex, or none");
+  if (problem.cut_into.size() != 0 && problem.cut_into.size() != nv)
+    throw InvalidInput(kWhere, "cut_into must have one entry per vertex, or none");
   if (!(problem.still_extent >= 0.0)) throw InvalidInput(kWhere, "still_extent must not be negative");
   if (!(problem.min_baseline >= 0.0) || !std::isfinite(problem.min_baseline))
     throw InvalidInput(kWhere, "min_baseline must be a finite value >= 0");
@@ -39,6 +49,17 @@ void SetUpAgents(const SeparationProblem& problem, SeparationState& data) {
     Agent& ag = data.agents[static_cast<size_t>(a)];
     ag.first = problem.starts[a];
     ag.count = problem.starts[a + 1] - problem.starts[a];
+    const double k = problem.rates.size() ? problem.rates[a] : 1.0;
+    ag.anchor = problem.anchor_weight / k;
+    ag.shape_weight = k * k * k;
+    ag.edge_weight = k;
+    if (problem.anchor_frames.size() && (problem.anchor_frames.segment(ag.first, ag.count).array() != 1.0).any())
+      ag.anchor_frames.assign(problem.anchor_frames.data() + ag.first, problem.anchor_frames.data() + ag.first + ag.count);
+    if (problem.cut_into.size() && problem.cut_into.segment(ag.first + 1, std::max(ag.count - 1, 0)).any()) {
+      ag.cuts_before.assign(static_cast<size_t>(ag.count), 0);
+      for (int i = 1; i < ag.count; ++i)
+        ag.cuts_before[static_cast<size_t>(i)] = ag.cuts_before[static_cast<size_t>(i - 1)] + (problem.cut_into[ag.first + i] != 0);
+    }
     ag.range.assign(static_cast<size_t>(ag.count), -1);
     ag.s.assign(static_cast<size_t>(ag.count), 0.0);
     for (int i = 0; i < ag.count; ++i) data.agent_of[static_cast<size_t>(ag.first + i)] = static_cast<int>(a);
@@ -101,9 +122,10 @@ void FactorShape(const SeparationState& data, double baseline, Agent& ag) {
   const auto range_of = [&](int i) { return ag.RangeOf(i); };
   const auto z = [&](int i) { return C(data.rest, ag.first + i); };
   ChainFrames(data.rest, ag.first, ag.count, baseline, [&](int i, int a, int b) {
-    if (!InOneRange(range_of, {i, a, b})) one.Add(Row(MakeShapeTerm(i, a, b, z(i), z(a), z(b))), map, 0.0, 1.0);
+    if (!InOneRange(range_of, {i, a, b}) && !ag.AcrossCut(a, b))
+      one.Add(Row(MakeShapeTerm(i, a, b, z(i), z(a), z(b))), map, 0.0, ag.shape_weight);
   });
-  for (int i = 0; i < ag.count; ++i) one.Add(AnchorRow(i), map, C(data.rest, ag.first + i), data.anchor_weight);
+  for (int i = 0; i < ag.count; ++i) one.Add(AnchorRow(i), map, C(data.rest, ag.first + i), ag.Anchor(i));
   Factor(ag.step1, ag.n1, one.triplets);
 }
 
@@ -134,7 +156,6 @@ void SeparationPrecompute(const SeparationProblem& problem, SeparationData& out)
   data->rest = problem.rest;
   data->starts = problem.starts;
   data->rigid = problem.rigid;
-  data->anchor_weight = problem.anchor_weight;
   data->still_extent = problem.still_extent;
   data->threads = ThreadCount(problem.threads, nv);
   SetUpAgents(problem, *data);

@@ -91,6 +91,20 @@ TEST(Separation, ValidityRejectsBadInput) {
   }
   {
     SeparationProblem p = HeadOn();
+    p.rates = Eigen::VectorXd::Ones(3);  // one per agent: there are two
+    mocapedit::SeparationData data;
+    EXPECT_THROW(mocapedit::SeparationPrecompute(p, data), mocapedit::InvalidInput);
+    p.rates = Eigen::Vector2d(1.0, 0.0);
+    EXPECT_THROW(mocapedit::SeparationPrecompute(p, data), mocapedit::InvalidInput);
+    p.rates.resize(0);
+    p.anchor_frames = Eigen::VectorXd::Constant(p.rest.rows(), 0.5);   // each stands for a frame at least
+    EXPECT_THROW(mocapedit::SeparationPrecompute(p, data), mocapedit::InvalidInput);
+    p.anchor_frames.resize(0);
+    p.cut_into = Eigen::VectorXi::Zero(5);   // one per vertex
+    EXPECT_THROW(mocapedit::SeparationPrecompute(p, data), mocapedit::InvalidInput);
+  }
+  {
+    SeparationProblem p = HeadOn();
     p.min_baseline = -0.1;
     mocapedit::SeparationData data;
     EXPECT_THROW(mocapedit::SeparationPrecompute(p, data), mocapedit::InvalidInput);
@@ -162,6 +176,89 @@ TEST(Separation, AHardSeparationIsMetAndSpreadsSmoothly) {
     length += (r.positions.row(i) - r.positions.row(i - 1)).norm();
   }
   EXPECT_NEAR(length / rest_length, 1.0, 0.05);
+}
+
+// The same crossing sampled twice as often, told so, steps aside over the same stretch of
+// its walk; untold, its detour was narrower and steeper.
+TEST(Separation, ADetourLastsAsLongAtAnyRate) {
+  const auto crossing = [](int per_step, bool told) {
+    const int n = 80 * per_step + 1;
+    SeparationProblem p;
+    p.rest.resize(2 * n, 2);
+    for (int i = 0; i < n; ++i) {
+      p.rest.row(i) << -4.0 + 0.1 * i / per_step, 0.0;
+      p.rest.row(n + i) << 4.0 - 0.1 * i / per_step, 0.02;
+    }
+    p.starts = Eigen::Vector3i(0, n, 2 * n);
+    p.anchor_weight = 1e-4;
+    if (told) p.rates = Eigen::Vector2d::Constant(per_step);
+    RowBuilder b;
+    b.Add(0, -1, 0.7, 0, 1, {{40 * per_step, -1.0}, {n + 40 * per_step, 1.0}});
+    const Trajectory2 moved = Solve(p, b.Build()).positions - p.rest;
+    Eigen::VectorXd out(81);   // agent 0's sideways move at the frames of the coarse walk
+    for (int i = 0; i <= 80; ++i) out[i] = moved(i * per_step, 1);
+    return out;
+  };
+  const Eigen::VectorXd once = crossing(1, true), twice = crossing(2, true), untold = crossing(2, false);
+  EXPECT_GT(once.cwiseAbs().maxCoeff(), 0.3);
+  EXPECT_LT((twice - once).cwiseAbs().maxCoeff(), 0.005) << (twice - once).cwiseAbs().maxCoeff();
+  EXPECT_GT((untold - once).cwiseAbs().maxCoeff(), 0.05) << (untold - once).cwiseAbs().maxCoeff();
+  // Rates of 1 are no rates, bit for bit.
+  SeparationProblem ones = HeadOn(), none = HeadOn();
+  ones.rates = Eigen::Vector2d(1.0, 1.0);
+  RowBuilder b;
+  b.Add(0, -1, 0.7, 0, 0, {{40, -1.0}, {81 + 40, 1.0}});
+  EXPECT_EQ((Solve(ones, b.Build()).positions - Solve(none, b.Build()).positions).cwiseAbs().maxCoeff(), 0.0);
+}
+
+// A last frame whose anchor stands for the 200 frames it is held gives way less to the same
+// push than one anchored as a frame, and the other agent more.
+TEST(Separation, AHeldFrameIsAnchoredForTheFramesItStandsFor) {
+  const int n = 81;
+  RowBuilder b;
+  b.Add(0, -1, 0.7, 0, 1, {{n - 1, -1.0}, {n + 40, 1.0}});
+  const SeparationRows rows = b.Build();
+  SeparationProblem one = HeadOn(n), held = HeadOn(n);
+  held.anchor_frames = Eigen::VectorXd::Ones(2 * n);
+  held.anchor_frames[n - 1] = 201.0;
+  const SeparationResult r1 = Solve(one, rows), r2 = Solve(held, rows);
+  const double end1 = (r1.positions.row(n - 1) - one.rest.row(n - 1)).norm();
+  const double end2 = (r2.positions.row(n - 1) - held.rest.row(n - 1)).norm();
+  EXPECT_LT(end2, 0.5 * end1) << end1 << " " << end2;
+  EXPECT_GT((r2.positions.row(n + 40) - held.rest.row(n + 40)).norm(), (r1.positions.row(n + 40) - one.rest.row(n + 40)).norm());
+}
+
+// A walker whose first frame is a rest pose 3 away (a cut), held there, pushed aside at its
+// middle under a weak anchor: the take moves as it does without the rest frame. Kept rigid in
+// the take's frame, the cut's step would swing the held frame round with the take, which it
+// cannot, and drag the take.
+TEST(Separation, ShapeTermsAcrossACutBarelyHoldTheTake) {
+  const int n = 81;
+  SeparationProblem cut;
+  cut.rest.resize(n, 2);
+  cut.rest.row(0) << -4.0, 3.0;
+  for (int i = 1; i < n; ++i) cut.rest.row(i) << -4.0 + 0.1 * i, 0.0;
+  cut.starts = Eigen::Vector2i(0, n);
+  cut.anchor_weight = 1e-8;
+  cut.cut_into = Eigen::VectorXi::Zero(n);
+  cut.cut_into[1] = 1;
+  SeparationProblem take;
+  take.rest = cut.rest.bottomRows(n - 1);
+  take.starts = Eigen::Vector2i(0, n - 1);
+  take.anchor_weight = cut.anchor_weight;
+  RowBuilder with_pin, alone;
+  with_pin.Add(0, 1, 0.5, 0, 1, {{50, 1.0}});
+  with_pin.Add(1, 0, cut.rest(0, 0), 0, 0, {{0, 1.0}});
+  with_pin.Add(0, 1, cut.rest(0, 1), 0, 0, {{0, 1.0}});
+  alone.Add(0, 1, 0.5, 0, 1, {{49, 1.0}});
+  const SeparationRows rows = with_pin.Build();
+  const Trajectory2 free = Solve(take, alone.Build()).positions;
+  const SeparationResult r = Solve(cut, rows);
+  EXPECT_NEAR((r.positions.row(0) - cut.rest.row(0)).norm(), 0.0, 1e-9);
+  EXPECT_GT((free.row(0) - take.rest.row(0)).norm(), 0.1);   // the push moves the whole take
+  EXPECT_LT((r.positions.bottomRows(n - 1) - free).cwiseAbs().maxCoeff(), 1e-9);
+  cut.cut_into.resize(0);
+  EXPECT_GT((Solve(cut, rows).positions.bottomRows(n - 1) - free).cwiseAbs().maxCoeff(), 0.05);
 }
 
 TEST(Separation, OneSidedRowsPushButNeverPull) {

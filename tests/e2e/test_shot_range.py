@@ -134,7 +134,9 @@ def test_the_plausibility_figures_are_of_what_plays_in_the_shot(tmp_path):
 
 def _stander_in_a_walkers_way(path, pin: bool) -> None:
     """``a`` walks 2 s and its clip ends: it holds its last pose to the end of the shot. ``b``
-    walks across, through that spot, 6 s in."""
+    walks across, through that spot, 6 s in; unless ``a`` is pinned, hard position constraints
+    hold ``b`` to its way there, so that ``a`` must give way (a held pose is anchored for the
+    time it is held: pushed by a free walker, it stays and the walker goes round it)."""
     short = walker.walk(frames=48, fps=FPS, speed=SPEED, name="short")
     long = walker.walk(frames=FRAMES, fps=FPS, speed=SPEED, name="walk")
     end = float(short.translations[-1, 0, 2])
@@ -149,13 +151,19 @@ def _stander_in_a_walkers_way(path, pin: bool) -> None:
     if pin:
         where = evaluate.agent_root_positions(stage, "/World/Crowd/a", [47.0])[0]
         examples.add_position_constraint(stage, "/Edits/a_stays", "/World/Crowd/a", 47, tuple(map(float, where)))
+    else:
+        for frame in (132, 156):
+            where = evaluate.agent_root_positions(stage, "/World/Crowd/b", [float(frame)])[0]
+            examples.add_position_constraint(stage, f"/Edits/b_keeps_{frame}", "/World/Crowd/b", frame,
+                                             tuple(map(float, where)))
     stage.GetRootLayer().Save()
 
 
 def test_a_pose_held_after_its_clip_that_avoidance_moves_gets_a_note_saying_how_to_keep_it(tmp_path):
-    """Pushed aside while it holds its last pose, a stander has its last steps turn into the new
-    place (one frame of its path stands for all the time it holds). The report says so and how
-    to keep the pose where it is: pin it. Pinned, it stays, and the walker goes round it."""
+    """Pushed aside while it holds its last pose (by a walker held to its way), a stander has
+    its last steps turn into the new place (one frame of its path stands for all the time it
+    holds). The report says so and how to keep the pose where it is: pin it. Pinned, it stays,
+    and the walker goes round it."""
     shot, edits = tmp_path / "shot.usda", tmp_path / "shot.edits.usda"
     _stander_in_a_walkers_way(shot, pin=False)
     report = solve(str(shot), output=str(edits), guides=False).report

@@ -1080,3 +1080,89 @@ def test_overlaps_left_by_the_guard_against_walking_back_do_not_ask_for_more_ite
     assert len(its) >= 3 and its[-1] == 0 and result.report.stats["remainingOverlaps"] > 0
     assert not any("raise maxIterations" in n or "stopped at maxIterations" in n for n in result.report.notes)
     assert any("back against the way they walk" in n for n in result.report.notes)
+
+
+def _crossing_sampled_at(fps: float):
+    """(seconds, agent 0's edited and source paths) of two walkers passing head-on 10 cm apart
+    at 1.25 m/s, their paths sampled ``fps`` times a second on a 24 fps shot, parted without
+    waiting."""
+    t = np.arange(int(8 * fps) + 1) / fps
+    a = np.stack([-5.0 + 1.25 * t, np.zeros(len(t))], axis=1)
+    b = np.stack([5.0 - 1.25 * t, np.full(len(t), 0.1)], axis=1)
+    problem = avoidance.Problem(names=["a", "b"], paths=[a, b], frame_times=[t * 24.0, t * 24.0],
+                                radius=np.array([0.3, 0.3]), height=np.array([1.8, 1.8]))
+    out = avoidance.resolve(problem, avoidance.Settings(max_wait_s=0.0, time_codes_per_second=24.0, meters_per_unit=1.0))
+    assert not len(out.remaining)
+    return t, out.paths[0], a
+
+
+@pytest.mark.parametrize("fps", [30.0, 60.0, 120.0])
+def test_a_detour_lasts_as_many_seconds_at_any_frame_rate(fps):
+    """The same crossing, its clips sampled at 24, 30, 60 or 120 fps, steps aside over the same
+    seconds at the same speed. Weighted per frame as at 24 fps, the 60 and 120 fps walkers
+    stepped aside at 0.54 and 0.87 m/s where the 24 fps one does at 0.23: CMU takes in a crowd
+    swerved 30 cm in a quarter of a second, and their feet slid."""
+    t24, e24, s24 = _crossing_sampled_at(24.0)
+    t, edited, source = _crossing_sampled_at(fps)
+    aside = edited[:, 1] - source[:, 1]
+    aside24 = np.interp(t, t24, e24[:, 1] - s24[:, 1])
+    assert np.abs(aside - aside24).max() < 0.01, np.abs(aside - aside24).max()      # metres
+    speed = np.abs(np.diff(aside)).max() * fps
+    speed24 = np.abs(np.diff(e24[:, 1] - s24[:, 1])).max() * 24.0
+    assert speed < 1.05 * speed24, (speed, speed24)
+
+
+def test_a_pose_held_after_its_clip_ends_is_anchored_for_as_long_as_it_stands():
+    """A walker's clip ends after 2 s and it holds its last pose for 6 s; another walks through
+    that spot 10 cm aside at 5 s. The one who walks steps round the one who stands. Anchored as
+    one frame, the held pose took the push: it slid 0.37 m (and turned the steps before it)
+    while the walker kept to 0.16 m of its way."""
+    fps = 24.0
+    ta = np.arange(0, 2 * fps + 1)
+    a = np.stack([ta / fps * 1.25, np.zeros(len(ta))], axis=1)
+    tb = np.arange(0, 8 * fps + 1)
+    b = np.stack([np.full(len(tb), 2.6), (tb / fps - 5.0) * 1.25], axis=1)
+    problem = avoidance.Problem(names=["a", "b"], paths=[a, b], frame_times=[ta, tb], radius=np.array([0.3, 0.3]),
+                                height=np.array([1.8, 1.8]), span=(0.0, 8 * fps))
+    out = avoidance.resolve(problem, avoidance.Settings(max_wait_s=0.0, time_codes_per_second=fps, meters_per_unit=1.0))
+    assert not len(out.remaining)
+    held = np.linalg.norm(out.paths[0][-1] - a[-1])
+    detour = np.linalg.norm(out.paths[1] - b, axis=1).max()
+    assert held < 0.15 and detour > 0.4, (held, detour)
+
+
+def _head_on_stage_detour(tmp_path, fps: float) -> tuple[np.ndarray, np.ndarray]:
+    """(seconds, sideways move in metres) of a generated walker passing another head-on, 10 cm
+    aside, on a stage whose clips and time codes run at ``fps``, by UsdSkel FK on the composed
+    stage."""
+    folder = tmp_path / f"fps{int(fps)}"
+    folder.mkdir()
+    frames = int(6 * fps) + 1
+    walk = walker.walk(frames=frames, fps=fps, speed=1.25, up="Y", meters_per_unit=1.0, name="walk_x")
+    specs = [examples.AgentSpec("agent_0000", walk, (-3.75, 0.0, 0.0), 90.0),
+             examples.AgentSpec("agent_0001", walk, (3.75, 0.0, 0.1), -90.0)]
+    stage = examples.build_crowd_stage(folder / "shot.usda", specs, up_axis="Y", meters_per_unit=1.0, fps=fps,
+                                       clips_dir=folder / "clips")
+    examples.define_mocap_prim(stage, "/World/Settings", "MocapSolveSettings", attributes={
+        "collisionAvoidance": (Sdf.ValueTypeNames.Bool, True), "maxWait": (Sdf.ValueTypeNames.Double, 0.0)})
+    stage.GetRootLayer().Save()
+    solve(str(folder / "shot.usda"), output=str(folder / "e.usda"), composed=str(folder / "c.usda"), foot_locking=False)
+    times = np.arange(frames, dtype=np.float64)
+    agent = "/World/Crowd/agent_0000"
+    before = evaluate.agent_root_positions(Usd.Stage.Open(str(folder / "shot.usda")), agent, times)
+    after = evaluate.agent_root_positions(Usd.Stage.Open(str(folder / "c.usda")), agent, times)
+    return times / fps, after[:, 2] - before[:, 2]
+
+
+def test_a_stage_at_60_fps_steps_aside_as_one_at_24_does(tmp_path):
+    """The same two generated walkers passing head-on, on a 24 and on a 60 fps stage: the one
+    steps aside over the same seconds, as fast (FK on the composed stages). The 60 fps one
+    used to step aside within half the time, at 0.52 m/s against 0.24, 15 cm off the other's
+    path over time."""
+    t24, aside24 = _head_on_stage_detour(tmp_path, 24.0)
+    t60, aside60 = _head_on_stage_detour(tmp_path, 60.0)
+    assert np.abs(aside24).max() > 0.2
+    assert np.abs(np.interp(t60, t24, aside24) - aside60).max() < 0.04, np.abs(np.interp(t60, t24, aside24) - aside60).max()
+    speed24 = np.abs(np.diff(aside24)).max() * 24.0
+    speed60 = np.abs(np.diff(aside60)).max() * 60.0
+    assert speed60 < 1.15 * speed24, (speed60, speed24)

@@ -896,8 +896,10 @@ def test_a_real_standing_clip_moved_by_a_handle_steps_within_the_bars(tmp_path):
 def test_two_real_walkers_crossing_with_avoidance_keep_their_feet(tmp_path):
     """Two CMU walks crossing at right angles at their middles, parted by collision avoidance:
     each keeps its feet within 0.5 cm/s of its source, bones and knees as they were. Carried
-    rigidly along the parted paths their feet slide over 1 cm/s more than the source's; pivoting
-    on the planted feet takes most of that away before locking."""
+    rigidly along the parted paths their feet slide about 0.5 cm/s more than the source's;
+    pivoting on the planted feet takes that away before locking. (Weighted per frame as at
+    24 fps, these 60 fps takes stepped aside over 2.5 times fewer seconds: carried rigidly they
+    slid 3 cm/s more, and 0.4 to 0.7 after pivoting.)"""
     stage, _ = _imported_shot(tmp_path, "cc_cmu07_01_walk")
     stage.GetRootLayer().subLayerPaths = []
     names = [f"{CROWD}/a", f"{CROWD}/b"]
@@ -916,8 +918,9 @@ def test_two_real_walkers_crossing_with_avoidance_keep_their_feet(tmp_path):
     assert result.report.stats["remainingOverlaps"] == 0
     for a in names:
         entry = result.report.agents[a]
-        assert rigid.report.agents[a]["footSkateUnlocked"] > entry["footSkateSource"] + 1.0   # avoidance slid the feet
-        assert entry["footSkateUnlocked"] < rigid.report.agents[a]["footSkateUnlocked"] - 0.5
+        assert rigid.report.agents[a]["footSkateUnlocked"] > entry["footSkateSource"] + 0.3   # avoidance slid the feet
+        assert entry["footSkateUnlocked"] < rigid.report.agents[a]["footSkateUnlocked"] - 0.4
+        assert entry["footSkateUnlocked"] <= entry["footSkateSource"] + 0.1
         assert entry["footSkateEdited"] <= entry["footSkateSource"] + 0.5       # cm/s
         bones, flips, speed = _leg_quality(stage, out, a, times, CC_LEGS, 60.0, unlocked=free)
         assert bones < 1e-4 and flips == 0 and speed < 1.5

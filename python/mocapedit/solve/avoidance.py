@@ -61,6 +61,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mocapedit import _solver
+from mocapedit.geometry import trajectory
 from mocapedit.solve import collisions
 from mocapedit.solve.path_edit import MIN_BASELINE_M
 from mocapedit.model import report
@@ -124,6 +125,19 @@ class Problem:
     #: (F_a,2) per agent: the paths whose way the walkers keep (the rows against walking back),
     #: when it is not ``paths``' (a solve resumed from an earlier one's result keeps the source's way)
     way: list[np.ndarray] | None = None
+    #: (A,) samples per second of each agent's path (its clip's rate), which set its anchor
+    #: (``ANCHOR_RATE``); None: from ``frame_times`` as :func:`resolve` is given them
+    samples_per_second: np.ndarray | None = None
+
+
+#: Samples per second at which the separation solve's weights (``Settings.anchor_weight``,
+#: ``region_anchor_weight``, the shape terms) hold. They are per frame, so a path sampled k
+#: times as often, weighted alike, detoured over about 1/k of the seconds and gave way k^3 times
+#: as easily: the same crossing stepped aside at 0.23 m/s at 24 fps, 0.54 at 60 and 0.87 at 120,
+#: and CMU takes (60 and 120 fps) in a crowd swerved 30 cm in a quarter of a second. Each agent
+#: is solved at its own rate against this one (``SeparationSolver(rates=)``): the same motion
+#: costs the same at any rate.
+ANCHOR_RATE = 24.0
 
 
 @dataclass
@@ -258,6 +272,34 @@ class _Rows:
                             relaxation=relaxation)
 
 
+def _samples_per_second(problem: Problem, settings: Settings) -> np.ndarray:
+    """(A,) ``Problem.samples_per_second``, or each agent's from its frame times."""
+    if problem.samples_per_second is not None:
+        return np.asarray(problem.samples_per_second, dtype=np.float64)
+    return np.array([trajectory.samples_per_second(t, settings.time_codes_per_second) for t in problem.frame_times],
+                    dtype=np.float64)
+
+
+def _held_frames(problem: Problem, settings: Settings, rates: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """(V,) how many frames' time each frame's anchor stands for (empty: one each): an agent's
+    first and last frames, where it holds its pose before its clip starts and after it ends
+    within ``Problem.span``, stand for as many frames as it holds them at its own rate. Held
+    for seconds and anchored as one frame, a pose that walkers kept bumping into slid 1.5 m
+    and turned the steps before it 40 degrees; anchored for the time it stands, it is as stiff
+    as a stand that long."""
+    if problem.span is None or not len(problem.frame_times):
+        return np.zeros(0)
+    lo, hi = problem.span
+    out = np.ones(int(starts[-1]))
+    for a, t in enumerate(problem.frame_times):
+        if len(t) < 2:
+            continue
+        per_code = rates[a] / settings.time_codes_per_second
+        out[starts[a]] += max(float(t[0]) - lo, 0.0) * per_code
+        out[starts[a + 1] - 1] += max(hi - float(t[-1]), 0.0) * per_code
+    return out if np.any(out != 1.0) else np.zeros(0)
+
+
 class _State:
     """The problem laid out for the solver: concatenated paths, samples, fixed rows."""
 
@@ -270,6 +312,16 @@ class _State:
         self.way = self.rest if problem.way is None or not len(counts) else \
             np.concatenate(problem.way).astype(np.float64)
         self.rigid = [(int(self.starts[a] + f), int(self.starts[a] + l)) for a, f, l in problem.rigid]
+        rates = _samples_per_second(problem, settings)
+        self.rates = rates / ANCHOR_RATE
+        self.anchor_frames = _held_frames(problem, settings, rates, self.starts)
+        # A cut in a path (a rest pose left in a clip's first frame) is no motion to keep: no
+        # shape term spans it (as the path editor's weigh next to nothing, ``CUT_WEIGHT``).
+        step = np.zeros(len(self.rest))
+        step[1:] = np.linalg.norm(np.diff(self.rest, axis=0), axis=1)
+        cut = trajectory.is_cut(step, np.repeat(1.0 / rates, counts), settings.meters_per_unit)
+        cut[self.starts[:-1]] = False
+        self.cut_into = cut.astype(np.int32) if cut.any() else np.zeros(0, np.int32)
         self.times = {i: t for i, t in enumerate(problem.frame_times)}
         idx = list(range(len(problem.names)))
         self.sampling = collisions.sample(idx, self.times, {i: g for i, g in enumerate(problem.paths)},
@@ -502,6 +554,8 @@ def resolve(problem: Problem, settings: Settings | None = None, progress=None) -
         raise ValueError(f"unknown collision strategy '{settings.strategy}' (use {' or '.join(STRATEGIES)})")
     t0 = time.perf_counter()
     fixed = np.zeros(len(problem.names), bool) if problem.fixed_timing is None else np.asarray(problem.fixed_timing)
+    # Anchors by the clips' own rates, before waiting stretches their timing.
+    problem = dataclasses.replace(problem, samples_per_second=_samples_per_second(problem, settings))
     source = problem
     strategy = _relinearize if settings.strategy == "relinearize" else _accumulate
     detour = _detours(problem, settings, strategy, progress)
@@ -670,6 +724,8 @@ class _Run:
         shape terms are framed as the path editor's (``MIN_BASELINE_M``)."""
         t = time.perf_counter()
         solver = _solver.SeparationSolver(rest=rest, starts=starts, rigid=rigid, anchor_weight=anchor_weight,
+                                          rates=self.state.rates, anchor_frames=self.state.anchor_frames,
+                                          cut_into=self.state.cut_into,
                                           still_extent=still_extent,
                                           min_baseline=MIN_BASELINE_M / self.state.s.meters_per_unit, threads=0)
         self.seconds["factor"] += time.perf_counter() - t

@@ -25,6 +25,14 @@
 // detour rather than a shift of the whole path. A detour spreads over roughly
 // anchor_weight^(-1/4) frames on each side.
 //
+// The weights hold per frame at one sampling rate. An agent sampled k times as often
+// (rates[a] = k: a 120 fps clip where the weights are set for 24) has k times the frames for
+// the same motion: summed over them, its anchors would weigh k times more, its step-1 shape
+// terms (second differences) k^-3 and its step-2 edges (first differences) k^-1, so its
+// detours would last 1/k of the seconds and it would give way k^3 times as easily. Its
+// anchors weigh 1/k, its shape terms k^3 and its edges k instead: the same motion costs the
+// same at any rate.
+//
 // Stationary ranges move rigidly in both steps (section 5.4.2.5): the range's frames are
 // replaced by one similarity in step 1 (translation and a complex scale) and by one
 // translation turned by step 1's rotation in step 2. Ranges whose rest positions stand
@@ -51,6 +59,14 @@ struct SeparationProblem {
   Eigen::VectorXi starts;      // #A+1 first vertex of each agent, then #V (non-decreasing)
   std::vector<FrameRange> rigid;  // inclusive global vertex ranges, each inside one agent, disjoint
   double anchor_weight = 1e-3;    // > 0
+  Eigen::VectorXd rates;          // #A, each > 0: each agent's samples per unit of time, relative; empty: 1
+  // #V, each >= 1, or empty: how many frames' time each vertex's anchor stands for (1; a pose
+  // held after its clip ends stands for the frames it is held: as stiff as a stand that long).
+  Eigen::VectorXd anchor_frames;
+  // #V, or empty: 1 where the rest step into the vertex from the one before is a cut (a rest
+  // pose left in a clip's first frame, a teleport): no motion to keep the shape of. No shape
+  // term spans a cut (a frame's triangle, a step's edge); the anchors hold each side.
+  Eigen::VectorXi cut_into;
   double still_extent = 1e-9;     // stage units, >= 0
   // Stage units, >= 0: each frame's shape term is framed by the nearest frames around it
   // at least this far apart (AppendChainTerms), so a frame that stands still or sways is

@@ -325,6 +325,8 @@ def _problem(ctx: SolveContext, names: list[str], footprints, enabled: bool) -> 
         radius=np.array([a.collision_radius for a in agents]), height=np.array([a.collision_height for a in agents]),
         margin=float(data.settings.margin), sample_step=float(data.settings.sample_step), collide_agents=enabled,
         fixed_timing=np.array([p in timed for p in names], dtype=bool),
+        samples_per_second=np.array([trajectory.samples_per_second(a.sample_times, data.info.time_codes_per_second)
+                                     for a in agents]),
         # Only what plays in the shot is parted: a long clip's walk after the shot ends (or
         # before it starts) is never seen, and pushes there would bend what is.
         span=data.info.shot_span(min((float(t[0]) for t in times), default=0.0),
