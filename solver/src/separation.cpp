@@ -58,11 +58,13 @@ struct RowLists {
 template <typename Scalar>
 struct InverseBlock {
   using Matrix = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>;
-  std::vector<int> unknowns;      // cached unknowns, in the order of `inverse`
+  std::vector<int> unknowns;      // cached unknowns, in the order of `lower`
   std::vector<int> slot;          // per unknown of the step: index into `unknowns`, -1 if absent
-  // K^-1 restricted to `unknowns`: its top left corner of that size (the rest is room to
-  // grow into without copying what is cached).
-  Matrix inverse;
+  // K^-1 restricted to `unknowns`, its lower triangle row after row (row p, entries 0 .. p,
+  // from p (p + 1) / 2 on); K being Hermitian, the upper one is its conjugate. New unknowns
+  // append rows, and half the entries of a square are kept (gigabytes for a crowd of 10,000).
+  std::vector<Scalar> lower;
+  size_t room = 0;                // rows `lower` has room for
 
   // The last solve's rows of the agent (their terms), and their G and Schur block.
   RowLists terms, g;
@@ -74,7 +76,10 @@ struct InverseBlock {
     else return std::conj(v);
   }
 
-  Scalar At(int i, int j) const { return inverse(slot[static_cast<size_t>(i)], slot[static_cast<size_t>(j)]); }
+  Scalar At(int i, int j) const {
+    const size_t a = static_cast<size_t>(slot[static_cast<size_t>(i)]), b = static_cast<size_t>(slot[static_cast<size_t>(j)]);
+    return a >= b ? lower[a * (a + 1) / 2 + b] : Conj(lower[b * (b + 1) / 2 + a]);
+  }
 
   // Makes sure the entries between `needed` unknowns are cached. Returns false when the
   // entries cached before were dropped (and those needed worked out again).
@@ -85,7 +90,8 @@ struct InverseBlock {
       kept = false;
       slot.assign(static_cast<size_t>(n), -1);
       unknowns.clear();
-      inverse.resize(0, 0);
+      lower = {};
+      room = 0;
     }
     std::vector<int> missing;
     for (int j : needed)
@@ -105,27 +111,28 @@ struct InverseBlock {
     columns += static_cast<int64_t>(missing.size());
     const Eigen::Index old = static_cast<Eigen::Index>(unknowns.size());
     const Eigen::Index total = old + static_cast<Eigen::Index>(missing.size());
-    if (total > inverse.rows()) {
-      // Half as much room again (no more than the step's unknowns): doubling made blocks
-      // four times the entries they held, gigabytes for a crowd of 10,000.
-      const Eigen::Index size = std::max(total, std::min<Eigen::Index>(n, inverse.rows() + inverse.rows() / 2));
-      Matrix room(size, size);
-      room.topLeftCorner(old, old) = inverse.topLeftCorner(old, old);
-      inverse = std::move(room);
+    if (static_cast<size_t>(total) > room) {
+      // Half as many rows again (no more than the step's unknowns): doubling made blocks
+      // four times the entries they held.
+      room = std::max(static_cast<size_t>(total), std::min(static_cast<size_t>(n), room + room / 2));
+      lower.reserve(room * (room + 1) / 2);
     }
-    Matrix& grown = inverse;
+    lower.resize(static_cast<size_t>(total) * static_cast<size_t>(total + 1) / 2);
     for (int j : missing) {
       slot[static_cast<size_t>(j)] = static_cast<int>(unknowns.size());
       unknowns.push_back(j);
     }
-    // K is Hermitian: entry (i, j) of a new column j above min(j, lowest) is entry (j, i)
-    // of the new column i, conjugated.
+    // Row p = old + c of new column c, entries i <= p: K^-1(unknowns[p], unknowns[i]), the
+    // conjugate of column c's entry i. Below min(j, lowest) column c was left undone: its
+    // entry i is then column i's entry j, conjugated (i is new there, the cached unknowns
+    // lying at or above lowest).
     for (Eigen::Index c = 0; c < static_cast<Eigen::Index>(missing.size()); ++c) {
       const int j = missing[static_cast<size_t>(c)];
-      for (Eigen::Index i = 0; i < total; ++i) {
-        const int at = unknowns[static_cast<size_t>(i)];
-        grown(i, old + c) = at >= std::min(j, lowest) ? x(at, c) : Conj(x(j, slot[static_cast<size_t>(at)] - old));
-        grown(old + c, i) = Conj(grown(i, old + c));
+      const size_t p = static_cast<size_t>(old + c);
+      Scalar* row = lower.data() + p * (p + 1) / 2;
+      for (size_t i = 0; i <= p; ++i) {
+        const int at = unknowns[i];
+        row[i] = at >= std::min(j, lowest) ? Conj(x(at, c)) : x(j, slot[static_cast<size_t>(at)] - old);
       }
     }
     return kept;

@@ -303,15 +303,15 @@ def _held_frames(problem: Problem, settings: Settings, rates: np.ndarray, starts
 class _State:
     """The problem laid out for the solver: concatenated paths, samples, fixed rows."""
 
-    def __init__(self, problem: Problem, settings: Settings):
+    def __init__(self, problem: Problem, settings: Settings, sampling: collisions.Sampling | None = None):
+        """``sampling``: the problem's agents sampled already, at its time maps and over its span
+        (the waits' last sampling), taken over instead of sampled again."""
         self.p = problem
         self.s = settings
-        counts = np.array([len(g) for g in problem.paths], dtype=np.int64)
-        self.starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
-        self.rest = np.concatenate(problem.paths).astype(np.float64) if len(counts) else np.zeros((0, 2))
-        self.way = self.rest if problem.way is None or not len(counts) else \
+        self.rest, self.starts, self.rigid = _layout(problem)
+        self.way = self.rest if problem.way is None or not len(problem.paths) else \
             np.concatenate(problem.way).astype(np.float64)
-        self.rigid = [(int(self.starts[a] + f), int(self.starts[a] + l)) for a, f, l in problem.rigid]
+        counts = np.diff(self.starts).astype(np.int64)
         rates = _samples_per_second(problem, settings)
         self.rates = rates / ANCHOR_RATE
         self.anchor_frames = _held_frames(problem, settings, rates, self.starts)
@@ -324,8 +324,8 @@ class _State:
         self.cut_into = cut.astype(np.int32) if cut.any() else np.zeros(0, np.int32)
         self.times = {i: t for i, t in enumerate(problem.frame_times)}
         idx = list(range(len(problem.names)))
-        self.sampling = collisions.sample(idx, self.times, {i: g for i, g in enumerate(problem.paths)},
-                                          problem.sample_step, problem.span)
+        self.sampling = sampling if sampling is not None else collisions.sample(
+            idx, self.times, {i: g for i, g in enumerate(problem.paths)}, problem.sample_step, problem.span)
         self.resample = collisions.Resampler(self.sampling, self.starts)
         pinned = np.zeros(len(self.rest), dtype=bool)
         for pin in problem.pins:
@@ -564,7 +564,7 @@ def resolve(problem: Problem, settings: Settings | None = None, progress=None) -
     waits = _waits(problem, settings, fixed)
     if waits.delay.any():
         problem = dataclasses.replace(problem, frame_times=waits.frame_times, span=waits.span)
-    state = _State(problem, settings)
+    state = _State(problem, settings, sampling=waits.sampling)
     watch = settings.buffer_m / settings.meters_per_unit if settings.strategy == "relinearize" else None
     run = _Run(state, progress, watch)
     flat, angles = strategy(state, run)
@@ -615,8 +615,9 @@ def _walks_backward(state: "_State", flat: np.ndarray) -> np.ndarray:
     least = CHORD_MIN_M / s.meters_per_unit
     # Each agent's chords (first, last frame) as rows of the concatenated paths; agents that
     # play their frames at the same times share the search.
-    chords: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
-    first, last, owner = [], [], []
+    chords: dict[bytes, int] = {}
+    starts, ends = [], []           # per distinct time map: its chords' first and last frames
+    group = np.zeros(agents, dtype=np.int64)
     for a, times in enumerate(state.p.frame_times):
         times = np.asarray(times, dtype=np.float64)
         key = times.tobytes()
@@ -624,14 +625,21 @@ def _walks_backward(state: "_State", flat: np.ndarray) -> np.ndarray:
             seconds = times / s.time_codes_per_second
             end = np.searchsorted(seconds, seconds + CHORD_SECONDS)
             ok = end < len(seconds)
-            chords[key] = (np.flatnonzero(ok), end[ok])
-        start, end = chords[key]
-        first.append(start + state.starts[a])
-        last.append(end + state.starts[a])
-        owner.append(np.full(len(start), a))
-    if not first:
+            chords[key] = len(starts)
+            starts.append(np.flatnonzero(ok))
+            ends.append(end[ok])
+        group[a] = chords[key]
+    if not agents:
         return np.zeros(agents, dtype=bool)
-    first, last, owner = np.concatenate(first), np.concatenate(last), np.concatenate(owner)
+    # All agents' chords at once, agent after agent: agent a's are its time map's, shifted to
+    # its rows.
+    count = np.array([len(c) for c in starts], dtype=np.int64)
+    at = np.concatenate([[0], np.cumsum(count)])
+    per_agent = count[group]
+    owner = np.repeat(np.arange(agents), per_agent)
+    pick = np.arange(int(per_agent.sum())) + np.repeat(at[group] - (np.cumsum(per_agent) - per_agent), per_agent)
+    shift = state.starts[:-1].astype(np.int64)[owner]
+    first, last = np.concatenate(starts)[pick] + shift, np.concatenate(ends)[pick] + shift
     was, now = state.way[last] - state.way[first], flat[last] - flat[first]
     back = (np.linalg.norm(was, axis=1) >= least) & (np.einsum("ij,ij->i", was, now) < 0.0)
     return np.bincount(owner[back], minlength=agents) > 0
@@ -658,6 +666,16 @@ def _detours(problem: Problem, settings: Settings, strategy, progress):
     run = _Run(state, progress, None, "avoid regions")
     flat, angles = strategy(state, run)
     return state.split(flat), angles, run
+
+
+def _layout(problem: Problem) -> tuple[np.ndarray, np.ndarray, list[tuple[int, int]]]:
+    """(rest, starts, rigid): the agents' paths concatenated, each agent's first row (then the
+    total), and the rigid ranges as global rows, as the solver takes them."""
+    counts = np.array([len(g) for g in problem.paths], dtype=np.int64)
+    starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
+    rest = np.concatenate(problem.paths).astype(np.float64) if len(counts) else np.zeros((0, 2))
+    rigid = [(int(starts[a] + f), int(starts[a] + l)) for a, f, l in problem.rigid]
+    return rest, starts, rigid
 
 
 class _Run:
@@ -1016,35 +1034,56 @@ class _Forward:
         length = np.take(n, moving)
         d = np.take(c, moving, axis=0) / length[:, None]
         self.slack = watch * length[:, None]
-        # Three rows per chord: d.c >= keep |c_source|, and the cone's two edges n.c >= 0.
-        across = np.stack((-d[:, 1], d[:, 0]), axis=1)
+        # Three rows per chord: d.c >= keep |c_source|, and the cone's two edges n.c >= 0
+        # (n = sin d -+ cos across, across = (-d_y, d_x)), kept as their x and y parts.
         sin, cos = np.sin(np.radians(cone_degrees)), np.cos(np.radians(cone_degrees))
-        self.normal = np.stack((d, sin * d - cos * across, sin * d + cos * across), axis=1)   # (C, 3, 2)
-        self.nx, self.ny = np.ascontiguousarray(self.normal[:, :, 0]), np.ascontiguousarray(self.normal[:, :, 1])
+        dx, dy = d[:, 0], d[:, 1]
+        self.nx, self.ny = np.empty((len(d), 3)), np.empty((len(d), 3))
+        self.nx[:, 0], self.ny[:, 0] = dx, dy
+        self.nx[:, 1], self.ny[:, 1] = sin * dx - cos * -dy, sin * dy - cos * dx
+        self.nx[:, 2], self.ny[:, 2] = sin * dx + cos * -dy, sin * dy + cos * dx
         self.rhs = np.zeros((len(d), 3))
         self.rhs[:, 0] = keep * length
+        self.near = self.rhs + self.slack      # a row is held from when its value drops below this
         self.on = np.zeros((len(d), 3), bool)
         self.force = np.zeros((len(d), 3))
         self.force1 = np.zeros((len(d), 3))
+        # Room for watch(): a big crowd's chords are millions, and fresh temporaries each
+        # iteration cost more in page faults than the arithmetic.
+        self._ends = np.empty((2, len(d), 2))
+        self._value, self._term = np.empty((len(d), 3)), np.empty((len(d), 3))
+        self._below, self._off = np.empty((len(d), 3), bool), np.empty((len(d), 3), bool)
+
+    @property
+    def normal(self) -> np.ndarray:
+        """(C, 3, 2) the rows' directions."""
+        return np.stack([self.nx, self.ny], axis=2)
 
     def watch(self, flat: np.ndarray) -> int:
         """Turns on the rows of the chords ``flat`` breaks or nearly breaks; returns how many
         broken ones were new."""
-        chord = np.take(flat, self.u, axis=0) - np.take(flat, self.v, axis=0)
-        value = self.nx * chord[:, 0, None]
-        value += self.ny * chord[:, 1, None]
-        fresh = ~self.on & (value < self.rhs)
-        self.on |= fresh | (value < self.rhs + self.slack)
-        return int(fresh.sum())
+        chord, start = self._ends[0], self._ends[1]
+        np.take(flat, self.u, axis=0, out=chord)
+        np.take(flat, self.v, axis=0, out=start)
+        chord -= start
+        value, fresh, below = self._value, self._below, self._off
+        np.multiply(self.nx, chord[:, 0, None], out=value)
+        value += np.multiply(self.ny, chord[:, 1, None], out=self._term)
+        np.less(value, self.rhs, out=fresh)
+        fresh &= np.logical_not(self.on, out=below)
+        self.on |= fresh
+        self.on |= np.less(value, self.near, out=below)
+        return int(np.count_nonzero(fresh))
 
     def add(self, rows: "_Rows") -> np.ndarray:
-        c, k = np.nonzero(self.on)
-        return rows.add(self.normal[c, k], self.rhs[c, k], SEPARATION_SOFTNESS,
+        c, k = self._held = np.nonzero(self.on)
+        return rows.add(np.stack([self.nx[c, k], self.ny[c, k]], axis=1), self.rhs[c, k], SEPARATION_SOFTNESS,
                         np.stack([self.u[c], self.v[c]], axis=1), np.tile([1.0, -1.0], (len(c), 1)),
                         at_least=True, force=self.force[c, k], force1=self.force1[c, k])
 
     def solved(self, force: np.ndarray, force1: np.ndarray) -> None:
-        c, k = np.nonzero(self.on)
+        """The forces of the rows the last add() sent (no watch() in between)."""
+        c, k = self._held
         self.force[c, k], self.force1[c, k] = force, force1
 
 
@@ -1168,6 +1207,9 @@ class _Waits:
     rounds: int = 0
     #: (a, b), a < b: pairs a wait would part whose timing is fixed on both sides
     refused: set[tuple[int, int]] = field(default_factory=set)
+    #: the agents sampled over ``span`` at the time maps ``frame_times`` (None: not sampled),
+    #: the sampling the solve that follows would make again
+    sampling: collisions.Sampling | None = None
 
 
 def _velocities(positions: np.ndarray, k: np.ndarray, cols: np.ndarray) -> np.ndarray:
@@ -1207,6 +1249,7 @@ def _waits(problem: Problem, settings: Settings, fixed: np.ndarray) -> _Waits:
     out.span = span
     tried: dict[tuple[int, int], tuple[float, float]] = {}
     sampling = collisions.sample(names, {i: t for i, t in enumerate(times)}, paths, problem.sample_step, span)
+    out.sampling = sampling
     for rnd in range(settings.wait_rounds):
         found = collisions.detect(sampling, problem.radius, problem.height, problem.margin,
                                   report_distance=problem.margin)
@@ -1255,15 +1298,19 @@ def _waits(problem: Problem, settings: Settings, fixed: np.ndarray) -> _Waits:
                                     time_codes_per_second=fps, sample_step=problem.sample_step, step=step,
                                     margin=problem.margin * (1.0 + settings.overshoot), slowest_pace=SLOWEST_PACE,
                                     passing_cos=PASSING_COS, block=max(1, int(round(fps / problem.sample_step))))
+        # The encounters in the order they begin, as Python numbers (converted once: tens of
+        # thousands of them in a crowd of 10,000).
         order = np.argsort(found.first, kind="stable")
-        for m in order[ok[order]]:
-            w, o = int(who[m]), int(other[m])
+        order = order[ok[order]]
+        for w, o, first, last, first_guess in zip(who[order].tolist(), other[order].tolist(),
+                                                  found.first[order].tolist(), found.last[order].tolist(),
+                                                  guess[order].tolist()):
             # A pair tried before, neither of which has waited since, fails again.
             if w in taken or budget - delay[w] < step or tried.get((w, o)) == (delay[w], delay[o]):
                 continue
             tried[(w, o)] = (delay[w], delay[o])
-            found_delay = search.least_delay(walker=w, other=o, first=int(found.first[m]), last=int(found.last[m]),
-                                             room=float(budget - delay[w]), guess=float(guess[m]), path=paths[w],
+            found_delay = search.least_delay(walker=w, other=o, first=first, last=last,
+                                             room=float(budget - delay[w]), guess=first_guess, path=paths[w],
                                              times=times[w], source_times=source[w])
             if found_delay is not None:
                 times[w], delay[w] = found_delay.times, delay[w] + found_delay.delay
