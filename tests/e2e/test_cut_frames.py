@@ -89,13 +89,16 @@ def test_feet_locked_next_to_a_cut_do_not_pull_the_body_down(tmp_path):
     assert result.report.stats.max_pelvis_drop < 8.0 + 1e-6
 
 
-def _bent_walk(tmp_path, cut: bool, hold_first: bool):
+def _bent_walk(tmp_path, cut: bool, hold_first: bool, notes: list | None = None):
     """(source, edited) hips ground paths (F,2) of a walk bent 1 m sideways at its middle,
-    held at its last frame, and at its first frame when ``hold_first``."""
+    held at its last frame, and at its first frame when ``hold_first``; the report's notes are
+    added to ``notes``."""
     def handles(n):
         return {**({0: (0.0, 0.0)} if hold_first else {}), n // 2: (0.0, 100.0), n - 1: (0.0, 0.0)}
     shot, agent = _shot(tmp_path, cut, walk1=4.0, idle=0.0, handles=handles)
-    solve(shot, output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"), foot_locking=False)
+    result = solve(shot, output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"), foot_locking=False)
+    if notes is not None:
+        notes.extend(result.report.notes)
     _, ms = evaluate.joint_world_matrices(Usd.Stage.Open(shot), agent)
     _, me = evaluate.joint_world_matrices(Usd.Stage.Open(str(tmp_path / "c.usda")), agent)
     return metrics.to_ground(ms[:, 3, :3], "Y"), metrics.to_ground(me[:, 3, :3], "Y")
@@ -108,8 +111,14 @@ def test_a_handle_on_the_rest_frame_before_a_cut_holds_that_frame_and_leaves_the
     frame round as the bend turned the take, and the held frame dragged the take's start back,
     squeezing its steps up to the bend to 0.77 of their length. (A CMU slow walk bent 1 m so
     slid its locked feet 4.8 cm/s more than its source.)"""
-    source, cut = _bent_walk(tmp_path / "cut", True, hold_first=True)
-    _, clean = _bent_walk(tmp_path / "clean", False, hold_first=False)
+    notes, clean_notes = [], []
+    source, cut = _bent_walk(tmp_path / "cut", True, hold_first=True, notes=notes)
+    _, clean = _bent_walk(tmp_path / "clean", False, hold_first=True, notes=clean_notes)
+    # The report says the handle holds the rest frame alone, and where the take starts.
+    said = [n for n in notes if "</Edits/handle0> holds frame 0" in n]
+    assert len(said) == 1 and "nearest frame is 1" in said[0], notes
+    assert not [n for n in clean_notes if "cut off" in n]
+    _, clean = _bent_walk(tmp_path / "free", False, hold_first=False)
     assert np.linalg.norm(cut[0] - source[0]) < 1e-6                      # held
     assert np.linalg.norm(cut[1:] - clean[1:], axis=1).max() < 1.0, np.linalg.norm(cut[1:] - clean[1:], axis=1).max()
     # The take's steps up to the bend, a quarter second at a time, against the source's: free to

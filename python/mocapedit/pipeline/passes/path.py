@@ -87,6 +87,36 @@ def _note_outside_shot(ctx: SolveContext) -> None:
                         "frame against the clip's time offset)")
 
 
+def _note_rest_frames(ctx: SolveContext) -> None:
+    """A note on each position constraint whose frame cuts part from the rest of its clip, alone
+    (a rest pose left in a clip's first frame, steps faster than ``trajectory.CUT_SPEED_M`` on
+    each side): it holds that frame only, and the take is bent by its own constraints
+    (``path_edit.CUT_WEIGHT``). The note says which frame of the take is next to it."""
+    info = ctx.data.info
+    for c in ctx.data.position_constraints:
+        agent = ctx.data.agents[c.agent]
+        track = ctx.trajectories.get(c.agent)
+        if track is None or len(track.ground) < 2:
+            continue
+        steps = np.linalg.norm(np.diff(track.ground, axis=0), axis=1)
+        cut = trajectory.is_cut(steps, np.diff(np.asarray(agent.sample_times, dtype=np.float64)) / info.time_codes_per_second,
+                                info.meters_per_unit)
+        last = len(track.ground) - 1
+
+        def alone(g: int) -> bool:   # cut off on both sides (or a clip's end)
+            return (g == 0 or bool(cut[g - 1])) and (g == last or bool(cut[g]))
+
+        f = int(c.frame)
+        if not alone(f):
+            continue
+        near = [g for g in (f + 1, f - 1) if 0 <= g <= last and not alone(g)]
+        beside = f" (the take's nearest frame is {near[0]})" if near else ""
+        ctx.report.note(f"<{c.path}> holds frame {f} of <{c.agent}>, a frame cut off from the rest of its clip "
+                        f"(a rest pose, a step faster than {trajectory.CUT_SPEED_M:g} m/s on each side): it holds "
+                        f"that frame alone, not the take{beside}; to hold the take, put the constraint on a frame "
+                        "of it")
+
+
 def _components(ctx: SolveContext) -> list[list[str]]:
     """Agents tied by relative constraints and groups, each component sorted, in order."""
     data = ctx.data
@@ -361,6 +391,7 @@ def _run_on_pool(ctx: SolveContext, comps: list[_Component], task) -> None:
 def run(ctx: SolveContext) -> None:
     _validate(ctx)
     _note_outside_shot(ctx)
+    _note_rest_frames(ctx)
     members = _components(ctx)
     if not members:
         return
