@@ -13,7 +13,10 @@ from mocapedit.geometry import curves, ground
 from mocapedit.data import examples, walker
 from mocapedit.inspect import metrics
 from mocapedit.model.errors import MocapEditError
+from mocapedit.pipeline.passes import path
+from mocapedit.solve import path_edit
 from mocapedit.solve.path_editor import PathEditor
+from mocapedit.tools import measure
 from mocapedit.pipeline.processor import solve
 from mocapedit.usd import reader
 
@@ -521,3 +524,93 @@ def test_three_hard_pins_on_a_stationary_range_that_one_rigid_motion_meets_solve
         assert all(c.met for c in result.report.constraints), [(c.prim, c.residual) for c in result.report.constraints]
         edited = evaluate.agent_root_positions(Usd.Stage.Open(str(folder / "c.usda")), agent, np.arange(240.0))
         np.testing.assert_allclose((edited - roots)[140:201] * [1, 0, 1], np.tile(shift, (61, 1)), atol=1e-6)
+
+
+def _still_path_with_a_hop(frames: int = 240, fps: float = 60.0):
+    """(rest (F,2), planted (F,)) of a take about one spot: a sway of a centimetre or two at
+    ``fps``, with no foot planted over frames 105 to 135 (a hop)."""
+    t = np.arange(frames) / fps
+    rest = 0.015 * np.stack([np.sin(1.1 * t), np.sin(0.7 * t + 1.0)], axis=1)
+    planted = np.ones(frames, dtype=bool)
+    planted[105:136] = False
+    return rest, planted
+
+
+def test_a_take_about_one_spot_travels_where_no_foot_is_planted():
+    """A take about one spot whose end is dragged 0.6 m aside travels while its source has no
+    foot on the ground (the flight of a hop), and keeps its own motion on the ground: 0.6 m
+    spread evenly over its 4 s, the planted feet were dragged 15 cm/s. Without contacts, the
+    drag is spread as before."""
+    rest, planted = _still_path_with_a_hop()
+    last = len(rest) - 1
+    handles = [path_edit.Handle("a", 0, rest[0], path_edit.HARD, "/start"),
+               path_edit.Handle("a", last, rest[last] + (0.6, 0.0), path_edit.HARD, "/end")]
+    settings = path_edit.Settings(min_baseline=0.01, rigid_min_extent=0.02, still=1e-5,
+                                  **path_edit.turn_settings(60.0, 1.0))
+
+    def moved(contacts):
+        a = path_edit.AgentInput("a", rest, rest, np.zeros(len(rest)), [],
+                                 stance=None if contacts is None else path_edit.stance_weights(contacts))
+        g = path_edit.ComponentProblem([a], handles, [], [], settings).solve().agents["a"].ground
+        np.testing.assert_allclose(g[[0, last]], [h.position for h in handles], atol=1e-9)
+        return np.linalg.norm(g - rest - (g[0] - rest[0]), axis=1)   # how far each frame is carried
+
+    carried = moved(planted)
+    assert carried[136] - carried[104] > 0.9 * 0.6            # in the air
+    assert carried[104] < 0.03 and carried[136] > 0.57         # on the ground before and after
+    even = moved(None)
+    assert 0.05 < even[136] - even[104] < 0.1                  # a 30-frame share of 0.6 m
+
+
+def _hop_shot(tmp_path, drag: float, hop: float = 0.0):
+    """(stage, agent) of the generated idle at 60 fps with a 15 cm hop over frames 105 to 135
+    that travels ``hop`` metres along the take's way (z), its last frame dragged ``drag`` metres
+    along x and along z (a pair) by a hard handle, its first frame held."""
+    clip = walker.idle(frames=240, fps=60.0, name="hop")
+    bump = np.clip((np.arange(240) - 105) / 30.0, 0.0, 1.0)
+    clip.translations[:, 0, 1] += 0.15 * np.sin(np.pi * bump)
+    clip.translations[:, 0, 2] += hop * bump * bump * (3.0 - 2.0 * bump)
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)], up_axis="Y",
+                                       fps=60.0, clips_dir=tmp_path / "clips")
+    a = f"{CROWD}/a"
+    for name, frame, (dx, dz) in (("start", 0, (0.0, 0.0)), ("end", 239, drag)):
+        p = clip.translations[frame, 0]
+        examples.add_position_constraint(stage, f"/Edits/{name}", a, frame, (float(p[0]) + dx, 0.0, float(p[2]) + dz))
+    return stage, a
+
+
+def test_a_standing_take_with_a_hop_dragged_aside_hops_across_on_the_stage(tmp_path):
+    """The generated idle with a 15 cm hop in its middle, its last frame dragged 0.6 m aside by
+    a hard handle: measured by UsdSkel FK on the composed stage before foot locking, the hips
+    travel 0.55 m of it during the hop (0.08 m with the drag spread over the take) and the feet
+    slide 1.4 cm/s over the source's contacts (15 cm/s); locked, they are as planted as the
+    source's."""
+    stage, a = _hop_shot(tmp_path, (0.6, 0.0))
+    result, src, out = _solve(tmp_path, stage, foot_locking=False)
+    assert max(c["residual"] for c in result.report.constraints) < 1e-6
+    frames = np.arange(240.0)
+    shift = _root_ground(out, a, frames)[:, 0] - _root_ground(src, a, frames)[:, 0]
+    assert shift[136] - shift[104] > 0.5 and abs(shift[0]) < 0.005 and abs(shift[239] - 0.6) < 0.005
+    before = measure.foot_skate(src, a)
+    after = measure.foot_skate(out, a, times=before.times, contact=before.contact)
+    assert not before.contact[112:129].any() and before.contact[:100].all()   # the hop is in the air
+    assert before.mean < 0.005 and after.mean < 0.03, (before.mean, after.mean)
+    locked, _, lout = _solve(tmp_path, stage)
+    assert locked.report.agents[a]["footSkateEdited"] <= locked.report.agents[a]["footSkateSource"] + 0.005
+
+
+def test_a_hop_dragged_against_its_way_is_not_turned_back(tmp_path):
+    """The hop travels 30 cm forward in the air and the take's end is dragged 60 cm back: carried
+    in the air, the whole drag would turn the hop back (a reversal, as the report counts it). The
+    frames where the travel would turn more than ``AIRBORNE_MAX_DEVIATION`` from the source's
+    weigh more, round by round, until it does not: measured by UsdSkel FK on the composed stage,
+    the hop still goes forward, and the report finds no reversal."""
+    stage, a = _hop_shot(tmp_path, (0.0, -0.6), hop=0.3)
+    result, src, out = _solve(tmp_path, stage, foot_locking=False)
+    frames = np.arange(240.0)
+    before, after = _root_ground(src, a, frames), _root_ground(out, a, frames)
+    hop, hopped = before[136] - before[104], after[136] - after[104]
+    assert np.linalg.norm(hop) == pytest.approx(0.3, abs=0.01)
+    assert hopped @ hop > 0.3 * hop @ hop                     # forward still, if shorter
+    p = result.report.agents[a]["plausibility"]
+    assert not p.reverses and p.max_direction_deviation < path.AIRBORNE_MAX_DEVIATION + 10.0

@@ -89,6 +89,13 @@ DRIFT_SPREAD_M = 0.5
 #: Weak, the terms still carry a free rest frame along with its take (they alone place it), and a
 #: held one pulls on the take by a thousandth of a millimetre per metre it is off.
 CUT_WEIGHT = 1e-6
+#: Weight, against 1, of the shape and spot terms of a take about one spot at the frames where
+#: its source has no foot planted (``AgentInput.stance``: the flight of a jump or a hop). Moved by
+#: an edit, such a take travels in the air, where no foot slides, and keeps its own motion on the
+#: ground: a generated stand with a hop, its end dragged 60 cm, slid its feet 15 cm/s before foot
+#: locking with the drag spread evenly over its 4 s, and 1.4 cm/s so; a CMU jump into a balance
+#: bent 1 m, 49 cm/s (18.4 locked, against its source's 9.2), and 31 (13.2).
+AIRBORNE_WEIGHT = 0.01
 #: Metres: the local frames of the shape terms along an agent's path are at least this long
 #: (the frame of a frame that stands still or sways widens to the walk around it), in path
 #: editing and in collision avoidance alike (solver/src/energy/two_step_energy.h).
@@ -109,6 +116,10 @@ class AgentInput:
     # The windows of the edit's turn at this agent's own sample rate (turn_settings); None: the
     # Settings' (a clip sampled at the stage's rate).
     turn: dict | None = None
+    # (F,) weight of the shape terms at each frame of a take about one spot, in (0, 1]: 1 where a
+    # foot is planted in the source, less where none is (:func:`stance_weights`); None: 1 everywhere.
+    # :func:`may_hold_spot` says which agents may use it.
+    stance: np.ndarray | None = None
 
     @property
     def frames(self) -> int:
@@ -192,6 +203,30 @@ def spot_weight(a: AgentInput, settings: "Settings | None" = None) -> float:
         return 0.0
     window, min_travel, max_step = turn_args(a, settings)
     return _solver.spot_weight(source=a.source, window=window, min_travel=min_travel, max_step=max_step)
+
+
+def _spread(points: np.ndarray) -> float:
+    """The largest distance between two of (N,2) ``points``."""
+    return float(np.linalg.norm(points[:, None, :] - points[None, :, :], axis=-1).max())
+
+
+def stance_weights(planted: np.ndarray) -> np.ndarray:
+    """(F,) ``AgentInput.stance`` from (F,) bool frames where a foot is planted in the source:
+    1 there, AIRBORNE_WEIGHT elsewhere."""
+    return np.where(planted, 1.0, AIRBORNE_WEIGHT)
+
+
+def may_hold_spot(a: AgentInput, frames: list[int], settings: Settings) -> bool:
+    """Whether agent ``a``, held at ``frames`` by its handles, may get spot terms (and so use
+    ``AgentInput.stance``): its path stays about one spot (:func:`spot_weight`), or its handles
+    lie closer together than ``Settings.drift_spread`` (a drift, see ``DRIFT_SPREAD_M``). A cheap
+    superset of the agents :class:`ComponentProblem` gives spot terms to."""
+    if a.stationary or a.rest_turn is not None:
+        return False
+    if len(set(frames)) >= 2 and settings.drift_spread > 0 and \
+            _spread(a.rest[np.unique(frames)]) < settings.drift_spread:
+        return True
+    return spot_weight(a, settings) > 0.0
 
 
 def turn_settings(fps: float, meters_per_unit: float) -> dict:
@@ -388,6 +423,7 @@ class ComponentProblem:
         if cuts is not None:
             tw[cuts[tri.max(axis=1)] > cuts[tri.min(axis=1)]] = CUT_WEIGHT
             ew[cuts[edg.max(axis=1)] > cuts[edg.min(axis=1)]] = CUT_WEIGHT
+        self._chain_terms = (len(tri), len(edg))   # the chain terms come first
         tri, edg, tw, ew = [tri], [edg], [tw], [ew]
         for n, g in enumerate(self.groups):
             t, e, w = self._group_terms(n, g)
@@ -562,13 +598,34 @@ class ComponentProblem:
             found.append((i, frames, np.ascontiguousarray(step[frames])))
             v = self._red_offset[i] + frames
             verts.append(np.stack([v + 1, v], axis=1))
-            weights.append(np.full(len(frames), SPOT_WEIGHT * weight))
+            w = np.full(len(frames), SPOT_WEIGHT * weight)
+            if a.stance is not None:
+                w *= np.minimum(a.stance[frames], a.stance[frames + 1])
+            weights.append(w)
         if not found:
             return
+        self._weigh_airborne([i for i, _, _ in found])
         self._spot = found
         self.link_vertex = np.concatenate([self.link_vertex.reshape(-1, 2)] + verts).astype(np.int32)
         self.link_weight = np.concatenate([self.link_weight] + weights)
         self.link_refs.extend([None] * sum(len(f) for _, f, _ in found))
+
+    def _weigh_airborne(self, agents: list[int]) -> None:
+        """The chain shape terms of these agents (takes about one spot) weigh their least
+        ``AgentInput.stance`` over their vertices."""
+        stiff = None
+        for i in agents:
+            stance = self._inputs[i].stance
+            if stance is None or (stance == 1.0).all():
+                continue
+            if stiff is None:
+                stiff = np.ones(len(self.rest))
+            stiff[self._red_offset[i]:self._red_offset[i + 1]] = stance
+        if stiff is None:
+            return
+        nt, ne = self._chain_terms
+        self.triangle_weights[:nt] *= stiff[self.triangles[:nt]].min(axis=1)
+        self.edge_weights[:ne] *= stiff[self.edges[:ne]].min(axis=1)
 
     def _drifting(self) -> set[int]:
         """The agents whose handles cannot turn them (``DRIFT_SPREAD_M``): held at two places or
@@ -588,10 +645,7 @@ class ComponentProblem:
             if i in self.translate_only or i in tied or a.stationary or a.rest_turn is not None:
                 continue
             p = self.rest[np.unique(verts)]
-            if len(p) < 2:
-                continue
-            spread = float(np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1).max())
-            if spread < self.settings.drift_spread:
+            if len(p) >= 2 and _spread(p) < self.settings.drift_spread:
                 out.add(i)
         return out
 
