@@ -579,6 +579,15 @@ def _hop_shot(tmp_path, drag: float, hop: float = 0.0):
     return stage, a
 
 
+def test_a_take_planted_throughout_or_never_weighs_as_before():
+    """Contacts that tell nothing of flights (every frame planted, or no frame: feet never found on
+    the ground) leave the take's terms as they were."""
+    assert path_edit.stance_weights(np.ones(10, dtype=bool)) is None
+    assert path_edit.stance_weights(np.zeros(10, dtype=bool)) is None
+    w = path_edit.stance_weights(np.arange(10) < 6)
+    np.testing.assert_array_equal(w, [1.0] * 6 + [path_edit.AIRBORNE_WEIGHT] * 4)
+
+
 def test_a_standing_take_with_a_hop_dragged_aside_hops_across_on_the_stage(tmp_path):
     """The generated idle with a 15 cm hop in its middle, its last frame dragged 0.6 m aside by
     a hard handle: measured by UsdSkel FK on the composed stage before foot locking, the hips

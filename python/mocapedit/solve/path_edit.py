@@ -210,9 +210,14 @@ def _spread(points: np.ndarray) -> float:
     return float(np.linalg.norm(points[:, None, :] - points[None, :, :], axis=-1).max())
 
 
-def stance_weights(planted: np.ndarray) -> np.ndarray:
+def stance_weights(planted: np.ndarray) -> np.ndarray | None:
     """(F,) ``AgentInput.stance`` from (F,) bool frames where a foot is planted in the source:
-    1 there, AIRBORNE_WEIGHT elsewhere."""
+    1 there, AIRBORNE_WEIGHT elsewhere; None where that tells nothing, every frame planted or none
+    (a take whose feet were never found on the ground is not in the air throughout: weighed so,
+    its shape would count for less against every other term of its component)."""
+    planted = np.asarray(planted, dtype=bool)
+    if planted.all() or not planted.any():
+        return None
     return np.where(planted, 1.0, AIRBORNE_WEIGHT)
 
 

@@ -260,7 +260,7 @@ class _Component:
         for a in self.inputs:
             if path_edit.may_hold_spot(a, held.get(a.path, []), self.settings):
                 planted = _planted(ctx, a.path)
-                if planted is not None and not planted.all():
+                if planted is not None:
                     a.stance = path_edit.stance_weights(planted)
         self.result: path_edit.ComponentResult | None = None
         self.problem: path_edit.ComponentProblem | None = None
