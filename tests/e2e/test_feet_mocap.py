@@ -114,3 +114,31 @@ def test_real_takes_about_one_spot_bent_by_handles_slide_as_a_whole(tmp_path, na
     turn = metrics.body_facing(after, "Y") - metrics.body_facing(before, "Y")
     turned = np.degrees(np.abs(np.angle(np.exp(1j * turn))))
     assert turned.mean() < 1.0 and turned.max() < 5.0, (turned.mean(), turned.max())
+
+
+def test_the_real_jump_bent_a_metre_travels_in_its_flight(tmp_path):
+    """The jump into a balance (4 s) bent 1 m at its middle: the path editor carries it out in its
+    jump, where both feet are off the ground, and not against the way its source goes there
+    (``path_edit.AIRBORNE_WEIGHT``, ``passes.path.AIRBORNE_MAX_DEVIATION``). Spread evenly over the
+    take, its feet slid 49.4 cm/s before locking and 18.4 locked (its source: 9.24); now 31.5 and
+    13.2. Still over the bar: its way back lies over frames with a foot down."""
+    stage, agent = _bent(tmp_path, "cc_cmu02_04_jump_balance", 100.0)
+    result = solve(str(tmp_path / "shot.usda"), output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"))
+    assert all(c["residual"] < 1e-6 for c in result.report.constraints)
+    entry = result.report.agents[agent]
+    assert entry["footSkateSource"] == pytest.approx(9.24, abs=0.05)
+    assert entry["footSkateUnlocked"] < 36.0 and entry["footSkateEdited"] < 15.0, \
+        (entry["footSkateUnlocked"], entry["footSkateEdited"])
+    # Out in the air: half the metre or more between the last frame both feet are down before
+    # the jump and the first after it, by FK on the composed stage.
+    times = evaluate.sample_times(stage, agent)
+    moved = metrics.to_ground(evaluate.agent_root_positions(Usd.Stage.Open(str(tmp_path / "c.usda")), agent, times), "Y") \
+        - metrics.to_ground(evaluate.agent_root_positions(stage, agent, times), "Y")
+    feet = evaluate.foot_positions(stage, agent, times).positions
+    contact = metrics.foot_skate_of_positions(feet, times, *evaluate.stage_units(stage)).contact
+    down = np.asarray(contact).any(axis=1)
+    mid = len(times) // 2
+    air = np.flatnonzero(~down[:mid])
+    takeoff, landing = air[0] - 1, air[-1] + 1
+    assert np.linalg.norm(moved[landing] - moved[takeoff]) > 50.0, (takeoff, landing, moved[[takeoff, landing]])
+    assert not entry["plausibility"].spin_frames
