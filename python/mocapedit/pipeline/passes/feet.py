@@ -51,8 +51,11 @@ MAX_DROP_M = 0.08
 #: leg reaches (a body dragged sideways would otherwise straddle).
 MAX_LEASH_M = 0.15
 #: Degrees a plant may be turned from the edited foot before it is turned along (the leg turns
-#: at the hip with its planted foot up to there: ``footlock.turn_legs_toward_plants``).
-LEASH_DEGREES = 15.0
+#: at the hip with its planted foot up to there: ``footlock.turn_legs_toward_plants``; a hip
+#: turns 40 degrees and more either way). Turned along, the foot turns about its ankle and its
+#: toes slide: at 15, a walk turned round a corner by handles slid +0.5 to +1.2 cm/s over its
+#: source's.
+LEASH_DEGREES = 25.0
 #: Seconds a foot takes to step where an edit drags or turns a standing body further than the
 #: leash (:func:`footplant.replant`): at least STEP_SECONDS, longer so that the foot moves no
 #: faster than its source does, but no longer than STEP_LONGEST_SECONDS; and metres it lifts at
