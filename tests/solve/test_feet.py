@@ -1009,19 +1009,25 @@ def _ankle_twist(local: np.ndarray, ankle: int) -> np.ndarray:
     return np.degrees(2.0 * np.arctan2(np.sum(q[:, :3] * axis, axis=1), q[:, 3]))
 
 
+def _walk_with_handles(tmp_path, handles: dict[int, tuple[float, float]]) -> str:
+    """A 4 s generated walk at 1.25 m/s on a Y-up metre stage, with a hard position handle at each
+    frame of ``handles`` (ground x, z); the agent's path."""
+    clip = walker.walk(frames=97, fps=FPS, speed=1.25, name="walk")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)], up_axis="Y",
+                                       fps=FPS, clips_dir=tmp_path / "clips")
+    a = f"{CROWD}/a"
+    for frame, (x, z) in handles.items():
+        examples.add_position_constraint(stage, f"/Edits/at{frame}", a, frame, (x, 0.0, z))
+    stage.GetRootLayer().Save()
+    return a
+
+
 def test_a_leg_turns_at_the_hip_with_its_planted_foot(tmp_path):
     """A walk dodging 1 m aside within 4 m turns its body over its planted feet. Each locked
     leg turns at the hip with its foot: the foot keeps its turn against the shin as in the
     source. Left turned with the body, the shin turned over the planted foot and twisted the
     ankle about the shin by 11.7 degrees more than the source's."""
-    clip = walker.walk(frames=97, fps=FPS, speed=1.25, name="dodge")
-    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)], up_axis="Y",
-                                       fps=FPS, clips_dir=tmp_path / "clips")
-    a = f"{CROWD}/a"
-    examples.add_position_constraint(stage, "/Edits/start", a, 0, (0.0, 0.0, 0.0))
-    examples.add_position_constraint(stage, "/Edits/aside", a, 48, (1.0, 0.0, 2.5))
-    examples.add_position_constraint(stage, "/Edits/end", a, 96, (0.0, 0.0, 5.0))
-    stage.GetRootLayer().Save()
+    a = _walk_with_handles(tmp_path, {0: (0.0, 0.0), 48: (1.0, 2.5), 96: (0.0, 5.0)})
     result, out = _solve(tmp_path)
     src = Usd.Stage.Open(str(tmp_path / "shot.usda"))
     times = evaluate.sample_times(src, a)
@@ -1044,14 +1050,7 @@ def test_a_walk_turned_at_a_corner_keeps_its_planted_feet(tmp_path, corner, end)
     the leg turns at the hip with it; beyond that the plant turns along, about the ankle, and the
     toes slide. Lagging 15 degrees at most, the feet slid +0.53, +1.17 and +0.69 cm/s over the
     source's (the bar is +0.5); lagging 25, +0.00, +0.27 and -0.16."""
-    clip = walker.walk(frames=97, fps=FPS, speed=1.25, name="corner")
-    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)], up_axis="Y",
-                                       fps=FPS, clips_dir=tmp_path / "clips")
-    a = f"{CROWD}/a"
-    examples.add_position_constraint(stage, "/Edits/start", a, 0, (0.0, 0.0, 0.0))
-    examples.add_position_constraint(stage, "/Edits/corner", a, 48, (corner[0], 0.0, corner[1]))
-    examples.add_position_constraint(stage, "/Edits/end", a, 96, (end[0], 0.0, end[1]))
-    stage.GetRootLayer().Save()
+    a = _walk_with_handles(tmp_path, {0: (0.0, 0.0), 48: corner, 96: end})
     result, out = _solve(tmp_path)
     _, free = _solve(tmp_path, name="free", foot_locking=False)
     src = Usd.Stage.Open(str(tmp_path / "shot.usda"))
@@ -1060,3 +1059,23 @@ def test_a_walk_turned_at_a_corner_keeps_its_planted_feet(tmp_path, corner, end)
     assert max(c["residual"] for c in result.report.constraints) < 1e-6
     bones, flips, speed = _leg_quality(src, out, a, evaluate.sample_times(src, a), LEGS, FPS, unlocked=free)
     assert bones < 1e-6 and flips == 0 and speed < 1.5
+
+
+def test_a_walk_pushed_aside_at_its_start_eases_its_locks_in_over_longer(tmp_path, monkeypatch):
+    """A walk pushed 1 m aside within half a second of its start (by a handle) swings each foot
+    far from its next plant. Easing in over 0.1 s, the lock turned a hip 1.57 times as fast as
+    the source ever does (the bar is 1.5). An agent whose locked legs turn faster than
+    STEP_SPEED_RATIO times its pose eases in and out over longer, and keeps that where its legs
+    turn slower with it."""
+    from mocapedit.pipeline.passes import feet
+    a = _walk_with_handles(tmp_path, {0: (0.0, 0.0), 12: (1.0, 0.625), 96: (0.0, 5.0)})
+    result, out = _solve(tmp_path)
+    _, free = _solve(tmp_path, name="free", foot_locking=False)
+    src = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    bones, flips, speed = _leg_quality(src, out, a, evaluate.sample_times(src, a), LEGS, FPS, unlocked=free)
+    assert bones < 1e-6 and flips == 0 and speed < 1.45
+    assert max(c["residual"] for c in result.report.constraints) < 1e-6
+    # The feet slide no more for it than easing in quickly let them.
+    monkeypatch.setattr(feet, "BLEND_ROUNDS", 0)
+    quick, _ = _solve(tmp_path, name="quick")
+    assert result.report.agents[a]["footSkateEdited"] <= quick.report.agents[a]["footSkateEdited"] + 1e-4

@@ -72,6 +72,12 @@ STEP_SLIDE_DEGREES = 10.0
 #: legs solved again, up to STEP_ROUNDS times.
 STEP_SPEED_RATIO = 1.35
 STEP_ROUNDS = 3
+#: A lock that still turns a leg's joint faster than STEP_SPEED_RATIO times the fastest the pose
+#: before locking does (easing towards a plant that lies far from the swinging foot, most often)
+#: eases in and out BLEND_LONGER times as long, up to BLEND_ROUNDS times, and keeps the longer
+#: ease only where the legs turn slower with it.
+BLEND_LONGER = 1.5
+BLEND_ROUNDS = 2
 #: Agents whose feet the edits make slide by at most this much more than the source's (metres
 #: per second, the issue's quality bar) keep their legs: locking them would bake their whole
 #: animation for a change no one sees.
@@ -162,6 +168,7 @@ class _AgentLock:
         self.legs = agent.legs
         # (source, unlocked) feet in the world, (T,F,3) each, once measured (:meth:`_Run.skates`).
         self.feet_world: tuple | None = None
+        self._pose_speed: np.ndarray | None = None
         # Locked legs are a pose edit, and a pose edit bakes the animation: lock on its frames.
         self.times, self.frames = ctx.output_frames(path, baked=True)
         self.root = _top(agent, self.legs[0].hip)
@@ -211,6 +218,21 @@ class _AgentLock:
                     return f"leg joint '{self.agent.joints[j]}' is not animated by the clip"
         return None
 
+    def pose_speed(self) -> np.ndarray:
+        """(legs, 3) the largest angular speed of each leg's hip, knee and ankle in the pose before
+        locking (radians per second), measured once."""
+        if self._pose_speed is None:
+            seconds = self.times / self.agent_fps
+            self._pose_speed = np.array([[
+                footplant.turn_speed(self.pose.rotations[:, self.columns[self.agent.joints[j]]], seconds).max(initial=0.0)
+                for j in (leg.hip, leg.knee, leg.ankle)] for leg in self.legs]).reshape(len(self.legs), 3)
+        return self._pose_speed
+
+    def ease_over(self, blend: float) -> None:
+        """Ease the locks in and out over ``blend`` frames (and the pelvis drop as long)."""
+        self.blend = blend
+        self.blend_frames = int(np.ceil(blend))
+
     def step_speed(self, run: "_Run", a: int) -> np.ndarray:
         """(legs,) the largest angular speed of a leg's hip, knee or ankle around its steps, against
         the largest the joint turns at in the pose before locking (1 when it steps no faster)."""
@@ -229,10 +251,9 @@ class _AgentLock:
             if not near[:, k].any():
                 continue
             around = near[1:, k] | near[:-1, k]
-            for j, new in ((leg.hip, out.hip_local), (leg.knee, out.knee_local), (leg.ankle, out.ankle_local)):
-                source = footplant.turn_speed(self.pose.rotations[:, self.columns[self.agent.joints[j]]], seconds).max()
+            for i, new in enumerate((out.hip_local, out.knee_local, out.ankle_local)):
                 locked = footplant.turn_speed(new[lo:hi, k], seconds)[around].max()
-                out_ratio[k] = max(out_ratio[k], locked / max(source, 1e-9))
+                out_ratio[k] = max(out_ratio[k], locked / max(self.pose_speed()[k, i], 1e-9))
         return out_ratio
 
 
@@ -296,6 +317,40 @@ class _Run:
 
     def span(self, a: int) -> tuple[int, int]:
         return int(self.offsets[a]), int(self.offsets[a + 1])
+
+    _PLAN = ("target", "target_rot", "weight", "stepping")
+    _LEGS = ("hip_local", "knee_local", "ankle_local", "drop", "reached")
+
+    def agent_state(self, a: int) -> tuple:
+        """A copy of agent ``a``'s plants and locked legs, for :meth:`set_agent_state`."""
+        lo, hi = self.span(a)
+        return ([getattr(self, k)[lo:hi].copy() for k in self._PLAN],
+                [getattr(self.legs, k)[lo:hi].copy() for k in self._LEGS], int(self.steps[a]))
+
+    def set_agent_state(self, a: int, state: tuple) -> None:
+        lo, hi = self.span(a)
+        plan, legs, self.steps[a] = state
+        for k, v in zip(self._PLAN, plan):
+            getattr(self, k)[lo:hi] = v
+        for k, v in zip(self._LEGS, legs):
+            getattr(self.legs, k)[lo:hi] = v
+
+    def leg_speed(self) -> np.ndarray:
+        """(A,) per agent, the largest angular speed of a leg's hip, knee or ankle after locking,
+        against the largest that joint turns at in the pose before locking (1: no faster)."""
+        out = np.ones(len(self.locks))
+        if len(self.times) < 2:
+            return out
+        seconds = self.times / self.ctx.data.info.time_codes_per_second
+        starts, between = self.offsets[:-1], self.offsets[1:-1] - 1   # pairs that span two agents
+        for i, new in enumerate((self.legs.hip_local, self.legs.knee_local, self.legs.ankle_local)):
+            for k in range(new.shape[1]):
+                speed = footplant.turn_speed(new[:, k], seconds)
+                speed[between] = 0.0
+                most = np.maximum.reduceat(np.append(speed, 0.0), starts)
+                pose = np.array([lock.pose_speed()[k, i] if k < len(lock.legs) else np.inf for lock in self.locks])
+                out = np.maximum(out, most / np.maximum(pose, 1e-9))
+        return out
 
     def _pick(self, values: np.ndarray, agents: list[int] | None) -> np.ndarray:
         """The poses of these agents (all: None), one after another."""
@@ -630,12 +685,39 @@ def _lock_run(ctx: SolveContext, locks: list) -> None:
             break
         run.plan(again)
         run.solve(again)
+    _ease_longer_where_fast(run)
     legs = [run.locked_legs(a, info.meters_per_unit) for a in range(len(locks))]
     for a, ((lock, result), locked_legs, skate) in enumerate(zip(locks, legs, run.skates(legs))):
         result.contacts, result.skate, result.legs = lock.locked, skate, locked_legs
         result.steps = int(run.steps[a]) if locked_legs is not None else 0
         result.max_drop, result.max_correction = lock.max_drop, lock.max_correction
         result.plants = run.plants(a)
+
+
+def _ease_longer_where_fast(run: _Run) -> None:
+    """Agents whose locked legs turn a joint faster than STEP_SPEED_RATIO times the pose before
+    locking ease their locks in and out over longer (BLEND_LONGER times, up to BLEND_ROUNDS
+    times), each keeping the longer ease only where its legs turn slower with it."""
+    ratio = run.leg_speed()
+    tried: set[int] = set()
+    for _ in range(BLEND_ROUNDS):
+        fast = [a for a in range(len(run.locks)) if ratio[a] > STEP_SPEED_RATIO + 1e-6 and a not in tried]
+        if not fast:
+            return
+        kept = {a: (run.agent_state(a), run.locks[a].blend) for a in fast}
+        for a in fast:
+            run.locks[a].ease_over(run.locks[a].blend * BLEND_LONGER)
+        run.plan(fast)
+        run.solve(fast)
+        now = run.leg_speed()
+        for a in fast:
+            if now[a] >= ratio[a] - 1e-9:
+                state, blend = kept[a]
+                run.set_agent_state(a, state)
+                run.locks[a].ease_over(blend)
+                now[a] = ratio[a]
+                tried.add(a)
+        ratio = now
 
 
 def lock_part(part: dict) -> list[AgentLocking]:
