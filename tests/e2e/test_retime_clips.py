@@ -14,6 +14,7 @@ from mocapedit.usd import bvh_usd
 from mocapedit.data import examples, walker
 from mocapedit.pipeline.processor import solve
 from mocapedit.tools import measure
+from mocapedit.usd import evaluate
 
 from conftest import SHARED_MOCAP, world_joints
 
@@ -245,3 +246,30 @@ def test_locked_legs_are_baked_as_rotations_over_the_retimed_source(tmp_path):
         assert np.allclose(fk.time_warp, entry.time_warp, atol=1e-6), agent
         assert abs(fk.length_ratio - entry.length_ratio) < 1e-4, agent
         assert abs(fk.max_direction_deviation - entry.max_direction_deviation) < 0.5, agent
+
+
+@pytest.mark.parametrize("shift", [-9.0, -7.3])
+def test_an_agent_played_earlier_and_locked_is_measured_by_fk_without_a_false_spin(tmp_path, shift):
+    """A walk played from ``shift`` and a tenth slower, bent by a handle: its value clip maps its
+    translations to shot times a rounding away (1e-15) from the shot frames its locked rotations
+    are baked on. Composed, the animation has two samples at nearly the same time; measured by
+    FK between them the body turned at 1e10 degrees per second (a spin), or the measure stopped
+    with "edited sample times must increase". A sample time is one time, however it is rounded."""
+    frames = 97
+    clip = walker.walk(frames=frames, name="walk")
+    shot = tmp_path / "shot.usda"
+    stage = examples.build_crowd_stage(shot, [examples.AgentSpec("a", clip)])
+    a = f"{CROWD}/a"
+    examples.add_position_constraint(stage, "/Edits/start", a, 0, (0.0, 0.0, 0.0))
+    examples.add_position_constraint(stage, "/Edits/aside", a, frames // 2, (0.5, 0.0, 2.5))
+    examples.add_time_constraint(stage, "/Edits/first", a, 0, shift)
+    examples.add_time_constraint(stage, "/Edits/last", a, frames - 1, shift + (frames - 1) * 1.1)
+    stage.GetRootLayer().Save()
+    result, out, _ = _composed(tmp_path, str(shot), "edits")
+    assert result.report.stats.foot_locked_agents == 1
+    times = evaluate.sample_times(out, a)
+    assert np.diff(times).min() > 1e-3
+    fk = measure.plausibility(Usd.Stage.Open(str(shot)), out, a)
+    # The walker's source turns at up to 30 degrees per second; a spin is 900.
+    assert not fk.spins and fk.spin_frames == 0 and fk.max_extra_facing_rate < 15.0
+    assert abs(fk.max_facing_rate - result.report.agent(a).plausibility.max_facing_rate) < 0.1

@@ -68,7 +68,7 @@ class _Skel:
         self.joints = [str(j) for j in self.query.GetJointOrder()]
         anim = self.query.GetAnimQuery()
         samples = anim.GetJointTransformTimeSamples() if anim else []
-        self.sample_times = np.asarray(sorted(samples), dtype=np.float64)
+        self.sample_times = _distinct_times(samples)
 
     def joint_index(self, joint) -> int:
         if isinstance(joint, (int, np.integer)):
@@ -152,6 +152,21 @@ def _times(times) -> np.ndarray:
             t = t.GetValue()
         out.append(float(t))
     return np.asarray(out, dtype=np.float64)
+
+
+#: Time codes: two samples closer than this are one. A value clip maps its samples to shot
+#: times by arithmetic that rounds (-8.999999999999998 for -9), so an animation whose
+#: translations play through a clip and whose rotations are baked on the shot frames composes
+#: both, and FK between the two saw a body turn at 1e10 degrees per second.
+SAME_TIME = 1e-6
+
+
+def _distinct_times(samples) -> np.ndarray:
+    """(T,) increasing time codes, the first of any run closer than SAME_TIME kept."""
+    times = np.asarray(sorted(samples), dtype=np.float64)
+    if len(times) < 2:
+        return times
+    return times[np.r_[True, np.diff(times) > SAME_TIME]]
 
 
 def sample_times(stage: Usd.Stage, agent_path: PathLike) -> np.ndarray:
