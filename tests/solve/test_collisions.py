@@ -267,7 +267,7 @@ def test_scene_ends_apart_without_loops_or_detours(tmp_path, scene, length_chang
     assert before < 0 or regions, "the scene must need avoidance"
     result, out = _solve(tmp_path, stage_path, guides=False)
     after, sep = _separation(out, agents, margin=0.05)
-    assert after >= -1e-4 and sep.overlaps == 0, (after, sep.pair)
+    assert after >= -1e-4 and sep.overlaps == 0, (after, sep.agents, sep.time_index)
     assert result.report.stats["regionFramesLeft"] == 0
     wait = result.report.stats.get("largestDelay", 0.0)
     times = np.arange(src.GetStartTimeCode(), src.GetEndTimeCode() + np.ceil(wait * FPS) + 1.0)

@@ -120,7 +120,7 @@ def test_avoidance_pivots_on_the_feet_and_still_ends_apart(tmp_path, scene, bar)
         figures = [measure.plausibility(src, out, a) for a in moved]
         ratios[pivot] = np.mean([f.foot_skate_ratio for f in figures])
         after, sep = _separation(out, agents, margin=0.05)
-        assert after >= -1e-4 and sep.overlaps == 0, (pivot, after, sep.pair)
+        assert after >= -1e-4 and sep.overlaps == 0, (pivot, after, sep.agents, sep.time_index)
         assert max(f.max_direction_deviation for f in figures) < 90.0
     assert ratios[True] <= bar < ratios[False] and ratios[True] < ratios[False] - 0.2, ratios
 
