@@ -1049,7 +1049,7 @@ def test_a_walk_turned_at_a_corner_keeps_its_planted_feet(tmp_path, corner, end)
     45 degrees over one planted foot. The plant lags the body's turn by up to LEASH_DEGREES and
     the leg turns at the hip with it; beyond that the plant turns along, about the ankle, and the
     toes slide. Lagging 15 degrees at most, the feet slid +0.53, +1.17 and +0.69 cm/s over the
-    source's (the bar is +0.5); lagging 25, +0.00, +0.27 and -0.16."""
+    source's (the bar is +0.5); lagging 25, +0.00, +0.27 and +0.13."""
     a = _walk_with_handles(tmp_path, {0: (0.0, 0.0), 48: corner, 96: end})
     result, out = _solve(tmp_path)
     _, free = _solve(tmp_path, name="free", foot_locking=False)
