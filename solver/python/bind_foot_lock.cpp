@@ -140,7 +140,8 @@ MOCAPEDIT_BINDINGS(BindFootLock) {
          const py::handle& blend_in, const py::handle& stretch_in, const py::handle& up_in, double meters_per_unit,
          double leash_m, double max_leash_m, double max_drop_m, double leash_degrees, double soft_reach,
          double step_slide_m, double step_slide_degrees, double step_seconds, double step_longest_seconds,
-         double step_height_m, int threads) {
+         double step_height_m, double step_foot_speed_ratio, double step_min_foot_speed_m,
+         double step_min_turn_speed, double step_min_knee_speed, int threads) {
         const IndexArray offsets = IndexArray::ensure(offsets_in);
         if (!offsets || offsets.ndim() != 1 || offsets.size() < 1)
           throw std::invalid_argument("offsets: a (A+1,) integer array expected");
@@ -185,6 +186,8 @@ MOCAPEDIT_BINDINGS(BindFootLock) {
         job.max_drop_m = max_drop_m, job.leash_degrees = leash_degrees, job.soft_reach = soft_reach;
         job.step_slide_m = step_slide_m, job.step_slide_degrees = step_slide_degrees, job.step_seconds = step_seconds;
         job.step_longest_seconds = step_longest_seconds, job.step_height_m = step_height_m;
+        job.step_foot_speed_ratio = step_foot_speed_ratio, job.step_min_foot_speed_m = step_min_foot_speed_m;
+        job.step_min_turn_speed = step_min_turn_speed, job.step_min_knee_speed = step_min_knee_speed;
         job.threads = threads;
         job.target = View(target), job.target_rot = View(target_rot), job.weight = View(weight);
         job.stepping = Span<std::uint8_t>(reinterpret_cast<std::uint8_t*>(stepping.mutable_data()),
@@ -202,12 +205,15 @@ MOCAPEDIT_BINDINGS(BindFootLock) {
       py::arg("contact_offsets"), py::arg("contacts"), py::arg("blend"), py::arg("stretch"), py::arg("up"),
       py::arg("meters_per_unit"), py::arg("leash_m"), py::arg("max_leash_m"), py::arg("max_drop_m"),
       py::arg("leash_degrees"), py::arg("soft_reach"), py::arg("step_slide_m"), py::arg("step_slide_degrees"),
-      py::arg("step_seconds"), py::arg("step_longest_seconds"), py::arg("step_height_m"), py::arg("threads") = 0,
+      py::arg("step_seconds"), py::arg("step_longest_seconds"), py::arg("step_height_m"),
+      py::arg("step_foot_speed_ratio"), py::arg("step_min_foot_speed_m"), py::arg("step_min_turn_speed"),
+      py::arg("step_min_knee_speed"), py::arg("threads") = 0,
       "Where planted feet go while an edit drags the body (the C++ FootPlantJob), for many agents.\n\n"
       "offsets (A+1,) int64 pose offsets per agent; frames, seconds, turn (N,) source frame, time in seconds\n"
       "and the edit's turn about up; stationary (N,) uint8; hip, knee, ankle (N,2,3) and ankle_rot (N,2,4)\n"
       "world, as edited; source_hip, source_ankle (N,2,3) and source_hip_rot, source_knee_rot,\n"
       "source_ankle_rot (N,2,4) world, posed before the edit's ground motion; contact_offsets (2A+1,) int64\n"
       "and contacts (R,2) inclusive source frame ranges per agent and leg; blend (A,) frames; stretch (A,2);\n"
-      "up (3,) +Y or +Z; lengths named _m in metres. Returns a FootPlantResult. Keyword arguments only.");
+      "up (3,) +Y or +Z; lengths named _m in metres; speeds in metres or radians per second. Returns a\n"
+      "FootPlantResult. Keyword arguments only.");
 }

@@ -361,10 +361,12 @@ struct Agent {
         }
         fastest = std::max(fastest, Norm(g));
       }
-      speed[k] = fastest;
-      spin[k] = turn_speed([&](std::size_t t) { return LegQ(p.source_ankle_rot, t, k); });
-      knee_spin[k] = turn_speed(
-          [&](std::size_t t) { return Mul(Conj(LegQ(p.source_hip_rot, t, k)), LegQ(p.source_knee_rot, t, k)); });
+      speed[k] = std::max(p.step_foot_speed_ratio * fastest, p.step_min_foot_speed_m / mpu);
+      spin[k] = std::max(turn_speed([&](std::size_t t) { return LegQ(p.source_ankle_rot, t, k); }),
+                         p.step_min_turn_speed);
+      knee_spin[k] = std::max(
+          turn_speed([&](std::size_t t) { return Mul(Conj(LegQ(p.source_hip_rot, t, k)), LegQ(p.source_knee_rot, t, k)); }),
+          p.step_min_knee_speed);
     }
     const double height = p.step_height_m / mpu;
     std::vector<double> bend(2 * count);
@@ -651,6 +653,10 @@ void FootPlantJob::Validate() const {
       {step_seconds, step_seconds > 0, "step_seconds must be positive"},
       {step_longest_seconds, step_longest_seconds >= step_seconds, "step_longest_seconds must not be below step_seconds"},
       {step_height_m, step_height_m >= 0, "step_height_m must not be negative"},
+      {step_foot_speed_ratio, step_foot_speed_ratio > 0, "step_foot_speed_ratio must be positive"},
+      {step_min_foot_speed_m, step_min_foot_speed_m >= 0, "step_min_foot_speed_m must not be negative"},
+      {step_min_turn_speed, step_min_turn_speed >= 0, "step_min_turn_speed must not be negative"},
+      {step_min_knee_speed, step_min_knee_speed >= 0, "step_min_knee_speed must not be negative"},
       {trigger, trigger > 0, "trigger must be positive"},
       {lead, lead > 0, "lead must be positive"}};
   for (const auto& s : settings)

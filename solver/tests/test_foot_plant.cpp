@@ -104,6 +104,17 @@ TEST(FootPlantJob, Validate) {
   }
   {
     auto job = s.Job();
+    job.step_foot_speed_ratio = 0.0;
+    EXPECT_NE(Rejection(job).find("step_foot_speed_ratio must be positive"), std::string::npos);
+    job = s.Job();
+    job.step_min_knee_speed = -1.0;
+    EXPECT_NE(Rejection(job).find("step_min_knee_speed must not be negative"), std::string::npos);
+    job = s.Job();
+    job.step_min_foot_speed_m = std::nan("");
+    EXPECT_NE(Rejection(job).find("step_min_foot_speed_m"), std::string::npos);
+  }
+  {
+    auto job = s.Job();
     job.target = Span<double>(s.hip.data(), s.hip.size());
     EXPECT_NE(Rejection(job).find("target overlaps the input hip"), std::string::npos);
   }

@@ -116,18 +116,28 @@ def test_real_takes_about_one_spot_bent_by_handles_slide_as_a_whole(tmp_path, na
     assert turned.mean() < 1.0 and turned.max() < 5.0, (turned.mean(), turned.max())
 
 
+@pytest.mark.parametrize("name", ["cc_cmu02_04_jump_balance", "cc_cmu02_05_punch_strike"])
+def test_real_takes_about_one_spot_bent_a_metre_keep_their_feet_planted(tmp_path, name):
+    """Bent 1 m at their middle, out and back: the feet step the way. Held to the source's foot
+    speed against the hip (a boxer's feet barely move), the punches' steps took 1.3 to 1.5 s and
+    their feet slid 9.34 cm/s against 5.93 in the source, the jump's 13.2 against 9.24; held to
+    the joints' bars, 6.25 and 9.33."""
+    stage, agent = _bent(tmp_path, name, 100.0)
+    _assert_feet_within_the_bar(tmp_path, stage, agent)
+
+
 def test_the_real_jump_bent_a_metre_travels_in_its_flight(tmp_path):
     """The jump into a balance (4 s) bent 1 m at its middle: the path editor carries it out in its
     jump, where both feet are off the ground, and not against the way its source goes there
     (``path_edit.AIRBORNE_WEIGHT``, ``passes.path.AIRBORNE_MAX_DEVIATION``). Spread evenly over the
     take, its feet slid 49.4 cm/s before locking and 18.4 locked (its source: 9.24); now 31.5 and
-    13.2. Still over the bar: its way back lies over frames with a foot down."""
+    9.3: its way back, over frames with a foot down, it steps."""
     stage, agent = _bent(tmp_path, "cc_cmu02_04_jump_balance", 100.0)
     result = solve(str(tmp_path / "shot.usda"), output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"))
     assert all(c["residual"] < 1e-6 for c in result.report.constraints)
     entry = result.report.agents[agent]
     assert entry["footSkateSource"] == pytest.approx(9.24, abs=0.05)
-    assert entry["footSkateUnlocked"] < 36.0 and entry["footSkateEdited"] < 15.0, \
+    assert entry["footSkateUnlocked"] < 36.0 and entry["footSkateEdited"] < entry["footSkateSource"] + 0.5, \
         (entry["footSkateUnlocked"], entry["footSkateEdited"])
     # Out in the air: half the metre or more between the last frame both feet are down before
     # the jump and the first after it, by FK on the composed stage.

@@ -54,10 +54,12 @@ def _fk(stage, agent, times):
     return evaluate.joint_transforms(stage, agent, times)
 
 
-def _leg_quality(src, out, agent, times, leg_names, fps, unlocked=None):
+def _leg_quality(src, out, agent, times, leg_names, fps, unlocked=None, least=(0.0, 0.0, 0.0)):
     """(largest bone length change, knee flips, largest joint angular speed over the source's) of
     the legs on a composed stage. Knee sides are compared with ``unlocked`` (the same edit without
-    foot locking, whose turns of the whole body are not flips), by default the source."""
+    foot locking, whose turns of the whole body are not flips), by default the source. ``least``:
+    radians per second the hip, knee and ankle are allowed at least, however still the source
+    holds them."""
     w0, l0, joints = _fk(src, agent, times)
     w1, l1, _ = _fk(out, agent, times)
     wr = w0 if unlocked is None else _fk(unlocked, agent, times)[0]
@@ -75,10 +77,10 @@ def _leg_quality(src, out, agent, times, leg_names, fps, unlocked=None):
             np.linalg.norm(wr[:, ankle, 3, :3] - wr[:, knee, 3, :3], axis=-1)
         bent = np.linalg.norm(bends[0], axis=-1) > 0.05 * lengths
         bend_flip += int(np.sum(bent & (np.einsum("ti,ti->t", bends[0], bends[1]) <= 0)))
-        for j in (hip, knee, ankle):
+        for j, floor in zip((hip, knee, ankle), least):
             q0, q1 = trs_from_matrices(l0[:, j])[1], trs_from_matrices(l1[:, j])[1]
             speed = [2 * np.arccos(np.clip(np.abs(np.sum(q[1:] * q[:-1], -1)), 0, 1)) * fps for q in (q0, q1)]
-            speed_ratio = max(speed_ratio, float(speed[1].max() / max(speed[0].max(), 1e-9)))
+            speed_ratio = max(speed_ratio, float(speed[1].max() / max(speed[0].max(), floor, 1e-9)))
     return bones, bend_flip, speed_ratio
 
 
@@ -1079,3 +1081,33 @@ def test_a_walk_pushed_aside_at_its_start_eases_its_locks_in_over_longer(tmp_pat
     monkeypatch.setattr(feet, "BLEND_ROUNDS", 0)
     quick, _ = _solve(tmp_path, name="quick")
     assert result.report.agents[a]["footSkateEdited"] <= quick.report.agents[a]["footSkateEdited"] + 1e-4
+
+
+def test_an_idle_dragged_aside_and_back_shuffles_at_a_calm_pace(tmp_path):
+    """A generated idle (feet planted throughout, legs nearly still: its knees turn at 0.12 rad/s
+    at most) dragged 60 cm aside at its middle and back by three handles over 10 s. Held to the
+    idle's own leg speeds no step could be taken: the feet slid 5.5 cm/s over the source's. A
+    leg the source holds still steps at a calm pace at least (STEP_MIN_FOOT_SPEED_M,
+    STEP_MIN_TURN_SPEEDS): the feet shuffle, one at a time, and slide no more than the bar."""
+    from mocapedit.pipeline.passes import feet
+    clip = walker.idle(frames=240, fps=FPS, name="idle")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)], up_axis="Y",
+                                       fps=FPS, clips_dir=tmp_path / "clips")
+    a = f"{CROWD}/a"
+    for name, frame, dx in (("start", 0, 0.0), ("aside", 120, 0.6), ("end", 239, 0.0)):
+        p = clip.translations[frame, 0]
+        examples.add_position_constraint(stage, f"/Edits/{name}", a, frame, (float(p[0]) + dx, 0.0, float(p[2])))
+    stage.GetRootLayer().Save()
+    result, out = _solve(tmp_path)
+    _, free = _solve(tmp_path, name="free", foot_locking=False)
+    entry = result.report.agents[a]
+    assert entry.get("footSteps", 0) >= 4
+    assert entry["footSkateEdited"] <= entry["footSkateSource"] + 0.005
+    src = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    times = evaluate.sample_times(src, a)
+    feet_at = ["LeftFoot", "RightFoot"]
+    lift = (evaluate.foot_positions(out, a, times, feet_at).positions[..., 1]
+            - evaluate.foot_positions(src, a, times, feet_at).positions[..., 1])
+    assert not ((lift[:, 0] > 0.02) & (lift[:, 1] > 0.02)).any()
+    bones, flips, speed = _leg_quality(src, out, a, times, LEGS, FPS, unlocked=free, least=feet.STEP_MIN_TURN_SPEEDS)
+    assert bones < 1e-6 and flips == 0 and speed < 1.5

@@ -323,6 +323,14 @@ class PlantInputs:
     step_seconds: float          # the shortest step
     step_longest_seconds: float  # the longest step
     step_height_m: float         # how far a stepping foot lifts
+    #: A step moves the foot against its hip at most this many times as fast as the source ever
+    #: does, and turns the foot and bends the knee at most as fast as the source ever does; where
+    #: the source holds a leg nearly still, at least as fast as these (a calm step): metres per
+    #: second, radians per second.
+    step_foot_speed_ratio: float
+    step_min_foot_speed_m: float
+    step_min_turn_speed: float
+    step_min_knee_speed: float
 
 
 @dataclass
@@ -564,12 +572,15 @@ class _AgentPlan:
             offset[t, k], shift[t, k], radius[t, k] = r.offset[c, w], r.shift[c, w], r.radius[c, w]
             turn[t, k], yaw[t, k] = r.turn[c, w], r.yaw[c, w]
         seconds = self.seconds
-        # The fastest the source moves each foot against its hip, turns it, and bends its knee.
-        speed = [float(np.linalg.norm(np.gradient(self.source_ankle[:, k] - self.source_hip[:, k], seconds, axis=0),
-                                      axis=-1).max()) for k in range(2)]
-        spin = [float(turn_speed(self.source_ankle_rot[:, k], seconds).max()) for k in range(2)]
-        knee_spin = [float(turn_speed(quat_multiply(quat_conjugate(self.source_hip_rot[:, k]), self.source_knee_rot[:, k]),
-                                      seconds).max()) for k in range(2)]
+        # How fast a step may move each foot against its hip, turn it, and bend its knee: from the
+        # fastest the source does, at least a calm step's pace.
+        speed = [max(p.step_foot_speed_ratio * float(np.linalg.norm(
+            np.gradient(self.source_ankle[:, k] - self.source_hip[:, k], seconds, axis=0), axis=-1).max()),
+            p.step_min_foot_speed_m / p.meters_per_unit) for k in range(2)]
+        spin = [max(float(turn_speed(self.source_ankle_rot[:, k], seconds).max()), p.step_min_turn_speed)
+                for k in range(2)]
+        knee_spin = [max(float(turn_speed(quat_multiply(quat_conjugate(self.source_hip_rot[:, k]), self.source_knee_rot[:, k]),
+                                          seconds).max()), p.step_min_knee_speed) for k in range(2)]
         height = p.step_height_m / p.meters_per_unit
         bend = lift_bend(np.linalg.norm(self.knee - self.hip, axis=-1), np.linalg.norm(self.ankle - self.knee, axis=-1),
                          np.linalg.norm(self.ankle - self.hip, axis=-1), height)

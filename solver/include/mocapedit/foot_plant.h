@@ -80,6 +80,15 @@ struct FootPlantJob {
   double step_seconds = 0.3;          // the shortest step
   double step_longest_seconds = 1.5;  // the longest step
   double step_height_m = 0.05;        // how far a stepping foot lifts
+  // A step moves the foot against its hip at most step_foot_speed_ratio times as fast as the
+  // source ever does, turns the foot and bends the knee at most as fast as the source ever
+  // does; where the source holds a leg nearly still (an idle), at least as fast as a calm step:
+  // step_min_foot_speed_m metres per second, step_min_turn_speed and step_min_knee_speed
+  // radians per second.
+  double step_foot_speed_ratio = 2.0;
+  double step_min_foot_speed_m = 1.0;
+  double step_min_turn_speed = 1.5;
+  double step_min_knee_speed = 2.0;
   double trigger = 0.6;  // a planted foot steps once the edited foot lies this much of the leash away
   double lead = 0.5;     // ... and lands this much of the leash ahead of where the body drifts
   int threads = 0;       // 0: up to two, as the machine allows
@@ -101,8 +110,9 @@ struct FootPlantJob {
   //  - up is neither +Y nor +Z;
   //  - meters_per_unit, leash_m, leash_degrees, soft_reach, step_seconds are not positive, or
   //    soft_reach is above 1, max_leash_m below leash_m, step_longest_seconds below
-  //    step_seconds, max_drop_m, step_slide_m, step_slide_degrees, step_height_m negative,
-  //    trigger or lead not positive (any of them not finite);
+  //    step_seconds, max_drop_m, step_slide_m, step_slide_degrees, step_height_m,
+  //    step_min_foot_speed_m, step_min_turn_speed or step_min_knee_speed negative, trigger,
+  //    lead or step_foot_speed_ratio not positive (any of them not finite);
   //  - an output does not hold #N * 2 entries of its width (steps: #A), or overlaps an input or
   //    another output.
   // #N and #A may be 0 (nothing to do).

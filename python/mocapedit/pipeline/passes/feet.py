@@ -72,6 +72,17 @@ STEP_SLIDE_DEGREES = 10.0
 #: legs solved again, up to STEP_ROUNDS times.
 STEP_SPEED_RATIO = 1.35
 STEP_ROUNDS = 3
+#: A step moves the foot against its hip at most STEP_FOOT_SPEED_RATIO times as fast as the
+#: source ever does (the bars are on the joints' turns, which STEP_SPEED_RATIO holds). A leg
+#: the source holds nearly still (an idle's) steps at a calm pace at least: the foot at
+#: STEP_MIN_FOOT_SPEED_M metres per second against its hip, and the hip, knee and ankle at
+#: STEP_MIN_TURN_SPEEDS radians per second (a fifth to a third of a 1 m/s walk's), also where
+#: the steps' joint speeds are held to STEP_SPEED_RATIO. Held to the idle's own legs (a knee
+#: that turns at 0.12 rad/s), an idle dragged 1 m aside and back over 10 s could take no step
+#: and slid 13.6 cm/s, its legs turning 5 times as fast as the idle's all the same.
+STEP_FOOT_SPEED_RATIO = 2.0
+STEP_MIN_FOOT_SPEED_M = 1.0
+STEP_MIN_TURN_SPEEDS = (1.0, 2.0, 1.5)
 #: A lock that still turns a leg's joint faster than STEP_SPEED_RATIO times the fastest the pose
 #: before locking does (easing towards a plant that lies far from the swinging foot, most often)
 #: eases in and out BLEND_LONGER times as long, up to BLEND_ROUNDS times, and keeps the longer
@@ -220,12 +231,13 @@ class _AgentLock:
 
     def pose_speed(self) -> np.ndarray:
         """(legs, 3) the largest angular speed of each leg's hip, knee and ankle in the pose before
-        locking (radians per second), measured once."""
+        locking (radians per second), at least STEP_MIN_TURN_SPEEDS; measured once."""
         if self._pose_speed is None:
             seconds = self.times / self.agent_fps
-            self._pose_speed = np.array([[
+            self._pose_speed = np.maximum(np.array([[
                 footplant.turn_speed(self.pose.rotations[:, self.columns[self.agent.joints[j]]], seconds).max(initial=0.0)
-                for j in (leg.hip, leg.knee, leg.ankle)] for leg in self.legs]).reshape(len(self.legs), 3)
+                for j in (leg.hip, leg.knee, leg.ankle)] for leg in self.legs]).reshape(len(self.legs), 3),
+                STEP_MIN_TURN_SPEEDS)
         return self._pose_speed
 
     def ease_over(self, blend: float) -> None:
@@ -376,6 +388,8 @@ class _Run:
             leash_m=LEASH_M, max_leash_m=MAX_LEASH_M, max_drop_m=MAX_DROP_M, leash_degrees=LEASH_DEGREES,
             soft_reach=footlock.SOFT_REACH, step_slide_m=STEP_SLIDE_M, step_slide_degrees=STEP_SLIDE_DEGREES,
             step_seconds=STEP_SECONDS, step_longest_seconds=STEP_LONGEST_SECONDS, step_height_m=STEP_HEIGHT_M,
+            step_foot_speed_ratio=STEP_FOOT_SPEED_RATIO, step_min_foot_speed_m=STEP_MIN_FOOT_SPEED_M,
+            step_min_turn_speed=STEP_MIN_TURN_SPEEDS[2], step_min_knee_speed=STEP_MIN_TURN_SPEEDS[1],
             frames=self._pick(self.frames, agents), seconds=self._pick(self.times, agents) / info.time_codes_per_second,
             stationary=self._pick(self.keep, agents), turn=self._pick(self.turn, agents),
             hip=self._pick(self.hip, agents), knee=self._pick(self.knee, agents), ankle=self._pick(self.ankle, agents),
