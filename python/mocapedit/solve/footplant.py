@@ -190,8 +190,9 @@ def replant(contact: np.ndarray, movable: np.ndarray, offset: np.ndarray, radius
     during the step (and as turned), so the next step comes later. A step lifts the foot by
     ``height`` (for which the knee bends ``bend`` (T,2) more) and takes from ``shortest`` to
     ``longest`` frames: long enough that the foot moves no faster than ``speed`` (2,), turns no
-    faster than ``spin`` (2,) and the knee bends no faster than ``knee_spin`` (2,) per second,
-    the fastest the source moves each foot and knee (:func:`step_frames`), times ``stretch`` (2,). Where it may not step, the
+    faster than ``spin`` (2,) and the knee bends no faster than ``knee_spin`` (2,) per second
+    (:func:`step_frames`; what the plant job allows each leg: :class:`PlantInputs`), times
+    ``stretch`` (2,). Where it may not step, the
     plant follows at the leash's length, as :func:`leash` does.
     """
     count = contact.shape[0]
@@ -551,8 +552,8 @@ class _AgentPlan:
 
     def _replant(self, rows: list[_Contacts], stretch) -> int:
         """Where the leash lets a foot slide through a contact and the other foot bears the
-        weight, the foot steps instead (:func:`replant`), no faster than the source moves and
-        turns that foot; returns the steps taken."""
+        weight, the foot steps instead (:func:`replant`), at the speeds the inputs allow (from the
+        source's, at least a calm step's); returns the steps taken."""
         p, count = self.inputs, len(self.frames)
         sliding = [r.sliding(p.step_slide_m / p.meters_per_unit, np.radians(p.step_slide_degrees)) for r in rows]
         if not any(s.any() for s in sliding) or count < 3:

@@ -18,8 +18,10 @@
 // followed outwards from them). Where a leashed plant would slide further than `step_slide_m`
 // (or turn further than `step_slide_degrees`) and the other foot bears the weight, the foot
 // steps instead: it lifts by `step_height_m`, moves to where the body now is and is set down,
-// in `step_seconds` to `step_longest_seconds`, no faster than the source moves, turns and bends
-// that leg (times the agent's `stretch`). A lock eases in and out over `blend` frames before and
+// in `step_seconds` to `step_longest_seconds`, moving the foot against its hip no faster than
+// `step_foot_speed_ratio` times the source's fastest, turning it and bending the knee no faster
+// than the source's fastest, or a calm step's pace where the source holds the leg nearly still
+// (the step_min_ speeds), times the agent's `stretch`. A lock eases in and out over `blend` frames before and
 // after its contact (longer where the plant lies further than `leash_m` from the edited foot),
 // and where the ramps of two contacts meet their plants blend by weight.
 //
