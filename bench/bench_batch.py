@@ -1,7 +1,8 @@
 """Batch: 8 shots of 1,000 agents x 240 frames x 31 joints (the whole-stage crowd with its edits).
 
-`mocapedit batch` on a local Dask cluster of 2 worker processes, start-up included, against its
-peer in the same run: the same 8 shots solved one after another in one process (no Dask).
+`mocapedit batch` on a local Dask cluster of 2 worker processes (each solver on its share of the
+cores, MOCAPEDIT_THREADS), start-up included, against its peer in the same run: the same 8 shots
+solved one after another in one process (no Dask), on the machine's threads.
 Target (issue 19): under 0.6 times the sequential time. The outputs of both are compared byte
 for byte.
 """

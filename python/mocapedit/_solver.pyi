@@ -65,11 +65,13 @@ __all__: list[str] = [
     'push_out_of_region',
     'region_signed_distance',
     'sample_clip',
+    'set_thread_budget',
     'skeleton_space',
     'smooth_delay',
     'spot_weight',
     'subtree_joint_weights',
     'tangent_headings',
+    'thread_budget',
     'time_warp',
     'time_warp_precompute',
     'turning_rates',
@@ -885,6 +887,10 @@ def sample_clip(translations: typing.Annotated[numpy.typing.ArrayLike, numpy.flo
     (T,) fractional frames: ((T, J, 3), (T, J, 4), (T, J, 3)) float32. Linear translations and
     scales, normalised shortest-arc slerp rotations; whole frames are copied bit for bit.
     """
+def set_thread_budget(threads: typing.SupportsInt | typing.SupportsIndex) -> None:
+    """
+    Sets how many threads the solver's jobs may use at once in this process (1: every job on the calling thread; the results are the same). 0 goes back to MOCAPEDIT_THREADS or the hardware's.
+    """
 def skeleton_space(*, parents: typing.Any, columns: typing.Any, rest: typing.Any, translations: typing.Any, rotations: typing.Any, scales: typing.Any, joints: typing.Any, with_rotations: bool = False) -> typing.Any:
     """
     Forward kinematics (the C++ SkeletonSpaceJob): (T, K, 4, 4) skeleton-space row-vector matrices of the
@@ -917,6 +923,10 @@ def tangent_headings(points: typing.Annotated[numpy.typing.NDArray[numpy.float64
     
     Frames inside a `fixed` inclusive range take that range's `fallback` heading;
     frames standing still (tangent shorter than `min_step`) keep the nearest moving heading.
+    """
+def thread_budget() -> int:
+    """
+    How many threads the solver's jobs may use at once in this process: set_thread_budget's, else the MOCAPEDIT_THREADS environment variable's as the process first asked, else the machine's hardware threads. Each job splits its work in two at most.
     """
 def time_warp(*, rest_times: collections.abc.Sequence[typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"]], time_frames: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 2]"], time_hard: typing.Annotated[numpy.typing.ArrayLike, numpy.bool, "[m, 1]"], time_weights: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], times: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], sync_frames: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 4]"], sync_hard: typing.Annotated[numpy.typing.ArrayLike, numpy.bool, "[m, 1]"], sync_weights: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], offsets: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], min_interval_fraction: typing.SupportsFloat | typing.SupportsIndex = 0.1, min_intervals: collections.abc.Sequence[typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"]] = [], stretch_weight: typing.SupportsFloat | typing.SupportsIndex = 1e-06, anchor_weight: typing.SupportsFloat | typing.SupportsIndex = 1e-06, max_active_set_iterations: typing.SupportsInt | typing.SupportsIndex = -1) -> TimeWarpResult:
     """

@@ -274,7 +274,7 @@ CollisionResult Finish(const Problem& p, std::vector<Partial>& parts) {
 
 int WorkerCount(const CollisionSettings& settings, int64_t work) {
   int threads = settings.threads;
-  if (threads <= 0) threads = std::min(2u, std::max(1u, std::thread::hardware_concurrency()));
+  if (threads <= 0) threads = DefaultThreads();
   // Below a few thousand agent samples a thread costs more than it saves.
   if (work < 20000) threads = 1;
   return std::max(1, threads);

@@ -265,7 +265,7 @@ void ParallelFor(int count, int threads, Fn fn) {
 }
 
 inline int ThreadCount(int requested, int64_t work) {
-  int threads = requested > 0 ? requested : static_cast<int>(std::min(2u, std::max(1u, std::thread::hardware_concurrency())));
+  const int threads = requested > 0 ? requested : DefaultThreads();
   return work < 20000 ? 1 : threads;
 }
 

@@ -54,3 +54,39 @@ TEST(Threads, ErrorsReachTheCallerAfterEveryPieceFinished) {
   EXPECT_TRUE(there_finished);
   EXPECT_THROW(OnTwoThreads([] {}, [] { throw std::out_of_range("there"); }), std::out_of_range);
 }
+
+TEST(Threads, ABudgetOfOneRunsBothPiecesOnTheCallerInTurn) {
+  const int before = mocapedit::ThreadBudget();
+  mocapedit::SetThreadBudget(1);
+  EXPECT_EQ(mocapedit::ThreadBudget(), 1);
+  EXPECT_EQ(mocapedit::DefaultThreads(), 1);
+  std::vector<std::thread::id> where;
+  OnTwoThreads([&] { where.push_back(std::this_thread::get_id()); },
+               [&] { where.push_back(std::this_thread::get_id()); });
+  ASSERT_EQ(where.size(), 2u);
+  EXPECT_EQ(where[0], std::this_thread::get_id());
+  EXPECT_EQ(where[1], std::this_thread::get_id());
+  // Both run before the first piece's error arrives, as on two threads.
+  bool there_ran = false;
+  try {
+    OnTwoThreads([] { throw std::invalid_argument("here"); }, [&] { there_ran = true; });
+    FAIL() << "no exception";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_STREQ(e.what(), "here");
+  }
+  EXPECT_TRUE(there_ran);
+  // Runs of agents: one, on the caller.
+  const std::int64_t offsets[] = {0, 10, 20, 30, 40};
+  std::vector<std::thread::id> runs(4);
+  mocapedit::OnAgentRuns(offsets, 4, 0, [&](std::size_t a) { runs[a] = std::this_thread::get_id(); });
+  for (const auto& id : runs) EXPECT_EQ(id, std::this_thread::get_id());
+  mocapedit::SetThreadBudget(2);
+  EXPECT_EQ(mocapedit::DefaultThreads(), 2);
+  std::vector<std::thread::id> split(4);
+  mocapedit::OnAgentRuns(offsets, 4, 0, [&](std::size_t a) { split[a] = std::this_thread::get_id(); });
+  EXPECT_EQ(split[0], std::this_thread::get_id());
+  EXPECT_NE(split[3], std::this_thread::get_id());
+  mocapedit::SetThreadBudget(0);
+  EXPECT_EQ(mocapedit::ThreadBudget(), before);
+  EXPECT_GE(before, 1);
+}

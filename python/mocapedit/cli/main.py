@@ -111,6 +111,8 @@ def main(argv: list[str] | None = None) -> int:
         import numpy as np
         # Degenerate input (a zero-length path, an agent standing still) is handled where it
         # matters; numpy's floating-point warnings would only be noise on the user's terminal.
+        from mocapedit.solve import threads
+        threads.check_environment()
         with np.errstate(all="ignore"):
             return int(args.run(args) or 0)
     except MocapEditError as exc:

@@ -27,6 +27,7 @@ from mocapedit.pipeline.passes import PASSES
 from mocapedit.pipeline.passes.path import on_curve
 from mocapedit.inspect import inspection, metrics
 from mocapedit.model import limits
+from mocapedit.solve import threads
 from mocapedit.usd import outputs, reader, stage_io, writer
 from mocapedit.usd.stage_io import content_hash  # noqa: F401 (batches compare it before solving)
 from mocapedit.model.errors import MocapEditError
@@ -385,6 +386,7 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
         raise MocapEditError(f"progress is a {type(progress).__name__}; give a mocapedit.model.progress.Progress "
                              f"(or None for silence)")
     progress = progress or Silent()
+    threads.check_environment()
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     source = stage_io.open_input(stage_or_path)
