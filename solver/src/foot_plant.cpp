@@ -242,7 +242,7 @@ struct Agent {
       width = std::max(width, r.width);
       out.push_back(std::move(r));
     }
-    const double leash_turn = p.leash_degrees * (kPi / 180.0);
+    const double leash_turn = p.leash_degrees * p.turn_leash[index] * (kPi / 180.0);
     for (Row& r : out) {
       const std::size_t n = r.width;
       // The longest leash over the leg's widest row from here (numpy's rows share one width).
@@ -381,7 +381,7 @@ struct Agent {
     const double frame = m % 2 ? sorted[m / 2] : (sorted[m / 2 - 1] + sorted[m / 2]) / 2.0;
     const int shortest = std::max(2, static_cast<int>(std::nearbyint(p.step_seconds / frame)));
     const int longest = std::max(2, static_cast<int>(std::nearbyint(p.step_longest_seconds / frame)));
-    const double turn_radius = p.leash_degrees * (kPi / 180.0);
+    const double turn_radius = job.leash_degrees * job.turn_leash[index] * (kPi / 180.0);
 
     std::vector<double> lift;
     const int steps = Steps(contact, movable, offset, radius, turn, shift, yaw, lift, bend, turn_radius, frame,
@@ -620,6 +620,7 @@ void FootPlantJob::Validate() const {
       {source_hip, n * 6, "source_hip"}, {source_ankle, n * 6, "source_ankle"},
       {source_hip_rot, n * 8, "source_hip_rot"}, {source_knee_rot, n * 8, "source_knee_rot"},
       {source_ankle_rot, n * 8, "source_ankle_rot"}, {blend, agents, "blend"}, {stretch, agents * 2, "stretch"},
+      {turn_leash, agents, "turn_leash"},
       {up, 3, "up"}};
   for (const auto& in : inputs)
     if (!Sized(in.s, in.size)) throw InvalidInput(job, std::string(in.name) + " must hold " + std::to_string(in.size) + " values");
@@ -639,6 +640,8 @@ void FootPlantJob::Validate() const {
     if (!(std::isfinite(b) && b > 0)) throw InvalidInput(job, "blend frames must be finite and positive");
   for (double s : stretch)
     if (!(std::isfinite(s) && s > 0)) throw InvalidInput(job, "stretch must be finite and positive");
+  for (double s : turn_leash)
+    if (!(std::isfinite(s) && s > 0)) throw InvalidInput(job, "turn_leash must be finite and positive");
   const bool y_up = up[0] == 0 && up[1] == 1 && up[2] == 0, z_up = up[0] == 0 && up[1] == 0 && up[2] == 1;
   if (!y_up && !z_up) throw InvalidInput(job, "up must be +Y (0, 1, 0) or +Z (0, 0, 1)");
   const struct { double v; bool ok; const char* what; } settings[] = {

@@ -21,7 +21,7 @@ struct Stand {
   std::vector<std::int64_t> offsets, contact_offsets;
   std::vector<std::uint8_t> stationary, stepping;
   std::vector<double> frames, seconds, turn, hip, knee, ankle, ankle_rot, source_hip, source_ankle, source_rot;
-  std::vector<double> contacts, blend, stretch, up{0, 1, 0};
+  std::vector<double> contacts, blend, stretch, turn_leash, up{0, 1, 0};
   std::vector<double> target, target_rot, weight;
   std::vector<std::int64_t> steps;
 
@@ -35,6 +35,7 @@ struct Stand {
         contact_offsets.push_back(contact_offsets.back() + 1);
       }
       blend.push_back(2.0);
+      turn_leash.push_back(1.0);
       stretch.insert(stretch.end(), {1.0, 1.0});
       for (std::size_t t = 0; t < kPoses; ++t) {
         const double f = static_cast<double>(t);
@@ -60,6 +61,7 @@ struct Stand {
     job.source_hip = source_hip, job.source_ankle = source_ankle;
     job.source_hip_rot = source_rot, job.source_knee_rot = source_rot, job.source_ankle_rot = source_rot;
     job.contact_offsets = contact_offsets, job.contacts = contacts, job.blend = blend, job.stretch = stretch;
+    job.turn_leash = turn_leash;
     job.up = up;
     job.target = target, job.target_rot = target_rot, job.weight = weight, job.stepping = stepping, job.steps = steps;
     return job;
@@ -96,6 +98,14 @@ TEST(FootPlantJob, Validate) {
     s.stretch[1] = 0.0;
     EXPECT_NE(Rejection(s.Job()).find("stretch"), std::string::npos);
     s.stretch[1] = 1.0;
+  }
+  {
+    s.turn_leash[0] = -1.0;
+    EXPECT_NE(Rejection(s.Job()).find("turn_leash must be finite and positive"), std::string::npos);
+    s.turn_leash[0] = 1.0;
+    auto job = s.Job();
+    job.turn_leash = Span<const double>(s.turn_leash.data(), 1);
+    EXPECT_NE(Rejection(job).find("turn_leash must hold 2"), std::string::npos);
   }
   {
     auto job = s.Job();
@@ -141,6 +151,32 @@ TEST(FootPlantJob, AFootDraggedWithinTheLeashStaysPlanted) {
       }
       EXPECT_NEAR(s.target_rot[4 * i + 3], 1.0, 1e-12);
     }
+}
+
+// The plant's turn about up at pose t, leg `leg` (degrees).
+double PlantYaw(const Stand& s, std::size_t t, std::size_t leg) {
+  const std::size_t i = 2 * t + leg;
+  return 2.0 * std::atan2(s.target_rot[4 * i + 1], s.target_rot[4 * i + 3]) * 180.0 / 3.14159265358979323846;
+}
+
+TEST(FootPlantJob, APlantLagsTheBodysTurnByItsTurnLeash) {
+  // The edit turns the body 40 degrees over the contact: the plant holds its turn within
+  // leash_degrees (15) times the agent's turn_leash of the contact's mean turn, and turns along
+  // beyond.
+  for (double leash : {1.0, 2.0}) {
+    Stand s(1, 0.0);
+    for (std::size_t t = 0; t < Stand::kPoses; ++t)
+      s.turn[t] = 40.0 * 3.14159265358979323846 / 180.0 * std::min(std::max((static_cast<double>(t) - 5.0) / 25.0, 0.0), 1.0);
+    s.turn_leash[0] = leash;
+    s.Job().Run();
+    for (std::size_t leg = 0; leg < 2; ++leg) {
+      const double swing = PlantYaw(s, 30, leg) - PlantYaw(s, 5, leg);
+      if (leash == 1.0)
+        EXPECT_NEAR(swing, 10.0, 0.5) << "both ends of the 40-degree turn lie 20 from its mean: 5 past the leash";
+      else
+        EXPECT_NEAR(swing, 0.0, 1e-9) << "30 degrees of leash hold the plant through it";
+    }
+  }
 }
 
 TEST(FootPlantJob, AgentsAreIndependentOfTheirRunAndThreads) {

@@ -312,6 +312,7 @@ class PlantInputs:
     contacts: np.ndarray         # (R,2) inclusive source frame ranges of the foot contacts
     blend: np.ndarray            # (A,) frames a lock eases in and out over (at least)
     stretch: np.ndarray          # (A,2) how much longer each leg's steps are made
+    turn_leash: np.ndarray       # (A,) how many times leash_degrees each agent's plants may lag the turn
     up: np.ndarray               # (3,) +Y or +Z
     meters_per_unit: float
     leash_m: float               # the least leash
@@ -455,6 +456,7 @@ class _AgentPlan:
         self.up = int(np.argmax(np.abs(self.up_vector)))
         self.up_axis = "YZ"[self.up - 1]
         self.blend = float(p.blend[a])
+        self.leash_turn = np.radians(p.leash_degrees * float(p.turn_leash[a]))
         self.rows = [self._contacts(k, p.contacts[p.contact_offsets[2 * a + k]:p.contact_offsets[2 * a + k + 1]])
                      for k in range(2)]
 
@@ -491,7 +493,7 @@ class _AgentPlan:
         # An edit that turns the body far during a contact turns the plant too.
         apart = np.angle(np.exp(1j * (turn_c - yaw0)))
         yaw = yaw0 + leash_rows(apart[..., None], np.zeros((len(at), 1)), inside, rigid,
-                                np.radians(p.leash_degrees))[..., 0]
+                                self.leash_turn)[..., 0]
         # Turned about the planted foot itself, so a plant that turns along does not slide.
         foot = self.source_ankle[:, k][at]                                                        # (C,W,3)
         pivot = (foot * chosen[..., None]).sum(1) / n_chosen
@@ -586,7 +588,7 @@ class _AgentPlan:
         bend = lift_bend(np.linalg.norm(self.knee - self.hip, axis=-1), np.linalg.norm(self.ankle - self.knee, axis=-1),
                          np.linalg.norm(self.ankle - self.hip, axis=-1), height)
         frame = float(np.median(np.diff(seconds)))
-        out = replant(contact, movable, offset, radius, turn, shift, yaw, np.radians(p.leash_degrees),
+        out = replant(contact, movable, offset, radius, turn, shift, yaw, self.leash_turn,
                       seconds=frame, shortest=max(2, int(round(p.step_seconds / frame))),
                       longest=max(2, int(round(p.step_longest_seconds / frame))),
                       height=height, bend=bend, speed=np.array(speed), spin=np.array(spin),

@@ -13,7 +13,7 @@
 // up and one ground shift, chosen where the edit puts the foot (least squares), turned about
 // the planted foot itself. While the edited foot stays within a leash of the plant (as far as
 // the leg reaches with the pelvis lowered a little, from `leash_m` to `max_leash_m`, and
-// `leash_degrees` of turn) the plant stays put; beyond, it follows at the leash's length, from
+// `leash_degrees` times the agent's `turn_leash` of turn) the plant stays put; beyond, it follows at the leash's length, from
 // the start that slides least (frames inside a stationary range keep the plant, which is
 // followed outwards from them). Where a leashed plant would slide further than `step_slide_m`
 // (or turn further than `step_slide_degrees`) and the other foot bears the weight, the foot
@@ -68,6 +68,9 @@ struct FootPlantJob {
   Span<const double> blend;
   // #A * 2: how many times longer each leg's steps are made (> 0; 1 as planned).
   Span<const double> stretch;
+  // #A: how many times leash_degrees each agent's plants may lag the edited foot's turn (> 0;
+  // 1 as planned).
+  Span<const double> turn_leash;
   // World up, 3 doubles: +Y (0, 1, 0) or +Z (0, 0, 1). The plant's turn is about it.
   Span<const double> up;
 
@@ -108,7 +111,7 @@ struct FootPlantJob {
   //    hold #N * 2 entries of its width; a frame, second or turn is not finite;
   //  - contact_offsets does not hold #2A + 1 values, does not start at 0, decreases, or does
   //    not end at the contacts' count; contacts is not 2 doubles each, or a frame is not finite;
-  //  - blend or stretch do not hold #A (#A * 2) finite positive values;
+  //  - blend, stretch or turn_leash do not hold #A (#A * 2, #A) finite positive values;
   //  - up is neither +Y nor +Z;
   //  - meters_per_unit, leash_m, leash_degrees, soft_reach, step_seconds are not positive, or
   //    soft_reach is above 1, max_leash_m below leash_m, step_longest_seconds below

@@ -7,7 +7,8 @@ source clip (authored with ``MocapFootContactAPI``, else detected) gets one plan
 source foot carried by one turn and one ground shift, chosen by least squares where the
 edit puts the foot, and leashed to stay within what the leg can reach from where the edit puts
 the foot (at least ``LEASH_M``, with the pelvis lowered by at most ``MAX_DROP_M``) and
-``LEASH_DEGREES`` of its turn. The solver's foot-locking job (:mod:`mocapedit.solve.footlock`)
+``LEASH_DEGREES`` of its turn (``TURN_FURTHER`` times that for an agent whose feet still slide
+over the bar). The solver's foot-locking job (:mod:`mocapedit.solve.footlock`)
 moves the legs of all agents at once (all of the shot's, or a run of them on a worker when
 ``SolveOptions.components`` is set: an agent's legs depend on no other agent's,
 :func:`lock_agents`). Agents whose legs change get a pose edit that replaces their hip, knee and ankle
@@ -56,6 +57,9 @@ MAX_LEASH_M = 0.15
 #: toes slide: at 15, a walk turned round a corner by handles slid +0.5 to +1.2 cm/s over its
 #: source's.
 LEASH_DEGREES = 25.0
+#: Times LEASH_DEGREES the plants of an agent whose locked feet still slide over the bar may lag
+#: the turn, tried in turn (:func:`_turn_further_where_sliding`): 45 and 35 degrees.
+TURN_FURTHER = (1.8, 1.4)
 #: Seconds a foot takes to step where an edit drags or turns a standing body further than the
 #: leash (:func:`footplant.replant`): at least STEP_SECONDS, longer so that the foot moves no
 #: faster than its source does, but no longer than STEP_LONGEST_SECONDS; and metres it lifts at
@@ -326,6 +330,7 @@ class _Run:
         self.frames = np.concatenate([lock.frames for lock in locks])
         self.keep = np.concatenate([lock.keep for lock in locks])
         self.stretch = np.ones((len(locks), 2))
+        self.turn_leash = np.ones(len(locks))
 
     def span(self, a: int) -> tuple[int, int]:
         return int(self.offsets[a]), int(self.offsets[a + 1])
@@ -384,7 +389,7 @@ class _Run:
         inputs = footplant.PlantInputs(
             offsets=self._offsets(agents), contact_offsets=np.cumsum([0] + [len(c) for c in contacts]).astype(np.int64),
             contacts=np.concatenate(contacts).reshape(-1, 2), blend=np.array([self.locks[a].blend for a in chosen]),
-            stretch=self.stretch[list(chosen)], up=self.up, meters_per_unit=info.meters_per_unit,
+            stretch=self.stretch[list(chosen)], turn_leash=self.turn_leash[list(chosen)], up=self.up, meters_per_unit=info.meters_per_unit,
             leash_m=LEASH_M, max_leash_m=MAX_LEASH_M, max_drop_m=MAX_DROP_M, leash_degrees=LEASH_DEGREES,
             soft_reach=footlock.SOFT_REACH, step_slide_m=STEP_SLIDE_M, step_slide_degrees=STEP_SLIDE_DEGREES,
             step_seconds=STEP_SECONDS, step_longest_seconds=STEP_LONGEST_SECONDS, step_height_m=STEP_HEIGHT_M,
@@ -493,11 +498,12 @@ class _Run:
                           None if root is None else drop.astype(np.float64), root,
                           None if shift is None else np.asarray(shift, dtype=np.float64))
 
-    def skates(self, legs: list) -> list:
+    def skates(self, legs: list, agents: list[int] | None = None) -> list:
         """Per agent, (source, after the edits, after locking) foot skate, stage units per second,
         as :func:`mocapedit.tools.measure.foot_skate` measures it on the input and on the composed
         stage: joints named like feet, over the frames where the source's feet are planted; None
-        for a skeleton without such joints. ``legs``: each agent's :class:`LockedLegs` or None.
+        for a skeleton without such joints (and for agents not in ``agents``, when given).
+        ``legs``: each agent's :class:`LockedLegs` or None.
 
         A retimed agent is measured against its source as its timing plays it: the clip's poses
         at the same clip times, per second of the shot. Against the source at its own samples, a
@@ -510,9 +516,11 @@ class _Run:
         # has not had them carried into the world yet (an earlier measure keeps them on the
         # agent), and after locking where its legs change; by agent.
         count = len(self.locks)
+        chosen = range(count) if agents is None else agents
         source, unlocked, locked = [None] * count, [None] * count, [None] * count
         groups: dict = {}
-        for a, lock in enumerate(self.locks):
+        for a in chosen:
+            lock = self.locks[a]
             feet = lock.posed.feet
             if feet is None:
                 continue
@@ -566,7 +574,7 @@ class _Run:
         # Measured at once for agents with as many frames and feet (each on its own).
         out: list = [None] * len(self.locks)
         by_shape: dict = {}
-        for a in range(len(self.locks)):
+        for a in chosen:
             if worlds[a] is not None:
                 by_shape.setdefault(worlds[a][0].shape, []).append(a)
         for members in by_shape.values():
@@ -701,7 +709,8 @@ def _lock_run(ctx: SolveContext, locks: list) -> None:
         run.solve(again)
     _ease_longer_where_fast(run)
     legs = [run.locked_legs(a, info.meters_per_unit) for a in range(len(locks))]
-    for a, ((lock, result), locked_legs, skate) in enumerate(zip(locks, legs, run.skates(legs))):
+    skates = _turn_further_where_sliding(run, legs, run.skates(legs))
+    for a, ((lock, result), locked_legs, skate) in enumerate(zip(locks, legs, skates)):
         result.contacts, result.skate, result.legs = lock.locked, skate, locked_legs
         result.steps = int(run.steps[a]) if locked_legs is not None else 0
         result.max_drop, result.max_correction = lock.max_drop, lock.max_correction
@@ -732,6 +741,47 @@ def _ease_longer_where_fast(run: _Run) -> None:
                 now[a] = ratio[a]
                 tried.add(a)
         ratio = now
+
+
+def _turn_further_where_sliding(run: _Run, legs: list, skates: list) -> list:
+    """Agents whose locked feet still slide more than SKATE_TOLERANCE_M over their source's (an
+    edit that turns the body hard while a foot is planted: the plant turns along past
+    LEASH_DEGREES, about the ankle, and the toes slide) are locked again with their plants
+    lagging the turn further, TURN_FURTHER times as far, in turn, until their feet slide less
+    and their legs turn no faster than STEP_SPEED_RATIO times the pose before locking (or than
+    they did). Updates ``legs`` and returns the skates (:meth:`_Run.skates`)."""
+    mpu = run.ctx.data.info.meters_per_unit
+    tolerance = SKATE_TOLERANCE_M / mpu
+    over = [a for a, (leg, skate) in enumerate(zip(legs, skates))
+            if leg is not None and skate is not None and skate[2] > skate[0] + tolerance]
+    if not over:
+        return skates
+    speed = run.leg_speed()
+    skates = list(skates)
+    for further in TURN_FURTHER:
+        if not over:
+            break
+        kept = {a: run.agent_state(a) for a in over}
+        run.turn_leash[over] = further
+        run.plan(over)
+        run.solve(over)
+        now = run.leg_speed()
+        trial = [None] * len(legs)
+        for a in over:
+            trial[a] = run.locked_legs(a, mpu)
+        again = run.skates(trial, over)
+        left = []
+        for a in over:
+            if (trial[a] is not None and again[a] is not None and again[a][2] < skates[a][2]
+                    and now[a] <= max(speed[a], STEP_SPEED_RATIO) + 1e-9):
+                legs[a], skates[a] = trial[a], again[a]
+            else:
+                run.set_agent_state(a, kept[a])
+                run.turn_leash[a] = 1.0
+                legs[a] = run.locked_legs(a, mpu)
+                left.append(a)
+        over = left
+    return skates
 
 
 def lock_part(part: dict) -> list[AgentLocking]:
