@@ -352,21 +352,27 @@ class _Run:
         for k, v in zip(self._LEGS, legs):
             getattr(self.legs, k)[lo:hi] = v
 
-    def leg_speed(self) -> np.ndarray:
-        """(A,) per agent, the largest angular speed of a leg's hip, knee or ankle after locking,
-        against the largest that joint turns at in the pose before locking (1: no faster)."""
+    def leg_speed(self, agents: list[int] | None = None) -> np.ndarray:
+        """(A,) per agent (of ``agents``, 1 for the others; all: None), the largest angular speed
+        of a leg's hip, knee or ankle after locking, against the largest that joint turns at in
+        the pose before locking (1: no faster)."""
+        chosen = list(range(len(self.locks))) if agents is None else list(agents)
         out = np.ones(len(self.locks))
-        if len(self.times) < 2:
+        offsets = self._offsets(agents)
+        if offsets[-1] < 2 or not chosen:
             return out
-        seconds = self.times / self.ctx.data.info.time_codes_per_second
-        starts, between = self.offsets[:-1], self.offsets[1:-1] - 1   # pairs that span two agents
+        seconds = self._pick(self.times, agents) / self.ctx.data.info.time_codes_per_second
+        starts, between = offsets[:-1], offsets[1:-1] - 1   # pairs that span two agents
+        ratio = np.ones(len(chosen))
         for i, new in enumerate((self.legs.hip_local, self.legs.knee_local, self.legs.ankle_local)):
             for k in range(new.shape[1]):
-                speed = footplant.turn_speed(new[:, k], seconds)
+                speed = footplant.turn_speed(self._pick(new[:, k], agents), seconds)
                 speed[between] = 0.0
                 most = np.maximum.reduceat(np.append(speed, 0.0), starts)
-                pose = np.array([lock.pose_speed()[k, i] if k < len(lock.legs) else np.inf for lock in self.locks])
-                out = np.maximum(out, most / np.maximum(pose, 1e-9))
+                pose = np.array([self.locks[a].pose_speed()[k, i] if k < len(self.locks[a].legs) else np.inf
+                                 for a in chosen])
+                ratio = np.maximum(ratio, most / np.maximum(pose, 1e-9))
+        out[chosen] = ratio
         return out
 
     def _pick(self, values: np.ndarray, agents: list[int] | None) -> np.ndarray:
@@ -732,7 +738,7 @@ def _ease_longer_where_fast(run: _Run) -> None:
             run.locks[a].ease_over(run.locks[a].blend * BLEND_LONGER)
         run.plan(fast)
         run.solve(fast)
-        now = run.leg_speed()
+        now = run.leg_speed(fast)
         for a in fast:
             if now[a] >= ratio[a] - 1e-9:
                 state, blend = kept[a]
@@ -740,7 +746,8 @@ def _ease_longer_where_fast(run: _Run) -> None:
                 run.locks[a].ease_over(blend)
                 now[a] = ratio[a]
                 tried.add(a)
-        ratio = now
+        ratio = ratio.copy()
+        ratio[fast] = now[fast]
 
 
 def _turn_further_where_sliding(run: _Run, legs: list, skates: list) -> list:
@@ -756,7 +763,7 @@ def _turn_further_where_sliding(run: _Run, legs: list, skates: list) -> list:
             if leg is not None and skate is not None and skate[2] > skate[0] + tolerance]
     if not over:
         return skates
-    speed = run.leg_speed()
+    speed = run.leg_speed(over)
     skates = list(skates)
     for further in TURN_FURTHER:
         if not over:
@@ -765,7 +772,7 @@ def _turn_further_where_sliding(run: _Run, legs: list, skates: list) -> list:
         run.turn_leash[over] = further
         run.plan(over)
         run.solve(over)
-        now = run.leg_speed()
+        now = run.leg_speed(over)
         trial = [None] * len(legs)
         for a in over:
             trial[a] = run.locked_legs(a, mpu)
