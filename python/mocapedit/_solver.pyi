@@ -31,6 +31,7 @@ __all__: list[str] = [
     'TimeWarpData',
     'TimeWarpResult',
     'WaitDelay',
+    'WaitMemory',
     'WaitSearch',
     'apply_layers',
     'blas',
@@ -75,6 +76,7 @@ __all__: list[str] = [
     'time_warp',
     'time_warp_precompute',
     'turning_rates',
+    'wait_round',
 ]
 class SolverError(Exception):
     """
@@ -113,7 +115,7 @@ class TimeWarpConflict(InvalidInput):
         ...
 class WaitDelay:
     """
-    A delay found by WaitSearch.least_delay.
+    A delay found by wait_round.
     """
     @property
     def delay(self) -> float:
@@ -146,13 +148,14 @@ class WaitSearch:
     """
     def __init__(self, *, positions: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], times: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"], radius: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"], time_codes_per_second: typing.SupportsFloat | typing.SupportsIndex, sample_step: typing.SupportsFloat | typing.SupportsIndex, step: typing.SupportsFloat | typing.SupportsIndex, margin: typing.SupportsFloat | typing.SupportsIndex, slowest_pace: typing.SupportsFloat | typing.SupportsIndex, passing_cos: typing.SupportsFloat | typing.SupportsIndex, block: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
-    def least_delay(self, *, walker: typing.SupportsInt | typing.SupportsIndex, other: typing.SupportsInt | typing.SupportsIndex, first: typing.SupportsInt | typing.SupportsIndex, last: typing.SupportsInt | typing.SupportsIndex, room: typing.SupportsFloat | typing.SupportsIndex, guess: typing.SupportsFloat | typing.SupportsIndex, path: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], times: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"], source_times: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]) -> WaitDelay | None:
-        """
-        The least delay of `walker` (time codes, in steps from a step below `guess` up to `room`) that
-        parts it from `other` over their encounter (samples first..last) and meets nobody new but
-        walkers going its way; path (F, 2), times and source_times (F,) are the walker's path, current
-        and source time maps. None when no delay does.
-        """
+class WaitMemory:
+    """
+    The pairs that rounds of waiting have tried, and the delays both had then.
+    """
+    def __init__(self) -> None:
+        ...
+    def __len__(self) -> int:
+        ...
 class TimeWarpResult:
     """
     Warped time maps and the figures to report (time_warp).
@@ -963,4 +966,13 @@ def turning_rates(*, facing: typing.Any, seconds: typing.Any) -> numpy.typing.ND
     """
     Unsigned turning rate (degrees per second) of a facing (..., T) radians between samples at
     increasing seconds (..., T): (..., T-1).
+    """
+def wait_round(*, search: WaitSearch, walkers: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 1]"], others: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 1]"], firsts: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 1]"], lasts: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 1]"], guesses: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"], paths: list, times: list, source_times: list, budget: typing.SupportsFloat | typing.SupportsIndex, step: typing.SupportsFloat | typing.SupportsIndex, delay: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"], tried: WaitMemory) -> list[tuple[int, WaitDelay]]:
+    """
+    One round of waiting (the C++ WaitRound): the encounters (walkers, others, their first and last
+    samples, first guesses) in turn, each walker taking the least delay of the first of its encounters
+    that has one, at most one per round, within `budget` time codes in all (`delay` (A,): taken so far;
+    passed over below `step` left) and not tried before with both delays as they are (`tried`, a
+    WaitMemory, records every pair tried). paths (F, 2), times and source_times (F,): every agent's.
+    Returns [(walker, WaitDelay)] in the order taken.
     """

@@ -317,4 +317,34 @@ WaitDelay WaitSearch::LeastDelay(const WaitQuery& q, const WaitWalker& walker) c
   return out;
 }
 
+std::vector<std::pair<int, WaitDelay>> WaitRound(const WaitSearch& search, const std::vector<WaitEncounter>& encounters,
+                                                 const std::vector<WaitWalker>& walkers, double budget, double step,
+                                                 std::vector<double>& delay, WaitTried& tried) {
+  if (delay.size() != static_cast<size_t>(search.agents()) || walkers.size() != delay.size())
+    throw InvalidInput("WaitRound", "delay and walkers need one entry per agent");
+  std::vector<std::pair<int, WaitDelay>> out;
+  std::vector<char> taken(delay.size(), 0);
+  for (const WaitEncounter& e : encounters) {
+    if (e.walker < 0 || e.other < 0 || e.walker >= search.agents() || e.other >= search.agents())
+      throw InvalidInput("WaitRound", "an encounter names an agent out of range");
+    const size_t w = static_cast<size_t>(e.walker), o = static_cast<size_t>(e.other);
+    if (taken[w] || budget - delay[w] < step) continue;
+    const std::pair<double, double> now{delay[w], delay[o]};
+    auto [at, fresh] = tried.try_emplace({e.walker, e.other}, now);
+    if (!fresh) {
+      if (at->second == now) continue;
+      at->second = now;
+    }
+    WaitQuery q;
+    q.walker = e.walker, q.other = e.other, q.first = e.first, q.last = e.last;
+    q.room = budget - delay[w], q.guess = e.guess;
+    WaitDelay found = search.LeastDelay(q, walkers[w]);
+    if (!found.found) continue;
+    delay[w] += found.delay;
+    taken[w] = 1;
+    out.emplace_back(e.walker, std::move(found));
+  }
+  return out;
+}
+
 }  // namespace mocapedit

@@ -167,3 +167,43 @@ TEST(WaitSearch, AWaitMeetsNobodyNew) {
   EXPECT_GE(Closest(two[1], found.times, three[0]), clearance);
   EXPECT_GE(Closest(two[1], found.times, three[2]), clearance);
 }
+
+TEST(WaitSearch, ARoundTakesEachWalkersFirstDelayAndRemembersWhatItTried) {
+  // Walker 1 crosses walker 0, and walker 2 crosses walker 0 later: each of 1 and 2 waits once,
+  // for its first encounter in the order given.
+  const std::vector<Walk> walks = {Through(1, 0, 100), Through(0, 1, 100), Through(0, -1, 100)};
+  const Eigen::VectorXd radius = Eigen::VectorXd::Constant(3, 0.3);
+  const WaitSearch search(Positions(walks), Frames(), radius, Settings());
+  const Eigen::VectorXd times = Frames();
+  const std::vector<Trajectory2> paths = {Path(walks[0]), Path(walks[1]), Path(walks[2])};
+  std::vector<WaitWalker> walkers;
+  for (const auto& p : paths) walkers.push_back({p, times, times});
+  const std::vector<mocapedit::WaitEncounter> encounters = {
+      {1, 0, 91, 109, 1.0}, {1, 0, 91, 109, 1.0}, {2, 0, 91, 109, 1.0}};
+  std::vector<double> delay(3, 0.0);
+  mocapedit::WaitTried tried;
+  const auto found = mocapedit::WaitRound(search, encounters, walkers, 72.0, 6.0, delay, tried);
+  ASSERT_EQ(found.size(), 2u);
+  EXPECT_EQ(found[0].first, 1);
+  EXPECT_EQ(found[1].first, 2);
+  const WaitDelay alone = search.LeastDelay({1, 0, 91, 109, 72.0, 1.0}, walkers[1]);
+  EXPECT_EQ(found[0].second.delay, alone.delay);
+  for (int i = 0; i < kSamples; ++i) EXPECT_EQ(found[0].second.times[i], alone.times[i]);
+  EXPECT_EQ(delay[1], alone.delay);
+  EXPECT_EQ(delay[2], found[1].second.delay);
+  EXPECT_EQ(tried.size(), 2u);
+  EXPECT_EQ(tried.at({1, 0}), std::make_pair(0.0, 0.0));
+  // The same pairs with the same delays again: passed over. A walker with less than a step of
+  // its budget left: passed over.
+  std::vector<double> again(3, 0.0);
+  EXPECT_TRUE(mocapedit::WaitRound(search, encounters, walkers, 72.0, 6.0, again, tried).empty());
+  mocapedit::WaitTried fresh;
+  std::vector<double> spent = {0.0, 70.0, 0.0};
+  const auto left = mocapedit::WaitRound(search, encounters, walkers, 72.0, 6.0, spent, fresh);
+  ASSERT_EQ(left.size(), 1u);
+  EXPECT_EQ(left[0].first, 2);
+  // An agent out of range is an error.
+  std::vector<double> none(3, 0.0);
+  EXPECT_THROW(mocapedit::WaitRound(search, {{3, 0, 91, 109, 1.0}}, walkers, 72.0, 6.0, none, fresh),
+               mocapedit::InvalidInput);
+}

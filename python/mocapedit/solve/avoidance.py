@@ -1247,7 +1247,8 @@ def _waits(problem: Problem, settings: Settings, fixed: np.ndarray) -> _Waits:
     # is not compared: nobody else walks there then.
     span = problem.span or (min(float(t[0]) for t in times), max(float(t[-1]) for t in times))
     out.span = span
-    tried: dict[tuple[int, int], tuple[float, float]] = {}
+    tried = _solver.WaitMemory()
+    walking_paths = [paths[i] for i in names]
     sampling = collisions.sample(names, {i: t for i, t in enumerate(times)}, paths, problem.sample_step, span)
     out.sampling = sampling
     for rnd in range(settings.wait_rounds):
@@ -1289,7 +1290,6 @@ def _waits(problem: Problem, settings: Settings, fixed: np.ndarray) -> _Waits:
         cross_guess = (to + need / np.maximum(so, 1e-300)) - (tw - need / np.maximum(sw, 1e-300))
         gap = np.linalg.norm(pos[k, a] - pos[k, b], axis=1)
         guess = np.where(following, (need - gap) / np.maximum(sw, 1e-300), cross_guess) * problem.sample_step
-        taken = set()
         # The least delay of each walker (C++): in steps, from a step below the first guess
         # (rounded to steps) up to three steps above it, that parts it from the other over
         # their encounter and meets nobody new but walkers going its way; it starts after
@@ -1298,23 +1298,19 @@ def _waits(problem: Problem, settings: Settings, fixed: np.ndarray) -> _Waits:
                                     time_codes_per_second=fps, sample_step=problem.sample_step, step=step,
                                     margin=problem.margin * (1.0 + settings.overshoot), slowest_pace=SLOWEST_PACE,
                                     passing_cos=PASSING_COS, block=max(1, int(round(fps / problem.sample_step))))
-        # The encounters in the order they begin, as Python numbers (converted once: tens of
-        # thousands of them in a crowd of 10,000).
+        # The encounters in the order they begin, each walker waiting for the first it can (at
+        # most once a round); a pair tried before, neither of which has waited since, fails
+        # again and is passed over.
         order = np.argsort(found.first, kind="stable")
         order = order[ok[order]]
-        for w, o, first, last, first_guess in zip(who[order].tolist(), other[order].tolist(),
-                                                  found.first[order].tolist(), found.last[order].tolist(),
-                                                  guess[order].tolist()):
-            # A pair tried before, neither of which has waited since, fails again.
-            if w in taken or budget - delay[w] < step or tried.get((w, o)) == (delay[w], delay[o]):
-                continue
-            tried[(w, o)] = (delay[w], delay[o])
-            found_delay = search.least_delay(walker=w, other=o, first=first, last=last,
-                                             room=float(budget - delay[w]), guess=first_guess, path=paths[w],
-                                             times=times[w], source_times=source[w])
-            if found_delay is not None:
-                times[w], delay[w] = found_delay.times, delay[w] + found_delay.delay
-                taken.add(w)
+        taken = set()
+        for w, found_delay in _solver.wait_round(
+                search=search, walkers=who[order].astype(np.int32), others=other[order].astype(np.int32),
+                firsts=found.first[order].astype(np.int32), lasts=found.last[order].astype(np.int32),
+                guesses=guess[order].astype(np.float64), paths=walking_paths, times=times, source_times=source,
+                budget=float(budget), step=float(step), delay=delay, tried=tried):
+            times[w], delay[w] = found_delay.times, delay[w] + found_delay.delay
+            taken.add(w)
         if not taken:
             break
         moved = np.array(sorted(taken), dtype=np.int64)   # only the agents that waited move in the sampling

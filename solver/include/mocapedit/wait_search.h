@@ -14,6 +14,8 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <map>
+#include <utility>
 #include <vector>
 
 #include "mocapedit/errors.h"
@@ -102,5 +104,27 @@ class WaitSearch {
   double speed_ = 0.0;           // largest move of any agent between samples, either axis
   double largest_radius_ = 0.0;
 };
+
+// One encounter of a round of waiting: the walker that would wait, the other, the samples of
+// their encounter (inclusive) and the first guess of the delay (time codes).
+struct WaitEncounter {
+  int walker = 0, other = 0;
+  int first = 0, last = 0;
+  double guess = 0.0;
+};
+
+// The pairs tried so far, over the rounds: (walker, other) -> the delays both had taken then.
+using WaitTried = std::map<std::pair<int, int>, std::pair<double, double>>;
+
+// One round of waiting: the encounters in the order given, each walker taking the least delay
+// (WaitSearch::LeastDelay) of the first of its encounters that has one. An encounter is passed
+// over when its walker has already taken a delay in this round, has less than `step` left of
+// `budget` (time codes, `delay` holding what each agent has taken so far), or was tried in an
+// earlier round or encounter with both agents' delays as they are now; every one tried is
+// recorded in `tried`. `walkers` holds each agent's frames (only the walkers' are read).
+// Adds the delays taken to `delay` and returns them (walker, delay) in the order taken.
+std::vector<std::pair<int, WaitDelay>> WaitRound(const WaitSearch& search, const std::vector<WaitEncounter>& encounters,
+                                                 const std::vector<WaitWalker>& walkers, double budget, double step,
+                                                 std::vector<double>& delay, WaitTried& tried);
 
 }  // namespace mocapedit
