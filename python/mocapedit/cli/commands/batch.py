@@ -32,6 +32,10 @@ costs, so it pays only when workers would be idle. Time warp, collision avoidanc
 (which couples agents that can meet), layering, inspection and writing run in the
 shot's own task either way.
 
+Each worker of the local cluster solves on its share of the machine's threads (the
+threads over the workers), or on MOCAPEDIT_THREADS when it is set; set it for the
+workers of a running cluster too (MOCAPEDIT_THREADS=1 dask worker ... --nthreads 1).
+
 Exit status: 0 when every shot was solved or skipped, 1 when any failed or on bad
 input (a missing shot, two shots writing the same output, an unreachable scheduler:
 then nothing is solved), 2 on bad usage."""
