@@ -206,7 +206,8 @@ struct Agent {
     const FootPlantJob& p = job;
     const std::size_t count = Count();
     const double mpu = p.meters_per_unit;
-    const double drop = p.max_drop_m / mpu, least = p.leash_m / mpu, most = p.max_leash_m / mpu;
+    const double longest = p.max_leash_m * p.reach_leash[index];
+    const double drop = p.max_drop_m / mpu, least = p.leash_m / mpu, most = longest / mpu;
     std::vector<double> radius(count);
     for (std::size_t t = 0; t < count; ++t) {
       // As far as the leg reaches with the pelvis lowered a little.
@@ -220,7 +221,7 @@ struct Agent {
       const double reach = std::sqrt(std::max(soft * soft - height * height, 0.0)) - over;
       radius[t] = Clip(reach, least, most);
     }
-    const double reach_blend = static_cast<double>(p.blend[index]) * p.max_leash_m / p.leash_m;
+    const double reach_blend = static_cast<double>(p.blend[index]) * longest / p.leash_m;
     const std::size_t c0 = static_cast<std::size_t>(p.contact_offsets[2 * index + k]);
     const std::size_t c1 = static_cast<std::size_t>(p.contact_offsets[2 * index + k + 1]);
     std::vector<Row>& out = rows[k];
@@ -559,7 +560,8 @@ struct Agent {
     std::array<std::vector<Row>, 2> legs = rows;
     const int steps = !legs[0].empty() && !legs[1].empty() ? Replant(legs, &p.stretch[2 * index]) : 0;
     p.steps[index] = steps;
-    const double blend = p.blend[index], least = p.leash_m / mpu, ratio = p.max_leash_m / p.leash_m;
+    const double blend = p.blend[index], least = p.leash_m / mpu;
+    const double ratio = p.max_leash_m * p.reach_leash[index] / p.leash_m;
     const double lifted = p.step_height_m / mpu;
     std::vector<Vec> pos_sum(2 * count, Vec::Zero());
     std::vector<Quat> rot_sum(2 * count, Quat(0, 0, 0, 0));
@@ -620,7 +622,7 @@ void FootPlantJob::Validate() const {
       {source_hip, n * 6, "source_hip"}, {source_ankle, n * 6, "source_ankle"},
       {source_hip_rot, n * 8, "source_hip_rot"}, {source_knee_rot, n * 8, "source_knee_rot"},
       {source_ankle_rot, n * 8, "source_ankle_rot"}, {blend, agents, "blend"}, {stretch, agents * 2, "stretch"},
-      {turn_leash, agents, "turn_leash"},
+      {turn_leash, agents, "turn_leash"}, {reach_leash, agents, "reach_leash"},
       {up, 3, "up"}};
   for (const auto& in : inputs)
     if (!Sized(in.s, in.size)) throw InvalidInput(job, std::string(in.name) + " must hold " + std::to_string(in.size) + " values");
@@ -642,6 +644,8 @@ void FootPlantJob::Validate() const {
     if (!(std::isfinite(s) && s > 0)) throw InvalidInput(job, "stretch must be finite and positive");
   for (double s : turn_leash)
     if (!(std::isfinite(s) && s > 0)) throw InvalidInput(job, "turn_leash must be finite and positive");
+  for (double s : reach_leash)
+    if (!(std::isfinite(s) && s >= 1)) throw InvalidInput(job, "reach_leash must be finite and at least 1");
   const bool y_up = up[0] == 0 && up[1] == 1 && up[2] == 0, z_up = up[0] == 0 && up[1] == 0 && up[2] == 1;
   if (!y_up && !z_up) throw InvalidInput(job, "up must be +Y (0, 1, 0) or +Z (0, 0, 1)");
   const struct { double v; bool ok; const char* what; } settings[] = {

@@ -21,7 +21,7 @@ struct Stand {
   std::vector<std::int64_t> offsets, contact_offsets;
   std::vector<std::uint8_t> stationary, stepping;
   std::vector<double> frames, seconds, turn, hip, knee, ankle, ankle_rot, source_hip, source_ankle, source_rot;
-  std::vector<double> contacts, blend, stretch, turn_leash, up{0, 1, 0};
+  std::vector<double> contacts, blend, stretch, turn_leash, reach_leash, up{0, 1, 0};
   std::vector<double> target, target_rot, weight;
   std::vector<std::int64_t> steps;
 
@@ -36,6 +36,7 @@ struct Stand {
       }
       blend.push_back(2.0);
       turn_leash.push_back(1.0);
+      reach_leash.push_back(1.0);
       stretch.insert(stretch.end(), {1.0, 1.0});
       for (std::size_t t = 0; t < kPoses; ++t) {
         const double f = static_cast<double>(t);
@@ -61,7 +62,7 @@ struct Stand {
     job.source_hip = source_hip, job.source_ankle = source_ankle;
     job.source_hip_rot = source_rot, job.source_knee_rot = source_rot, job.source_ankle_rot = source_rot;
     job.contact_offsets = contact_offsets, job.contacts = contacts, job.blend = blend, job.stretch = stretch;
-    job.turn_leash = turn_leash;
+    job.turn_leash = turn_leash, job.reach_leash = reach_leash;
     job.up = up;
     job.target = target, job.target_rot = target_rot, job.weight = weight, job.stepping = stepping, job.steps = steps;
     return job;
@@ -106,6 +107,9 @@ TEST(FootPlantJob, Validate) {
     auto job = s.Job();
     job.turn_leash = Span<const double>(s.turn_leash.data(), 1);
     EXPECT_NE(Rejection(job).find("turn_leash must hold 2"), std::string::npos);
+    s.reach_leash[1] = 0.5;
+    EXPECT_NE(Rejection(s.Job()).find("reach_leash must be finite and at least 1"), std::string::npos);
+    s.reach_leash[1] = 1.0;
   }
   {
     auto job = s.Job();
@@ -175,6 +179,28 @@ TEST(FootPlantJob, APlantLagsTheBodysTurnByItsTurnLeash) {
         EXPECT_NEAR(swing, 10.0, 0.5) << "both ends of the 40-degree turn lie 20 from its mean: 5 past the leash";
       else
         EXPECT_NEAR(swing, 0.0, 1e-9) << "30 degrees of leash hold the plant through it";
+    }
+  }
+}
+
+TEST(FootPlantJob, APlantLiesAsFarAsItsReachLeashLets) {
+  // Bent legs (hips 0.75 up) that reach far; the edit drags the body 0.4 forwards over the
+  // contact. The plant lies where the edit puts the foot on average, 0.2 from either end: past
+  // max_leash_m (0.15) it is dragged along, within 5/3 of it (0.25) it stays.
+  for (double leash : {1.0, 5.0 / 3.0}) {
+    Stand s(1, 0.4);
+    for (std::size_t i = 0; i < Stand::kPoses * 2; ++i) {
+      s.hip[3 * i + 1] = 0.75;
+      s.knee[3 * i + 1] = 0.40, s.knee[3 * i + 2] = s.ankle[3 * i + 2] + 0.25;
+    }
+    s.reach_leash[0] = leash;
+    s.Job().Run();
+    for (std::size_t leg = 0; leg < 2; ++leg) {
+      const double moved = s.target[3 * (2 * 30 + leg) + 2] - s.target[3 * (2 * 5 + leg) + 2];
+      if (leash == 1.0)
+        EXPECT_GT(moved, 0.05) << "dragged past the leash";
+      else
+        EXPECT_NEAR(moved, 0.0, 1e-9) << "held within the longer leash";
     }
   }
 }

@@ -1066,8 +1066,8 @@ def test_a_walk_turned_at_a_corner_keeps_its_planted_feet(tmp_path, corner, end)
 @pytest.mark.parametrize("corner, end", [((0.0, 2.5), (2.5, 2.5)), ((0.0, 2.5), (1.5, 2.5))])
 def test_an_agent_whose_feet_still_slide_lets_its_plants_lag_the_turn_further(tmp_path, monkeypatch, corner, end):
     """An agent whose locked feet still slide over the bar is locked again with its plants
-    lagging the body's turn further (TURN_FURTHER times LEASH_DEGREES), and keeps that where its
-    feet slide less and its legs turn no faster. With the plants lagging 15 degrees at most, the
+    lagging the body's turn further (LOOSER, in turn), and keeps that where its feet slide less
+    and its legs turn no faster. With the plants lagging 15 degrees at most, the
     walks turned at a corner slide +0.52 and +0.69 cm/s over their source's; lagging further
     where they slide, +0.00 and +0.05 (the CMU crowds: a walker turned hard as it stops, +1.47 ->
     +0.68; one whose held pose avoidance moved, +3.17 -> +1.44)."""
@@ -1083,9 +1083,40 @@ def test_an_agent_whose_feet_still_slide_lets_its_plants_lag_the_turn_further(tm
     assert bones < 1e-6 and flips == 0 and speed < 1.45
     assert max(c["residual"] for c in result.report.constraints) < 1e-6
     # Without the second try, over the bar.
-    monkeypatch.setattr(feet, "_turn_further_where_sliding", lambda run, legs, skates: skates)
+    monkeypatch.setattr(feet, "_loosen_where_sliding", lambda run, legs, skates: skates)
     _, plain = _solve(tmp_path, name="plain")
     assert measure.plausibility(src, plain, a).foot_skate_edited > figures.foot_skate_source + 0.005
+
+
+def test_a_standing_agent_whose_feet_still_slide_lets_its_plants_lie_further(tmp_path, monkeypatch):
+    """An idle dragged 50 cm aside and back within 4 s by handles: with its plants no further
+    than MAX_LEASH_M from where the edit puts its feet, they slid 7.5 cm/s (its source's do not
+    slide). Its plants may then lie further, as far as its legs reach (LOOSER's last step): it
+    stands and sways its hips over its feet, which slide no more than the source's."""
+    from mocapedit.pipeline.passes import feet
+    clip = walker.idle(frames=96, fps=FPS, name="idle")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)], up_axis="Y",
+                                       fps=FPS, clips_dir=tmp_path / "clips")
+    a = f"{CROWD}/a"
+    p = clip.translations[:, 0]
+    for k, frame in enumerate((0, 48, 95)):
+        examples.add_position_constraint(stage, f"/Edits/h{k}", a, frame,
+                                         (float(p[frame][0]) + (0.5 if k == 1 else 0.0), 0.0, float(p[frame][2])))
+    stage.GetRootLayer().Save()
+    src = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    times = evaluate.sample_times(src, a)
+    result, out = _solve(tmp_path)
+    figures = measure.plausibility(src, out, a)
+    assert figures.foot_skate_edited <= figures.foot_skate_source + 0.002
+    assert max(c["residual"] for c in result.report.constraints) < 1e-6
+    _, free = _solve(tmp_path, name="free", foot_locking=False)
+    bones, flips, speed = _leg_quality(src, out, a, times, LEGS, FPS, unlocked=free)
+    assert bones < 1e-6 and flips == 0
+    # Without that step, over the bar, and the legs turning faster.
+    monkeypatch.setattr(feet, "LOOSER", tuple(step for step in feet.LOOSER if step[1] == 1.0))
+    _, plain = _solve(tmp_path, name="plain")
+    assert measure.plausibility(src, plain, a).foot_skate_edited > figures.foot_skate_source + 0.05
+    assert _leg_quality(src, plain, a, times, LEGS, FPS, unlocked=free)[2] > speed
 
 
 def test_a_walk_pushed_aside_at_its_start_eases_its_locks_in_over_longer(tmp_path, monkeypatch):
@@ -1093,8 +1124,10 @@ def test_a_walk_pushed_aside_at_its_start_eases_its_locks_in_over_longer(tmp_pat
     far from its next plant. Easing in over 0.1 s, the lock turned a hip 1.57 times as fast as
     the source ever does (the bar is 1.5). An agent whose locked legs turn faster than
     STEP_SPEED_RATIO times its pose eases in and out over longer, and keeps that where its legs
-    turn slower with it."""
+    turn slower with it. (Measured without the looser plants of LOOSER, which lower the skate of
+    either ease by as much as they can.)"""
     from mocapedit.pipeline.passes import feet
+    monkeypatch.setattr(feet, "LOOSER", ())
     a = _walk_with_handles(tmp_path, {0: (0.0, 0.0), 12: (1.0, 0.625), 96: (0.0, 5.0)})
     result, out = _solve(tmp_path)
     _, free = _solve(tmp_path, name="free", foot_locking=False)

@@ -313,6 +313,7 @@ class PlantInputs:
     blend: np.ndarray            # (A,) frames a lock eases in and out over (at least)
     stretch: np.ndarray          # (A,2) how much longer each leg's steps are made
     turn_leash: np.ndarray       # (A,) how many times leash_degrees each agent's plants may lag the turn
+    reach_leash: np.ndarray      # (A,) how many times max_leash_m they may lie from the edited foot (>= 1)
     up: np.ndarray               # (3,) +Y or +Z
     meters_per_unit: float
     leash_m: float               # the least leash
@@ -457,6 +458,7 @@ class _AgentPlan:
         self.up_axis = "YZ"[self.up - 1]
         self.blend = float(p.blend[a])
         self.leash_turn = np.radians(p.leash_degrees * float(p.turn_leash[a]))
+        self.max_leash_m = p.max_leash_m * float(p.reach_leash[a])
         self.rows = [self._contacts(k, p.contacts[p.contact_offsets[2 * a + k]:p.contact_offsets[2 * a + k + 1]])
                      for k in range(2)]
 
@@ -468,14 +470,14 @@ class _AgentPlan:
         # least leash to the longest.
         radius = np.clip(reach(self.hip[:, k], self.knee[:, k], self.ankle[:, k], self.up_vector,
                                p.max_drop_m / p.meters_per_unit, p.soft_reach),
-                         p.leash_m / p.meters_per_unit, p.max_leash_m / p.meters_per_unit)
+                         p.leash_m / p.meters_per_unit, self.max_leash_m / p.meters_per_unit)
         ranges = np.array(ranges, dtype=np.float64).reshape(-1, 2)
         inside = (self.frames >= ranges[:, :1] - 1e-9) & (self.frames <= ranges[:, 1:] + 1e-9)   # (C,T)
         used = inside.any(axis=1)
         ranges, inside = ranges[used], inside[used]
         if not len(ranges):
             return None
-        reached = _ramp(self.frames, ranges[:, :1], ranges[:, 1:], blend * p.max_leash_m / p.leash_m) > 0  # (C,T)
+        reached = _ramp(self.frames, ranges[:, :1], ranges[:, 1:], blend * self.max_leash_m / p.leash_m) > 0  # (C,T)
         lo = reached.argmax(axis=1)
         width = int((reached.sum(axis=1)).max())
         at = lo[:, None] + np.arange(width)                                                      # (C,W)
@@ -533,7 +535,7 @@ class _AgentPlan:
             far = np.linalg.norm(r.shift - r.offset, axis=-1) / (p.leash_m / p.meters_per_unit)    # (C,W)
             rows_c = np.arange(len(r.at))
             ends = r.inside.argmax(axis=1), r.at.shape[1] - 1 - r.inside[:, ::-1].argmax(axis=1)
-            blend_in, blend_out = (blend * np.clip(far[rows_c, e], 1.0, p.max_leash_m / p.leash_m)[:, None]
+            blend_in, blend_out = (blend * np.clip(far[rows_c, e], 1.0, self.max_leash_m / p.leash_m)[:, None]
                                    for e in ends)
             w = np.where(r.valid, _ramp(self.frames[r.at], r.ranges[:, :1], r.ranges[:, 1:], blend_in, blend_out), 0.0)
             valid = r.valid & (w > 0)

@@ -12,7 +12,8 @@
 // Each contact of the source clip gets one plant: the source foot carried by one turn about
 // up and one ground shift, chosen where the edit puts the foot (least squares), turned about
 // the planted foot itself. While the edited foot stays within a leash of the plant (as far as
-// the leg reaches with the pelvis lowered a little, from `leash_m` to `max_leash_m`, and
+// the leg reaches with the pelvis lowered a little, from `leash_m` to `max_leash_m` times the
+// agent's `reach_leash`, and
 // `leash_degrees` times the agent's `turn_leash` of turn) the plant stays put; beyond, it follows at the leash's length, from
 // the start that slides least (frames inside a stationary range keep the plant, which is
 // followed outwards from them). Where a leashed plant would slide further than `step_slide_m`
@@ -71,6 +72,9 @@ struct FootPlantJob {
   // #A: how many times leash_degrees each agent's plants may lag the edited foot's turn (> 0;
   // 1 as planned).
   Span<const double> turn_leash;
+  // #A: how many times max_leash_m each agent's plants may lie from where the edit puts the
+  // foot, where its leg reaches (>= 1; 1 as planned).
+  Span<const double> reach_leash;
   // World up, 3 doubles: +Y (0, 1, 0) or +Z (0, 0, 1). The plant's turn is about it.
   Span<const double> up;
 
@@ -111,7 +115,8 @@ struct FootPlantJob {
   //    hold #N * 2 entries of its width; a frame, second or turn is not finite;
   //  - contact_offsets does not hold #2A + 1 values, does not start at 0, decreases, or does
   //    not end at the contacts' count; contacts is not 2 doubles each, or a frame is not finite;
-  //  - blend, stretch or turn_leash do not hold #A (#A * 2, #A) finite positive values;
+  //  - blend, stretch or turn_leash do not hold #A (#A * 2, #A) finite positive values, or
+  //    reach_leash #A finite values of at least 1;
   //  - up is neither +Y nor +Z;
   //  - meters_per_unit, leash_m, leash_degrees, soft_reach, step_seconds are not positive, or
   //    soft_reach is above 1, max_leash_m below leash_m, step_longest_seconds below

@@ -7,8 +7,8 @@ source clip (authored with ``MocapFootContactAPI``, else detected) gets one plan
 source foot carried by one turn and one ground shift, chosen by least squares where the
 edit puts the foot, and leashed to stay within what the leg can reach from where the edit puts
 the foot (at least ``LEASH_M``, with the pelvis lowered by at most ``MAX_DROP_M``) and
-``LEASH_DEGREES`` of its turn (``TURN_FURTHER`` times that for an agent whose feet still slide
-over the bar). The solver's foot-locking job (:mod:`mocapedit.solve.footlock`)
+``LEASH_DEGREES`` of its turn (further, and further from the foot, for an agent whose feet still
+slide over the bar: ``LOOSER``). The solver's foot-locking job (:mod:`mocapedit.solve.footlock`)
 moves the legs of all agents at once (all of the shot's, or a run of them on a worker when
 ``SolveOptions.components`` is set: an agent's legs depend on no other agent's,
 :func:`lock_agents`). Agents whose legs change get a pose edit that replaces their hip, knee and ankle
@@ -57,9 +57,11 @@ MAX_LEASH_M = 0.15
 #: toes slide: at 15, a walk turned round a corner by handles slid +0.5 to +1.2 cm/s over its
 #: source's.
 LEASH_DEGREES = 25.0
-#: Times LEASH_DEGREES the plants of an agent whose locked feet still slide over the bar may lag
-#: the turn, tried in turn (:func:`_turn_further_where_sliding`): 45 and 35 degrees.
-TURN_FURTHER = (1.8, 1.4)
+#: The looser plants an agent whose locked feet still slide over the bar tries, in turn
+#: (:func:`_loosen_where_sliding`): times LEASH_DEGREES they may lag the turn (45, then 35
+#: degrees), and times MAX_LEASH_M they may lie from the edited foot (25 cm), each pair kept or
+#: not before the next.
+LOOSER = ((1.8, 1.0), (1.4, 1.0), (1.0, 5.0 / 3.0))
 #: Seconds a foot takes to step where an edit drags or turns a standing body further than the
 #: leash (:func:`footplant.replant`): at least STEP_SECONDS, longer so that the foot moves no
 #: faster than its source does, but no longer than STEP_LONGEST_SECONDS; and metres it lifts at
@@ -331,6 +333,7 @@ class _Run:
         self.keep = np.concatenate([lock.keep for lock in locks])
         self.stretch = np.ones((len(locks), 2))
         self.turn_leash = np.ones(len(locks))
+        self.reach_leash = np.ones(len(locks))
 
     def span(self, a: int) -> tuple[int, int]:
         return int(self.offsets[a]), int(self.offsets[a + 1])
@@ -395,7 +398,8 @@ class _Run:
         inputs = footplant.PlantInputs(
             offsets=self._offsets(agents), contact_offsets=np.cumsum([0] + [len(c) for c in contacts]).astype(np.int64),
             contacts=np.concatenate(contacts).reshape(-1, 2), blend=np.array([self.locks[a].blend for a in chosen]),
-            stretch=self.stretch[list(chosen)], turn_leash=self.turn_leash[list(chosen)], up=self.up, meters_per_unit=info.meters_per_unit,
+            stretch=self.stretch[list(chosen)], turn_leash=self.turn_leash[list(chosen)],
+            reach_leash=self.reach_leash[list(chosen)], up=self.up, meters_per_unit=info.meters_per_unit,
             leash_m=LEASH_M, max_leash_m=MAX_LEASH_M, max_drop_m=MAX_DROP_M, leash_degrees=LEASH_DEGREES,
             soft_reach=footlock.SOFT_REACH, step_slide_m=STEP_SLIDE_M, step_slide_degrees=STEP_SLIDE_DEGREES,
             step_seconds=STEP_SECONDS, step_longest_seconds=STEP_LONGEST_SECONDS, step_height_m=STEP_HEIGHT_M,
@@ -715,7 +719,7 @@ def _lock_run(ctx: SolveContext, locks: list) -> None:
         run.solve(again)
     _ease_longer_where_fast(run)
     legs = [run.locked_legs(a, info.meters_per_unit) for a in range(len(locks))]
-    skates = _turn_further_where_sliding(run, legs, run.skates(legs))
+    skates = _loosen_where_sliding(run, legs, run.skates(legs))
     for a, ((lock, result), locked_legs, skate) in enumerate(zip(locks, legs, skates)):
         result.contacts, result.skate, result.legs = lock.locked, skate, locked_legs
         result.steps = int(run.steps[a]) if locked_legs is not None else 0
@@ -750,26 +754,35 @@ def _ease_longer_where_fast(run: _Run) -> None:
         ratio[fast] = now[fast]
 
 
-def _turn_further_where_sliding(run: _Run, legs: list, skates: list) -> list:
-    """Agents whose locked feet still slide more than SKATE_TOLERANCE_M over their source's (an
-    edit that turns the body hard while a foot is planted: the plant turns along past
-    LEASH_DEGREES, about the ankle, and the toes slide) are locked again with their plants
-    lagging the turn further, TURN_FURTHER times as far, in turn, until their feet slide less
-    and their legs turn no faster than STEP_SPEED_RATIO times the pose before locking (or than
-    they did). Updates ``legs`` and returns the skates (:meth:`_Run.skates`)."""
+def _loosen_where_sliding(run: _Run, legs: list, skates: list) -> list:
+    """Agents whose locked feet still slide more than SKATE_TOLERANCE_M over their source's are
+    locked again with looser plants, a step at a time (LOOSER): their plants lag the body's turn
+    further (an edit that turns the body hard while a foot is planted: past LEASH_DEGREES the
+    plant turns along, about the ankle, and the toes slide), then may lie further from where the
+    edit puts the foot, as far as the leg reaches (a body carried while it stands on one foot:
+    past MAX_LEASH_M the foot is dragged along). Each keeps a step where its feet slide less and
+    its legs turn no faster than STEP_SPEED_RATIO times the pose before locking (or than they
+    did), and the steps after it try from there. Updates ``legs`` and returns the skates
+    (:meth:`_Run.skates`)."""
     mpu = run.ctx.data.info.meters_per_unit
     tolerance = SKATE_TOLERANCE_M / mpu
-    over = [a for a, (leg, skate) in enumerate(zip(legs, skates))
-            if leg is not None and skate is not None and skate[2] > skate[0] + tolerance]
+    skates = list(skates)
+
+    def sliding() -> list[int]:
+        return [a for a, (leg, skate) in enumerate(zip(legs, skates))
+                if leg is not None and skate is not None and skate[2] > skate[0] + tolerance]
+
+    over = sliding()
     if not over:
         return skates
     speed = run.leg_speed(over)
-    skates = list(skates)
-    for further in TURN_FURTHER:
+    for turn, reach in LOOSER:
+        over = [a for a in sliding() if turn > run.turn_leash[a] or reach > run.reach_leash[a]]
         if not over:
-            break
-        kept = {a: run.agent_state(a) for a in over}
-        run.turn_leash[over] = further
+            continue
+        kept = {a: (run.agent_state(a), run.turn_leash[a], run.reach_leash[a]) for a in over}
+        for a in over:
+            run.turn_leash[a], run.reach_leash[a] = max(turn, run.turn_leash[a]), max(reach, run.reach_leash[a])
         run.plan(over)
         run.solve(over)
         now = run.leg_speed(over)
@@ -777,17 +790,14 @@ def _turn_further_where_sliding(run: _Run, legs: list, skates: list) -> list:
         for a in over:
             trial[a] = run.locked_legs(a, mpu)
         again = run.skates(trial, over)
-        left = []
         for a in over:
             if (trial[a] is not None and again[a] is not None and again[a][2] < skates[a][2]
                     and now[a] <= max(speed[a], STEP_SPEED_RATIO) + 1e-9):
                 legs[a], skates[a] = trial[a], again[a]
             else:
-                run.set_agent_state(a, kept[a])
-                run.turn_leash[a] = 1.0
+                state, run.turn_leash[a], run.reach_leash[a] = kept[a]
+                run.set_agent_state(a, state)
                 legs[a] = run.locked_legs(a, mpu)
-                left.append(a)
-        over = left
     return skates
 
 
