@@ -1007,7 +1007,15 @@ class _Forward:
     lets a push far enough sideways pass for progress). Only the rows an iterate broke, or
     came within ``watch`` source chord lengths of breaking, are solved, kept from then on:
     held before they break, they cost no iteration of their own (on the bench's dense crowds
-    of 1,000, 5 to 7 iterations instead of 8 to 10; the mean displacement grows by up to 1%)."""
+    of 1,000, 5 to 7 iterations instead of 8 to 10; the mean displacement grows by up to 1%).
+
+    A crowd of 10,000 has millions of chords: each keeps its ends, direction and length and
+    which of its rows are held; the rows' directions and bounds are worked out from those when
+    needed, the forces are kept for the held rows only, and :meth:`watch` goes through the
+    chords a block at a time (held as arrays of three rows per chord, they took 600 MB)."""
+
+    #: Chords :meth:`watch` measures at once.
+    BLOCK = 1 << 16
 
     def __init__(self, state: _State, keep: float = 0.5, chord_s: float = 0.25, moving_m_s: float = 0.2,
                  cone_degrees: float = 45.0, watch: float = 0.0):
@@ -1028,63 +1036,75 @@ class _Forward:
         hv = h[owner]
         c = np.take(state.way, v + hv, axis=0) - np.take(state.way, v, axis=0)
         n = np.linalg.norm(c, axis=1)
-        moving = n > moving_m_s / s.meters_per_unit * hv * dt[owner]
-        moving = np.flatnonzero(moving)
-        self.v, self.u = np.take(v, moving), np.take(v + hv, moving)
-        length = np.take(n, moving)
-        d = np.take(c, moving, axis=0) / length[:, None]
-        self.slack = watch * length[:, None]
-        # Three rows per chord: d.c >= keep |c_source|, and the cone's two edges n.c >= 0
-        # (n = sin d -+ cos across, across = (-d_y, d_x)), kept as their x and y parts.
-        sin, cos = np.sin(np.radians(cone_degrees)), np.cos(np.radians(cone_degrees))
-        dx, dy = d[:, 0], d[:, 1]
-        self.nx, self.ny = np.empty((len(d), 3)), np.empty((len(d), 3))
-        self.nx[:, 0], self.ny[:, 0] = dx, dy
-        self.nx[:, 1], self.ny[:, 1] = sin * dx - cos * -dy, sin * dy - cos * dx
-        self.nx[:, 2], self.ny[:, 2] = sin * dx + cos * -dy, sin * dy + cos * dx
-        self.rhs = np.zeros((len(d), 3))
-        self.rhs[:, 0] = keep * length
-        self.near = self.rhs + self.slack      # a row is held from when its value drops below this
-        self.on = np.zeros((len(d), 3), bool)
-        self.force = np.zeros((len(d), 3))
-        self.force1 = np.zeros((len(d), 3))
-        # Room for watch(): a big crowd's chords are millions, and fresh temporaries each
-        # iteration cost more in page faults than the arithmetic.
-        self._ends = np.empty((2, len(d), 2))
-        self._value, self._term = np.empty((len(d), 3)), np.empty((len(d), 3))
-        self._below, self._off = np.empty((len(d), 3), bool), np.empty((len(d), 3), bool)
+        moving = np.flatnonzero(n > moving_m_s / s.meters_per_unit * hv * dt[owner])
+        del owner
+        index = np.int32 if len(state.rest) < np.iinfo(np.int32).max else np.int64
+        self.v, self.u = np.take(v, moving).astype(index), np.take(v + hv, moving).astype(index)
+        del v, hv
+        self.length = np.take(n, moving)
+        self.dx, self.dy = (np.take(c[:, k], moving) / self.length for k in range(2))
+        del c, n, moving
+        self.keep, self.watch_by = keep, watch
+        self.sin, self.cos = np.sin(np.radians(cone_degrees)), np.cos(np.radians(cone_degrees))
+        self.on = np.zeros((len(self.v), 3), bool)
+        # The held rows (flat indices chord * 3 + row, ascending) and their forces.
+        self._held_rows = np.zeros(0, dtype=np.int64)
+        self._force, self._force1 = np.zeros(0), np.zeros(0)
+
+    def _rows(self, chord: np.ndarray, row: np.ndarray | None = None) -> tuple:
+        """(nx, ny, rhs) of the chords' rows: all three of each, (len, 3) each, or of row ``row``
+        of each, (len,) each. Three rows per chord: d.c >= keep |c_source|, and the cone's two
+        edges n.c >= 0 (n = sin d -+ cos across, across = (-d_y, d_x))."""
+        dx, dy = self.dx[chord], self.dy[chord]
+        sin, cos = self.sin, self.cos
+        nx = np.stack([dx, sin * dx - cos * -dy, sin * dx + cos * -dy], axis=1)
+        ny = np.stack([dy, sin * dy - cos * dx, sin * dy + cos * dx], axis=1)
+        rhs = np.zeros((len(dx), 3))
+        rhs[:, 0] = self.keep * self.length[chord]
+        if row is None:
+            return nx, ny, rhs
+        at = np.arange(len(dx))
+        return nx[at, row], ny[at, row], rhs[at, row]
 
     @property
     def normal(self) -> np.ndarray:
         """(C, 3, 2) the rows' directions."""
-        return np.stack([self.nx, self.ny], axis=2)
+        nx, ny, _ = self._rows(np.arange(len(self.v)))
+        return np.stack([nx, ny], axis=2)
 
     def watch(self, flat: np.ndarray) -> int:
         """Turns on the rows of the chords ``flat`` breaks or nearly breaks; returns how many
         broken ones were new."""
-        chord, start = self._ends[0], self._ends[1]
-        np.take(flat, self.u, axis=0, out=chord)
-        np.take(flat, self.v, axis=0, out=start)
-        chord -= start
-        value, fresh, below = self._value, self._below, self._off
-        np.multiply(self.nx, chord[:, 0, None], out=value)
-        value += np.multiply(self.ny, chord[:, 1, None], out=self._term)
-        np.less(value, self.rhs, out=fresh)
-        fresh &= np.logical_not(self.on, out=below)
-        self.on |= fresh
-        self.on |= np.less(value, self.near, out=below)
-        return int(np.count_nonzero(fresh))
+        fresh_count = 0
+        for lo in range(0, len(self.v), self.BLOCK):
+            block = np.arange(lo, min(lo + self.BLOCK, len(self.v)))
+            chord = np.take(flat, self.u[block], axis=0) - np.take(flat, self.v[block], axis=0)
+            nx, ny, rhs = self._rows(block)
+            value = nx * chord[:, 0, None] + ny * chord[:, 1, None]
+            # A row is held from when its value drops below its bound and a slack.
+            slack = (self.watch_by * self.length[block])[:, None]
+            on = self.on[block]
+            fresh = (value < rhs) & ~on
+            fresh_count += int(np.count_nonzero(fresh))
+            self.on[block] = on | fresh | (value < rhs + slack)
+        return fresh_count
 
     def add(self, rows: "_Rows") -> np.ndarray:
-        c, k = self._held = np.nonzero(self.on)
-        return rows.add(np.stack([self.nx[c, k], self.ny[c, k]], axis=1), self.rhs[c, k], SEPARATION_SOFTNESS,
-                        np.stack([self.u[c], self.v[c]], axis=1), np.tile([1.0, -1.0], (len(c), 1)),
-                        at_least=True, force=self.force[c, k], force1=self.force1[c, k])
+        held = np.flatnonzero(self.on.ravel())
+        # Rows are only ever turned on: the ones held before keep their forces.
+        force, force1 = np.zeros(len(held)), np.zeros(len(held))
+        before = np.searchsorted(held, self._held_rows)
+        force[before], force1[before] = self._force, self._force1
+        self._held_rows, self._force, self._force1 = held, force, force1
+        c, k = np.divmod(held, 3)
+        nx, ny, rhs = self._rows(c, k)
+        return rows.add(np.stack([nx, ny], axis=1), rhs, SEPARATION_SOFTNESS,
+                        np.stack([self.u[c], self.v[c]], axis=1).astype(np.int64), np.tile([1.0, -1.0], (len(c), 1)),
+                        at_least=True, force=force, force1=force1)
 
     def solved(self, force: np.ndarray, force1: np.ndarray) -> None:
         """The forces of the rows the last add() sent (no watch() in between)."""
-        c, k = self._held
-        self.force[c, k], self.force1[c, k] = force, force1
+        self._force, self._force1 = np.array(force, dtype=np.float64), np.array(force1, dtype=np.float64)
 
 
 def _relinearize(state: _State, run: _Run):
