@@ -1169,3 +1169,21 @@ def test_an_idle_dragged_aside_and_back_shuffles_at_a_calm_pace(tmp_path):
     assert not ((lift[:, 0] > 0.02) & (lift[:, 1] > 0.02)).any()
     bones, flips, speed = _leg_quality(src, out, a, times, LEGS, FPS, unlocked=free, least=feet.STEP_MIN_TURN_SPEEDS)
     assert bones < 1e-6 and flips == 0 and speed < 1.5
+
+
+def test_turn_speed_of_many_joints_at_once_is_each_joints_own():
+    """The leg checks measure every hip, knee and ankle of a run of agents in one call: each joint's
+    speeds are those it gets alone (radians per second between uneven samples)."""
+    rng = np.random.default_rng(11)
+    seconds = np.cumsum(rng.uniform(1 / 60, 1 / 24, 30))
+    q = rng.normal(size=(30, 3, 2, 4))
+    both = footplant.turn_speed(q, seconds)
+    assert both.shape == (29, 3, 2)
+    for i in range(3):
+        for k in range(2):
+            np.testing.assert_array_equal(both[:, i, k], footplant.turn_speed(q[:, i, k], seconds))
+    # A quarter turn about up over one interval, then still.
+    half = np.radians(45.0)
+    turning = np.array([[0.0, 0.0, 0.0, 1.0], [0.0, 0.0, np.sin(half), np.cos(half)],
+                        [0.0, 0.0, np.sin(half), np.cos(half)]])
+    np.testing.assert_allclose(footplant.turn_speed(turning, np.array([0.0, 0.5, 1.0])), [np.pi, 0.0], atol=1e-12)

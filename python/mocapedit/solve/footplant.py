@@ -366,11 +366,13 @@ def yaw_quat(angle: np.ndarray, up: np.ndarray) -> np.ndarray:
 
 
 def turn_speed(q: np.ndarray, seconds: np.ndarray) -> np.ndarray:
-    """(T-1,) how fast (T,4) rotations turn between samples ``seconds`` apart, radians per second."""
+    """(T-1,) how fast (T,4) rotations turn between samples ``seconds`` (T,) apart, radians per
+    second; (T-1,...) for (T,...,4) rotations (many joints at once, each on its own)."""
     q = np.asarray(q, dtype=np.float64)
     dot = np.abs(np.sum(q[1:] * q[:-1], axis=-1)) / np.maximum(
         np.linalg.norm(q[1:], axis=-1) * np.linalg.norm(q[:-1], axis=-1), 1e-300)
-    return 2.0 * np.arccos(np.clip(dot, 0.0, 1.0)) / np.maximum(np.diff(seconds), 1e-300)
+    step = np.diff(np.asarray(seconds, dtype=np.float64)).reshape((-1,) + (1,) * (q.ndim - 2))
+    return 2.0 * np.arccos(np.clip(dot, 0.0, 1.0)) / np.maximum(step, 1e-300)
 
 
 def place(placement: np.ndarray, placement_rotation: np.ndarray, motion: np.ndarray, turn: np.ndarray,

@@ -240,10 +240,9 @@ class _AgentLock:
         locking (radians per second), at least STEP_MIN_TURN_SPEEDS; measured once."""
         if self._pose_speed is None:
             seconds = self.times / self.agent_fps
-            self._pose_speed = np.maximum(np.array([[
-                footplant.turn_speed(self.pose.rotations[:, self.columns[self.agent.joints[j]]], seconds).max(initial=0.0)
-                for j in (leg.hip, leg.knee, leg.ankle)] for leg in self.legs]).reshape(len(self.legs), 3),
-                STEP_MIN_TURN_SPEEDS)
+            columns = [self.columns[self.agent.joints[j]] for leg in self.legs for j in (leg.hip, leg.knee, leg.ankle)]
+            fastest = footplant.turn_speed(self.pose.rotations[:, columns], seconds).max(axis=0, initial=0.0)
+            self._pose_speed = np.maximum(fastest.reshape(len(self.legs), 3), STEP_MIN_TURN_SPEEDS)
         return self._pose_speed
 
     def ease_over(self, blend: float) -> None:
@@ -366,16 +365,17 @@ class _Run:
             return out
         seconds = self._pick(self.times, agents) / self.ctx.data.info.time_codes_per_second
         starts, between = offsets[:-1], offsets[1:-1] - 1   # pairs that span two agents
-        ratio = np.ones(len(chosen))
-        for i, new in enumerate((self.legs.hip_local, self.legs.knee_local, self.legs.ankle_local)):
-            for k in range(new.shape[1]):
-                speed = footplant.turn_speed(self._pick(new[:, k], agents), seconds)
-                speed[between] = 0.0
-                most = np.maximum.reduceat(np.append(speed, 0.0), starts)
-                pose = np.array([self.locks[a].pose_speed()[k, i] if k < len(self.locks[a].legs) else np.inf
-                                 for a in chosen])
-                ratio = np.maximum(ratio, most / np.maximum(pose, 1e-9))
-        out[chosen] = ratio
+        # (N, joint, leg, 4): each leg's hip, knee and ankle, all turn speeds at once.
+        new = np.stack([self._pick(v, agents) for v in (self.legs.hip_local, self.legs.knee_local,
+                                                        self.legs.ankle_local)], axis=1)
+        speed = footplant.turn_speed(new, seconds)
+        speed[between] = 0.0
+        most = np.maximum.reduceat(np.concatenate([speed, np.zeros((1,) + speed.shape[1:])]), starts, axis=0)
+        pose = np.full((len(chosen), 3, new.shape[2]), np.inf)
+        for n, a in enumerate(chosen):
+            legs = self.locks[a].pose_speed()
+            pose[n, :, :len(legs)] = legs.T
+        out[chosen] = np.maximum(1.0, (most / np.maximum(pose, 1e-9)).max(axis=(1, 2)))
         return out
 
     def _pick(self, values: np.ndarray, agents: list[int] | None) -> np.ndarray:
