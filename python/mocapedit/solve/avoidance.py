@@ -1076,17 +1076,23 @@ class _Forward:
         """Turns on the rows of the chords ``flat`` breaks or nearly breaks; returns how many
         broken ones were new."""
         fresh_count = 0
+        sin, cos = self.sin, self.cos
         for lo in range(0, len(self.v), self.BLOCK):
-            block = np.arange(lo, min(lo + self.BLOCK, len(self.v)))
-            chord = np.take(flat, self.u[block], axis=0) - np.take(flat, self.v[block], axis=0)
-            nx, ny, rhs = self._rows(block)
-            value = nx * chord[:, 0, None] + ny * chord[:, 1, None]
+            hi = min(lo + self.BLOCK, len(self.v))
+            chord = np.take(flat, self.u[lo:hi], axis=0) - np.take(flat, self.v[lo:hi], axis=0)
+            cx, cy = chord[:, 0], chord[:, 1]
+            dx, dy = self.dx[lo:hi], self.dy[lo:hi]
             # A row is held from when its value drops below its bound and a slack.
-            slack = (self.watch_by * self.length[block])[:, None]
-            on = self.on[block]
-            fresh = (value < rhs) & ~on
-            fresh_count += int(np.count_nonzero(fresh))
-            self.on[block] = on | fresh | (value < rhs + slack)
+            slack = self.watch_by * self.length[lo:hi]
+            bound = self.keep * self.length[lo:hi]
+            for k, (nx, ny) in enumerate(((dx, dy), (sin * dx - cos * -dy, sin * dy - cos * dx),
+                                          (sin * dx + cos * -dy, sin * dy + cos * dx))):
+                value = nx * cx + ny * cy
+                on = self.on[lo:hi, k]
+                rhs = bound if k == 0 else 0.0
+                fresh = (value < rhs) & ~on
+                fresh_count += int(np.count_nonzero(fresh))
+                on |= fresh | (value < (bound + slack if k == 0 else slack))
         return fresh_count
 
     def add(self, rows: "_Rows") -> np.ndarray:
