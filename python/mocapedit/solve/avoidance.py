@@ -482,13 +482,15 @@ def _separation_normals(state: _State, a: np.ndarray, b: np.ndarray, k: np.ndarr
     k0 = np.maximum(k - 1, 0)
     motion = (at(k1, a) - at(k0, a)) - (at(k1, b) - at(k0, b))
     speed = np.linalg.norm(motion, axis=1)
+    clearance = _clearance(state, a, b)
     # Passing, not walking together: over two samples they move by a fair part of a clearance.
-    moving = speed > 0.05 * _clearance(state, a, b)
+    moving = speed > 0.05 * clearance
     t = np.where(moving[:, None], motion / np.where(moving, speed, 1.0)[:, None], [[1.0, 0.0]])
     perp = np.stack([-t[:, 1], t[:, 0]], axis=1)
     along, across = np.sum(rel * t, axis=1), np.sum(rel * perp, axis=1)
     pair = a * np.int64(len(state.p.names)) + b
-    close = moving & (np.linalg.norm(rel, axis=1) < _clearance(state, a, b))
+    near = np.linalg.norm(rel, axis=1) < clearance
+    close = moving & near
     uniq, inverse = np.unique(pair, return_inverse=True)
     # The side is voted in the world: the offsets of a from b across their motion, summed.
     # A vote along the motion (pass on its left) flips with it, and an agent who walks up
@@ -511,8 +513,7 @@ def _separation_normals(state: _State, a: np.ndarray, b: np.ndarray, k: np.ndarr
     # turns back, pauses or sways), the pair's voted side holds: the line between their
     # points is a few centimetres long there and points anywhere, and following it pushed
     # such samples out in every direction, round the other in a loop.
-    still = ~moving & (np.linalg.norm(rel, axis=1) < _clearance(state, a, b)) & \
-        (np.linalg.norm(vote, axis=1) > 0)[inverse]
+    still = ~moving & near & (np.linalg.norm(vote, axis=1) > 0)[inverse]
     d[still] = vote[inverse[still]]
     return _unit(d, np.where(moving[:, None], side[:, None] * perp, [[1.0, 0.0]]))
 
