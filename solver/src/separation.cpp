@@ -297,9 +297,14 @@ struct RowSlots {
 // when it was last worked out, and while that residual, grown by what its agents moved
 // since, leaves it within the tolerance (or, a one-sided row without force, pulling), the
 // row would change nothing and is passed over: the same forces as visiting every row.
+//
+// With `side` (per block, 0 or 1: SplitInTwo), a sweep visits the rows of side 0's agents,
+// those of side 1's, then the rows between the sides, each in time order. The first two
+// touch no agent in common, so they run on two threads (`threads`) with the same result as
+// one after the other: the forces do not depend on the thread count.
 int SweepRows(const std::vector<AgentRows*>& blocks, const RowSlots& slots, const SeparationRows& in,
               const SeparationSettings& settings, const Eigen::VectorXd& q, const Eigen::VectorXd& diag,
-              Eigen::VectorXd& forces, bool* converged, int64_t* updates) {
+              const std::vector<char>& side, int threads, Eigen::VectorXd& forces, bool* converged, int64_t* updates) {
   const int nr = static_cast<int>(in.rhs.size());
   auto unilateral = [&](int r) { return in.kind.size() && in.kind[r] != 0; };
   // Every agent's part u = S_a lambda_a, one after another in one array (a sweep visits
@@ -344,6 +349,18 @@ int SweepRows(const std::vector<AgentRows*>& blocks, const RowSlots& slots, cons
     *converged = true;
     return 0;
   }
+  // The rows a sweep visits, in that order: side 0's, side 1's, those between (or all).
+  std::vector<int> order[3];
+  for (int r = 0; r < nr; ++r) {
+    if (!(diag[r] > 0.0)) continue;
+    int group = 0;
+    if (!side.empty()) {
+      group = side[static_cast<size_t>(slots.items[static_cast<size_t>(slots.start[static_cast<size_t>(r)])].agent)];
+      for (int i = slots.start[static_cast<size_t>(r)] + 1; i < slots.start[static_cast<size_t>(r) + 1]; ++i)
+        if (side[static_cast<size_t>(slots.items[static_cast<size_t>(i)].agent)] != group) group = 2;
+    }
+    order[group].push_back(r);
+  }
   // Per slot (as slots.items): sqrt of the row's diagonal entry in that agent's block, and
   // the agent's `moved` when the row was last worked out; per row, its residual then.
   std::vector<double> root(slots.items.size()), then(slots.items.size(), 0.0);
@@ -356,15 +373,16 @@ int SweepRows(const std::vector<AgentRows*>& blocks, const RowSlots& slots, cons
   const double relax = settings.relaxation, tol = settings.tolerance;
   // Rows ahead whose entries of u and columns of S are fetched early (memory latency).
   constexpr int kAhead = 8;
-  const int total_slots = static_cast<int>(slot.size());
-  for (sweep = 1; sweep <= settings.max_sweeps; ++sweep) {
+  // One pass over `rows`; returns the largest change passed on, counts the updates.
+  auto pass = [&](const std::vector<int>& rows, int64_t* count) {
     double change = 0.0;
-    for (int r = 0; r < nr; ++r) {
-      if (!(diag[r] > 0.0)) continue;
+    const int n = static_cast<int>(rows.size());
+    for (int p = 0; p < n; ++p) {
+      const int r = rows[static_cast<size_t>(p)];
       const int s0 = slots.start[static_cast<size_t>(r)], s1 = slots.start[static_cast<size_t>(r) + 1];
-      {
-        const int ahead = slots.start[static_cast<size_t>(std::min(r + kAhead, nr))];
-        for (int i = ahead, end = std::min(ahead + 2, total_slots); i < end; ++i) {
+      if (p + kAhead < n) {
+        const int ahead = rows[static_cast<size_t>(p + kAhead)];
+        for (int i = slots.start[static_cast<size_t>(ahead)], end = slots.start[static_cast<size_t>(ahead) + 1]; i < end; ++i) {
           __builtin_prefetch(u.data() + slot[static_cast<size_t>(i)].entry);
           __builtin_prefetch(slot[static_cast<size_t>(i)].column);
         }
@@ -394,7 +412,7 @@ int SweepRows(const std::vector<AgentRows*>& blocks, const RowSlots& slots, cons
         continue;
       }
       forces[r] = f;
-      ++*updates;
+      ++*count;
       change = std::max(change, std::abs(delta) * diag[r]);
       for (int i = s0; i < s1; ++i) {
         const Slot& sl = slot[static_cast<size_t>(i)];
@@ -406,12 +424,64 @@ int SweepRows(const std::vector<AgentRows*>& blocks, const RowSlots& slots, cons
       for (int i = s0; i < s1; ++i)
         then[static_cast<size_t>(i)] = moved[static_cast<size_t>(slots.items[static_cast<size_t>(i)].agent)];
     }
-    if (change <= tol) {
+    return change;
+  };
+  const bool two = threads > 1 && !order[0].empty() && !order[1].empty();
+  for (sweep = 1; sweep <= settings.max_sweeps; ++sweep) {
+    double change[3] = {0.0, 0.0, 0.0};
+    int64_t count[3] = {0, 0, 0};
+    if (two)
+      OnTwoThreads([&] { change[0] = pass(order[0], &count[0]); }, [&] { change[1] = pass(order[1], &count[1]); });
+    else
+      for (int k = 0; k < 2; ++k) change[k] = pass(order[k], &count[k]);
+    change[2] = pass(order[2], &count[2]);
+    *updates += count[0] + count[1] + count[2];
+    if (std::max({change[0], change[1], change[2]}) <= tol) {
       *converged = true;
       break;
     }
   }
   return std::min(sweep, settings.max_sweeps);
+}
+
+// The involved agents in two sides for SweepRows (0 or 1 each), or none (empty) for a
+// small solve: a line across the crowd's ground, across its longer extent, with about as
+// many rows' slots on either side (agents by the centroid of the rest frames their rows
+// touch; ties by agent). It depends on the rows alone, not on the threads.
+std::vector<char> SplitInTwo(const SeparationState& data, const std::vector<int>& involved,
+                             const std::vector<AgentRows*>& blocks, int64_t work) {
+  const size_t nq = involved.size();
+  if (work < 20000 || nq < 2) return {};
+  std::vector<Eigen::Vector2d> centre(nq, Eigen::Vector2d::Zero());
+  for (size_t q = 0; q < nq; ++q) {
+    const Agent& ag = data.agents[static_cast<size_t>(involved[q])];
+    const RowLists& terms = blocks[q]->terms;
+    for (const auto& item : terms.items)
+      centre[q] += data.rest.row(ag.first + item.first).transpose();
+    centre[q] /= static_cast<double>(std::max<size_t>(terms.items.size(), 1));
+  }
+  Eigen::Vector2d lo = centre[0], hi = centre[0];
+  for (const auto& c : centre) {
+    lo = lo.cwiseMin(c);
+    hi = hi.cwiseMax(c);
+  }
+  const int axis = (hi - lo)[0] >= (hi - lo)[1] ? 0 : 1;
+  std::vector<int> by(nq);
+  for (size_t q = 0; q < nq; ++q) by[q] = static_cast<int>(q);
+  std::sort(by.begin(), by.end(), [&](int a, int b) {
+    const double ca = centre[static_cast<size_t>(a)][axis], cb = centre[static_cast<size_t>(b)][axis];
+    return ca < cb || (ca == cb && a < b);
+  });
+  int64_t total = 0;
+  for (const AgentRows* ar : blocks) total += static_cast<int64_t>(ar->rows.size());
+  std::vector<char> side(nq, 1);
+  int64_t sum = 0;
+  for (int q : by) {
+    if (2 * sum >= total) break;
+    side[static_cast<size_t>(q)] = 0;
+    sum += static_cast<int64_t>(blocks[static_cast<size_t>(q)]->rows.size());
+  }
+  return side;
 }
 
 // Equality rows exactly for the one-sided forces found: (S_EE + D_E) lambda_E = q_E -
@@ -472,8 +542,8 @@ void SolveEqualities(const std::vector<AgentRows*>& blocks, const SeparationRows
 // by projected Gauss-Seidel from `forces`, then meets the equality rows exactly for the
 // unilateral forces found. Returns the sweeps used.
 int SolveRows(const std::vector<AgentRows*>& blocks, const RowSlots& slots,
-              const SeparationRows& in, const SeparationSettings& settings, Eigen::VectorXd& forces,
-              bool* regularized, bool* converged, int64_t* updates) {
+              const SeparationRows& in, const SeparationSettings& settings, const std::vector<char>& side,
+              int threads, Eigen::VectorXd& forces, bool* regularized, bool* converged, int64_t* updates) {
   const int nr = static_cast<int>(in.rhs.size());
   Eigen::VectorXd q = in.rhs;
   Eigen::VectorXd diag = in.softness;
@@ -484,7 +554,7 @@ int SolveRows(const std::vector<AgentRows*>& blocks, const RowSlots& slots,
     }
   for (int r = 0; r < nr; ++r)
     if (in.kind.size() && in.kind[r] != 0) forces[r] = std::max(forces[r], 0.0);
-  const int sweeps = SweepRows(blocks, slots, in, settings, q, diag, forces, converged, updates);
+  const int sweeps = SweepRows(blocks, slots, in, settings, q, diag, side, threads, forces, converged, updates);
   SolveEqualities(blocks, in, q, forces, regularized);
   return sweeps;
 }
@@ -709,6 +779,7 @@ void SeparationSolve(const SeparationData& handle, const SeparationRows& in, con
   int64_t work = 0;
   for (int a : g.involved) work += data.agents[static_cast<size_t>(a)].count;
   const int threads = work < 20000 ? 1 : data.threads;
+  const std::vector<char> side = SplitInTwo(data, g.involved, g.blocks, work);
 
   // Step 1.
   lap(3);
@@ -723,22 +794,16 @@ void SeparationSolve(const SeparationData& handle, const SeparationRows& in, con
   });
   bool converged = true;
   lap(0);
-  // Step 1's forces (one thread), while the other forms step 2's blocks; then both finish those.
+  // Step 2's blocks (they depend on the rows alone), then step 1's forces, each on every thread.
   std::atomic<int> next{0};
-  double sweeps_end = 0.0;
-  auto step1_rows = [&] {
-    result.sweeps = SolveRows(g.blocks, g.slots, in, settings, result.shape_forces, &result.regularized, &converged,
-                              &result.updates);
-    sweeps_end = Seconds();
-    Step2Matrices(data, g, cache, next);
-  };
   if (threads > 1)
-    OnTwoThreads(step1_rows, [&] { Step2Matrices(data, g, cache, next); });
+    OnTwoThreads([&] { Step2Matrices(data, g, cache, next); }, [&] { Step2Matrices(data, g, cache, next); });
   else
-    step1_rows();
-  result.seconds[1] += sweeps_end - clock;
-  clock = sweeps_end;
+    Step2Matrices(data, g, cache, next);
   lap(0);
+  result.sweeps = SolveRows(g.blocks, g.slots, in, settings, side, threads, result.shape_forces, &result.regularized,
+                            &converged, &result.updates);
+  lap(1);
   if (in.initial_shape_forces.size() && in.initial_forces.size()) result.forces = in.initial_forces;
   else result.forces = result.shape_forces;
   result.converged = converged;
@@ -747,7 +812,7 @@ void SeparationSolve(const SeparationData& handle, const SeparationRows& in, con
   std::vector<std::vector<Complex>> turns;
   ScaleBlocks(data, g, threads, cache, turns, result);
   lap(0);
-  result.sweeps += SolveRows(g.blocks, g.slots, in, settings, result.forces, &result.regularized, &converged,
+  result.sweeps += SolveRows(g.blocks, g.slots, in, settings, side, threads, result.forces, &result.regularized, &converged,
                              &result.updates);
   lap(1);
   result.converged = result.converged && converged;

@@ -423,3 +423,50 @@ TEST(Separation, ItsEnergyIsThePathEditors) {
   EXPECT_NEAR((sr.positions - pr.positions).cwiseAbs().maxCoeff(), 0.0, 1e-9);
   EXPECT_NEAR(sr.rigid_angles[0], pr.rigid_angles[0], 1e-9);
 }
+
+TEST(Separation, ABigCrowdSweepsOnTwoThreadsWithTheSameForcesAsOnOne) {
+  // 40 walkers side by side along x, 1 apart, each walking along y; one-sided rows push
+  // every neighbouring pair 1.2 apart every 10 frames: enough work to sweep the rows of each
+  // half of the crowd on a thread of its own, and the rows between the halves after them.
+  const int agents = 40, n = 600;
+  SeparationProblem p;
+  p.rest.resize(agents * n, 2);
+  p.starts.resize(agents + 1);
+  for (int a = 0; a < agents; ++a) {
+    p.starts[a] = a * n;
+    for (int i = 0; i < n; ++i) p.rest.row(a * n + i) << 1.0 * a, -3.0 + 6.0 * i / (n - 1) + 0.01 * a;
+  }
+  p.starts[agents] = agents * n;
+  RowBuilder b;
+  for (int a = 0; a + 1 < agents; ++a)
+    for (int f = 5 + a % 3; f < n; f += 10) b.Add(1, 0, 1.2, 0, 1, {{(a + 1) * n + f, 1.0}, {a * n + f, -1.0}});
+  const SeparationRows rows = b.Build();
+  SeparationSettings settings;
+  settings.tolerance = 1e-9;
+  settings.max_sweeps = 2000;
+  SeparationResult results[2];
+  for (int threads : {1, 2}) {
+    p.threads = threads;
+    mocapedit::SeparationData data;
+    mocapedit::SeparationPrecompute(p, data);
+    mocapedit::SeparationSolve(data, rows, settings, results[threads - 1]);
+  }
+  const SeparationResult& one = results[0];
+  const SeparationResult& two = results[1];
+  EXPECT_TRUE(one.converged);
+  EXPECT_EQ(one.sweeps, two.sweeps);
+  EXPECT_EQ(one.updates, two.updates);
+  ASSERT_EQ(one.forces.size(), two.forces.size());
+  for (Eigen::Index r = 0; r < one.forces.size(); ++r) {
+    EXPECT_EQ(one.forces[r], two.forces[r]) << "row " << r;
+    EXPECT_EQ(one.shape_forces[r], two.shape_forces[r]) << "row " << r;
+  }
+  EXPECT_EQ((one.positions - two.positions).cwiseAbs().maxCoeff(), 0.0);
+  // Every row is met; a row that pushes sits on its bound.
+  for (Eigen::Index r = 0; r < one.forces.size(); ++r) {
+    EXPECT_GE(one.forces[r], 0.0);
+    EXPECT_GE(one.residuals[r], -1e-6) << "row " << r;
+    if (one.forces[r] > 1e-6) EXPECT_NEAR(one.residuals[r], 0.0, 1e-6) << "row " << r;
+  }
+  EXPECT_GT(one.forces.maxCoeff(), 0.0);
+}

@@ -72,7 +72,7 @@ struct SeparationProblem {
   // at least this far apart (AppendChainTerms), so a frame that stands still or sways is
   // framed by the walk around it. Frames closer than still_extent never frame a term.
   double min_baseline = 0;
-  int threads = 0;                // 0: hardware, at most 2
+  int threads = 0;                // 0: hardware, at most 2; the result is the same on any number
 };
 
 // #R linear rows on ground positions, each sum_t weight_t * dot(direction_r, x[vertex_t])
