@@ -150,5 +150,14 @@ def run_cli(*args, cwd=None, timeout=None):
 
 
 @pytest.fixture
+def budget():
+    """Sets the solver's thread budget (``mocapedit.solve.threads.set_budget``) for a test and
+    puts the process's back after it."""
+    from mocapedit.solve import threads
+    yield threads.set_budget
+    threads.set_budget(0)
+
+
+@pytest.fixture
 def toy_stage(tmp_path):
     return write_toy_stage(tmp_path / "shot.usda")

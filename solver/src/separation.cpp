@@ -779,7 +779,7 @@ void SeparationSolve(const SeparationData& handle, const SeparationRows& in, con
   int64_t work = 0;
   for (int a : g.involved) work += data.agents[static_cast<size_t>(a)].count;
   const int threads = work < 20000 ? 1 : data.threads;
-  const std::vector<char> side = SplitInTwo(data, g.involved, g.blocks, work);
+  const std::vector<char> side = settings.split ? SplitInTwo(data, g.involved, g.blocks, work) : std::vector<char>();
 
   // Step 1.
   lap(3);
@@ -794,16 +794,32 @@ void SeparationSolve(const SeparationData& handle, const SeparationRows& in, con
   });
   bool converged = true;
   lap(0);
-  // Step 2's blocks (they depend on the rows alone), then step 1's forces, each on every thread.
+  // Step 2's blocks (they depend on the rows alone), then step 1's forces, each on every
+  // thread; without the split, step 1's forces on one thread while the other forms the blocks.
   std::atomic<int> next{0};
-  if (threads > 1)
-    OnTwoThreads([&] { Step2Matrices(data, g, cache, next); }, [&] { Step2Matrices(data, g, cache, next); });
-  else
-    Step2Matrices(data, g, cache, next);
-  lap(0);
-  result.sweeps = SolveRows(g.blocks, g.slots, in, settings, side, threads, result.shape_forces, &result.regularized,
-                            &converged, &result.updates);
-  lap(1);
+  if (side.empty() && threads > 1) {
+    double sweeps_end = 0.0;
+    OnTwoThreads(
+        [&] {
+          result.sweeps = SolveRows(g.blocks, g.slots, in, settings, side, 1, result.shape_forces,
+                                    &result.regularized, &converged, &result.updates);
+          sweeps_end = Seconds();
+          Step2Matrices(data, g, cache, next);
+        },
+        [&] { Step2Matrices(data, g, cache, next); });
+    result.seconds[1] += sweeps_end - clock;
+    clock = sweeps_end;
+    lap(0);
+  } else {
+    if (threads > 1)
+      OnTwoThreads([&] { Step2Matrices(data, g, cache, next); }, [&] { Step2Matrices(data, g, cache, next); });
+    else
+      Step2Matrices(data, g, cache, next);
+    lap(0);
+    result.sweeps = SolveRows(g.blocks, g.slots, in, settings, side, threads, result.shape_forces, &result.regularized,
+                              &converged, &result.updates);
+    lap(1);
+  }
   if (in.initial_shape_forces.size() && in.initial_forces.size()) result.forces = in.initial_forces;
   else result.forces = result.shape_forces;
   result.converged = converged;

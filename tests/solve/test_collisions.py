@@ -303,6 +303,31 @@ def test_a_dense_crowd_of_1000_crossing_at_random_ends_apart_without_loops():
     assert np.abs(ratio - 1.0).mean() < 0.02
 
 
+def test_a_crowd_swept_in_two_halves_ends_apart_as_the_rows_in_time_order_do(budget):
+    """A crowd big enough for the separation solve to sweep its two halves on two threads
+    (``split_sweeps``, the default) ends apart, without loops, in as many iterations as with
+    every row swept in time order on one thread; the split order is another one (other forces,
+    within the tolerance), and the same on one thread as on two."""
+    agents, frames = 160, 240
+    paths = examples.dense_crowd_paths(agents, frames, seed=3)
+    t = np.arange(frames, dtype=np.float64)
+    problem = avoidance.Problem(names=[f"a{i}" for i in range(agents)], paths=paths, frame_times=[t] * agents,
+                                radius=np.full(agents, 0.3), height=np.full(agents, 1.8), margin=0.05)
+    budget(2)
+    split = avoidance.resolve(problem)
+    ordered = avoidance.resolve(problem, avoidance.Settings(split_sweeps=False))
+    budget(1)
+    alone = avoidance.resolve(problem)
+    assert split.iterations[0].collisions > 50
+    for out in (split, ordered):
+        assert out.converged and not out.kept_direction
+        ratio = np.array([metrics.length_ratio(b, a) for a, b in zip(paths, out.paths)])
+        assert np.abs(ratio - 1.0).mean() < 0.02
+    assert abs(len(split.iterations) - len(ordered.iterations)) <= 1
+    assert any(not np.array_equal(a, b) for a, b in zip(split.paths, ordered.paths))
+    assert all(np.array_equal(a, b) for a, b in zip(split.paths, alone.paths))
+
+
 def test_the_walking_direction_guard_holds_chords_about_to_break_not_only_broken_ones():
     """The guard that keeps walkers going their way (0.25 s chords keep half their source
     length along the source's way) holds a chord from the iterate it comes within a quarter of

@@ -18,13 +18,6 @@ from mocapedit.solve import avoidance, threads
 from conftest import run_cli
 
 
-@pytest.fixture
-def budget():
-    """Sets the budget for a test and puts the process's back after it."""
-    yield threads.set_budget
-    threads.set_budget(0)
-
-
 def _crossing_stage(path, agents: int = 100):
     """Walkers crossing at random, dense enough for every job to split its work (avoidance
     over 100 x 240 samples, legs locked for tens of agents), one of them bent by a handle."""
