@@ -13,8 +13,8 @@ Figures, each beside a peer measured in the same run:
   gathering the rows, the agents' Schur blocks, the sweeps, the responses, forming the
   rows in Python) and the work done (rows, force updates, back-substitutions). DESIGN.md:
   1,000 agents dense, under 2 s to zero overlaps. Beside the default, the same with every
-  row swept in time order on one thread (``split_sweeps=False``, as before the crowd's two
-  halves were swept on two threads). The peer of the solve is scipy.sparse:
+  row swept in time order on one thread (``split_from_frames=None``, as before the crowd's
+  two halves were swept on two threads: at 10,000 agents, not at 1,000). The peer of the solve is scipy.sparse:
   the rows the last solve pushed with, as hard equalities, both steps as one KKT system
   each (100 agents);
 - quality on a composed stage: the 128-walker crossing example solved with each strategy
@@ -259,7 +259,7 @@ def run(ctx) -> dict:
                 for _ in range(3 if agents <= 1000 else 1)]
         entry["steerOnlyBefore"] = _figures(problem, min(runs, key=lambda o: o.seconds))
         # The peer of the split sweeps: the default with every row swept in time order on one thread.
-        runs = [avoidance.resolve(problem, avoidance.Settings(split_sweeps=False))
+        runs = [avoidance.resolve(problem, avoidance.Settings(split_from_frames=None))
                 for _ in range(3 if agents <= 1000 else 1)]
         entry["sweepsInTimeOrder"] = _figures(problem, min(runs, key=lambda o: o.seconds))
         entry["splitSweepsSpeedup"] = round(entry["sweepsInTimeOrder"]["seconds"] / entry[settings.strategy]["seconds"], 3)

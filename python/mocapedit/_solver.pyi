@@ -307,7 +307,7 @@ class SeparationSolver:
     """
     def __init__(self, *, rest: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], starts: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"], rigid: collections.abc.Sequence[tuple[typing.SupportsInt | typing.SupportsIndex, typing.SupportsInt | typing.SupportsIndex]] = [], anchor_weight: typing.SupportsFloat | typing.SupportsIndex = 0.001, rates: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"] = ..., anchor_frames: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"] = ..., cut_into: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"] = ..., still_extent: typing.SupportsFloat | typing.SupportsIndex = 1e-09, min_baseline: typing.SupportsFloat | typing.SupportsIndex = 0.0, threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
         ...
-    def solve(self, *, direction: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], rhs: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], softness: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], term_row: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"], term_vertex: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"], term_weight: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], kind: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"] = ..., initial_forces: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"] = ..., tolerance: typing.SupportsFloat | typing.SupportsIndex = 1e-06, max_sweeps: typing.SupportsInt | typing.SupportsIndex = 500, initial_shape_forces: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"] = ..., relaxation: typing.SupportsFloat | typing.SupportsIndex = 1.0, split: bool = True) -> SeparationResult:
+    def solve(self, *, direction: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 2]", "flags.c_contiguous"], rhs: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], softness: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], term_row: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"], term_vertex: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"], term_weight: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"], kind: typing.Annotated[numpy.typing.ArrayLike, numpy.int32, "[m, 1]"] = ..., initial_forces: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"] = ..., tolerance: typing.SupportsFloat | typing.SupportsIndex = 1e-06, max_sweeps: typing.SupportsInt | typing.SupportsIndex = 500, initial_shape_forces: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"] = ..., relaxation: typing.SupportsFloat | typing.SupportsIndex = 1.0, split_from: typing.SupportsInt | typing.SupportsIndex = 1000000) -> SeparationResult:
         """
         Solves both steps under R rows, each sum_t term_weight[t] * dot(direction[row], x[term_vertex[t]])
         = rhs[row] (kind 0), or >= rhs[row] (kind 1: a one-sided row, it only pushes); softness 0 = hard,
@@ -315,8 +315,9 @@ class SeparationSolver:
         solve's forces and shape_forces (warm starts of step 2 and step 1; with initial_forces alone both
         steps start from it);
         tolerance (stage units) and max_sweeps bound the Gauss-Seidel on one-sided rows; relaxation: its
-        over-relaxation factor, in (0, 2); split: a big crowd's rows swept in two halves on two threads
-        (the same forces on any thread count), or (false) all in time order on one thread.
+        over-relaxation factor, in (0, 2); split_from: frames of the agents the rows touch from which the
+        rows are swept in two halves of the crowd on two threads (the same forces on any thread count);
+        below, or negative, all in time order on one thread.
         Returns a SeparationResult. Keyword arguments only.
         """
     @property

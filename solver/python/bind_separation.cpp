@@ -39,7 +39,7 @@ class SeparationSolver {
                  const Eigen::VectorXd& softness, const Eigen::VectorXi& term_row, const Eigen::VectorXi& term_vertex,
                  const Eigen::VectorXd& term_weight, const Eigen::VectorXi& kind,
                  const Eigen::VectorXd& initial_forces, double tolerance, int max_sweeps,
-                 const Eigen::VectorXd& initial_shape_forces, double relaxation, bool split) {
+                 const Eigen::VectorXd& initial_shape_forces, double relaxation, int64_t split_from) {
     mocapedit::SeparationRows rows;
     rows.direction = direction;
     rows.rhs = rhs;
@@ -51,7 +51,7 @@ class SeparationSolver {
     settings.tolerance = tolerance;
     settings.max_sweeps = max_sweeps;
     settings.relaxation = relaxation;
-    settings.split = split;
+    settings.split_from = split_from;
     rows.term_row = term_row;
     rows.term_vertex = term_vertex;
     rows.term_weight = term_weight;
@@ -121,15 +121,16 @@ MOCAPEDIT_BINDINGS(BindSeparation) {
            py::arg("term_row"), py::arg("term_vertex"), py::arg("term_weight"),
            py::arg("kind") = Eigen::VectorXi(), py::arg("initial_forces") = Eigen::VectorXd(),
            py::arg("tolerance") = 1e-6, py::arg("max_sweeps") = 500,
-           py::arg("initial_shape_forces") = Eigen::VectorXd(), py::arg("relaxation") = 1.0, py::arg("split") = true,
+           py::arg("initial_shape_forces") = Eigen::VectorXd(), py::arg("relaxation") = 1.0, py::arg("split_from") = 1000000,
            "Solves both steps under R rows, each sum_t term_weight[t] * dot(direction[row], x[term_vertex[t]])\n"
            "= rhs[row] (kind 0), or >= rhs[row] (kind 1: a one-sided row, it only pushes); softness 0 = hard,\n"
            "else 1 / weight relative to the shape terms. initial_forces and initial_shape_forces: a previous\n"
            "solve's forces and shape_forces (warm starts of step 2 and step 1; with initial_forces alone both\n"
            "steps start from it);\n"
            "tolerance (stage units) and max_sweeps bound the Gauss-Seidel on one-sided rows; relaxation: its\n"
-           "over-relaxation factor, in (0, 2); split: a big crowd's rows swept in two halves on two threads\n"
-           "(the same forces on any thread count), or (false) all in time order on one thread.\n"
+           "over-relaxation factor, in (0, 2); split_from: frames of the agents the rows touch from which the\n"
+           "rows are swept in two halves of the crowd on two threads (the same forces on any thread count);\n"
+           "below, or negative, all in time order on one thread.\n"
            "Returns a SeparationResult. Keyword arguments only.")
       .def_property_readonly("agents", &SeparationSolver::agents)
       .def_property_readonly("vertices", &SeparationSolver::vertices);

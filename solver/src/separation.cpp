@@ -444,14 +444,14 @@ int SweepRows(const std::vector<AgentRows*>& blocks, const RowSlots& slots, cons
   return std::min(sweep, settings.max_sweeps);
 }
 
-// The involved agents in two sides for SweepRows (0 or 1 each), or none (empty) for a
-// small solve: a line across the crowd's ground, across its longer extent, with about as
+// The involved agents in two sides for SweepRows (0 or 1 each), or none (empty) below
+// `from` frames (`work`; or `from` negative): a line across the crowd's ground, across its longer extent, with about as
 // many rows' slots on either side (agents by the centroid of the rest frames their rows
 // touch; ties by agent). It depends on the rows alone, not on the threads.
 std::vector<char> SplitInTwo(const SeparationState& data, const std::vector<int>& involved,
-                             const std::vector<AgentRows*>& blocks, int64_t work) {
+                             const std::vector<AgentRows*>& blocks, int64_t work, int64_t from) {
   const size_t nq = involved.size();
-  if (work < 20000 || nq < 2) return {};
+  if (from < 0 || work < from || nq < 2) return {};
   std::vector<Eigen::Vector2d> centre(nq, Eigen::Vector2d::Zero());
   for (size_t q = 0; q < nq; ++q) {
     const Agent& ag = data.agents[static_cast<size_t>(involved[q])];
@@ -779,7 +779,7 @@ void SeparationSolve(const SeparationData& handle, const SeparationRows& in, con
   int64_t work = 0;
   for (int a : g.involved) work += data.agents[static_cast<size_t>(a)].count;
   const int threads = work < 20000 ? 1 : data.threads;
-  const std::vector<char> side = settings.split ? SplitInTwo(data, g.involved, g.blocks, work) : std::vector<char>();
+  const std::vector<char> side = SplitInTwo(data, g.involved, g.blocks, work, settings.split_from);
 
   // Step 1.
   lap(3);

@@ -426,8 +426,8 @@ TEST(Separation, ItsEnergyIsThePathEditors) {
 
 TEST(Separation, ABigCrowdSweepsOnTwoThreadsWithTheSameForcesAsOnOne) {
   // 40 walkers side by side along x, 1 apart, each walking along y; one-sided rows push
-  // every neighbouring pair 1.2 apart every 10 frames: enough work to sweep the rows of each
-  // half of the crowd on a thread of its own, and the rows between the halves after them.
+  // every neighbouring pair 1.2 apart every 10 frames: the rows of each half of the crowd
+  // swept on a thread of its own (split_from 0), and the rows between the halves after them.
   const int agents = 40, n = 600;
   SeparationProblem p;
   p.rest.resize(agents * n, 2);
@@ -444,6 +444,7 @@ TEST(Separation, ABigCrowdSweepsOnTwoThreadsWithTheSameForcesAsOnOne) {
   SeparationSettings settings;
   settings.tolerance = 1e-9;
   settings.max_sweeps = 2000;
+  settings.split_from = 0;
   SeparationResult results[2];
   for (int threads : {1, 2}) {
     p.threads = threads;

@@ -305,7 +305,7 @@ def test_a_dense_crowd_of_1000_crossing_at_random_ends_apart_without_loops():
 
 def test_a_crowd_swept_in_two_halves_ends_apart_as_the_rows_in_time_order_do(budget):
     """A crowd big enough for the separation solve to sweep its two halves on two threads
-    (``split_sweeps``, the default) ends apart, without loops, in as many iterations as with
+    (``split_from_frames`` 0 here; by default from 1,000,000 frames) ends apart, without loops, in as many iterations as with
     every row swept in time order on one thread; the split order is another one (other forces,
     within the tolerance), and the same on one thread as on two."""
     agents, frames = 160, 240
@@ -314,10 +314,12 @@ def test_a_crowd_swept_in_two_halves_ends_apart_as_the_rows_in_time_order_do(bud
     problem = avoidance.Problem(names=[f"a{i}" for i in range(agents)], paths=paths, frame_times=[t] * agents,
                                 radius=np.full(agents, 0.3), height=np.full(agents, 1.8), margin=0.05)
     budget(2)
-    split = avoidance.resolve(problem)
-    ordered = avoidance.resolve(problem, avoidance.Settings(split_sweeps=False))
+    split = avoidance.resolve(problem, avoidance.Settings(split_from_frames=0))
+    ordered = avoidance.resolve(problem, avoidance.Settings(split_from_frames=None))
+    assert all(np.array_equal(a, b) for a, b in zip(ordered.paths, avoidance.resolve(problem).paths)), \
+        "a crowd this small is swept in time order by default"
     budget(1)
-    alone = avoidance.resolve(problem)
+    alone = avoidance.resolve(problem, avoidance.Settings(split_from_frames=0))
     assert split.iterations[0].collisions > 50
     for out in (split, ordered):
         assert out.converged and not out.kept_direction

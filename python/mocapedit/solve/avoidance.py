@@ -152,7 +152,8 @@ class Settings:
     sweeps: int = 20                    # Gauss-Seidel sweeps per solve step at least (warm-started)
     sweep_budget: float = 3e5           # rows x sweeps per step allowed beyond that (up to 10x sweeps)
     relaxation: float = 1.0             # over-relaxation of the Gauss-Seidel sweeps, in (0, 2)
-    split_sweeps: bool = True           # a big crowd's rows swept in two halves on two threads
+    split_from_frames: int | None = 1_000_000  # frames from which a crowd's rows are swept in two
+                                        # halves on two threads (None: all in time order)
     tolerance: float = 1e-3             # of the clearance: Gauss-Seidel stops when no row moves more
     patience: int = 6                   # stop after this many iterations without progress
     stiffen_after: int = 3              # relinearize: from this iteration on, the anchor is
@@ -262,7 +263,7 @@ class _Rows:
         return idx
 
     def solve(self, solver, tolerance: float = 1e-6, max_sweeps: int = 500, relaxation: float = 1.0,
-              split: bool = True):
+              split_from: int | None = 1_000_000):
         cat = lambda parts, shape, dtype: (np.concatenate(parts) if parts else np.zeros(shape)).astype(dtype)  # noqa: E731
         return solver.solve(direction=cat(self.direction, (0, 2), np.float64).reshape(-1, 2),
                             rhs=cat(self.rhs, 0, np.float64), softness=cat(self.softness, 0, np.float64),
@@ -271,7 +272,7 @@ class _Rows:
                             term_weight=cat(self.term_weight, 0, np.float64), kind=cat(self.kind, 0, np.int32),
                             initial_forces=cat(self.force, 0, np.float64), tolerance=tolerance,
                             max_sweeps=max_sweeps, initial_shape_forces=cat(self.force1, 0, np.float64),
-                            relaxation=relaxation, split=split)
+                            relaxation=relaxation, split_from=-1 if split_from is None else split_from)
 
 
 def _samples_per_second(problem: Problem, settings: Settings) -> np.ndarray:
@@ -1176,7 +1177,7 @@ def _relinearize(state: _State, run: _Run):
         # to iteration (warm start) within a budget of row updates.
         sweeps = int(np.clip(s.sweep_budget / max(rows.count, 1), s.sweeps, 10 * s.sweeps))
         out = rows.solve(solver, tolerance=s.tolerance * float(np.min(need, initial=1.0)), max_sweeps=sweeps,
-                         relaxation=s.relaxation, split=s.split_sweeps)
+                         relaxation=s.relaxation, split_from=s.split_from_frames)
         run.solved(rows, out)
         force, force1 = out.forces, out.shape_forces
         fixed_force, fixed_force1 = force[:fixed], force1[:fixed]

@@ -97,9 +97,10 @@ struct SeparationSettings {
                                // (smaller changes are not passed on to the other rows)
   int max_sweeps = 500;        // Gauss-Seidel sweeps per step at most
   double relaxation = 1.0;     // over-relaxation factor of the sweeps, in (0, 2)
-  // A big crowd's rows swept in two halves on two threads (the same forces on any thread
-  // count); false: every row in time order on one thread, as before (a peer to measure).
-  bool split = true;
+  // From this many frames of the agents the rows touch, the rows are swept in two halves of
+  // the crowd on two threads (the same forces on any thread count: a big crowd's sweeps wait
+  // on memory); below it, or when negative, every row in time order on one thread.
+  int64_t split_from = 1000000;
 };
 
 struct SeparationResult {
