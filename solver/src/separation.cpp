@@ -797,16 +797,18 @@ void SeparationSolve(const SeparationData& handle, const SeparationRows& in, con
   // Step 2's blocks (they depend on the rows alone), then step 1's forces, each on every
   // thread; without the split, step 1's forces on one thread while the other forms the blocks.
   std::atomic<int> next{0};
-  if (side.empty() && threads > 1) {
+  if (side.empty()) {
     double sweeps_end = 0.0;
-    OnTwoThreads(
-        [&] {
-          result.sweeps = SolveRows(g.blocks, g.slots, in, settings, side, 1, result.shape_forces,
-                                    &result.regularized, &converged, &result.updates);
-          sweeps_end = Seconds();
-          Step2Matrices(data, g, cache, next);
-        },
-        [&] { Step2Matrices(data, g, cache, next); });
+    auto step1_rows = [&] {
+      result.sweeps = SolveRows(g.blocks, g.slots, in, settings, side, 1, result.shape_forces, &result.regularized,
+                                &converged, &result.updates);
+      sweeps_end = Seconds();
+      Step2Matrices(data, g, cache, next);
+    };
+    if (threads > 1)
+      OnTwoThreads(step1_rows, [&] { Step2Matrices(data, g, cache, next); });
+    else
+      step1_rows();
     result.seconds[1] += sweeps_end - clock;
     clock = sweeps_end;
     lap(0);

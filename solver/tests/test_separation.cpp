@@ -5,6 +5,7 @@
 
 #include "mocapedit/path_edit.h"
 #include "mocapedit/separation.h"
+#include "mocapedit/two_threads.h"
 
 using mocapedit::SeparationProblem;
 using mocapedit::SeparationResult;
@@ -445,13 +446,21 @@ TEST(Separation, ABigCrowdSweepsOnTwoThreadsWithTheSameForcesAsOnOne) {
   settings.tolerance = 1e-9;
   settings.max_sweeps = 2000;
   settings.split_from = 0;
-  SeparationResult results[2];
+  const int budget = mocapedit::ThreadBudget();
+  mocapedit::SetThreadBudget(2);  // two threads even where the machine or MOCAPEDIT_THREADS says one
+  SeparationResult results[2], in_time_order;
   for (int threads : {1, 2}) {
     p.threads = threads;
     mocapedit::SeparationData data;
     mocapedit::SeparationPrecompute(p, data);
     mocapedit::SeparationSolve(data, rows, settings, results[threads - 1]);
+    if (threads == 2) {
+      SeparationSettings ordered = settings;
+      ordered.split_from = -1;
+      mocapedit::SeparationSolve(data, rows, ordered, in_time_order);
+    }
   }
+  mocapedit::SetThreadBudget(budget);
   const SeparationResult& one = results[0];
   const SeparationResult& two = results[1];
   EXPECT_TRUE(one.converged);
@@ -470,4 +479,8 @@ TEST(Separation, ABigCrowdSweepsOnTwoThreadsWithTheSameForcesAsOnOne) {
     if (one.forces[r] > 1e-6) EXPECT_NEAR(one.residuals[r], 0.0, 1e-6) << "row " << r;
   }
   EXPECT_GT(one.forces.maxCoeff(), 0.0);
+  // The halves are another order than time order (other forces, within the tolerance).
+  EXPECT_TRUE(in_time_order.converged);
+  EXPECT_GT((in_time_order.forces - one.forces).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_NEAR((in_time_order.positions - one.positions).cwiseAbs().maxCoeff(), 0.0, 1e-6);
 }

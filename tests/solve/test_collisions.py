@@ -305,7 +305,7 @@ def test_a_dense_crowd_of_1000_crossing_at_random_ends_apart_without_loops():
 
 def test_a_crowd_swept_in_two_halves_ends_apart_as_the_rows_in_time_order_do(budget):
     """A crowd big enough for the separation solve to sweep its two halves on two threads
-    (``split_from_frames`` 0 here; by default from 1,000,000 frames) ends apart, without loops, in as many iterations as with
+    (``split_from_frames`` 0 here; by default from 1,000,000 frames) ends apart, without loops, in about as many iterations as with
     every row swept in time order on one thread; the split order is another one (other forces,
     within the tolerance), and the same on one thread as on two."""
     agents, frames = 160, 240
@@ -321,6 +321,8 @@ def test_a_crowd_swept_in_two_halves_ends_apart_as_the_rows_in_time_order_do(bud
     budget(1)
     alone = avoidance.resolve(problem, avoidance.Settings(split_from_frames=0))
     assert split.iterations[0].collisions > 50
+    # Enough agents move for the solve to take two threads (20,000 frames of moved agents).
+    assert int(split.moved.sum()) * frames >= 20000
     for out in (split, ordered):
         assert out.converged and not out.kept_direction
         ratio = np.array([metrics.length_ratio(b, a) for a, b in zip(paths, out.paths)])

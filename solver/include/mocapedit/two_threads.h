@@ -56,40 +56,30 @@ inline void SetThreadBudget(int threads) { detail::BudgetSet().store(std::max(th
 inline int DefaultThreads() { return std::min(2, ThreadBudget()); }
 
 // `here` on the calling thread, `there` on a thread of its own (both on the calling thread,
-// `here` first, when the budget is one thread).
+// `here` first, when the budget is one thread or the system gives no thread).
 template <typename Here, typename There>
 void OnTwoThreads(Here&& here, There&& there) {
-  if (ThreadBudget() < 2) {
-    std::exception_ptr error_here, error_there;
+  std::exception_ptr error_here, error_there;
+  auto run = [](auto& work, std::exception_ptr& error) {
     try {
-      here();
+      work();
     } catch (...) {
-      error_here = std::current_exception();
+      error = std::current_exception();
     }
+  };
+  std::thread other;
+  if (ThreadBudget() >= 2) {
     try {
-      there();
-    } catch (...) {
-      error_there = std::current_exception();
+      other = std::thread([&] { run(there, error_there); });
+    } catch (const std::system_error&) {
+      // No thread to be had (a farm slot's limit): both here, in turn.
     }
-    if (error_here) std::rethrow_exception(error_here);
-    if (error_there) std::rethrow_exception(error_there);
-    return;
   }
-  std::exception_ptr error_there;
-  std::thread other([&] {
-    try {
-      there();
-    } catch (...) {
-      error_there = std::current_exception();
-    }
-  });
-  std::exception_ptr error_here;
-  try {
-    here();
-  } catch (...) {
-    error_here = std::current_exception();
-  }
-  other.join();
+  run(here, error_here);
+  if (other.joinable())
+    other.join();
+  else
+    run(there, error_there);
   if (error_here) std::rethrow_exception(error_here);
   if (error_there) std::rethrow_exception(error_there);
 }
