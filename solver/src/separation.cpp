@@ -307,48 +307,14 @@ int SweepRows(const std::vector<AgentRows*>& blocks, const RowSlots& slots, cons
               const std::vector<char>& side, int threads, Eigen::VectorXd& forces, bool* converged, int64_t* updates) {
   const int nr = static_cast<int>(in.rhs.size());
   auto unilateral = [&](int r) { return in.kind.size() && in.kind[r] != 0; };
-  // Every agent's part u = S_a lambda_a, one after another in one array (a sweep visits
-  // the rows in time order, which jumps from agent to agent: the fewer pointers to follow
-  // per row, the fewer cache misses on a big crowd).
-  std::vector<Eigen::Index> offset(blocks.size() + 1, 0);
-  for (size_t b = 0; b < blocks.size(); ++b)
-    offset[b + 1] = offset[b] + static_cast<Eigen::Index>(blocks[b]->rows.size());
-  Eigen::VectorXd u(offset.back());
-  for (size_t b = 0; b < blocks.size(); ++b) {
-    const AgentRows* ar = blocks[b];
-    Eigen::VectorXd f(static_cast<Eigen::Index>(ar->rows.size()));
-    for (size_t k = 0; k < ar->rows.size(); ++k) f[static_cast<Eigen::Index>(k)] = forces[ar->rows[k]];
-    const Eigen::VectorXd ub = *ar->s * f;
-    u.segment(offset[b], ub.size()) = ub;
-  }
-  // Per slot (as slots.items): its entry of u, its agent's part of u, and its column of S_a.
-  struct Slot {
-    double* part;
-    const double* column;
-    Eigen::Index length;
-    Eigen::Index entry;
-  };
-  std::vector<Slot> slot(slots.items.size());
-  for (size_t i = 0; i < slots.items.size(); ++i) {
-    const RowSlot& sl = slots.items[i];
-    const Eigen::MatrixXd& sa = *blocks[static_cast<size_t>(sl.agent)]->s;
-    slot[i] = {u.data() + offset[static_cast<size_t>(sl.agent)], sa.data() + static_cast<Eigen::Index>(sl.local) * sa.rows(),
-               sa.rows(), offset[static_cast<size_t>(sl.agent)] + sl.local};
-  }
-  auto value = [&](int r) {
-    double sum = 0.0;
-    for (int i = slots.start[static_cast<size_t>(r)]; i < slots.start[static_cast<size_t>(r) + 1]; ++i)
-      sum += u[slot[static_cast<size_t>(i)].entry];
-    return sum;
-  };
   *converged = false;
-  int sweep = 0;
   bool any_unilateral = false;
   for (int r = 0; r < nr; ++r) any_unilateral = any_unilateral || unilateral(r);
   if (!any_unilateral) {
     *converged = true;
     return 0;
   }
+  const size_t nq = blocks.size();
   // The rows a sweep visits, in that order: side 0's, side 1's, those between (or all).
   std::vector<int> order[3];
   for (int r = 0; r < nr; ++r) {
@@ -361,86 +327,145 @@ int SweepRows(const std::vector<AgentRows*>& blocks, const RowSlots& slots, cons
     }
     order[group].push_back(r);
   }
-  // Per slot (as slots.items): sqrt of the row's diagonal entry in that agent's block, and
-  // the agent's `moved` when the row was last worked out; per row, its residual then.
-  std::vector<double> root(slots.items.size()), then(slots.items.size(), 0.0);
-  for (size_t i = 0; i < slots.items.size(); ++i) {
-    const RowSlot& sl = slots.items[i];
-    root[i] = std::sqrt(std::max((*blocks[static_cast<size_t>(sl.agent)]->s)(sl.local, sl.local), 0.0));
+  // What the two threads write lies apart: each agent's sum of moves (`moved`) and its part
+  // u = S_a lambda_a of the row values, side 0's agents first, then (a cache line on) side 1's;
+  // and each group's rows' forces, residuals and slots in arrays of the group's own.
+  constexpr size_t kLine = 8;  // doubles per cache line
+  std::vector<size_t> place(nq);  // per agent: its index in `moved`
+  std::vector<Eigen::Index> offset(nq);  // per agent: where its part of u starts
+  size_t places = 0;
+  Eigen::Index length = 0;
+  for (int s_ = 0; s_ < 2; ++s_) {
+    for (size_t b = 0; b < nq; ++b)
+      if ((side.empty() ? 0 : side[b]) == s_) {
+        place[b] = places++;
+        offset[b] = length;
+        length += static_cast<Eigen::Index>(blocks[b]->rows.size());
+      }
+    places += kLine;
+    length += static_cast<Eigen::Index>(kLine);
   }
-  std::vector<double> moved(blocks.size(), 0.0), residual(static_cast<size_t>(nr), 0.0);
-  std::vector<char> known(static_cast<size_t>(nr), 0);
+  Eigen::VectorXd u = Eigen::VectorXd::Zero(length);
+  for (size_t b = 0; b < nq; ++b) {
+    const AgentRows* ar = blocks[b];
+    Eigen::VectorXd f(static_cast<Eigen::Index>(ar->rows.size()));
+    for (size_t k = 0; k < ar->rows.size(); ++k) f[static_cast<Eigen::Index>(k)] = forces[ar->rows[k]];
+    const Eigen::VectorXd ub = *ar->s * f;
+    u.segment(offset[b], ub.size()) = ub;
+  }
+  std::vector<double> moved(places, 0.0);
+  // Per slot of a group's rows (in the rows' order): its agent's part of u, its column of S_a,
+  // its entry of u, its agent's place in `moved`, sqrt of the row's diagonal entry in that
+  // agent's block, and the agent's `moved` when the row was last worked out.
+  struct Slot {
+    double* part;
+    const double* column;
+    Eigen::Index length;
+    Eigen::Index entry;
+    size_t mover;
+    double root;
+    double then;
+  };
+  struct Group {
+    std::vector<int> rows;
+    std::vector<int> start;       // per row of the group, into `slot`
+    std::vector<Slot> slot;
+    std::vector<double> force, residual;
+    std::vector<char> known;
+  };
+  Group groups[3];
+  for (int k = 0; k < 3; ++k) {
+    Group& gr = groups[k];
+    gr.rows = std::move(order[k]);
+    gr.start.assign(1, 0);
+    for (int r : gr.rows) {
+      for (int i = slots.start[static_cast<size_t>(r)]; i < slots.start[static_cast<size_t>(r) + 1]; ++i) {
+        const RowSlot& sl = slots.items[static_cast<size_t>(i)];
+        const size_t b = static_cast<size_t>(sl.agent);
+        const Eigen::MatrixXd& sa = *blocks[b]->s;
+        gr.slot.push_back({u.data() + offset[b], sa.data() + static_cast<Eigen::Index>(sl.local) * sa.rows(), sa.rows(),
+                           offset[b] + sl.local, place[b], std::sqrt(std::max(sa(sl.local, sl.local), 0.0)), 0.0});
+      }
+      gr.start.push_back(static_cast<int>(gr.slot.size()));
+      gr.force.push_back(forces[r]);
+    }
+    gr.residual.assign(gr.rows.size(), 0.0);
+    gr.known.assign(gr.rows.size(), 0);
+  }
   const double relax = settings.relaxation, tol = settings.tolerance;
   // Rows ahead whose entries of u and columns of S are fetched early (memory latency).
   constexpr int kAhead = 8;
-  // One pass over `rows`; returns the largest change passed on, counts the updates.
-  auto pass = [&](const std::vector<int>& rows, int64_t* count) {
+  // One pass over a group's rows; returns the largest change passed on, counts the updates.
+  auto pass = [&](Group& gr, int64_t* count) {
     double change = 0.0;
-    const int n = static_cast<int>(rows.size());
+    const int n = static_cast<int>(gr.rows.size());
     for (int p = 0; p < n; ++p) {
-      const int r = rows[static_cast<size_t>(p)];
-      const int s0 = slots.start[static_cast<size_t>(r)], s1 = slots.start[static_cast<size_t>(r) + 1];
-      if (p + kAhead < n) {
-        const int ahead = rows[static_cast<size_t>(p + kAhead)];
-        for (int i = slots.start[static_cast<size_t>(ahead)], end = slots.start[static_cast<size_t>(ahead) + 1]; i < end; ++i) {
-          __builtin_prefetch(u.data() + slot[static_cast<size_t>(i)].entry);
-          __builtin_prefetch(slot[static_cast<size_t>(i)].column);
+      const int r = gr.rows[static_cast<size_t>(p)];
+      Slot* const s0 = gr.slot.data() + gr.start[static_cast<size_t>(p)];
+      Slot* const s1 = gr.slot.data() + gr.start[static_cast<size_t>(p) + 1];
+      if (p + kAhead < n)
+        for (const Slot* a = gr.slot.data() + gr.start[static_cast<size_t>(p + kAhead)],
+                        *end = gr.slot.data() + gr.start[static_cast<size_t>(p + kAhead) + 1];
+             a < end; ++a) {
+          __builtin_prefetch(u.data() + a->entry);
+          __builtin_prefetch(a->column);
         }
-      }
-      if (known[static_cast<size_t>(r)]) {
+      double& force = gr.force[static_cast<size_t>(p)];
+      double& residual = gr.residual[static_cast<size_t>(p)];
+      if (gr.known[static_cast<size_t>(p)]) {
         double reach = 0.0;
-        for (int i = s0; i < s1; ++i)
-          reach += root[static_cast<size_t>(i)] *
-                   (moved[static_cast<size_t>(slots.items[static_cast<size_t>(i)].agent)] - then[static_cast<size_t>(i)]);
-        const double res = residual[static_cast<size_t>(r)];
+        for (const Slot* sl = s0; sl < s1; ++sl) reach += sl->root * (moved[sl->mover] - sl->then);
+        const double res = residual;
         // Far above the rounding of the values compared, far below the tolerance.
         const double margin = 1e-9 * (tol + std::abs(q[r]) + std::abs(res) + reach);
-        const bool idle = unilateral(r) && forces[r] == 0.0 ? relax * (res + reach) <= tol - margin
-                                                              : relax * (std::abs(res) + reach) <= tol - margin;
+        const bool idle = unilateral(r) && force == 0.0 ? relax * (res + reach) <= tol - margin
+                                                        : relax * (std::abs(res) + reach) <= tol - margin;
         if (idle) continue;
       }
-      const double res = q[r] - value(r) - in.softness[r] * forces[r];
-      double f = forces[r] + relax * res / diag[r];
+      double value = 0.0;
+      for (const Slot* sl = s0; sl < s1; ++sl) value += u[sl->entry];
+      const double res = q[r] - value - in.softness[r] * force;
+      double f = force + relax * res / diag[r];
       if (unilateral(r)) f = std::max(f, 0.0);
-      const double delta = f - forces[r];
-      known[static_cast<size_t>(r)] = 1;
+      const double delta = f - force;
+      gr.known[static_cast<size_t>(p)] = 1;
       // A change below the tolerance is not worth passing on to the other rows.
       if (std::abs(delta) * diag[r] <= tol) {
-        residual[static_cast<size_t>(r)] = res;
-        for (int i = s0; i < s1; ++i)
-          then[static_cast<size_t>(i)] = moved[static_cast<size_t>(slots.items[static_cast<size_t>(i)].agent)];
+        residual = res;
+        for (Slot* sl = s0; sl < s1; ++sl) sl->then = moved[sl->mover];
         continue;
       }
-      forces[r] = f;
+      force = f;
       ++*count;
       change = std::max(change, std::abs(delta) * diag[r]);
-      for (int i = s0; i < s1; ++i) {
-        const Slot& sl = slot[static_cast<size_t>(i)];
-        Eigen::Map<Eigen::VectorXd>(sl.part, sl.length).noalias() +=
-            Eigen::Map<const Eigen::VectorXd>(sl.column, sl.length) * delta;
-        moved[static_cast<size_t>(slots.items[static_cast<size_t>(i)].agent)] += root[static_cast<size_t>(i)] * std::abs(delta);
+      for (const Slot* sl = s0; sl < s1; ++sl) {
+        Eigen::Map<Eigen::VectorXd>(sl->part, sl->length).noalias() +=
+            Eigen::Map<const Eigen::VectorXd>(sl->column, sl->length) * delta;
+        moved[sl->mover] += sl->root * std::abs(delta);
       }
-      residual[static_cast<size_t>(r)] = res - diag[r] * delta;
-      for (int i = s0; i < s1; ++i)
-        then[static_cast<size_t>(i)] = moved[static_cast<size_t>(slots.items[static_cast<size_t>(i)].agent)];
+      residual = res - diag[r] * delta;
+      for (Slot* sl = s0; sl < s1; ++sl) sl->then = moved[sl->mover];
     }
     return change;
   };
-  const bool two = threads > 1 && !order[0].empty() && !order[1].empty();
+  const bool two = threads > 1 && !groups[0].rows.empty() && !groups[1].rows.empty();
+  int sweep = 0;
   for (sweep = 1; sweep <= settings.max_sweeps; ++sweep) {
     double change[3] = {0.0, 0.0, 0.0};
     int64_t count[3] = {0, 0, 0};
     if (two)
-      OnTwoThreads([&] { change[0] = pass(order[0], &count[0]); }, [&] { change[1] = pass(order[1], &count[1]); });
+      OnTwoThreads([&] { change[0] = pass(groups[0], &count[0]); }, [&] { change[1] = pass(groups[1], &count[1]); });
     else
-      for (int k = 0; k < 2; ++k) change[k] = pass(order[k], &count[k]);
-    change[2] = pass(order[2], &count[2]);
+      for (int k = 0; k < 2; ++k) change[k] = pass(groups[k], &count[k]);
+    change[2] = pass(groups[2], &count[2]);
     *updates += count[0] + count[1] + count[2];
     if (std::max({change[0], change[1], change[2]}) <= tol) {
       *converged = true;
       break;
     }
   }
+  for (const Group& gr : groups)
+    for (size_t p = 0; p < gr.rows.size(); ++p) forces[gr.rows[p]] = gr.force[p];
   return std::min(sweep, settings.max_sweeps);
 }
 
