@@ -48,11 +48,11 @@ def _shot(tmp_path, cut: bool, walk1: float = 2.0, idle: float = 0.5, handles=No
     return str(tmp_path / "shot.usda"), str(agent)
 
 
-def _edit_turn_steps(tmp_path, cut: bool) -> np.ndarray:
+def _edit_turn_steps(tmp_path, cut: bool, **options) -> np.ndarray:
     """Degrees the edit's turn of the body changes by from frame to frame, over the first walk
-    (frames 1 to 90, before it slows down to stand)."""
+    (frames 1 to 90, before it slows down to stand); ``options`` go to the solve."""
     shot, agent = _shot(tmp_path, cut)
-    solve(shot, output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"))
+    solve(shot, output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"), **options)
     _, ms = evaluate.joint_world_matrices(Usd.Stage.Open(shot), agent)
     _, me = evaluate.joint_world_matrices(Usd.Stage.Open(str(tmp_path / "c.usda")), agent)
     turn = np.degrees(metrics.body_facing(me, "Y") - metrics.body_facing(ms, "Y"))
@@ -70,9 +70,13 @@ def test_a_cut_in_the_source_makes_no_pop_in_the_edit(tmp_path):
 
 def test_the_cut_is_what_the_limit_leaves_out(tmp_path, monkeypatch):
     """Counted as a motion, the cut's 3.6 m step outweighs the walk's steps in every window that
-    holds it, and the body turns 13 degrees in one frame where it leaves them."""
+    holds it, and the path edit turns the body 13 degrees in one frame where it leaves them (the
+    body carried rigidly along the edited path: pivoting on the feet spreads the turn over the
+    step, which would hide it)."""
     monkeypatch.setattr(trajectory, "CUT_SPEED_M", np.inf)
-    assert _edit_turn_steps(tmp_path, True).max() > 5.0
+    assert _edit_turn_steps(tmp_path, True, pivot_on_feet=False).max() > 5.0
+    monkeypatch.undo()
+    assert _edit_turn_steps(tmp_path / "limited", True, pivot_on_feet=False).max() < 3.0
 
 
 def test_feet_locked_next_to_a_cut_do_not_pull_the_body_down(tmp_path):

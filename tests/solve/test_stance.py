@@ -51,6 +51,9 @@ def test_the_turn_waits_through_double_support_and_is_the_edits_at_each_free_str
         assert gated[frame] == pytest.approx(turn[frame])
     assert np.all(np.diff(gated) >= -1e-12)     # never turns back
     assert np.array_equal(stance.gated_turn(np.zeros(50), double, fixed), np.zeros(50))
+    # A turn taken between steps already is taken so again, not later and faster each time (a
+    # path that avoidance bent after a pivot pivots once more).
+    np.testing.assert_allclose(stance.gated_turn(gated, double, fixed), gated, atol=1e-12)
 
 
 def test_a_path_moved_and_turned_rigidly_is_left_exactly_as_it_is():
@@ -104,7 +107,7 @@ def _solved(tmp_path, stage_path, pivot: bool):
 
 
 @pytest.mark.parametrize("scene,bar", [("collisions_head_on", 1.25), ("collisions_crossing", 1.25),
-                                       ("collisions_counterflow", 1.3)])
+                                       ("collisions_counterflow", 1.25), ("collisions_groups", 1.3)])
 def test_avoidance_pivots_on_the_feet_and_still_ends_apart(tmp_path, scene, bar):
     """By FK on the composed stages: the moved agents' feet skate (before foot locking) at most
     ``bar`` times their source's on average, where rigid frames skated 1.5-1.7 times; no overlap
@@ -123,6 +126,55 @@ def test_avoidance_pivots_on_the_feet_and_still_ends_apart(tmp_path, scene, bar)
         assert after >= -1e-4 and sep.overlaps == 0, (pivot, after, sep.agents, sep.time_index)
         assert max(f.max_direction_deviation for f in figures) < 90.0
     assert ratios[True] <= bar < ratios[False] and ratios[True] < ratios[False] - 0.2, ratios
+
+
+def test_what_the_clearing_solve_moves_pivots_on_the_feet_too(tmp_path, monkeypatch):
+    """Two groups crossing: the solve that clears what the pivot moved into others bends paths
+    again; the moved agents pivot once more on what it left. By FK: their feet skate less than
+    with that last pivot left out, and still nobody overlaps."""
+    from mocapedit.pipeline.passes import collisions as collisions_pass
+    STAGES.STAGES["collisions_groups.usda"](tmp_path)
+    stage_path = tmp_path / "collisions_groups.usda"
+    src = Usd.Stage.Open(str(stage_path))
+    agents = _agents(src)
+    ratio = {}
+    for last_pivot in (True, False):
+        if not last_pivot:
+            monkeypatch.setattr(collisions_pass, "_pivot_where_clear", lambda *args: None)
+        (tmp_path / str(last_pivot)).mkdir()     # a layer of its own: USD keeps the first one open
+        result, out = _solved(tmp_path / str(last_pivot), stage_path, True)
+        moved = [a for a in agents if result.report.agents.get(a, {}).get("edited")]
+        ratio[last_pivot] = np.mean([measure.plausibility(src, out, a).foot_skate_ratio for a in moved])
+        after, sep = _separation(out, agents, margin=0.05)
+        assert after >= -1e-4 and sep.overlaps == 0, (last_pivot, after, sep.agents)
+    assert ratio[True] < ratio[False] - 0.02, ratio
+
+
+def test_a_last_pivot_that_would_meet_another_agent_is_given_up(tmp_path, monkeypatch):
+    """Head-on walkers whose last pivot (made to, here) would put one onto the other's path: it
+    gives up that pivot, by halves, until nothing new overlaps: by FK nobody overlaps."""
+    from mocapedit.pipeline.context import EditedPath
+    from mocapedit.pipeline.passes import collisions as collisions_pass
+    STAGES.STAGES["collisions_head_on.usda"](tmp_path)
+    stage_path = tmp_path / "collisions_head_on.usda"
+    src = Usd.Stage.Open(str(stage_path))
+    agents = _agents(src)
+    pivot_moved = collisions_pass.stance.pivot_moved
+    calls = []
+
+    def onto_the_other(ctx, keep=frozenset()):
+        pivot_moved(ctx, keep)
+        calls.append(dict(ctx.paths))
+        if len(calls) == 2:   # the last pivot: agent_0000 walks where agent_0001 does
+            a, b = ctx.paths[agents[0]], ctx.paths[agents[1]]
+            ctx.paths[agents[0]] = EditedPath(ground=b.ground.copy(), heading=a.heading)
+
+    monkeypatch.setattr(collisions_pass.stance, "pivot_moved", onto_the_other)
+    result, out = _solved(tmp_path, stage_path, True)
+    assert len(calls) == 2
+    after, sep = _separation(out, agents, margin=0.05)
+    assert after >= -1e-4 and sep.overlaps == 0, (after, sep.agents)
+    assert result.report.stats["remainingOverlaps"] == 0
 
 
 def test_pinned_frames_and_stationary_ranges_keep_the_edit(tmp_path):
@@ -264,7 +316,9 @@ def test_a_turn_on_the_way_off_a_fixed_range_waits_for_the_steps_and_is_shared_b
     assert first > np.radians(10.0) and second > np.radians(10.0)
     assert np.all(np.diff(gated) >= -1e-12)
     assert np.abs(np.diff(gated)).max() * fps < stance.STEP_TURN_RATE * np.pi / 2 + 1e-9
-    # Without a frame rate (or well inside a walk) the turn catches up over the next stretch.
+    # Without a frame rate only the stretch up to the next free one's end counts: 17 frames
+    # with 8 free ones, a little over MAX_SPEEDUP, so the turn waits a little less than fully.
     plain = stance.gated_turn(turn, double, fixed)
-    assert np.array_equal(plain[:20], turn[:20])
+    wait = 2.0 - (17 / 8) / stance.MAX_SPEEDUP
+    np.testing.assert_allclose(plain[:20], (1.0 - wait) * turn[:20], atol=1e-12)
 

@@ -604,6 +604,17 @@ def resolve(problem: Problem, settings: Settings | None = None, progress=None) -
                    detour_iterations=detour[2].iterations if detour is not None else [])
 
 
+def overlaps(problem: Problem, settings: Settings | None = None) -> tuple[set[tuple[int, int]], set[int]]:
+    """What the problem's paths, as they are, leave uncleared: the pairs of agents ``(a, b)``,
+    ``a < b``, closer than their clearance at some sample, and the agents with a frame in the
+    shot within an avoid region's clearance. Nothing is solved."""
+    state = _State(problem, settings or Settings())
+    found = state.detect(state.rest)
+    pairs = set(zip(found.agent_a.tolist(), found.agent_b.tolist()))
+    inside = {int(a) for hit in state.region_hits(state.rest) if hit is not None for a in hit[1]}
+    return pairs, inside
+
+
 #: Seconds between the two ends of the chords whose directions :func:`_walks_backward` compares,
 #: and metres a source chord spans at least to count (the plausibility figures' walking direction).
 CHORD_SECONDS = 0.25

@@ -32,9 +32,10 @@ __all__ = ["EASE_SECONDS", "AIR_WEIGHT", "MAX_SPEEDUP", "STEP_TURN_RATE", "CATCH
 
 #: The shift pays itself back over about this long (seconds): the weight that keeps it small.
 EASE_SECONDS = 2.0
-#: The turn waits through double support only where it then turns at most this many times as
-#: fast as the edit does (a walk's double support is a fifth of its steps or less: 1.25); where
-#: both feet stay planted longer (standing, shuffling on the spot) it turns as the edit does.
+#: The turn waits through double support fully where it then turns at most this many times as
+#: fast as the edit does (a walk's double support is a fifth of its steps or less: 1.25), less
+#: and less up to twice that, and not at all beyond: where both feet stay planted longer
+#: (standing, shuffling on the spot) it turns as the edit does.
 MAX_SPEEDUP = 2.0
 #: A turn that a body leaving a fixed frame on both feet would take on them is shared by the
 #: steps after it, as many as keep it this slow on average (radians per second: a quarter turn a
@@ -56,10 +57,12 @@ def _rotate(v: np.ndarray, angle: np.ndarray) -> np.ndarray:
 def gated_turn(turn: np.ndarray, double: np.ndarray, fixed: np.ndarray, frame_seconds: float = 0.0) -> np.ndarray:
     """(F,) the edit's turn of each frame held while both feet are planted (``double``, (F,)
     bool) and caught up over the next stretch of frames that are not, so that it equals ``turn``
-    at the end of each such stretch, at the first and last frame and at every ``fixed`` frame;
-    where that would turn more than :data:`MAX_SPEEDUP` times as fast, as the edit turns. Each
-    catching up eases in and out (a half cosine), so that the turn never starts or stops within
-    a frame.
+    at the end of each such stretch, at the first and last frame and at every ``fixed`` frame.
+    Between two such frames the turn goes from the one's to the other's as the free frames pass,
+    easing in and out (a half cosine), so that it never starts or stops within a frame; a turn
+    taken so already is returned as it is. Where that would turn more than :data:`MAX_SPEEDUP`
+    times as fast as the edit, the turn waits less, in proportion, and from twice that not at
+    all: it turns as the edit does (a gait near the limit then waits as much at any frame rate).
 
     A body that leaves a fixed frame (the end of a stationary range, a pin) on both feet would
     otherwise turn on them there, as the edit turns it on its way off: that turn is shared
@@ -80,10 +83,11 @@ def gated_turn(turn: np.ndarray, double: np.ndarray, fixed: np.ndarray, frame_se
     k = np.clip(np.searchsorted(sync, frames, side="right") - 1, 0, len(sync) - 2)
     a, b = sync[k], sync[k + 1]
     span = progress[b] - progress[a]
-    moving = span * MAX_SPEEDUP >= (b - a)
-    share = (progress - progress[a]) / np.where(moving, span, 1.0)
+    speedup = (b - a) / np.maximum(span, 1e-12)
+    wait = np.clip(2.0 - speedup / MAX_SPEEDUP, 0.0, 1.0)
+    share = (progress - progress[a]) / np.maximum(span, 1e-12)
     eased = 0.5 - 0.5 * np.cos(np.pi * np.clip(share, 0.0, 1.0))
-    out = np.interp(np.where(moving, a + (b - a) * eased, frames), frames, turn)
+    out = turn + wait * (turn[a] + (turn[b] - turn[a]) * eased - turn)
     if frame_seconds <= 0:
         return out
     pairs = len(sync) - 1

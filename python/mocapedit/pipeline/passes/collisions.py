@@ -22,7 +22,10 @@ time, sync or relative constraint or a hard position constraint names keep their
 With ``MocapSolveSettings.pivotOnFeet`` on, the moved agents then turn between steps and pivot on
 their planted feet (the stance pass, :mod:`mocapedit.pipeline.passes.stance`), which moves their
 roots by a few centimetres, and the paths are solved once more from there, so that the overlaps
-the pivot makes are cleared like any other.
+the pivot makes are cleared like any other. That solve moves some paths again, without regard to
+the feet: they pivot once more on what it left, and an agent whose second pivot would meet another
+agent (or a region) where the cleared paths did not gives up half of that pivot, then three
+quarters, then all of it, until nothing new meets.
 
 Report: ``stats`` ``collisionStrategy``, ``collisionIterations``, ``collisionsPerIteration``
 (collision intervals found before each solve, then after the last), ``remainingOverlaps``,
@@ -69,6 +72,9 @@ MAX_RADIUS_M = 10.0
 #: or starts after it) that avoidance moves further than HELD_MOVED_M (metres) gets a note.
 HELD_NOTE_S = 0.5
 HELD_MOVED_M = 0.25
+#: The share of its last pivot an agent keeps is halved where that pivot meets another agent, down
+#: to this share; below it, none is kept.
+PIVOT_SHARE_FLOOR = 0.25
 
 
 def _settings(ctx: SolveContext):
@@ -373,9 +379,10 @@ def _pivot_and_clear(ctx: SolveContext, problem: avoidance.Problem, footprints, 
                      solve_settings: avoidance.Settings, outcome: avoidance.Outcome) -> avoidance.Outcome:
     """The moved agents pivot on their feet (the stance pass), which moves their roots by a few
     centimetres, and the paths are solved again from there, so that what the pivot moves into
-    another agent (or a region) is cleared as any overlap is. Pairs that hard constraints hold
-    closer than their clearance keep their paths (their partings are tight already); a shot that
-    the second solve does not clear as well as the first keeps the first's paths."""
+    another agent (or a region) is cleared as any overlap is; then they pivot once more where
+    that meets nobody (:func:`_pivot_where_clear`). Pairs that hard constraints hold closer than
+    their clearance keep their paths (their partings are tight already); a shot that the second
+    solve does not clear as well as the first keeps the first's paths."""
     names = problem.names
     held = {names[i] for _, a, b, _, _, _ in outcome.link_held for i in (a, b)}
     held |= {names[i] for a, b, _ in outcome.blocked for i in (a, b)}
@@ -394,7 +401,33 @@ def _pivot_and_clear(ctx: SolveContext, problem: avoidance.Problem, footprints, 
             now.update(before)
         return outcome
     _apply(ctx, again, second)
+    if _cleared(second):
+        _pivot_where_clear(ctx, names, footprints, enabled, solve_settings, held)
     return _merged(outcome, second)
+
+
+def _pivot_where_clear(ctx: SolveContext, names: list[str], footprints, enabled: bool,
+                       solve_settings: avoidance.Settings, held: set[str]) -> None:
+    """The moved agents but ``held`` pivot on their feet once more, on the paths the clearing solve
+    left. Then, round by round, each agent that a new overlap names (a pair the cleared paths did
+    not have, or a frame in a region's clearance) takes half of what its pivot moved, then a
+    quarter, then none: the cleared paths have no new overlap, so the rounds end."""
+    cleared = dict(ctx.paths)
+    before, before_inside = avoidance.overlaps(_problem(ctx, names, footprints, enabled), solve_settings)
+    stance.pivot_moved(ctx, keep=held)
+    pivoted = {p: e for p, e in ctx.paths.items() if e is not cleared.get(p)}
+    share = {p: 1.0 for p in pivoted}
+    while True:
+        pairs, inside = avoidance.overlaps(_problem(ctx, names, footprints, enabled), solve_settings)
+        new = {i for pair in pairs - before for i in pair} | (inside - before_inside)
+        back = [names[i] for i in sorted(new) if share.get(names[i], 0.0) > 0.0]
+        if not back:
+            return
+        for p in back:
+            share[p] = share[p] / 2 if share[p] > PIVOT_SHARE_FLOOR else 0.0
+            a, b = cleared[p], pivoted[p]
+            ctx.paths[p] = EditedPath(ground=a.ground + share[p] * (b.ground - a.ground),
+                                      heading=a.heading + share[p] * (b.heading - a.heading))
 
 
 def _merged(first: avoidance.Outcome, second: avoidance.Outcome) -> avoidance.Outcome:
