@@ -69,6 +69,25 @@ def test_a_path_moved_and_turned_rigidly_is_left_exactly_as_it_is():
         np.testing.assert_allclose(out_turn, turn, atol=1e-12)
 
 
+def test_agents_pivoted_together_are_pivoted_as_one_by_one(monkeypatch):
+    """Agents of two lengths, in batches of two: each gets what it gets alone."""
+    monkeypatch.setattr(stance, "BATCH", 2)
+    agents = []
+    for k, frames in enumerate((97, 61, 97, 97, 61)):
+        root, feet, planted = _gait(frames)
+        turn = (0.3 + 0.1 * k) * np.clip((np.arange(frames) - 12) / 36.0, 0.0, 1.0)
+        step = _rotate(np.diff(root, axis=0), turn[1:])
+        edited = np.concatenate([root[:1], root[:1] + np.cumsum(step, axis=0)]) * (1.0 + 0.02 * k)
+        fixed = np.zeros(frames, dtype=bool)
+        fixed[[0, 30 + k]] = True
+        agents.append((root, edited, turn, feet, planted, fixed, 1 / FPS))
+    together = stance.pivot(*[list(column) for column in zip(*agents)])
+    for agent, (uv, turn) in zip(agents, together):
+        (alone_uv, alone_turn), = stance.pivot(*[[value] for value in agent])
+        np.testing.assert_allclose(uv, alone_uv, atol=1e-12)
+        np.testing.assert_allclose(turn, alone_turn, atol=1e-12)
+
+
 def _planted_slide(root, feet, planted, uv, turn):
     """Mean speed of the planted feet beyond the source's, where the rigid motion of each frame
     (turn about the root, then onto ``uv``) puts them."""
@@ -162,8 +181,8 @@ def test_a_last_pivot_that_would_meet_another_agent_is_given_up(tmp_path, monkey
     pivot_moved = collisions_pass.stance.pivot_moved
     calls = []
 
-    def onto_the_other(ctx, keep=frozenset()):
-        pivot_moved(ctx, keep)
+    def onto_the_other(ctx, keep=frozenset(), **kwargs):
+        pivot_moved(ctx, keep, **kwargs)
         calls.append(dict(ctx.paths))
         if len(calls) == 2:   # the last pivot: agent_0000 walks where agent_0001 does
             a, b = ctx.paths[agents[0]], ctx.paths[agents[1]]

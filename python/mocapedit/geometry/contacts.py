@@ -237,8 +237,8 @@ def detect_agent(agent: Agent, clip: Clip, info: StageInfo, settings: DetectSett
         if k in raised:
             out.append([])
             continue
-        ankle = trajectory.joint_world(agent, clip, leg.ankle)[:, 3, :3]
-        toe = trajectory.joint_world(agent, clip, leg.toe)[:, 3, :3] if leg.toe is not None else None
+        ankle = trajectory.joint_world_position(agent, clip, leg.ankle)
+        toe = trajectory.joint_world_position(agent, clip, leg.toe) if leg.toe is not None else None
         out.append(detect_leg(seconds, ankle, toe, info.up_axis, info.meters_per_unit, settings))
     return out
 

@@ -75,13 +75,23 @@ def joint_world(agent: Agent, clip: Clip, joint: int, cache: dict | None = None)
 
     ``cache`` (optional, shared across agents) keeps the skeleton-space chains of clips
     that many agents play, so a crowd of re-used clips is composed once per clip."""
+    return _skel_space_cached(agent, clip, joint, cache) @ agent.skel_to_world
+
+
+def _skel_space_cached(agent: Agent, clip: Clip, joint: int, cache: dict | None) -> np.ndarray:
     key = (agent.clip_key, tuple(agent.joints), joint)
     skel = cache.get(key) if cache is not None else None
     if skel is None:
         skel = joint_skel_space(agent, clip, joint)
         if cache is not None:
             cache[key] = skel
-    return skel @ agent.skel_to_world
+    return skel
+
+
+def joint_world_position(agent: Agent, clip: Clip, joint: int, cache: dict | None = None) -> np.ndarray:
+    """(F,3) world position of one joint at every source frame: the translation of
+    :func:`joint_world`, without composing the rest of the matrices (``cache`` as there)."""
+    return (_skel_space_cached(agent, clip, joint, cache)[:, 3:4, :] @ agent.skel_to_world)[:, 0, :3]
 
 
 def extract(agent: Agent, clip: Clip, up_axis: str, meters_per_unit: float,

@@ -604,15 +604,23 @@ def resolve(problem: Problem, settings: Settings | None = None, progress=None) -
                    detour_iterations=detour[2].iterations if detour is not None else [])
 
 
-def overlaps(problem: Problem, settings: Settings | None = None) -> tuple[set[tuple[int, int]], set[int]]:
-    """What the problem's paths, as they are, leave uncleared: the pairs of agents ``(a, b)``,
-    ``a < b``, closer than their clearance at some sample, and the agents with a frame in the
-    shot within an avoid region's clearance. Nothing is solved."""
-    state = _State(problem, settings or Settings())
-    found = state.detect(state.rest)
-    pairs = set(zip(found.agent_a.tolist(), found.agent_b.tolist()))
-    inside = {int(a) for hit in state.region_hits(state.rest) if hit is not None for a in hit[1]}
-    return pairs, inside
+class Uncleared:
+    """What paths leave uncleared at a problem's samples (its time maps and span), measured as
+    often as the paths change: the problem is laid out and sampled once. Nothing is solved."""
+
+    def __init__(self, problem: Problem, settings: Settings | None = None):
+        self._state = _State(problem, settings or Settings())
+
+    def __call__(self, paths: list[np.ndarray]) -> tuple[set[tuple[int, int]], set[int]]:
+        """(pairs, inside) at ``paths`` (one (F,2) ground path per agent, as the problem's): the
+        pairs of agents ``(a, b)``, ``a < b``, closer than their clearance at some sample, and
+        the agents with a frame in the shot within an avoid region's clearance."""
+        state = self._state
+        flat = np.concatenate(paths).astype(np.float64) if len(paths) else state.rest
+        found = state.detect(flat)
+        pairs = set(zip(found.agent_a.tolist(), found.agent_b.tolist()))
+        inside = {int(a) for hit in state.region_hits(flat) if hit is not None for a in hit[1]}
+        return pairs, inside
 
 
 #: Seconds between the two ends of the chords whose directions :func:`_walks_backward` compares,

@@ -28,7 +28,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["EASE_SECONDS", "AIR_WEIGHT", "MAX_SPEEDUP", "STEP_TURN_RATE", "CATCH_UP_SECONDS", "gated_turn", "shifts", "pivot", "tridiagonal"]
+__all__ = ["EASE_SECONDS", "AIR_WEIGHT", "MAX_SPEEDUP", "STEP_TURN_RATE", "CATCH_UP_SECONDS", "BATCH", "gated_turn",
+           "gated_turns", "shifts", "pivot", "tridiagonal"]
 
 #: The shift pays itself back over about this long (seconds): the weight that keeps it small.
 EASE_SECONDS = 2.0
@@ -43,6 +44,8 @@ MAX_SPEEDUP = 2.0
 STEP_TURN_RATE = np.pi / 2
 #: ... within this long (seconds).
 CATCH_UP_SECONDS = 1.5
+#: Agents pivoted together, at most (a bound on the arrays a batch makes).
+BATCH = 256
 #: Weight of the shift's motion where no foot is planted, against 1 where one is: a body in the
 #: air (a run's flight) takes the shift back there first.
 AIR_WEIGHT = 0.05
@@ -68,28 +71,58 @@ def gated_turn(turn: np.ndarray, double: np.ndarray, fixed: np.ndarray, frame_se
     otherwise turn on them there, as the edit turns it on its way off: that turn is shared
     evenly by the stretches off double support that follow instead, as many as it takes (within
     :data:`CATCH_UP_SECONDS`, up to the next fixed frame) to turn no faster than
-    :data:`STEP_TURN_RATE` on average (``frame_seconds``: seconds per frame; 0 leaves it out)."""
-    n = len(turn)
+    :data:`STEP_TURN_RATE` on average (``frame_seconds``: seconds per frame; 0 leaves it out).
+    :func:`gated_turns` does the same for many agents at once."""
+    return gated_turns(np.asarray(turn, dtype=np.float64)[None], np.asarray(double, dtype=bool)[None],
+                       np.asarray(fixed, dtype=bool)[None], np.array([frame_seconds], dtype=np.float64))[0]
+
+
+def gated_turns(turn: np.ndarray, double: np.ndarray, fixed: np.ndarray, frame_seconds: np.ndarray) -> np.ndarray:
+    """:func:`gated_turn` of (B,F) turns, double supports and fixed frames of B agents with as
+    many frames each, and (B,) seconds per frame."""
     turn = np.asarray(turn, dtype=np.float64)
+    count, n = turn.shape
     if n < 3:
         return turn.copy()
     free = ~np.asarray(double, dtype=bool)
-    progress = np.cumsum(np.concatenate([[0.0], free[1:].astype(np.float64)]))
-    ends = free & ~np.concatenate([free[1:], [False]])    # last frame of each stretch off double support
+    progress = np.zeros((count, n))
+    progress[:, 1:] = np.cumsum(free[:, 1:], axis=1)
+    ends = free.copy()                                  # last frame of each stretch off double support
+    ends[:, :-1] &= ~free[:, 1:]
     hard = np.asarray(fixed, dtype=bool).copy()
-    hard[[0, -1]] = True
-    sync = np.flatnonzero(ends | hard)
-    frames = np.arange(n, dtype=np.float64)
-    k = np.clip(np.searchsorted(sync, frames, side="right") - 1, 0, len(sync) - 2)
-    a, b = sync[k], sync[k + 1]
-    span = progress[b] - progress[a]
+    hard[:, [0, -1]] = True
+    sync = ends | hard
+    frames = np.arange(n)
+    # Each frame lies between the last sync frame at or before it (a) and the first after it (b);
+    # the last frame, between the sync frame before it and itself.
+    a = np.maximum.accumulate(np.where(sync, frames, -1), axis=1)
+    later = np.full((count, n), n)
+    later[:, :-1] = np.where(sync[:, 1:], frames[1:], n)
+    b = np.minimum.accumulate(later[:, ::-1], axis=1)[:, ::-1]
+    a[:, -1], b[:, -1] = a[:, -2], n - 1
+
+    def at(values, index):
+        return np.take_along_axis(values, index, axis=1)
+
+    span = at(progress, b) - at(progress, a)
     speedup = (b - a) / np.maximum(span, 1e-12)
     wait = np.clip(2.0 - speedup / MAX_SPEEDUP, 0.0, 1.0)
-    share = (progress - progress[a]) / np.maximum(span, 1e-12)
+    share = (progress - at(progress, a)) / np.maximum(span, 1e-12)
     eased = 0.5 - 0.5 * np.cos(np.pi * np.clip(share, 0.0, 1.0))
-    out = turn + wait * (turn[a] + (turn[b] - turn[a]) * eased - turn)
-    if frame_seconds <= 0:
-        return out
+    start = at(turn, a)
+    out = turn + wait * (start + (at(turn, b) - start) * eased - turn)
+    # Stretches that start at a fixed frame and wait less than fully: shared by the steps after.
+    slow = sync & hard & (frames < n - 1) & (speedup > MAX_SPEEDUP) & (np.asarray(frame_seconds)[:, None] > 0)
+    for row in np.flatnonzero(slow.any(axis=1)):
+        _share_off_fixed(out[row], turn[row], progress[row], hard[row], np.flatnonzero(sync[row]),
+                         float(frame_seconds[row]))
+    return out
+
+
+def _share_off_fixed(out: np.ndarray, turn: np.ndarray, progress: np.ndarray, hard: np.ndarray,
+                     sync: np.ndarray, frame_seconds: float) -> None:
+    """In place, one agent's ``out`` (:func:`gated_turns`): the turn a body leaving a fixed frame
+    on both feet would take on them, shared by the stretches off double support after it."""
     pairs = len(sync) - 1
     span = np.diff(progress[sync])
     slow = np.flatnonzero(~(span * MAX_SPEEDUP >= np.diff(sync)) & hard[sync[:-1]])
@@ -111,7 +144,6 @@ def gated_turn(turn: np.ndarray, double: np.ndarray, fixed: np.ndarray, frame_se
                 break
             if hard[last]:
                 break
-    return out
 
 
 def tridiagonal(lower: np.ndarray, diag: np.ndarray, upper: np.ndarray, rhs: np.ndarray) -> np.ndarray:
@@ -136,18 +168,18 @@ def tridiagonal(lower: np.ndarray, diag: np.ndarray, upper: np.ndarray, rhs: np.
 
 def _slide_steps(source: np.ndarray, edited: np.ndarray, turn: np.ndarray, feet: np.ndarray,
                  planted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """((F-1,2) the root shift from each frame to the next that makes the feet planted over both
-    move as they do in the source (the mean over them), (F-1,) whether a foot is on the ground
-    at either frame: a step from one foot's contact to the other's, with no frame that both
-    are down, is no flight)."""
-    lever = feet - source[:, None]                                    # (F,L,2)
-    moved = _rotate(lever, turn[:, None]) + edited[:, None]           # where the edit puts the feet
-    wanted = _rotate(feet[1:] - feet[:-1], turn[1:, None])           # the source's own motion, turned
-    extra = (moved[1:] - moved[:-1]) - wanted
-    both = planted[1:] & planted[:-1]                                 # (F-1,L)
-    count = both.sum(axis=1)
-    step = -(extra * both[..., None]).sum(axis=1) / np.maximum(count, 1)[:, None]
-    return step, planted[1:].any(axis=1) | planted[:-1].any(axis=1)
+    """((...,F-1,2) the root shift from each frame to the next that makes the feet planted over
+    both move as they do in the source (the mean over them), (...,F-1) whether a foot is on the
+    ground at either frame: a step from one foot's contact to the other's, with no frame that
+    both are down, is no flight). Leading axes (...) are agents."""
+    lever = feet - source[..., None, :]                                         # (...,F,L,2)
+    moved = _rotate(lever, turn[..., None]) + edited[..., None, :]              # where the edit puts the feet
+    wanted = _rotate(feet[..., 1:, :, :] - feet[..., :-1, :, :], turn[..., 1:, None])  # the source's own motion, turned
+    extra = (moved[..., 1:, :, :] - moved[..., :-1, :, :]) - wanted
+    both = planted[..., 1:, :] & planted[..., :-1, :]                           # (...,F-1,L)
+    count = both.sum(axis=-1)
+    step = -(extra * both[..., None]).sum(axis=-2) / np.maximum(count, 1)[..., None]
+    return step, planted[..., 1:, :].any(axis=-1) | planted[..., :-1, :].any(axis=-1)
 
 
 def shifts(steps: list[np.ndarray], planted: list[np.ndarray], fixed: list[np.ndarray],
@@ -196,11 +228,25 @@ def pivot(source: list[np.ndarray], edited: list[np.ndarray], turn: list[np.ndar
       fixed: (F,) bool, frames that keep the edited path and turn exactly
       frame_seconds: seconds between two of the agent's frames
     """
-    turns, steps, on = [], [], []
-    for src, ed, th, ft, pl, fix, dt in zip(source, edited, turn, feet, planted, fixed, frame_seconds):
-        gated = gated_turn(th, pl.all(axis=1), fix, dt)
-        step, any_planted = _slide_steps(src, ed, gated, ft, pl)
-        turns.append(gated)
-        steps.append(step)
-        on.append(any_planted)
+    count = len(source)
+    turns: list = [None] * count
+    steps: list = [None] * count
+    on: list = [None] * count
+    # Agents with as many frames are taken together, a batch at a time.
+    by_length: dict[int, list[int]] = {}
+    for i, th in enumerate(turn):
+        by_length.setdefault(len(th), []).append(i)
+    for rows in by_length.values():
+        for first in range(0, len(rows), BATCH):
+            batch = rows[first:first + BATCH]
+
+            def stacked(values, dtype=np.float64):
+                return np.stack([np.asarray(values[i], dtype=dtype) for i in batch])
+
+            pl = stacked(planted, bool)
+            gated = gated_turns(stacked(turn), pl.all(axis=-1), stacked(fixed, bool),
+                                np.array([frame_seconds[i] for i in batch], dtype=np.float64))
+            step, any_planted = _slide_steps(stacked(source), stacked(edited), gated, stacked(feet), pl)
+            for k, i in enumerate(batch):
+                turns[i], steps[i], on[i] = gated[k], step[k], any_planted[k]
     return [(ed + e, th) for ed, e, th in zip(edited, shifts(steps, on, fixed, frame_seconds), turns)]

@@ -389,7 +389,8 @@ def _pivot_and_clear(ctx: SolveContext, problem: avoidance.Problem, footprints, 
     kept = (dict(ctx.paths), dict(ctx.time_maps), dict(ctx.out_times))
     # The walkers keep their way as the first solve was given it, not as it left them.
     first_paths = problem.paths
-    stance.pivot_moved(ctx, keep=held)
+    feet: dict = {}
+    stance.pivot_moved(ctx, keep=held, feet=feet)
     again = _problem(ctx, names, footprints, enabled)
     again.way = first_paths
     # What a pivot moves is a few centimetres: stepped aside from, never waited for (a wait
@@ -402,23 +403,30 @@ def _pivot_and_clear(ctx: SolveContext, problem: avoidance.Problem, footprints, 
         return outcome
     _apply(ctx, again, second)
     if _cleared(second):
-        _pivot_where_clear(ctx, names, footprints, enabled, solve_settings, held)
+        _pivot_where_clear(ctx, names, footprints, enabled, solve_settings, held, feet, second)
     return _merged(outcome, second)
 
 
 def _pivot_where_clear(ctx: SolveContext, names: list[str], footprints, enabled: bool,
-                       solve_settings: avoidance.Settings, held: set[str]) -> None:
-    """The moved agents but ``held`` pivot on their feet once more, on the paths the clearing solve
-    left. Then, round by round, each agent that a new overlap names (a pair the cleared paths did
-    not have, or a frame in a region's clearance) takes half of what its pivot moved, then a
-    quarter, then none: the cleared paths have no new overlap, so the rounds end."""
+                       solve_settings: avoidance.Settings, keep: set[str], feet: dict,
+                       cleared_by: avoidance.Outcome) -> None:
+    """The moved agents but those in ``keep`` pivot on their feet once more, on the paths the
+    clearing solve ``cleared_by`` left (``feet``: their source feet, kept from the first pivot,
+    :func:`stance.pivot_moved`). Then, round by
+    round, each agent that a new overlap names (a pair the cleared paths did not have, or a frame
+    in a region's clearance) takes half of what its pivot moved, then a quarter, then none: the
+    cleared paths have no new overlap, so the rounds end."""
     cleared = dict(ctx.paths)
-    before, before_inside = avoidance.overlaps(_problem(ctx, names, footprints, enabled), solve_settings)
-    stance.pivot_moved(ctx, keep=held)
+    found = cleared_by.remaining
+    before = set(zip(found.agent_a.tolist(), found.agent_b.tolist()))
+    before_inside = {a for _, a, _, _ in cleared_by.region_left}
+    stance.pivot_moved(ctx, keep=keep, feet=feet)
     pivoted = {p: e for p, e in ctx.paths.items() if e is not cleared.get(p)}
     share = {p: 1.0 for p in pivoted}
+    uncleared = avoidance.Uncleared(_problem(ctx, names, footprints, enabled), solve_settings)
     while True:
-        pairs, inside = avoidance.overlaps(_problem(ctx, names, footprints, enabled), solve_settings)
+        pairs, inside = uncleared([ctx.paths[p].ground if p in ctx.paths else ctx.trajectories[p].ground
+                                   for p in names])
         new = {i for pair in pairs - before for i in pair} | (inside - before_inside)
         back = [names[i] for i in sorted(new) if share.get(names[i], 0.0) > 0.0]
         if not back:

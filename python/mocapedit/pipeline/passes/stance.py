@@ -58,15 +58,16 @@ def _feet(ctx: SolveContext, path: str, cache: dict) -> tuple[np.ndarray, np.nda
     points = []
     for leg in agent.legs:
         joints = [leg.ankle] + ([leg.toe] if leg.toe is not None else [])
-        world = np.mean([trajectory.joint_world(agent, clip, j, cache)[:, 3, :3] for j in joints], axis=0)
+        world = np.mean([trajectory.joint_world_position(agent, clip, j, cache) for j in joints], axis=0)
         points.append(ground.to_ground(world, data.info.up_axis))
     planted = np.stack([contacts.mask_of(r, agent.frame_count) for r in ranges], axis=1)
     return np.stack(points, axis=1), planted
 
 
-def pivot_moved(ctx: SolveContext, keep: set[str] = frozenset()) -> None:
+def pivot_moved(ctx: SolveContext, keep: set[str] = frozenset(), feet: dict | None = None) -> None:
     """Every moved agent with two legs and foot contacts but those in ``keep``: its edited path and
-    turn pivoted on its planted feet (:func:`stance.pivot`), frames the artist fixed kept."""
+    turn pivoted on its planted feet (:func:`stance.pivot`), frames the artist fixed kept.
+    ``feet``: a dict that keeps each agent's source feet (:func:`_feet`) for a later call."""
     ctx.pivoted = True
     if not ctx.data.settings.pivot_on_feet:
         return
@@ -84,17 +85,19 @@ def pivot_moved(ctx: SolveContext, keep: set[str] = frozenset()) -> None:
     info = ctx.data.info
     cache: dict = {}
     fixed = _fixed(ctx, moved)
-    agents, feet = [], []
+    known = {} if feet is None else feet
+    agents, found = [], []
     for p in moved:
-        found = _feet(ctx, p, cache)
-        if found is not None:
+        if p not in known:
+            known[p] = _feet(ctx, p, cache)
+        if known[p] is not None:
             agents.append(p)
-            feet.append(found)
+            found.append(known[p])
     source = [ctx.trajectories[p] for p in agents]
     pivoted = stance.pivot(
         [t.ground for t in source], [ctx.paths[p].ground for p in agents],
         [ctx.paths[p].heading - t.heading for p, t in zip(agents, source)],
-        [f[0] for f in feet], [f[1] for f in feet], [fixed[p] for p in agents],
+        [f[0] for f in found], [f[1] for f in found], [fixed[p] for p in agents],
         [1.0 / trajectory.samples_per_second(ctx.data.agents[p].sample_times, info.time_codes_per_second)
          for p in agents])
     for p, t, (uv, turn) in zip(agents, source, pivoted):
