@@ -183,10 +183,10 @@ def _slide_steps(source: np.ndarray, edited: np.ndarray, turn: np.ndarray, feet:
 
 
 def shifts(steps: list[np.ndarray], planted: list[np.ndarray], fixed: list[np.ndarray],
-           frame_seconds: list[float]) -> list[np.ndarray]:
+           frame_seconds: list[float], ease_seconds: float = EASE_SECONDS) -> list[np.ndarray]:
     """Per agent, the (F,2) root shift ``e`` that minimises
 
-        sum_t w_t |e[t+1] - e[t] - steps[t]|^2 + (dt / EASE_SECONDS)^2 sum_t |e[t]|^2
+        sum_t w_t |e[t+1] - e[t] - steps[t]|^2 + (dt / ease_seconds)^2 sum_t |e[t]|^2
 
     with ``e = 0`` on its ``fixed`` frames; ``w_t`` is 1 where a foot is planted over the step
     (``planted``, (F-1,) bool), :data:`AIR_WEIGHT` where none is. Agents are solved together,
@@ -204,7 +204,7 @@ def shifts(steps: list[np.ndarray], planted: list[np.ndarray], fixed: list[np.nd
         w[a, :f - 1] = np.where(on, 1.0, AIR_WEIGHT)
         s[a, :f - 1] = step
         hold[a, :f] = fix
-        lam[a] = (dt / EASE_SECONDS) ** 2
+        lam[a] = (dt / ease_seconds) ** 2
     before = np.concatenate([np.zeros((count, 1)), w[:, :-1]], axis=1)   # w_{t-1}
     diag = before + w + lam
     lower, upper = -before, -w.copy()
@@ -216,7 +216,7 @@ def shifts(steps: list[np.ndarray], planted: list[np.ndarray], fixed: list[np.nd
 
 def pivot(source: list[np.ndarray], edited: list[np.ndarray], turn: list[np.ndarray], feet: list[np.ndarray],
           planted: list[np.ndarray], fixed: list[np.ndarray],
-          frame_seconds: list[float]) -> list[tuple[np.ndarray, np.ndarray]]:
+          frame_seconds: list[float], ease_seconds: float = EASE_SECONDS) -> list[tuple[np.ndarray, np.ndarray]]:
     """Per agent, (ground (F,2), turn (F,)): the edited path and the edit's turn of each frame
     with the turn taken between steps and the body pivoting on its planted feet.
 
@@ -227,6 +227,7 @@ def pivot(source: list[np.ndarray], edited: list[np.ndarray], turn: list[np.ndar
       planted: (F,L) bool, the leg's foot contacts in the source
       fixed: (F,) bool, frames that keep the edited path and turn exactly
       frame_seconds: seconds between two of the agent's frames
+      ease_seconds: how long the shift takes to pay itself back (:func:`shifts`)
     """
     count = len(source)
     turns: list = [None] * count
@@ -249,4 +250,4 @@ def pivot(source: list[np.ndarray], edited: list[np.ndarray], turn: list[np.ndar
             step, any_planted = _slide_steps(stacked(source), stacked(edited), gated, stacked(feet), pl)
             for k, i in enumerate(batch):
                 turns[i], steps[i], on[i] = gated[k], step[k], any_planted[k]
-    return [(ed + e, th) for ed, e, th in zip(edited, shifts(steps, on, fixed, frame_seconds), turns)]
+    return [(ed + e, th) for ed, e, th in zip(edited, shifts(steps, on, fixed, frame_seconds, ease_seconds), turns)]

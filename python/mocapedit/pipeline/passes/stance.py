@@ -64,10 +64,12 @@ def _feet(ctx: SolveContext, path: str, cache: dict) -> tuple[np.ndarray, np.nda
     return np.stack(points, axis=1), planted
 
 
-def pivot_moved(ctx: SolveContext, keep: set[str] = frozenset(), feet: dict | None = None) -> None:
+def pivot_moved(ctx: SolveContext, keep: set[str] = frozenset(), feet: dict | None = None,
+                ease_seconds: float = stance.EASE_SECONDS) -> None:
     """Every moved agent with two legs and foot contacts but those in ``keep``: its edited path and
-    turn pivoted on its planted feet (:func:`stance.pivot`), frames the artist fixed kept.
-    ``feet``: a dict that keeps each agent's source feet (:func:`_feet`) for a later call."""
+    turn pivoted on its planted feet (:func:`stance.pivot`, the shift paying itself back over
+    about ``ease_seconds``), frames the artist fixed kept. ``feet``: a dict that keeps each
+    agent's source feet (:func:`_feet`) for a later call."""
     ctx.pivoted = True
     if not ctx.data.settings.pivot_on_feet:
         return
@@ -99,7 +101,7 @@ def pivot_moved(ctx: SolveContext, keep: set[str] = frozenset(), feet: dict | No
         [ctx.paths[p].heading - t.heading for p, t in zip(agents, source)],
         [f[0] for f in found], [f[1] for f in found], [fixed[p] for p in agents],
         [1.0 / trajectory.samples_per_second(ctx.data.agents[p].sample_times, info.time_codes_per_second)
-         for p in agents])
+         for p in agents], ease_seconds)
     for p, t, (uv, turn) in zip(agents, source, pivoted):
         ctx.paths[p] = EditedPath(ground=uv, heading=t.heading + turn)
         # Measured again on the final path (the inspection fills it in).
