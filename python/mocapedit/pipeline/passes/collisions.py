@@ -24,8 +24,8 @@ their planted feet (the stance pass, :mod:`mocapedit.pipeline.passes.stance`), w
 roots by a few centimetres, and the paths are solved once more from there, so that the overlaps
 the pivot makes are cleared like any other. That solve moves some paths again, without regard to
 the feet: they pivot once more on what it left, and an agent whose second pivot would meet another
-agent (or a region) where the cleared paths did not gives up half of that pivot, then three
-quarters, then all of it, until nothing new meets.
+agent (or a region) where the cleared paths did not keeps half of that pivot, then half of that,
+down to a sixteenth, then none of it, until nothing new meets.
 
 Report: ``stats`` ``collisionStrategy``, ``collisionIterations``, ``collisionsPerIteration``
 (collision intervals found before each solve, then after the last), ``remainingOverlaps``,
@@ -80,8 +80,10 @@ HELD_MOVED_M = 0.25
 #: the clearing solve made for the larger shift.
 LAST_PIVOT_EASE_SECONDS = 8.0
 #: The share of its last pivot an agent keeps is halved where that pivot meets another agent, down
-#: to this share; below it, none is kept.
-PIVOT_SHARE_FLOOR = 0.25
+#: to this share; below it, none is kept. Measured on the example scenes, a sixteenth rather than
+#: a quarter lowered `make demo`'s skate ratio before locking from 1.729 to 1.697 and changed no
+#: other scene's.
+PIVOT_SHARE_FLOOR = 1.0 / 16.0
 
 
 def _settings(ctx: SolveContext):
@@ -419,10 +421,10 @@ def _pivot_where_clear(ctx: SolveContext, names: list[str], footprints, enabled:
                        cleared_by: avoidance.Outcome) -> None:
     """The moved agents but those in ``keep`` pivot on their feet once more, on the paths the
     clearing solve ``cleared_by`` left (``feet``: their source feet, kept from the first pivot,
-    :func:`stance.pivot_moved`). Then, round by
-    round, each agent that a new overlap names (a pair the cleared paths did not have, or a frame
-    in a region's clearance) takes half of what its pivot moved, then a quarter, then none: the
-    cleared paths have no new overlap, so the rounds end."""
+    :func:`stance.pivot_moved`). Then, round by round, each agent that a new overlap names (a
+    pair the cleared paths did not have, or a frame in a region's clearance) keeps half of what
+    its pivot moved, then half of that, down to :data:`PIVOT_SHARE_FLOOR`, then none: the cleared
+    paths have no new overlap, so the rounds end."""
     cleared = dict(ctx.paths)
     found = cleared_by.remaining
     before = set(zip(found.agent_a.tolist(), found.agent_b.tolist()))
