@@ -70,8 +70,9 @@ def test_a_path_moved_and_turned_rigidly_is_left_exactly_as_it_is():
 
 
 def test_agents_pivoted_together_are_pivoted_as_one_by_one(monkeypatch):
-    """Agents of two lengths, in batches of two: each gets what it gets alone."""
-    monkeypatch.setattr(stance, "BATCH", 2)
+    """Agents of two lengths, in batches of two (of the longer) or three (of the shorter): each
+    gets what it gets alone."""
+    monkeypatch.setattr(stance, "BATCH", 2 * 97)
     agents = []
     for k, frames in enumerate((97, 61, 97, 97, 61)):
         root, feet, planted = _gait(frames)

@@ -44,8 +44,9 @@ MAX_SPEEDUP = 2.0
 STEP_TURN_RATE = np.pi / 2
 #: ... within this long (seconds).
 CATCH_UP_SECONDS = 1.5
-#: Agents pivoted together, at most (a bound on the arrays a batch makes).
-BATCH = 256
+#: Frames of the agents pivoted together, at most (a bound on the arrays a batch makes: 256
+#: agents of 240 frames; one agent at least, however long its clip).
+BATCH = 256 * 240
 #: Weight of the shift's motion where no foot is planted, against 1 where one is: a body in the
 #: air (a run's flight) takes the shift back there first.
 AIR_WEIGHT = 0.05
@@ -237,9 +238,10 @@ def pivot(source: list[np.ndarray], edited: list[np.ndarray], turn: list[np.ndar
     by_length: dict[int, list[int]] = {}
     for i, th in enumerate(turn):
         by_length.setdefault(len(th), []).append(i)
-    for rows in by_length.values():
-        for first in range(0, len(rows), BATCH):
-            batch = rows[first:first + BATCH]
+    for frames, rows in by_length.items():
+        size = max(1, BATCH // max(frames, 1))
+        for first in range(0, len(rows), size):
+            batch = rows[first:first + size]
 
             def stacked(values, dtype=np.float64):
                 return np.stack([np.asarray(values[i], dtype=dtype) for i in batch])

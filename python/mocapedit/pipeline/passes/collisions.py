@@ -430,6 +430,7 @@ def _pivot_where_clear(ctx: SolveContext, names: list[str], footprints, enabled:
     before = set(zip(found.agent_a.tolist(), found.agent_b.tolist()))
     before_inside = {a for _, a, _, _ in cleared_by.region_left}
     stance.pivot_moved(ctx, keep=keep, feet=feet, ease_seconds=LAST_PIVOT_EASE_SECONDS)
+    feet.clear()    # not needed again: freed before the problem is sampled once more
     pivoted = {p: e for p, e in ctx.paths.items() if e is not cleared.get(p)}
     share = {p: 1.0 for p in pivoted}
     uncleared = avoidance.Uncleared(_problem(ctx, names, footprints, enabled), solve_settings)
