@@ -855,6 +855,29 @@ def test_a_retimed_walk_is_measured_against_its_source_as_its_timing_plays_it(tm
         pytest.approx(entry["footSkateEdited"], rel=1e-3)
 
 
+def test_a_retimed_walk_measured_on_the_stage_gives_the_reports_skate(tmp_path):
+    """``measure.plausibility`` judges a re-timed walk against its source as the shot plays it,
+    by UsdSkel FK at the clip times each shot frame plays, as the report does: a time edit
+    alone slides no foot there. Interpolating the source's foot positions between its samples
+    instead (not its joints, as USD does) made the warp alone slide the feet 0.14 cm/s more,
+    and on real takes 0.5 to 0.8 cm/s more (a brisk walk delayed by avoidance)."""
+    clip = walker.walk(frames=120, fps=FPS, name="beats")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)], up_axis="Y",
+                                       fps=FPS, clips_dir=tmp_path / "clips")
+    a = f"{CROWD}/a"
+    for k, (frame, time) in enumerate(((21, 23.76), (45, 43.32), (69, 73.08))):
+        examples.add_time_constraint(stage, f"/Edits/beat{k}", a, frame, time)
+    stage.SetEndTimeCode(144.0)
+    stage.GetRootLayer().Save()
+    result, out = _solve(tmp_path)
+    entry = result.report.agents[a]
+    figures = measure.plausibility(Usd.Stage.Open(str(tmp_path / "shot.usda")), out, a)
+    # (The report also counts the clip's first and last samples, between the shot's frames.)
+    assert figures.foot_skate_source == pytest.approx(entry["footSkateSource"], rel=2e-3)
+    assert figures.foot_skate_edited == pytest.approx(entry["footSkateEdited"], rel=2e-3)
+    assert abs(figures.foot_skate_edited - figures.foot_skate_source) < 1e-4     # 0.01 cm/s
+
+
 CC_LEGS = [("CC_Base_L_Thigh", "CC_Base_L_Calf", "CC_Base_L_Foot"), ("CC_Base_R_Thigh", "CC_Base_R_Calf", "CC_Base_R_Foot")]
 
 
