@@ -823,21 +823,28 @@ def test_a_stand_dragged_fast_keeps_its_feet_with_quick_steps(tmp_path):
     assert bones < 1e-6 and flips == 0 and speed < 1.5
 
 
+def _retimed_walk(tmp_path, beats, end: float):
+    """A walk re-timed by time constraints alone (clip frame, shot time), the shot shown to
+    ``end`` (the report measures the shot): (result, composed stage, agent)."""
+    clip = walker.walk(frames=120, fps=FPS, name="beats")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)], up_axis="Y",
+                                       fps=FPS, clips_dir=tmp_path / "clips")
+    a = f"{CROWD}/a"
+    for k, (frame, time) in enumerate(beats):
+        examples.add_time_constraint(stage, f"/Edits/beat{k}", a, frame, time)
+    stage.SetEndTimeCode(end)
+    stage.GetRootLayer().Save()
+    result, out = _solve(tmp_path)
+    return result, out, a
+
+
 def test_a_retimed_walk_is_measured_against_its_source_as_its_timing_plays_it(tmp_path):
     """A walk re-timed to hurry and then slow down (time constraints alone) is played by a value
     clip; its feet are where its source put them at each clip time. Its foot skate at the shot's
     frames is its source's at the same clip times, per shot second: between the clip's samples
     (where the warp falls) the poses are interpolated, and a sped-up heel-toe roll is faster.
     Measured against its source at the clip's own samples, the warp alone counted 1.2 cm/s more."""
-    clip = walker.walk(frames=120, fps=FPS, name="beats")
-    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)], up_axis="Y",
-                                       fps=FPS, clips_dir=tmp_path / "clips")
-    a = f"{CROWD}/a"
-    for k, (frame, time) in enumerate(((22, 24.0), (46, 44.0), (70, 72.0))):
-        examples.add_time_constraint(stage, f"/Edits/beat{k}", a, frame, time)
-    stage.SetEndTimeCode(140.0)     # the shot shows the walk to its end (the report measures the shot)
-    stage.GetRootLayer().Save()
-    result, out = _solve(tmp_path)
+    result, out, a = _retimed_walk(tmp_path, ((22, 24.0), (46, 44.0), (70, 72.0)), 140.0)
     entry = result.report.agents[a]
     assert entry["footSkateEdited"] <= entry["footSkateSource"] + 0.005
     # The same by FK: the source at the clip time each shot frame plays, the edited at that frame.
@@ -861,15 +868,7 @@ def test_a_retimed_walk_measured_on_the_stage_gives_the_reports_skate(tmp_path):
     alone slides no foot there. Interpolating the source's foot positions between its samples
     instead (not its joints, as USD does) made the warp alone slide the feet 0.14 cm/s more,
     and on real takes 0.5 to 0.8 cm/s more (a brisk walk delayed by avoidance)."""
-    clip = walker.walk(frames=120, fps=FPS, name="beats")
-    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)], up_axis="Y",
-                                       fps=FPS, clips_dir=tmp_path / "clips")
-    a = f"{CROWD}/a"
-    for k, (frame, time) in enumerate(((21, 23.76), (45, 43.32), (69, 73.08))):
-        examples.add_time_constraint(stage, f"/Edits/beat{k}", a, frame, time)
-    stage.SetEndTimeCode(144.0)
-    stage.GetRootLayer().Save()
-    result, out = _solve(tmp_path)
+    result, out, a = _retimed_walk(tmp_path, ((21, 23.76), (45, 43.32), (69, 73.08)), 144.0)
     entry = result.report.agents[a]
     figures = measure.plausibility(Usd.Stage.Open(str(tmp_path / "shot.usda")), out, a)
     # (The report also counts the clip's first and last samples, between the shot's frames.)
