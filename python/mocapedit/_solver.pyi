@@ -970,12 +970,13 @@ def turning_rates(*, facing: typing.Any, seconds: typing.Any) -> numpy.typing.ND
     Unsigned turning rate (degrees per second) of a facing (..., T) radians between samples at
     increasing seconds (..., T): (..., T-1).
     """
-def wait_round(*, search: WaitSearch, walkers: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 1]"], others: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 1]"], firsts: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 1]"], lasts: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 1]"], guesses: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"], paths: list, times: list, source_times: list, budget: typing.SupportsFloat | typing.SupportsIndex, step: typing.SupportsFloat | typing.SupportsIndex, delay: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"], tried: WaitMemory) -> list[tuple[int, WaitDelay]]:
+def wait_round(*, search: WaitSearch, walkers: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 1]"], others: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 1]"], firsts: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 1]"], lasts: typing.Annotated[numpy.typing.NDArray[numpy.int32], "[m, 1]"], guesses: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"], paths: list, times: list, source_times: list, budget: typing.SupportsFloat | typing.SupportsIndex, step: typing.SupportsFloat | typing.SupportsIndex, delay: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"], tried: WaitMemory, earliest: typing.Any = None) -> list[tuple[int, WaitDelay]]:
     """
     One round of waiting (the C++ WaitRound): the encounters (walkers, others, their first and last
     samples, first guesses) in turn, each walker taking the least delay of the first of its encounters
     that has one, at most one per round, within `budget` time codes in all (`delay` (A,): taken so far;
     passed over below `step` left) and not tried before with both delays as they are (`tried`, a
-    WaitMemory, records every pair tried). paths (F, 2), times and source_times (F,): every agent's.
+    WaitMemory, records every pair tried). paths (F, 2), times and source_times (F,): every agent's;
+    earliest (A,) or None: the shot time before which each agent's time map stays as it is.
     Returns [(walker, WaitDelay)] in the order taken.
     """

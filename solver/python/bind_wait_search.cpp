@@ -1,6 +1,7 @@
 #include <pybind11/eigen.h>
 #include <pybind11/stl.h>
 
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -64,14 +65,17 @@ MOCAPEDIT_BINDINGS(BindWaitSearch) {
          const Eigen::Ref<const Eigen::VectorXi>& others, const Eigen::Ref<const Eigen::VectorXi>& firsts,
          const Eigen::Ref<const Eigen::VectorXi>& lasts, const Eigen::Ref<const Eigen::VectorXd>& guesses,
          const py::list& paths, const py::list& times, const py::list& source_times, double budget, double step,
-         const Eigen::Ref<const Eigen::VectorXd>& delay, WaitMemory& memory) {
+         const Eigen::Ref<const Eigen::VectorXd>& delay, WaitMemory& memory,
+         const py::object& earliest_arg) {
+        const bool has_earliest = !earliest_arg.is_none();
+        const Eigen::VectorXd earliest = has_earliest ? earliest_arg.cast<Eigen::VectorXd>() : Eigen::VectorXd();
         const Eigen::Index n = walkers.size();
         if (others.size() != n || firsts.size() != n || lasts.size() != n || guesses.size() != n)
           throw std::invalid_argument("walkers, others, firsts, lasts and guesses need one entry per encounter");
         const auto agents = static_cast<size_t>(search.agents());
         if (py::len(paths) != agents || py::len(times) != agents || py::len(source_times) != agents ||
-            static_cast<size_t>(delay.size()) != agents)
-          throw std::invalid_argument("paths, times, source_times and delay need one entry per agent");
+            static_cast<size_t>(delay.size()) != agents || (has_earliest && static_cast<size_t>(earliest.size()) != agents))
+          throw std::invalid_argument("paths, times, source_times, delay and earliest need one entry per agent");
         using Array = py::array_t<double, py::array::c_style | py::array::forcecast>;
         std::vector<Array> held;
         held.reserve(3 * agents);
@@ -83,7 +87,8 @@ MOCAPEDIT_BINDINGS(BindWaitSearch) {
             throw std::invalid_argument("agent " + std::to_string(a) + ": path (F, 2), times and source_times (F,) expected");
           frames.push_back({Eigen::Map<const mocapedit::Trajectory2>(path.data(), path.shape(0), 2),
                             Eigen::Map<const Eigen::VectorXd>(t.data(), t.shape(0)),
-                            Eigen::Map<const Eigen::VectorXd>(src.data(), src.shape(0))});
+                            Eigen::Map<const Eigen::VectorXd>(src.data(), src.shape(0)),
+                            has_earliest ? earliest[static_cast<Eigen::Index>(a)] : -std::numeric_limits<double>::infinity()});
           held.push_back(std::move(path)), held.push_back(std::move(t)), held.push_back(std::move(src));
         }
         std::vector<mocapedit::WaitEncounter> encounters(static_cast<size_t>(n));
@@ -99,12 +104,13 @@ MOCAPEDIT_BINDINGS(BindWaitSearch) {
       },
       py::kw_only(), py::arg("search"), py::arg("walkers"), py::arg("others"), py::arg("firsts"), py::arg("lasts"),
       py::arg("guesses"), py::arg("paths"), py::arg("times"), py::arg("source_times"), py::arg("budget"),
-      py::arg("step"), py::arg("delay"), py::arg("tried"),
+      py::arg("step"), py::arg("delay"), py::arg("tried"), py::arg("earliest") = py::none(),
       "One round of waiting (the C++ WaitRound): the encounters (walkers, others, their first and last\n"
       "samples, first guesses) in turn, each walker taking the least delay of the first of its encounters\n"
       "that has one, at most one per round, within `budget` time codes in all (`delay` (A,): taken so far;\n"
       "passed over below `step` left) and not tried before with both delays as they are (`tried`, a\n"
-      "WaitMemory, records every pair tried). paths (F, 2), times and source_times (F,): every agent's.\n"
+      "WaitMemory, records every pair tried). paths (F, 2), times and source_times (F,): every agent's;\n"
+      "earliest (A,) or None: the shot time before which each agent's time map stays as it is.\n"
       "Returns [(walker, WaitDelay)] in the order taken.");
   m.def(
       "smooth_delay",

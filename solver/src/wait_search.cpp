@@ -282,7 +282,8 @@ WaitDelay WaitSearch::LeastDelay(const WaitQuery& q, const WaitWalker& walker) c
   }
   // A smoothstep's steepest slope is 1.5 times its mean: the pace stays at or above
   // slowest_pace. It starts after the clip does: a walker never stands frozen in its first
-  // pose waiting for its clip to begin.
+  // pose waiting for its clip to begin; and after the walker's earliest (its pinned frames play
+  // when they did).
   const double t_end = times_[q.first] - 0.1 * fps;
   const double step = s.step;
   const double lowest = std::isfinite(q.guess) ? std::max(step, step * (std::ceil(q.guess / step) - 1.0)) : step;
@@ -293,7 +294,7 @@ WaitDelay WaitSearch::LeastDelay(const WaitQuery& q, const WaitWalker& walker) c
   for (int i = 0; i < count; ++i) {
     const double d = i == 0 ? lowest : i == 1 ? lowest + step : lowest + i * delta;
     const double t_start = t_end - std::max(1.5 * d / (1.0 / s.slowest_pace - 1.0), fps);
-    if (!(t_start >= walker.times[0])) continue;
+    if (!(t_start >= walker.times[0] && t_start >= walker.earliest)) continue;
     Eigen::VectorXd trial = SmoothDelay(walker.times, t_start, t_end, d);
     // Delays taken up over overlapping spans add their slowing: the pace stays at or above
     // slowest_pace of the source's all the same.

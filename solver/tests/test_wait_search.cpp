@@ -145,6 +145,31 @@ TEST(WaitSearch, TheLaterWalkerWaitsUntilTheOtherHasPassed) {
   EXPECT_FALSE(search.LeastDelay({1, 0, 91, 109, found.delay - 1.0, 1.0}, walker).found);
 }
 
+TEST(WaitSearch, AWaitStartsNoEarlierThanTheWalkersEarliest) {
+  // The walker's frames up to its earliest keep their times: a wait starts at it or later, and
+  // one that would have to start before it is none.
+  const std::vector<Walk> walks = {Through(1, 0, 100), Through(0, 1, 100)};
+  const WaitSettings s = Settings();
+  const WaitSearch search(Positions(walks), Frames(), Eigen::VectorXd::Constant(2, 0.3), s);
+  const Trajectory2 path = Path(walks[1]);
+  const Eigen::VectorXd times = Frames();
+  const WaitQuery query{1, 0, 91, 109, 72.0, 1.0};
+  const WaitDelay free = search.LeastDelay(query, WaitWalker{path, times, times});
+  ASSERT_TRUE(free.found);
+  const WaitDelay at = search.LeastDelay(query, WaitWalker{path, times, times, free.start});
+  ASSERT_TRUE(at.found);
+  EXPECT_EQ(at.delay, free.delay);
+  EXPECT_EQ(at.start, free.start);
+  for (const double earliest : {free.start + 1.0, free.end - 1.0, free.end}) {
+    const WaitDelay later = search.LeastDelay(query, WaitWalker{path, times, times, earliest});
+    if (later.found) {
+      EXPECT_GE(later.start, earliest);
+      for (int i = 0; i < kSamples && times[i] <= earliest; ++i) EXPECT_EQ(later.times[i], times[i]);
+    }
+  }
+  EXPECT_FALSE(search.LeastDelay(query, WaitWalker{path, times, times, free.end}).found);
+}
+
 TEST(WaitSearch, AWaitMeetsNobodyNew) {
   // A third walker crosses the same point a little after the first: the least delay that
   // parts the walker from the first would run it into the third, so it waits longer.

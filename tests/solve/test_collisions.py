@@ -556,6 +556,46 @@ def test_a_time_constraint_keeps_the_later_walker_from_waiting(tmp_path):
     assert result.report.stats["remainingOverlaps"] == 0
 
 
+@pytest.mark.parametrize("pinned", [0, 24])
+def test_a_walker_pinned_before_the_crossing_waits_after_its_pin(tmp_path, pinned):
+    """The later walker must be where it was at an earlier frame (a hard position constraint):
+    that frame still plays when it did if the walker slows down only after it, so the walker
+    waits 0.5 s instead of stepping aside (when any pin kept it from waiting, it stepped aside
+    0.19 m and the other walker 0.33 m). Its pin holds, at its frame's moment of the shot."""
+    stage_path = _crossing_pair(tmp_path)
+    stage = Usd.Stage.Open(str(stage_path))
+    waiter = "/World/Crowd/agent_0001"
+    held = evaluate.agent_root_positions(stage, waiter, [float(pinned)])[0]
+    examples.add_position_constraint(stage, "/World/Mark", waiter, pinned, tuple(map(float, held)))
+    stage.GetRootLayer().Save()
+    result, out = _solve(tmp_path, stage_path)
+    stats = result.report.stats
+    assert stats["remainingOverlaps"] == 0
+    assert result.report.agents[waiter]["delay"] > 0.2
+    assert result.report.agents[waiter].get("maxDisplacement", 0.0) < 0.05
+    assert all(c["residual"] < 1e-6 for c in result.report.constraints)
+    # At the pinned frame's moment the walker is where the mark holds it, before the wait.
+    on_ground = evaluate.agent_root_positions(out, waiter, [float(pinned)])[0]
+    np.testing.assert_allclose(metrics.to_ground(on_ground, "Y"), metrics.to_ground(held, "Y"), atol=1e-6)
+
+
+def test_a_walker_pinned_after_the_crossing_steps_aside_instead_of_waiting(tmp_path):
+    """Pinned where it is after the crossing, the walker cannot wait (its pinned frame would
+    play later): it steps aside."""
+    stage_path = _crossing_pair(tmp_path)
+    stage = Usd.Stage.Open(str(stage_path))
+    waiter = "/World/Crowd/agent_0001"
+    held = evaluate.agent_root_positions(stage, waiter, [96.0])[0]
+    examples.add_position_constraint(stage, "/World/Mark", waiter, 96, tuple(map(float, held)))
+    stage.GetRootLayer().Save()
+    result, out = _solve(tmp_path, stage_path)
+    assert result.report.stats["remainingOverlaps"] == 0
+    assert "delay" not in result.report.agents[waiter]
+    assert all(c["residual"] < 1e-6 for c in result.report.constraints)
+    on_ground = evaluate.agent_root_positions(out, waiter, [96.0])[0]
+    np.testing.assert_allclose(metrics.to_ground(on_ground, "Y"), metrics.to_ground(held, "Y"), atol=1e-6)
+
+
 def _crossroads(tmp_path, marks=True, cues=True, settings=None, sync=False):
     stage_path = write_crossroads(tmp_path / "s.usda", marks=marks)
     stage = Usd.Stage.Open(str(stage_path))

@@ -121,6 +121,9 @@ class Problem:
     regions: list[Region] = field(default_factory=list)
     collide_agents: bool = True         # False: regions only
     fixed_timing: np.ndarray | None = None  # (A,) bool: time constraints fix the agent's timing
+    #: (A,) int: the last source frame whose shot time is fixed (a hard position constraint put
+    #: the agent there at that moment), -1 for none: the agent may wait, but only after it
+    waits_after: np.ndarray | None = None
     span: tuple[float, float] | None = None  # shot times compared (default: all the frames play)
     #: (F_a,2) per agent: the paths whose way the walkers keep (the rows against walking back),
     #: when it is not ``paths``' (a solve resumed from an earlier one's result keeps the source's way)
@@ -1275,9 +1278,11 @@ def _waits(problem: Problem, settings: Settings, fixed: np.ndarray) -> _Waits:
     lines later (of two walking the same way, the one behind), unless its timing is
     ``fixed``; find the least delay (in steps of ``wait_step_s`` from a step below the time
     the other needs to clear the crossing, at most what it may still add within
-    ``max_wait_s``) after which the pair keeps its clearance over the encounter; take that delay up smoothly before the encounter, slowing to no less than
-    ``SLOWEST_PACE``. Each agent takes up at most one delay per round (its earliest), so
-    delays that create new encounters are seen by the next round. Collisions waiting
+    ``max_wait_s``) after which the pair keeps its clearance over the encounter; take that delay
+    up smoothly before the encounter, slowing to no less than ``SLOWEST_PACE``, and after the
+    last frame whose moment is fixed (``Problem.waits_after``: a frame pinned in place plays
+    when it did). Each agent takes up at most one delay per round (its earliest), so delays
+    that create new encounters are seen by the next round. Collisions waiting
     cannot part (head-on, standing agents, no room) are left to the lateral solve; so are
     those neither agent may wait for, which ``refused`` lists.
     """
@@ -1297,6 +1302,9 @@ def _waits(problem: Problem, settings: Settings, fixed: np.ndarray) -> _Waits:
     span = problem.span or (min(float(t[0]) for t in times), max(float(t[-1]) for t in times))
     out.span = span
     tried = _solver.WaitMemory()
+    # The shot time of each agent's last pinned frame: no wait is taken up before it, so it stays.
+    after = np.full(len(names), -1) if problem.waits_after is None else np.asarray(problem.waits_after)
+    earliest = np.array([float(times[i][f]) if f >= 0 else -np.inf for i, f in enumerate(after)])
     walking_paths = [paths[i] for i in names]
     sampling = collisions.sample(names, {i: t for i, t in enumerate(times)}, paths, problem.sample_step, span)
     out.sampling = sampling
@@ -1357,7 +1365,7 @@ def _waits(problem: Problem, settings: Settings, fixed: np.ndarray) -> _Waits:
                 search=search, walkers=who[order].astype(np.int32), others=other[order].astype(np.int32),
                 firsts=found.first[order].astype(np.int32), lasts=found.last[order].astype(np.int32),
                 guesses=guess[order].astype(np.float64), paths=walking_paths, times=times, source_times=source,
-                budget=float(budget), step=float(step), delay=delay, tried=tried):
+                budget=float(budget), step=float(step), delay=delay, tried=tried, earliest=earliest):
             times[w], delay[w] = found_delay.times, delay[w] + found_delay.delay
             taken.add(w)
         if not taken:

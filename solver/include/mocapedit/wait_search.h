@@ -14,6 +14,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <limits>
 #include <map>
 #include <utility>
 #include <vector>
@@ -48,11 +49,14 @@ struct WaitQuery {
 };
 
 // The walker's frames: ground path, current time map and source time map (its pace bound),
-// #F each.
+// #F each; and the shot time before which its time map must stay as it is (a frame an artist
+// placed at a moment of the shot plays then): no delay is taken up before it, nor before the
+// clip starts.
 struct WaitWalker {
   Eigen::Ref<const Trajectory2> path;
   Eigen::Ref<const Eigen::VectorXd> times;
   Eigen::Ref<const Eigen::VectorXd> source_times;
+  double earliest = -std::numeric_limits<double>::infinity();
 };
 
 struct WaitDelay {

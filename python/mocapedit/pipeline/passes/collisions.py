@@ -328,18 +328,23 @@ def _problem(ctx: SolveContext, names: list[str], footprints, enabled: bool) -> 
         times.append(np.asarray(ctx.time_maps.get(p, data.agents[p].sample_times), dtype=np.float64))
     agents = [data.agents[p] for p in names]
     # Constraints fix the timing of the agents they name: a time or sync constraint states
-    # it, a relative constraint meets another agent at a moment, a position constraint marks
-    # where the agent is at a moment of the shot.
+    # it, a relative constraint meets another agent at a moment.
     # A soft time or sync constraint gives way to a wait (the report says by how much).
     timed = {c.agent for c in data.time_constraints if c.hard}
     timed |= {a for c in data.sync_constraints if c.hard for a in (c.agent, c.target)}
     timed |= {a for c in data.relative_constraints for a in (c.agent, c.target)}
-    timed |= {c.agent for c in data.position_constraints if c.hard}
+    # A hard position constraint puts the agent at its frame at that moment: the agent may wait
+    # after it (the frame still plays then), not before.
+    pinned_until = {}
+    for c in data.position_constraints:
+        if c.hard:
+            pinned_until[c.agent] = max(pinned_until.get(c.agent, -1), int(c.frame))
     problem = avoidance.Problem(
         names=names, paths=paths, frame_times=times,
         radius=np.array([a.collision_radius for a in agents]), height=np.array([a.collision_height for a in agents]),
         margin=float(data.settings.margin), sample_step=float(data.settings.sample_step), collide_agents=enabled,
         fixed_timing=np.array([p in timed for p in names], dtype=bool),
+        waits_after=np.array([pinned_until.get(p, -1) for p in names], dtype=np.int64),
         samples_per_second=np.array([trajectory.samples_per_second(a.sample_times, data.info.time_codes_per_second)
                                      for a in agents]),
         # Only what plays in the shot is parted: a long clip's walk after the shot ends (or
