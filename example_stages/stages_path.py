@@ -22,8 +22,10 @@ curves, groups). All Y-up, metres, 24 fps; the walker walks along +Z before its 
   middle runner's middle frame is dragged 3 m sideways: the whole chain bends.
 - ``path_long_stand.usda`` (Z-up, centimetres, 60 fps): a 10 s walk with a 4 s stand in
   the middle that is not tagged stationary, its root jittering by a few millimetres as
-  captured roots do; three handles bend it: one in the stand moved 0.8 m sideways, the end
-  moved 1.5 m sideways. The body turns with the bend, smoothly through the stand.
+  captured roots do; three handles bend it: the start held, one in the stand moved 0.8 m
+  sideways (the walk there turned about its start, keeping its length), the end moved as much
+  (the walk after the stand goes on its way, 0.8 m aside). The body turns with the first walk
+  and back, smoothly through the stand.
 """
 from __future__ import annotations
 
@@ -177,14 +179,29 @@ def long_stand_clip() -> tuple[walker.Clip, tuple[int, int]]:
     return clip, (first, last)
 
 
-LONG_STAND_HANDLES = {"start": (0, (0.0, 0.0)), "stand": (320, (80.0, 0.0)), "end": (599, (150.0, -50.0))}
+#: The frames of the long stand's handles: its start, inside the stand, its end.
+LONG_STAND_FRAMES = {"start": 0, "stand": 320, "end": 599}
 
 
-def path_long_stand(out: Path) -> None:
+def long_stand_handles(clip: walker.Clip, aside: float = 80.0) -> dict[str, tuple[int, tuple[float, float]]]:
+    """Name -> (frame, ground offset, cm) of the long stand's handles: the start held; the stand
+    moved ``aside`` sideways by turning the walk to it about its start (its length kept); the
+    end moved as much (the walk after the stand keeps its way and length)."""
+    start, stand = (clip.translations[LONG_STAND_FRAMES[k], 0, :2].astype(np.float64) for k in ("start", "stand"))
+    reach = stand - start
+    turn = np.arcsin(aside / np.linalg.norm(reach))
+    rot = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
+    moved = tuple(float(v) for v in np.round(rot @ reach - reach, 3))
+    return {"start": (LONG_STAND_FRAMES["start"], (0.0, 0.0)), "stand": (LONG_STAND_FRAMES["stand"], moved),
+            "end": (LONG_STAND_FRAMES["end"], moved)}
+
+
+def path_long_stand(out: Path, handles: dict | None = None) -> None:
+    """``handles``: name -> (frame, ground offset) instead of :func:`long_stand_handles`'."""
     clip, _ = long_stand_clip()
     stage = examples.build_crowd_stage(out / "path_long_stand.usda", [examples.AgentSpec("stander", clip)],
                                        up_axis="Z", meters_per_unit=0.01, fps=60.0, clips_dir=out / "clips")
-    for name, (frame, (dx, dy)) in LONG_STAND_HANDLES.items():
+    for name, (frame, (dx, dy)) in (handles or long_stand_handles(clip)).items():
         x, y, z = (float(v) for v in clip.translations[frame, 0])
         examples.add_position_constraint(stage, f"/Edits/{name}", f"{CROWD}/stander", frame,
                                          (round(x + dx, 6), round(y + dy, 6), 0.0))

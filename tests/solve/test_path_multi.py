@@ -341,9 +341,10 @@ def test_example_edits_keep_foot_skate_low(tmp_path, builder, stage):
 
 def test_a_long_stand_bent_by_handles_turns_the_body_smoothly(tmp_path):
     """A 60 fps, Z-up centimetre walk with a 4 s untagged stand whose root jitters, bent by
-    three handles (one inside the stand): the body turns with the bend, never spins, and the
-    handles hold. With the heading taken from the edited path's tangent, the stand spins by
-    up to 177 degrees in one frame."""
+    three handles (one inside the stand moved 0.8 m aside, the end as much): the body turns with
+    the bend, never spins, and the handles hold. With the heading taken from the edited path's
+    tangent, the stand spins by up to 177 degrees in one frame. Before foot locking the feet
+    slide 1.01 times as fast as the source's (#16's bar: 1.25), the path as long as it was."""
     stages = _load_stages()
     stages.path_long_stand(tmp_path)
     # Plausibility is the edit's, before foot locking plants the feet again: measured without it.
@@ -364,17 +365,37 @@ def test_a_long_stand_bent_by_handles_turns_the_body_smoothly(tmp_path):
     assert p.spin_frames == 0
     assert p.max_extra_facing_rate < 60.0                    # under 1 degree per frame at 60 fps
     assert p.max_direction_deviation < 20.0 and not p.reverses
-    assert p.foot_skate_ratio < 1.5
-    # The stand turns with the handle inside it: by about the bend there, in one smooth sweep.
+    assert p.foot_skate_ratio <= 1.25 and abs(p.length_ratio - 1.0) < 0.02
+    # The stand turns with the handles: from the first walk's turn towards the second's, in one
+    # smooth sweep.
     _, (first, last) = stages.long_stand_clip()
     t, ms = evaluate.joint_world_matrices(src, agent)
     _, me = evaluate.joint_world_matrices(out, agent)
     turn = np.degrees(metrics.body_facing(me, "Z") - metrics.body_facing(ms, "Z"))
     assert np.abs(np.diff(turn[first:last + 1])).max() < 0.2
-    # It turns with the bend (about 11 degrees), between the turns of the walks around it.
+    # The first walk turns by about 10 degrees, the second by about 1.5; the stand turns between.
     before, after = turn[first - 60:first].mean(), turn[last + 1:last + 61].mean()
-    assert turn[first:last + 1].mean() > 5.0
+    assert before > 8.0 and after < 3.0
+    assert turn[first:last + 1].max() - turn[first:last + 1].min() > 5.0
     assert min(before, after) - 1.0 < turn[first:last + 1].min() <= turn[first:last + 1].max() < max(before, after) + 1.0
+
+
+def test_a_long_stand_whose_second_walk_handles_stretch_keeps_its_feet_once_locked(tmp_path):
+    """The same stand with handles that ask more than a bend: the stand 0.8 m aside, the end 1.5 m
+    aside and 0.5 m further on, so the walk after the stand must be a fifth longer. No motion of
+    the whole body lengthens strides: before foot locking the feet slide 1.27 times as fast as the
+    source's; locked, no faster than the source's (within #17's 0.5 cm/s)."""
+    stages = _load_stages()
+    stages.path_long_stand(tmp_path, handles={"start": (0, (0.0, 0.0)), "stand": (320, (80.0, 0.0)),
+                                              "end": (599, (150.0, -50.0))})
+    agent = f"{CROWD}/stander"
+    src = Usd.Stage.Open(str(tmp_path / "path_long_stand.usda"))
+    result, _, free = _solve(tmp_path, src, foot_locking=False)
+    result, _, out = _solve(tmp_path, src)
+    assert all(c["residual"] < 1e-6 for c in result.report.constraints)
+    unlocked, locked = measure.plausibility(src, free, agent), measure.plausibility(src, out, agent)
+    assert unlocked.length_ratio > 1.05 and unlocked.foot_skate_ratio > 1.25
+    assert locked.foot_skate_edited <= locked.foot_skate_source + 0.5        # cm/s
 
 
 def test_backward_walks_and_turns_on_the_spot_keep_their_facing(tmp_path):
