@@ -1304,7 +1304,8 @@ def _waits(problem: Problem, settings: Settings, fixed: np.ndarray) -> _Waits:
     tried = _solver.WaitMemory()
     # The shot time of each agent's last pinned frame: no wait is taken up before it, so it stays.
     after = np.full(len(names), -1) if problem.waits_after is None else np.asarray(problem.waits_after)
-    earliest = np.array([float(times[i][f]) if f >= 0 else -np.inf for i, f in enumerate(after)])
+    earliest = np.array([float(times[i][min(int(f), len(times[i]) - 1)]) if f >= 0 and len(times[i]) else -np.inf
+                         for i, f in enumerate(after)])
     walking_paths = [paths[i] for i in names]
     sampling = collisions.sample(names, {i: t for i, t in enumerate(times)}, paths, problem.sample_step, span)
     out.sampling = sampling
