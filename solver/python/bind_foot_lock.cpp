@@ -138,7 +138,7 @@ MOCAPEDIT_BINDINGS(BindFootLock) {
          const py::handle& source_ankle_in, const py::handle& source_hip_rot_in, const py::handle& source_knee_rot_in,
          const py::handle& source_ankle_rot_in, const py::handle& contact_offsets_in, const py::handle& contacts_in,
          const py::handle& blend_in, const py::handle& stretch_in, const py::handle& turn_leash_in,
-         const py::handle& reach_leash_in, const py::handle& up_in, double meters_per_unit,
+         const py::handle& reach_leash_in, const py::handle& step_leash_in, const py::handle& up_in, double meters_per_unit,
          double leash_m, double max_leash_m, double max_drop_m, double leash_degrees, double soft_reach,
          double step_slide_m, double step_slide_degrees, double step_seconds, double step_longest_seconds,
          double step_height_m, double step_foot_speed_ratio, double step_min_foot_speed_m,
@@ -153,6 +153,7 @@ MOCAPEDIT_BINDINGS(BindFootLock) {
                           turn = Flat<double>(turn_in, n, "turn"), blend = Flat<double>(blend_in, agents, "blend"),
                           turn_leash = Flat<double>(turn_leash_in, agents, "turn_leash"),
                           reach_leash = Flat<double>(reach_leash_in, agents, "reach_leash"),
+                          step_leash = Flat<double>(step_leash_in, agents, "step_leash"),
                           up = Flat<double>(up_in, 3, "up");
         using FlagArray = py::array_t<std::uint8_t, py::array::c_style | py::array::forcecast>;
         const FlagArray stationary = Flat<std::uint8_t>(stationary_in, n, "stationary");
@@ -185,7 +186,7 @@ MOCAPEDIT_BINDINGS(BindFootLock) {
         job.contact_offsets =
             Span<const std::int64_t>(contact_offsets.data(), static_cast<std::size_t>(contact_offsets.size()));
         job.contacts = View(contacts), job.blend = View(blend), job.stretch = View(stretch), job.up = View(up);
-        job.turn_leash = View(turn_leash), job.reach_leash = View(reach_leash);
+        job.turn_leash = View(turn_leash), job.reach_leash = View(reach_leash), job.step_leash = View(step_leash);
         job.meters_per_unit = meters_per_unit, job.leash_m = leash_m, job.max_leash_m = max_leash_m;
         job.max_drop_m = max_drop_m, job.leash_degrees = leash_degrees, job.soft_reach = soft_reach;
         job.step_slide_m = step_slide_m, job.step_slide_degrees = step_slide_degrees, job.step_seconds = step_seconds;
@@ -206,7 +207,7 @@ MOCAPEDIT_BINDINGS(BindFootLock) {
       py::kw_only(), py::arg("offsets"), py::arg("frames"), py::arg("seconds"), py::arg("stationary"), py::arg("turn"),
       py::arg("hip"), py::arg("knee"), py::arg("ankle"), py::arg("ankle_rot"), py::arg("source_hip"),
       py::arg("source_ankle"), py::arg("source_hip_rot"), py::arg("source_knee_rot"), py::arg("source_ankle_rot"),
-      py::arg("contact_offsets"), py::arg("contacts"), py::arg("blend"), py::arg("stretch"), py::arg("turn_leash"), py::arg("reach_leash"), py::arg("up"),
+      py::arg("contact_offsets"), py::arg("contacts"), py::arg("blend"), py::arg("stretch"), py::arg("turn_leash"), py::arg("reach_leash"), py::arg("step_leash"), py::arg("up"),
       py::arg("meters_per_unit"), py::arg("leash_m"), py::arg("max_leash_m"), py::arg("max_drop_m"),
       py::arg("leash_degrees"), py::arg("soft_reach"), py::arg("step_slide_m"), py::arg("step_slide_degrees"),
       py::arg("step_seconds"), py::arg("step_longest_seconds"), py::arg("step_height_m"),
@@ -219,7 +220,8 @@ MOCAPEDIT_BINDINGS(BindFootLock) {
       "source_ankle_rot (N,2,4) world, posed before the edit's ground motion; contact_offsets (2A+1,) int64\n"
       "and contacts (R,2) inclusive source frame ranges per agent and leg; blend (A,) frames; stretch (A,2);\n"
       "turn_leash (A,) times leash_degrees each agent's plants may lag the turn; reach_leash (A,) times\n"
-      "max_leash_m they may lie from the edited foot;\n"
+      "max_leash_m they may lie from the edited foot; step_leash (A,) times max_leash_m a foot may lie from\n"
+      "its plant before it steps (above reach_leash: reach_leash);\n"
       "up (3,) +Y or +Z; lengths named _m in metres; speeds in metres or radians per second. Returns a\n"
       "FootPlantResult. Keyword arguments only.");
 }

@@ -176,8 +176,10 @@ struct Row {
   std::vector<std::uint8_t> inside, rigid;
   std::vector<double> turn, yaw, radius, lift;
   std::vector<Vec> foot, offset, shift;
+  std::vector<double> step_radius;  // the leash the foot steps at
+  std::vector<Vec> step_shift;      // the plant's shift on that leash
   Vec pivot, base;
-  double radius_max = 0;
+  double radius_max = 0, step_radius_max = 0;
   std::vector<std::size_t> inside_at, rigid_at;  // indices of inside (rigid) entries
 };
 
@@ -208,7 +210,9 @@ struct Agent {
     const double mpu = p.meters_per_unit;
     const double longest = p.max_leash_m * p.reach_leash[index];
     const double drop = p.max_drop_m / mpu, least = p.leash_m / mpu, most = longest / mpu;
-    std::vector<double> radius(count);
+    const double step_most = p.max_leash_m * std::min(p.step_leash[index], p.reach_leash[index]) / mpu;
+    const bool step_apart = step_most != most;
+    std::vector<double> radius(count), step_radius(count);
     for (std::size_t t = 0; t < count; ++t) {
       // As far as the leg reaches with the pelvis lowered a little.
       const Vec h = Leg(p.hip, t, k), kn = Leg(p.knee, t, k), a = Leg(p.ankle, t, k);
@@ -220,6 +224,7 @@ struct Agent {
       const double soft = p.soft_reach * length;
       const double reach = std::sqrt(std::max(soft * soft - height * height, 0.0)) - over;
       radius[t] = Clip(reach, least, most);
+      step_radius[t] = Clip(reach, least, step_most);
     }
     const double reach_blend = static_cast<double>(p.blend[index]) * longest / p.leash_m;
     const std::size_t c0 = static_cast<std::size_t>(p.contact_offsets[2 * index + k]);
@@ -247,10 +252,14 @@ struct Agent {
     for (Row& r : out) {
       const std::size_t n = r.width;
       // The longest leash over the leg's widest row from here (numpy's rows share one width).
-      r.radius_max = 0.0;
-      for (std::size_t w = 0; w < width; ++w) r.radius_max = std::max(r.radius_max, radius[std::min(r.lo + w, count - 1)]);
+      r.radius_max = 0.0, r.step_radius_max = 0.0;
+      for (std::size_t w = 0; w < width; ++w) {
+        r.radius_max = std::max(r.radius_max, radius[std::min(r.lo + w, count - 1)]);
+        r.step_radius_max = std::max(r.step_radius_max, step_radius[std::min(r.lo + w, count - 1)]);
+      }
       r.inside.assign(n, 0), r.rigid.assign(n, 0);
       r.turn.resize(n), r.radius.resize(n), r.foot.resize(n), r.offset.resize(n), r.lift.assign(n, 0.0);
+      r.step_radius.resize(n);
       for (std::size_t w = 0; w < n; ++w) {
         const std::size_t t = r.lo + w;
         const double f = p.frames[lo + t];
@@ -259,6 +268,7 @@ struct Agent {
         r.rigid[w] = r.inside[w] && p.stationary[lo + t];
         r.turn[w] = p.turn[lo + t];
         r.radius[w] = radius[t];
+        r.step_radius[w] = step_radius[t];
         r.foot[w] = Leg(p.source_ankle, t, k);
         if (r.inside[w]) r.inside_at.push_back(w);
         if (r.rigid[w]) r.rigid_at.push_back(w);
@@ -290,6 +300,9 @@ struct Agent {
       }
       for (const std::size_t w : chosen) mean += r.offset[w];
       r.shift = Leash(r.offset, Vec(mean / n_chosen), r.inside_at, r.rigid_at, r.radius, r.radius_max);
+      r.step_shift = step_apart ? Leash(r.offset, Vec(mean / n_chosen), r.inside_at, r.rigid_at, r.step_radius,
+                                        r.step_radius_max)
+                                : r.shift;
     }
   }
 
@@ -304,9 +317,10 @@ struct Agent {
     for (int k = 0; k < 2; ++k)
       for (const Row& r : legs[k]) {
         double slide = 0.0, turned = 0.0;
+        // On the leash the foot steps at.
         for (std::size_t w = 0; w + 1 < r.width; ++w)
           if (r.inside[w] && r.inside[w + 1])
-            slide += Norm(Vec(r.shift[w + 1] - r.shift[w])), turned += std::abs(r.yaw[w + 1] - r.yaw[w]);
+            slide += Norm(Vec(r.step_shift[w + 1] - r.step_shift[w])), turned += std::abs(r.yaw[w + 1] - r.yaw[w]);
         const bool s = slide > p.step_slide_m / mpu || turned > p.step_slide_degrees * (kPi / 180.0);
         sliding[k].push_back(s);
         any = any || s;
@@ -317,7 +331,7 @@ struct Agent {
     std::vector<long> contact(2 * count, -1);
     std::vector<std::uint8_t> movable(2 * count, 0);
     std::vector<Vec> offset(2 * count, Vec::Zero()), shift(2 * count, Vec::Zero());
-    std::vector<double> radius(2 * count, 0.0), turn(2 * count, 0.0), yaw(2 * count, 0.0);
+    std::vector<double> radius(2 * count, 0.0), hold(2 * count, 0.0), turn(2 * count, 0.0), yaw(2 * count, 0.0);
     for (int k = 0; k < 2; ++k)
       for (std::size_t c = 0; c < legs[k].size(); ++c) {
         const Row& r = legs[k][c];
@@ -325,7 +339,7 @@ struct Agent {
           const std::size_t i = 2 * (r.lo + w) + static_cast<std::size_t>(k);
           contact[i] = static_cast<long>(c);
           movable[i] = sliding[k][c] && !r.rigid[w];
-          offset[i] = r.offset[w], shift[i] = r.shift[w], radius[i] = r.radius[w];
+          offset[i] = r.offset[w], shift[i] = r.shift[w], radius[i] = r.step_radius[w], hold[i] = r.radius[w];
           turn[i] = r.turn[w], yaw[i] = r.yaw[w];
         }
       }
@@ -385,7 +399,7 @@ struct Agent {
     const double turn_radius = job.leash_degrees * job.turn_leash[index] * (kPi / 180.0);
 
     std::vector<double> lift;
-    const int steps = Steps(contact, movable, offset, radius, turn, shift, yaw, lift, bend, turn_radius, frame,
+    const int steps = Steps(contact, movable, offset, radius, hold, turn, shift, yaw, lift, bend, turn_radius, frame,
                             shortest, longest, height, speed, spin, knee_spin, stretch);
     if (!steps) return 0;
     for (int k = 0; k < 2; ++k)
@@ -406,7 +420,8 @@ struct Agent {
   // The step planner of mocapedit.solve.footplant.replant, on (pose, leg) arrays; writes shift,
   // yaw and lift (0 to 1 of the step height) and returns the steps taken.
   int Steps(const std::vector<long>& contact, std::vector<std::uint8_t> movable, const std::vector<Vec>& offset,
-            const std::vector<double>& radius, const std::vector<double>& turn, std::vector<Vec>& shift,
+            const std::vector<double>& radius, const std::vector<double>& hold, const std::vector<double>& turn,
+            std::vector<Vec>& shift,
             std::vector<double>& yaw, std::vector<double>& lift, const std::vector<double>& bend, double turn_radius, double seconds,
             int shortest, int longest, double height, const std::array<double, 2>& speed,
             const std::array<double, 2>& spin, const std::array<double, 2>& knee_spin, const double* stretch) const {
@@ -541,9 +556,10 @@ struct Agent {
             continue;
           }
         }
-        // No step here: the plant follows at the leash's length.
+        // No step here: the plant follows at the leash's length (hold's).
         const double d = Norm(Vec(o - s.plant));
-        if (d > r) s.plant = o - Vec(o - s.plant) * (r / d);
+        const double held = hold[i];
+        if (d > held) s.plant = o - Vec(o - s.plant) * (held / d);
         const double a = Wrap(turn[i] - s.yaw);
         if (std::abs(a) > turn_radius) s.yaw += a - Sign(a) * turn_radius;
         shift[i] = s.plant, yaw[i] = s.yaw;
@@ -622,7 +638,7 @@ void FootPlantJob::Validate() const {
       {source_hip, n * 6, "source_hip"}, {source_ankle, n * 6, "source_ankle"},
       {source_hip_rot, n * 8, "source_hip_rot"}, {source_knee_rot, n * 8, "source_knee_rot"},
       {source_ankle_rot, n * 8, "source_ankle_rot"}, {blend, agents, "blend"}, {stretch, agents * 2, "stretch"},
-      {turn_leash, agents, "turn_leash"}, {reach_leash, agents, "reach_leash"},
+      {turn_leash, agents, "turn_leash"}, {reach_leash, agents, "reach_leash"}, {step_leash, agents, "step_leash"},
       {up, 3, "up"}};
   for (const auto& in : inputs)
     if (!Sized(in.s, in.size)) throw InvalidInput(job, std::string(in.name) + " must hold " + std::to_string(in.size) + " values");
@@ -646,6 +662,8 @@ void FootPlantJob::Validate() const {
     if (!(std::isfinite(s) && s > 0)) throw InvalidInput(job, "turn_leash must be finite and positive");
   for (double s : reach_leash)
     if (!(std::isfinite(s) && s >= 1)) throw InvalidInput(job, "reach_leash must be finite and at least 1");
+  for (double s : step_leash)
+    if (!(std::isfinite(s) && s >= 1)) throw InvalidInput(job, "step_leash must be finite and at least 1");
   const bool y_up = up[0] == 0 && up[1] == 1 && up[2] == 0, z_up = up[0] == 0 && up[1] == 0 && up[2] == 1;
   if (!y_up && !z_up) throw InvalidInput(job, "up must be +Y (0, 1, 0) or +Z (0, 0, 1)");
   const struct { double v; bool ok; const char* what; } settings[] = {

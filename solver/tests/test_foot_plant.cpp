@@ -21,7 +21,7 @@ struct Stand {
   std::vector<std::int64_t> offsets, contact_offsets;
   std::vector<std::uint8_t> stationary, stepping;
   std::vector<double> frames, seconds, turn, hip, knee, ankle, ankle_rot, source_hip, source_ankle, source_rot;
-  std::vector<double> contacts, blend, stretch, turn_leash, reach_leash, up{0, 1, 0};
+  std::vector<double> contacts, blend, stretch, turn_leash, reach_leash, step_leash, up{0, 1, 0};
   std::vector<double> target, target_rot, weight;
   std::vector<std::int64_t> steps;
 
@@ -37,6 +37,7 @@ struct Stand {
       blend.push_back(2.0);
       turn_leash.push_back(1.0);
       reach_leash.push_back(1.0);
+      step_leash.push_back(1.0);
       stretch.insert(stretch.end(), {1.0, 1.0});
       for (std::size_t t = 0; t < kPoses; ++t) {
         const double f = static_cast<double>(t);
@@ -62,7 +63,7 @@ struct Stand {
     job.source_hip = source_hip, job.source_ankle = source_ankle;
     job.source_hip_rot = source_rot, job.source_knee_rot = source_rot, job.source_ankle_rot = source_rot;
     job.contact_offsets = contact_offsets, job.contacts = contacts, job.blend = blend, job.stretch = stretch;
-    job.turn_leash = turn_leash, job.reach_leash = reach_leash;
+    job.turn_leash = turn_leash, job.reach_leash = reach_leash, job.step_leash = step_leash;
     job.up = up;
     job.target = target, job.target_rot = target_rot, job.weight = weight, job.stepping = stepping, job.steps = steps;
     return job;
@@ -110,6 +111,9 @@ TEST(FootPlantJob, Validate) {
     s.reach_leash[1] = 0.5;
     EXPECT_NE(Rejection(s.Job()).find("reach_leash must be finite and at least 1"), std::string::npos);
     s.reach_leash[1] = 1.0;
+    s.step_leash[0] = std::nan("");
+    EXPECT_NE(Rejection(s.Job()).find("step_leash must be finite and at least 1"), std::string::npos);
+    s.step_leash[0] = 1.0;
   }
   {
     auto job = s.Job();
@@ -193,7 +197,7 @@ TEST(FootPlantJob, APlantLiesAsFarAsItsReachLeashLets) {
       s.hip[3 * i + 1] = 0.75;
       s.knee[3 * i + 1] = 0.40, s.knee[3 * i + 2] = s.ankle[3 * i + 2] + 0.25;
     }
-    s.reach_leash[0] = leash;
+    s.reach_leash[0] = leash, s.step_leash[0] = leash;
     s.Job().Run();
     for (std::size_t leg = 0; leg < 2; ++leg) {
       const double moved = s.target[3 * (2 * 30 + leg) + 2] - s.target[3 * (2 * 5 + leg) + 2];

@@ -116,12 +116,17 @@ def test_real_takes_about_one_spot_bent_by_handles_slide_as_a_whole(tmp_path, na
     assert turned.mean() < 1.0 and turned.max() < 5.0, (turned.mean(), turned.max())
 
 
-@pytest.mark.parametrize("name", ["cc_cmu02_04_jump_balance", "cc_cmu02_05_punch_strike"])
+@pytest.mark.parametrize("name", ["cc_cmu02_04_jump_balance", "cc_cmu02_05_punch_strike",
+                                  "cc_cmu06_15_basketball_dribble_shoot", "cc_cmu02_10_wash_self",
+                                  "cc_cmu02_06_bend_scoop_lift_arm"])
 def test_real_takes_about_one_spot_bent_a_metre_keep_their_feet_planted(tmp_path, name):
     """Bent 1 m at their middle, out and back: the feet step the way. Held to the source's foot
     speed against the hip (a boxer's feet barely move), the punches' steps took 1.3 to 1.5 s and
     their feet slid 9.34 cm/s against 5.93 in the source, the jump's 13.2 against 9.24; held to
-    the joints' bars, 6.25 and 9.33."""
+    the joints' bars, 6.25 and 9.33. The dribble (4.5 s) is dragged 1 m aside in 2.3 s: stepping
+    at the longest leash its feet took one step and slid 10.50 cm/s against its source's 9.69;
+    stepping at the usual leash while the waiting foot's plant is held at the longest, three
+    steps and 10.07 (``feet.LOOSER``'s last)."""
     stage, agent = _bent(tmp_path, name, 100.0)
     _assert_feet_within_the_bar(tmp_path, stage, agent)
 

@@ -823,6 +823,31 @@ def test_a_stand_dragged_fast_keeps_its_feet_with_quick_steps(tmp_path):
     assert bones < 1e-6 and flips == 0 and speed < 1.5
 
 
+def test_a_stand_dragged_faster_than_one_foot_at_a_time_steps_holds_the_waiting_plant(tmp_path, monkeypatch):
+    """A 60 fps stand whose middle a handle drags 1 m aside (43 cm/s): both feet must step in
+    turn, and the foot that waits for the other slides at its leash. Stepping as at the usual
+    leash while the waiting foot's plant may lie as far as the leg reaches (``feet.LOOSER``'s
+    last) lowers the skate from 20.5 to 15.0 cm/s; stepping at the longer leash took fewer
+    steps. (A drag this fast still slides far over #17's bar.)"""
+    from mocapedit.pipeline.passes import feet
+    frames, fps = 273, 60.0
+    clip, _ = walker.walk_idle_walk(frames=frames, fps=fps, stop_frame=10, idle_frames=frames - 20, name="stand")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)], up_axis="Y",
+                                       fps=fps, clips_dir=tmp_path / "clips")
+    a = f"{CROWD}/a"
+    for name, f, dx in (("start", 0, 0.0), ("middle", frames // 2, 1.0), ("end", frames - 1, 0.0)):
+        p = clip.translations[f, 0]
+        examples.add_position_constraint(stage, f"/Edits/{name}", a, f, (float(p[0]) + dx, 0.0, float(p[2])))
+    stage.GetRootLayer().Save()
+    result, _ = _solve(tmp_path)
+    held = result.report.agents[a]
+    monkeypatch.setattr(feet, "LOOSER", feet.LOOSER[:-1])
+    before, _ = _solve(tmp_path, "before")
+    assert held["footSkateEdited"] < before.report.agents[a]["footSkateEdited"] - 0.03      # m/s
+    assert held["footSteps"] >= 3
+    assert all(c["residual"] < 1e-6 for c in result.report.constraints)
+
+
 def _retimed_walk(tmp_path, beats, end: float):
     """A walk re-timed by time constraints alone (clip frame, shot time), the shot shown to
     ``end`` (the report measures the shot): (result, composed stage, agent)."""
@@ -981,6 +1006,15 @@ def test_the_solvers_plant_placement_and_kinematics_jobs_match_numpy(tmp_path, m
         np.testing.assert_array_equal(fast.stepping, slow.stepping)
         np.testing.assert_array_equal(fast.steps, slow.steps)
     assert any(fast.steps.sum() for _, _, fast in calls["plan"])
+    # Feet that step at a shorter leash than their plants may lie at (LOOSER's last step).
+    for (inputs,), _, _ in list(calls["plan"]):
+        held = dataclasses.replace(inputs, reach_leash=np.full_like(inputs.reach_leash, 5.0 / 3.0),
+                                   step_leash=np.ones_like(inputs.step_leash))
+        fast, slow = footplant.plan_feet(held), footplant.plan_feet_numpy(held)
+        for name in ("target", "target_rot", "weight"):
+            np.testing.assert_allclose(getattr(fast, name), getattr(slow, name), atol=1e-9, err_msg=name)
+        np.testing.assert_array_equal(fast.stepping, slow.stepping)
+        np.testing.assert_array_equal(fast.steps, slow.steps)
     for args, _, fast in calls["place"]:
         for a, b in zip(fast, footplant.place_numpy(*args)):
             np.testing.assert_allclose(a, b, atol=1e-12)

@@ -171,7 +171,7 @@ def replant(contact: np.ndarray, movable: np.ndarray, offset: np.ndarray, radius
             turn: np.ndarray, shift: np.ndarray, yaw: np.ndarray, turn_radius: float, *, seconds: float,
             shortest: int, longest: int, height: float, bend: np.ndarray, speed: np.ndarray, spin: np.ndarray,
             knee_spin: np.ndarray, stretch: np.ndarray | None = None,
-            trigger: float = 0.6, lead: float = 0.5) -> Replant:
+            trigger: float = 0.6, lead: float = 0.5, hold: np.ndarray | None = None) -> Replant:
     """Plants that step instead of sliding, for two legs over T frames ``seconds`` apart.
 
     ``contact`` (T,2) int: the contact each leg's foot is in at each frame (-1: none); ``movable``
@@ -193,10 +193,13 @@ def replant(contact: np.ndarray, movable: np.ndarray, offset: np.ndarray, radius
     faster than ``spin`` (2,) and the knee bends no faster than ``knee_spin`` (2,) per second
     (:func:`step_frames`; what the plant job allows each leg: :class:`PlantInputs`), times
     ``stretch`` (2,). Where it may not step, the
-    plant follows at the leash's length, as :func:`leash` does.
+    plant follows at the leash's length, as :func:`leash` does: ``hold`` (T,2)'s, where it is
+    given (the leash a plant may lie at, from ``radius`` on: a foot steps at ``radius`` and its
+    plant is held at ``hold`` while it cannot), else ``radius``'s.
     """
     count = contact.shape[0]
     stretch = np.ones(2) if stretch is None else stretch
+    hold = radius if hold is None else hold
     movable = movable & _standing(contact, movable, shortest + 3)
     shift, yaw = shift.copy(), yaw.copy()
     lift = np.zeros(contact.shape)
@@ -274,8 +277,9 @@ def replant(contact: np.ndarray, movable: np.ndarray, offset: np.ndarray, radius
                     steps += 1
                     shift[t, k], yaw[t, k] = s["plant"], s["yaw"]
                     continue
-            # No step here: the plant follows at the leash's length.
+            # No step here: the plant follows at the leash's length (``hold``'s).
             d = float(np.linalg.norm(o - s["plant"]))
+            r = float(hold[t, k])
             if d > r:
                 s["plant"] = o - (o - s["plant"]) * (r / d)
             a = _angle(turn[t, k] - s["yaw"])
@@ -314,6 +318,11 @@ class PlantInputs:
     stretch: np.ndarray          # (A,2) how much longer each leg's steps are made
     turn_leash: np.ndarray       # (A,) how many times leash_degrees each agent's plants may lag the turn
     reach_leash: np.ndarray      # (A,) how many times max_leash_m they may lie from the edited foot (>= 1)
+    #: (A,) how many times max_leash_m a foot may lie from its plant before it steps (1 to
+    #: reach_leash): below reach_leash, a foot steps as at the shorter leash and only where it
+    #: cannot is its plant held as far as reach_leash lets it (a body dragged faster than one
+    #: foot at a time can step)
+    step_leash: np.ndarray
     up: np.ndarray               # (3,) +Y or +Z
     meters_per_unit: float
     leash_m: float               # the least leash
@@ -414,6 +423,8 @@ class _Contacts:
     offset: np.ndarray | None = None   # (C,W,3) the edited ankle against the carried source foot
     shift: np.ndarray | None = None    # (C,W,3) the plant's ground shift
     lift: np.ndarray | None = None     # (C,W) how far a stepping foot is up (0 to 1 of the step height)
+    step_radius: np.ndarray | None = None  # (C,W) the leash a foot steps at
+    step_shift: np.ndarray | None = None   # (C,W,3) the plant's ground shift on that leash
 
     @property
     def carried(self) -> np.ndarray:
@@ -461,6 +472,7 @@ class _AgentPlan:
         self.blend = float(p.blend[a])
         self.leash_turn = np.radians(p.leash_degrees * float(p.turn_leash[a]))
         self.max_leash_m = p.max_leash_m * float(p.reach_leash[a])
+        self.step_leash_m = p.max_leash_m * min(float(p.step_leash[a]), float(p.reach_leash[a]))
         self.rows = [self._contacts(k, p.contacts[p.contact_offsets[2 * a + k]:p.contact_offsets[2 * a + k + 1]])
                      for k in range(2)]
 
@@ -470,9 +482,10 @@ class _AgentPlan:
         p, count, blend = self.inputs, len(self.frames), self.blend
         # The leash: as far as the leg reaches with the pelvis lowered a little, from the
         # least leash to the longest.
-        radius = np.clip(reach(self.hip[:, k], self.knee[:, k], self.ankle[:, k], self.up_vector,
-                               p.max_drop_m / p.meters_per_unit, p.soft_reach),
-                         p.leash_m / p.meters_per_unit, self.max_leash_m / p.meters_per_unit)
+        reaches = reach(self.hip[:, k], self.knee[:, k], self.ankle[:, k], self.up_vector,
+                        p.max_drop_m / p.meters_per_unit, p.soft_reach)
+        radius = np.clip(reaches, p.leash_m / p.meters_per_unit, self.max_leash_m / p.meters_per_unit)
+        step_radius = np.clip(reaches, p.leash_m / p.meters_per_unit, self.step_leash_m / p.meters_per_unit)
         ranges = np.array(ranges, dtype=np.float64).reshape(-1, 2)
         inside = (self.frames >= ranges[:, :1] - 1e-9) & (self.frames <= ranges[:, 1:] + 1e-9)   # (C,T)
         used = inside.any(axis=1)
@@ -510,6 +523,9 @@ class _AgentPlan:
         out.shift = leash_rows(out.offset, (out.offset * chosen[..., None]).sum(1) / n_chosen, inside,
                                rigid, out.radius)
         out.lift = np.zeros(at.shape)
+        out.step_radius = step_radius[at]
+        out.step_shift = out.shift if self.step_leash_m == self.max_leash_m else leash_rows(
+            out.offset, (out.offset * chosen[..., None]).sum(1) / n_chosen, inside, rigid, out.step_radius)
         return out
 
     def plan(self, stretch) -> tuple:
@@ -561,7 +577,9 @@ class _AgentPlan:
         weight, the foot steps instead (:func:`replant`), at the speeds the inputs allow (from the
         source's, at least a calm step's); returns the steps taken."""
         p, count = self.inputs, len(self.frames)
-        sliding = [r.sliding(p.step_slide_m / p.meters_per_unit, np.radians(p.step_slide_degrees)) for r in rows]
+        # Which contacts slide, on the leash a foot steps at.
+        sliding = [replace(r, shift=r.step_shift).sliding(p.step_slide_m / p.meters_per_unit,
+                                                          np.radians(p.step_slide_degrees)) for r in rows]
         if not any(s.any() for s in sliding) or count < 3:
             return 0
         contact = np.full((count, 2), -1)
@@ -569,6 +587,7 @@ class _AgentPlan:
         offset = np.zeros((count, 2, 3))
         shift = np.zeros((count, 2, 3))
         radius = np.zeros((count, 2))
+        hold = np.zeros((count, 2))
         turn = np.zeros((count, 2))
         yaw = np.zeros((count, 2))
         for k, (r, s) in enumerate(zip(rows, sliding)):
@@ -576,7 +595,8 @@ class _AgentPlan:
             t = r.at[c, w]
             contact[t, k] = c
             movable[t, k] = s[c] & ~r.rigid[c, w]
-            offset[t, k], shift[t, k], radius[t, k] = r.offset[c, w], r.shift[c, w], r.radius[c, w]
+            offset[t, k], shift[t, k], radius[t, k] = r.offset[c, w], r.shift[c, w], r.step_radius[c, w]
+            hold[t, k] = r.radius[c, w]
             turn[t, k], yaw[t, k] = r.turn[c, w], r.yaw[c, w]
         seconds = self.seconds
         # How fast a step may move each foot against its hip, turn it, and bend its knee: from the
@@ -596,7 +616,7 @@ class _AgentPlan:
                       seconds=frame, shortest=max(2, int(round(p.step_seconds / frame))),
                       longest=max(2, int(round(p.step_longest_seconds / frame))),
                       height=height, bend=bend, speed=np.array(speed), spin=np.array(spin),
-                      knee_spin=np.array(knee_spin), stretch=np.asarray(stretch, dtype=np.float64))
+                      knee_spin=np.array(knee_spin), stretch=np.asarray(stretch, dtype=np.float64), hold=hold)
         if not out.steps:
             return 0
         for k, (r, s) in enumerate(zip(rows, sliding)):

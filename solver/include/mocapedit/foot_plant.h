@@ -75,6 +75,11 @@ struct FootPlantJob {
   // #A: how many times max_leash_m each agent's plants may lie from where the edit puts the
   // foot, where its leg reaches (>= 1; 1 as planned).
   Span<const double> reach_leash;
+  // #A: how many times max_leash_m a foot may lie from its plant before it steps (>= 1; above
+  // reach_leash counts as reach_leash). Below reach_leash, a foot steps as at that shorter
+  // leash, and only where it cannot step is its plant held as far as reach_leash lets it (a
+  // body dragged faster than one foot at a time can step).
+  Span<const double> step_leash;
   // World up, 3 doubles: +Y (0, 1, 0) or +Z (0, 0, 1). The plant's turn is about it.
   Span<const double> up;
 
@@ -116,7 +121,7 @@ struct FootPlantJob {
   //  - contact_offsets does not hold #2A + 1 values, does not start at 0, decreases, or does
   //    not end at the contacts' count; contacts is not 2 doubles each, or a frame is not finite;
   //  - blend, stretch or turn_leash do not hold #A (#A * 2, #A) finite positive values, or
-  //    reach_leash #A finite values of at least 1;
+  //    reach_leash or step_leash #A finite values of at least 1;
   //  - up is neither +Y nor +Z;
   //  - meters_per_unit, leash_m, leash_degrees, soft_reach, step_seconds are not positive, or
   //    soft_reach is above 1, max_leash_m below leash_m, step_longest_seconds below

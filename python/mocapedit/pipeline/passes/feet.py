@@ -59,9 +59,12 @@ MAX_LEASH_M = 0.15
 LEASH_DEGREES = 25.0
 #: The looser plants an agent whose locked feet still slide over the bar tries, in turn
 #: (:func:`_loosen_where_sliding`): times LEASH_DEGREES they may lag the turn (45, then 35
-#: degrees), and times MAX_LEASH_M they may lie from the edited foot (25 cm), each pair kept or
-#: not before the next.
-LOOSER = ((1.8, 1.0), (1.4, 1.0), (1.0, 5.0 / 3.0))
+#: degrees), times MAX_LEASH_M they may lie from the edited foot (25 cm), and times MAX_LEASH_M
+#: a foot may lie from its plant before it steps; each kept or not before the next. The last
+#: steps as at MAX_LEASH_M and holds the other foot's plant as far as 25 cm while it cannot (a
+#: CMU dribble dragged 1 m aside in 2.3 s: its feet, stepping at 25 cm, took one step and slid
+#: +0.81 cm/s over its source's; stepping at 15 and holding at 25, three steps and +0.38).
+LOOSER = ((1.8, 1.0, 1.0), (1.4, 1.0, 1.0), (1.0, 5.0 / 3.0, 5.0 / 3.0), (1.0, 5.0 / 3.0, 1.0))
 #: Seconds a foot takes to step where an edit drags or turns a standing body further than the
 #: leash (:func:`footplant.replant`): at least STEP_SECONDS, longer so that the foot moves no
 #: faster than its source does, but no longer than STEP_LONGEST_SECONDS; and metres it lifts at
@@ -333,6 +336,7 @@ class _Run:
         self.stretch = np.ones((len(locks), 2))
         self.turn_leash = np.ones(len(locks))
         self.reach_leash = np.ones(len(locks))
+        self.step_leash = np.ones(len(locks))
 
     def span(self, a: int) -> tuple[int, int]:
         return int(self.offsets[a]), int(self.offsets[a + 1])
@@ -399,7 +403,8 @@ class _Run:
             offsets=self._offsets(agents), contact_offsets=np.cumsum([0] + [len(c) for c in contacts]).astype(np.int64),
             contacts=np.concatenate(contacts).reshape(-1, 2), blend=np.array([self.locks[a].blend for a in chosen]),
             stretch=self.stretch[list(chosen)], turn_leash=self.turn_leash[list(chosen)],
-            reach_leash=self.reach_leash[list(chosen)], up=self.up, meters_per_unit=info.meters_per_unit,
+            reach_leash=self.reach_leash[list(chosen)], step_leash=self.step_leash[list(chosen)], up=self.up,
+            meters_per_unit=info.meters_per_unit,
             leash_m=LEASH_M, max_leash_m=MAX_LEASH_M, max_drop_m=MAX_DROP_M, leash_degrees=LEASH_DEGREES,
             soft_reach=footlock.SOFT_REACH, step_slide_m=STEP_SLIDE_M, step_slide_degrees=STEP_SLIDE_DEGREES,
             step_seconds=STEP_SECONDS, step_longest_seconds=STEP_LONGEST_SECONDS, step_height_m=STEP_HEIGHT_M,
@@ -760,7 +765,9 @@ def _loosen_where_sliding(run: _Run, legs: list, skates: list) -> list:
     further (an edit that turns the body hard while a foot is planted: past LEASH_DEGREES the
     plant turns along, about the ankle, and the toes slide), then may lie further from where the
     edit puts the foot, as far as the leg reaches (a body carried while it stands on one foot:
-    past MAX_LEASH_M the foot is dragged along). Each keeps a step where its feet slide less and
+    past MAX_LEASH_M the foot is dragged along), then may lie that far only while the foot
+    cannot step, stepping as at MAX_LEASH_M (a body dragged faster than one foot at a time
+    steps). Each keeps a step where its feet slide less and
     its legs turn no faster than STEP_SPEED_RATIO times the pose before locking (or than they
     did), and the steps after it try from there. Updates ``legs`` and returns the skates
     (:meth:`_Run.skates`)."""
@@ -776,13 +783,18 @@ def _loosen_where_sliding(run: _Run, legs: list, skates: list) -> list:
     if not over:
         return skates
     speed = run.leg_speed(over)
-    for turn, reach in LOOSER:
-        over = [a for a in sliding() if turn > run.turn_leash[a] or reach > run.reach_leash[a]]
+
+    def leashes(a: int) -> tuple[float, float, float]:
+        return float(run.turn_leash[a]), float(run.reach_leash[a]), float(run.step_leash[a])
+
+    for turn, reach, step in LOOSER:
+        trial = {a: (max(turn, run.turn_leash[a]), max(reach, run.reach_leash[a]), step) for a in sliding()}
+        over = [a for a, t in trial.items() if t != leashes(a)]
         if not over:
             continue
-        kept = {a: (run.agent_state(a), run.turn_leash[a], run.reach_leash[a]) for a in over}
+        kept = {a: (run.agent_state(a), leashes(a)) for a in over}
         for a in over:
-            run.turn_leash[a], run.reach_leash[a] = max(turn, run.turn_leash[a]), max(reach, run.reach_leash[a])
+            run.turn_leash[a], run.reach_leash[a], run.step_leash[a] = trial[a]
         run.plan(over)
         run.solve(over)
         now = run.leg_speed(over)
@@ -795,7 +807,7 @@ def _loosen_where_sliding(run: _Run, legs: list, skates: list) -> list:
                     and now[a] <= max(speed[a], STEP_SPEED_RATIO) + 1e-9):
                 legs[a], skates[a] = trial[a], again[a]
             else:
-                state, run.turn_leash[a], run.reach_leash[a] = kept[a]
+                state, (run.turn_leash[a], run.reach_leash[a], run.step_leash[a]) = kept[a]
                 run.set_agent_state(a, state)
                 legs[a] = run.locked_legs(a, mpu)
     return skates
