@@ -17,7 +17,8 @@ What held before holds after: every hard position constraint keeps its frame whe
 every hard relative constraint keeps its offset, stationary ranges move rigidly. Agents
 with ``mocap:collide = false`` are left alone. Walkers that wait (``maxWait``) get a time
 map that plays them slower before the crossing and later from there on; agents that a
-time, sync or relative constraint or a hard position constraint names keep their timing.
+time, sync or relative constraint names keep their timing, and an agent that a hard position
+constraint names waits only after that constraint's frame (the frame still plays when it did).
 
 With ``MocapSolveSettings.pivotOnFeet`` on, the moved agents then turn between steps and pivot on
 their planted feet (the stance pass, :mod:`mocapedit.pipeline.passes.stance`), which moves their
