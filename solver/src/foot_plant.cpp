@@ -150,6 +150,13 @@ struct Profile {
   }
 };
 
+// The ground distance a step moves its foot as the hip sees it at the step's fastest, the body
+// drifting by `drift` over the step: mocapedit.solve.footplant.against_hip.
+double AgainstHip(const Vec& step, const Vec& drift) {
+  const double width = 0.75 - 0.25;
+  return Norm(Vec(step - drift * (width / 1.5)));
+}
+
 // Frames a step takes: mocapedit.solve.footplant.step_frames.
 int StepFrames(double distance, double turn, double height, double bend, double speed, double spin,
                double knee_spin, double seconds, int shortest) {
@@ -538,7 +545,8 @@ struct Agent {
               Vec to;
               double y1;
               landing(k, t, t + n, aheads[a], to, y1);
-              int need = StepFrames(Norm(Vec(to - s.plant)), Wrap(y1 - s.yaw), height, bend[i], speed[k], spin[k],
+              int need = StepFrames(AgainstHip(Vec(to - s.plant), Vec(offset[at(t + n, k)] - o)), Wrap(y1 - s.yaw),
+                                    height, bend[i], speed[k], spin[k],
                                     knee_spin[k], seconds, shortest);
               need = std::max(shortest, static_cast<int>(std::ceil(need * stretch[k])));
               if (need <= n) {

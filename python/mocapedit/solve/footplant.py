@@ -24,7 +24,7 @@ from mocapedit.geometry import kinematics
 from mocapedit.solve.footlock import normalize
 from mocapedit.geometry.kinematics import quat_conjugate, quat_multiply
 
-__all__ = ["follow", "leash", "leash_rows", "Replant", "replant", "step_profile", "step_frames", "lift_bend",
+__all__ = ["follow", "leash", "leash_rows", "Replant", "replant", "step_profile", "step_frames", "against_hip", "lift_bend",
            "PlantInputs", "PlantOutputs", "plan_feet", "plan_feet_numpy", "place", "place_numpy", "reach", "turn_speed", "yaw_quat"]
 
 
@@ -105,13 +105,23 @@ def step_profile(frames: int) -> tuple[np.ndarray, np.ndarray]:
     return x * x * (3.0 - 2.0 * x), np.sin(np.pi * s) ** 2
 
 
+def against_hip(step: np.ndarray, drift: np.ndarray) -> float:
+    """The ground distance a step moves its foot as the hip sees it at the step's fastest: ``step``
+    (D,) from the plant to the landing, while the body drifts by ``drift`` (D,) over the step.
+    The foot moves over the ground at up to 1.5 / (width of ``_MOVE``) times its mean speed there,
+    the hip at its mean all along, so the peak against the hip is that of ``step`` less
+    ``drift`` times (width / 1.5): a foot stepping along with a dragged body moves slower against
+    its hip than over the ground."""
+    return float(np.linalg.norm(np.asarray(step) - np.asarray(drift) * ((_MOVE[1] - _MOVE[0]) / 1.5)))
+
+
 def step_frames(distance: float, turn: float, height: float, bend: float, speed: float, spin: float,
                 knee_spin: float, seconds: float, shortest: int) -> int:
     """Frames a step takes (at least ``shortest``) so that the foot moves no faster than ``speed``
-    (stage units per second) and turns no faster than ``spin``, and the knee bends no faster than
-    ``knee_spin`` (radians per second): the peaks of :func:`step_profile` over ``distance`` on the
-    ground, ``height`` up, ``turn`` about up and ``bend`` of the knee (the bend that lifts the
-    foot by ``height``)."""
+    (stage units per second) against its hip and turns no faster than ``spin``, and the knee
+    bends no faster than ``knee_spin`` (radians per second): the peaks of :func:`step_profile`
+    over ``distance`` on the ground (against the hip: :func:`against_hip`), ``height`` up,
+    ``turn`` about up and ``bend`` of the knee (the bend that lifts the foot by ``height``)."""
     width = _MOVE[1] - _MOVE[0]
     peak = np.hypot(1.5 * distance / width, np.pi * height)      # times 1 / duration (sin^2 peaks at pi)
     need = max(peak / max(speed, 1e-300), 1.5 * abs(turn) / width / max(spin, 1e-300),
@@ -259,7 +269,8 @@ def replant(contact: np.ndarray, movable: np.ndarray, offset: np.ndarray, radius
                         if n > longest or not may_step(k, c, t, t + n):
                             break
                         to, y1 = landing(k, t, t + n, ahead)
-                        need = step_frames(float(np.linalg.norm(to - s["plant"])), _angle(y1 - s["yaw"]), height,
+                        need = step_frames(against_hip(to - s["plant"], offset[t + n, k] - offset[t, k]),
+                                           _angle(y1 - s["yaw"]), height,
                                            float(bend[t, k]), float(speed[k]), float(spin[k]), float(knee_spin[k]),
                                            seconds, shortest)
                         need = max(shortest, int(np.ceil(need * stretch[k])))
