@@ -273,3 +273,35 @@ def test_an_agent_played_earlier_and_locked_is_measured_by_fk_without_a_false_sp
     # The walker's source turns at up to 30 degrees per second; a spin is 900.
     assert not fk.spins and fk.spin_frames == 0 and fk.max_extra_facing_rate < 15.0
     assert abs(fk.max_facing_rate - result.report.agent(a).plausibility.max_facing_rate) < 0.1
+
+
+def test_a_retimed_agent_far_from_the_origin_turned_by_its_path_stays_on_it_between_samples(tmp_path):
+    """A walker 250 m from the stage origin, slowed by a time constraint and bent 72 cm aside at
+    its middle by a handle (its turn goes from +29 to -33 degrees): its re-timed clip's samples
+    fall between the shot's frames, and its transform ops (a translate and a turn about the
+    parent's origin) were sampled there alone. USD interpolates each op on its own, so at the
+    frames between, the turn swung the body about the far origin off its path: up to 15 cm here
+    (18 cm within one frame in a dense crowd 55 m out). Sampled at every whole frame as well, it
+    plays what the baked form plays there."""
+    clip = walker.walk(frames=FRAMES, fps=24.0, name="walk")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip, (180.0, 0, 170.0), 40.0, 0.0)],
+                                       fps=24.0)
+    stage.SetEndTimeCode(2 * FRAMES)
+    a = f"{CROWD}/a"
+    examples.add_time_constraint(stage, "/Edits/keep", a, 0, 0.0)
+    examples.add_time_constraint(stage, "/Edits/slow", a, 40, 75.0)
+    start, end = evaluate.agent_root_positions(stage, a, [0.0, 59.0])
+    examples.add_position_constraint(stage, "/Edits/start", a, 0, tuple(start))
+    examples.add_position_constraint(stage, "/Edits/end", a, 59, tuple(end))
+    middle = evaluate.agent_root_positions(stage, a, [30.0])[0] + np.array([0.6, 0.0, -0.4])
+    examples.add_position_constraint(stage, "/Edits/aside", a, 30, tuple(middle))
+    stage.GetRootLayer().Save()
+    shot = str(tmp_path / "shot.usda")
+    retimed, out, layer_path = _composed(tmp_path, shot, "clips", foot_locking=False)
+    baked, ref, _ = _composed(tmp_path, shot, "baked", bake_timing=True, foot_locking=False)
+    clips = Sdf.Layer.FindOrOpen(str(layer_path)).GetPrimAtPath("/MocapEdit/Animations").nameChildren
+    assert len(clips) == 1, "the walker's clip is re-timed by a value clip"
+    whole = _anim_times(ref, a)
+    assert len(whole) > FRAMES + 10
+    gap = np.abs(_world(out, a, whole) - _world(ref, a, whole)).max()
+    assert gap < 1e-4, gap

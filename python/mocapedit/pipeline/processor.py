@@ -91,6 +91,12 @@ def compose_edits(ctx: SolveContext, parents_at=None) -> None:
                 "a prim between it and its skeleton has an animated transform, which plays at shot time while the "
                 "re-timed clip plays its source time: put that motion on the agent prim itself or in the clip to "
                 "re-time it too")
+        if spec:
+            # The ops also at every whole shot frame between the re-timed clip's samples: USD
+            # interpolates a translate and a turn about the parent's origin each on its own, so
+            # between samples a frame or two apart an agent far from that origin strayed off
+            # its path (18 cm within one frame, 55 m out, turning 7 degrees between samples).
+            times, frames, lowered = _with_whole_frames(times, frames, lowered)
         # Untimed agents are written at their own frames: nothing to interpolate.
         whole = len(frames) == len(traj.ground) and np.array_equal(frames, np.arange(len(frames)))
         at = (lambda values: values) if whole else (lambda values: animation.interp_frames(values, frames))
@@ -121,6 +127,24 @@ def compose_edits(ctx: SolveContext, parents_at=None) -> None:
                 edit.xform_ops = trajectory.xform_ops(op, up)
         if edit.retimed is not None or edit.xform_ops or edit.skeleton_ops or _baked(ctx, path, spec):
             ctx.edits[path] = edit
+
+
+def _with_whole_frames(times: np.ndarray, frames: np.ndarray, lowered: np.ndarray | None):
+    """(times, frames, lowered) sampled also at every whole stage frame between the first and the
+    last of ``times`` (a re-timed clip's samples, (T,) increasing), the fractional source frame
+    at each as the value clip maps it (linearly between its samples), and ``lowered`` (T,) or None
+    likewise."""
+    times = np.asarray(times, dtype=np.float64)
+    if len(times) < 2:
+        return times, frames, lowered
+    whole = np.arange(np.ceil(times[0] - 1e-9), np.floor(times[-1] + 1e-9) + 1.0)
+    at = np.searchsorted(times, whole)
+    near = np.minimum(np.abs(whole - times[np.maximum(at - 1, 0)]), np.abs(whole - times[np.minimum(at, len(times) - 1)]))
+    dense = np.union1d(times, whole[near > 1e-6])
+    if len(dense) == len(times):
+        return times, frames, lowered
+    return (dense, np.interp(dense, times, frames),
+            None if lowered is None else np.interp(dense, times, lowered))
 
 
 def _baked(ctx: SolveContext, path: str, spec) -> bool:
