@@ -193,6 +193,14 @@ shot("clip-short-translations", anim_over("float3[] translations.timeSamples = {
 shot("clip-nan-rotations", anim_over("quatf[] rotations.timeSamples = {4: [(nan, 0, 0, 0), (1, 0, 0, 0), "
                                      "(1, 0, 0, 0), (1, 0, 0, 0)]}"),
      r"</World/agent0/Skel/Anim>\.rotations: holds non-finite values")
+shot("clip-zero-rotation", anim_over("quatf[] rotations.timeSamples = {4: [(1, 0, 0, 0), (0, 0, 0, 0), "
+                                     "(1, 0, 0, 0), (1, 0, 0, 0)]}"),
+     r"</World/agent0/Skel/Anim>\.rotations: at time \d+ holds a zero quaternion for joint '[^']+'")
+shot("curve-basis-unknown", agent_over("rel mocap:pathCurve = </Curves/path>") +
+     'def "Curves"\n{\n    def BasisCurves "path"\n    {\n        uniform token type = "cubic"\n'
+     '        uniform token basis = "bogus"\n        point3f[] points = [(0, 0, 0), (50, 0, 0), (100, 0, 0), '
+     '(150, 0, 0)]\n        int[] curveVertexCounts = [4]\n    }\n}\n',
+     r"</Curves/path>\.basis: basis 'bogus' is not supported")
 shot("clip-inf-translations", anim_over("float3[] translations.timeSamples = {4: [(inf, 0, 0), (0, 0, 90), "
                                         "(10, 0, -90), (-10, 0, -90)]}"),
      r"</World/agent0/Skel/Anim>\.translations: holds non-finite values")
@@ -311,6 +319,10 @@ OWN = {
         "position-string": ("position", 'uniform string position = "here"', r"position: is authored as string"),
         "position-double": ("position", "uniform double position = 3", r"position: is authored as double"),
         "position-sampled": ("position", "point3d position.timeSamples = {0: (1, 2, 3)}", r"position: .*time samples"),
+        "position-unknown-type": ("position", "uniform point2d position = (1, 2)",
+                                  r"position: is authored with a type USD does not know; the schema's type is point3d"),
+        "position-far": ("position", "uniform point3d position = (1e300, 0, 0)",
+                         r"position: .* lies more than 1e\+06 m .* from the stage origin"),
     },
     ("MocapRelativeConstraint", "Rel", REL): {
         "no-target": ("target", None, r"target: has no target"),
@@ -322,6 +334,7 @@ OWN = {
         "targetframe-double": ("targetFrame", "uniform double targetFrame = 4.5", r"targetFrame: is authored as double"),
         "offset-nan": ("offset", "uniform vector3d offset = (nan, 0, 0)", r"offset: must be a finite number"),
         "offset-float": ("offset", "uniform float offset = 2", r"offset: is authored as float"),
+        "offset-far": ("offset", "uniform vector3d offset = (0, 0, -2e20)", r"offset: .* lies more than 1e\+06 m"),
         "no-offset": ("offset", None, r"offset: has no offset; author the agent's root position"),
         "target-as-attribute": ("target", 'uniform string target = "/World/agent1"',
                                 r"target: is authored as an attribute; it is a relationship"),
@@ -394,6 +407,8 @@ prop_cases("MocapAvoidRegion", "Fountain", REGION, {
     "radius-negative": ("radius", "uniform double radius = -5", AR + r"radius: radius must be positive"),
     "radius-nan": ("radius", "uniform double radius = nan", AR + r"radius: must be a finite number"),
     "radius-inf": ("radius", "uniform double radius = inf", AR + r"radius: must be a finite number"),
+    "radius-huge": ("radius", "uniform double radius = 1e12", AR + r"radius: 1e\+12 stage units is more than 1e\+06 m"),
+    "margin-huge": ("margin", "uniform double margin = 1e30", AR + r"margin: 1e\+30 stage units is more than 1e\+06 m"),
     "radius-string": ("radius", 'uniform string radius = "big"', AR + r"radius: is authored as string"),
     "size-negative": ("shape", 'uniform token shape = "box"\nuniform double3 size = (10, -1, 10)', AR + r"size: size must be positive"),
     "size-nan": ("shape", 'uniform token shape = "box"\nuniform double3 size = (10, nan, 10)', AR + r"size: must be a finite number"),
@@ -478,6 +493,10 @@ prop_cases("MocapSolveSettings", "Settings", SETTINGS, {
     "step-tiny": ("sampleStep", "uniform double sampleStep = 1e-7", SS + r"sampleStep"),
     "margin-negative": ("margin", "uniform double margin = -2", SS + r"margin: must not be negative"),
     "margin-inf": ("margin", "uniform double margin = inf", SS + r"margin: must be a finite number"),
+    "margin-huge": ("margin", "uniform double margin = 1e30", SS + r"margin: 1e\+30 stage units is more than 10 m"),
+    "margin-unknown-type": ("margin", "uniform point2d margin = (1, 2)",
+                            SS + r"margin: is authored with a type USD does not know; the schema's type is double"),
+    "wait-huge": ("maxWait", "uniform double maxWait = 1e8", SS + r"maxWait: 1e\+08 s is more than the 3600 s"),
     "strategy": ("collisionStrategy", 'uniform token collisionStrategy = "shove"', SS + r"collisionStrategy: must be one of"),
     "min-interval-zero": ("minTimeInterval", "uniform double minTimeInterval = 0", SS + r"minTimeInterval: must be in \(0, 1\]"),
     "min-interval-above-one": ("minTimeInterval", "uniform double minTimeInterval = 2", SS + r"minTimeInterval: must be in \(0, 1\]"),
@@ -503,6 +522,8 @@ shot("output-existing-folder", "", r"edits layer .*sub: is a folder", outputs=("
      base=lambda folder: (__import__("bad_base").write_base(folder), (folder / "sub").mkdir()))
 shot("detect-output-is-input", "", r"-o .*shot\.usda: names a file the input uses", outputs=("shot.usda",),
      command="detect-stationary")
+shot("contacts-release-below-entry", "", r"release-height 0\.06 is below height 0\.1: .*raise release-height to 0\.1",
+     args=("--height", "0.1"), command="detect-contacts")
 
 
 # ---- BVH files broken at each section ---------------------------------------------------------------
@@ -562,6 +583,11 @@ for vid, (line, new, needle) in {
 }.items():
     bvh(vid, bvh_line(line, new), needle)
 bvh("empty", "", r"clip\.bvh: empty file")
+bvh("scale-inf", GOOD_BVH, r"--scale must be stage units per BVH unit, a finite number above 0, got inf",
+    args=("--scale", "inf"))
+bvh("unit-huge", GOOD_BVH, r"--unit 1e\+300 is outside", args=("--unit", "1e300"))
+bvh("meters-per-unit-inf", GOOD_BVH, r"--meters-per-unit must be the stage unit in metres", args=("--meters-per-unit", "inf"))
+bvh("meters-per-unit-tiny", GOOD_BVH, r"--meters-per-unit 1e-300 is outside", args=("--meters-per-unit", "1e-300"))
 bvh("root-joint-missing", GOOD_BVH, r"clip\.bvh: root joint 'Pelvis' is not a joint", args=("--root-joint", "Pelvis"))
 bvh("output-is-input", GOOD_BVH, r"-o .*clip\.bvh: ", output="clip.bvh")
 bvh("missing-file", GOOD_BVH, r"nothere\.bvh: no such file", name="nothere.bvh")

@@ -71,6 +71,8 @@ def test_the_plan_is_checked_before_any_work(tmp_path, shots):
         batch.plan([str(shots[0])], str(shots[0].parent), suffix=".usda")
     with pytest.raises(MocapEditError, match=r"s1\.edits\.txt"):   # not a layer USD can write
         batch.plan([str(shots[0])], str(tmp_path / "out"), suffix=".edits.txt")
+    with pytest.raises(MocapEditError, match=r"--suffix '/\.\./x\.usda': names a folder"):   # outside OUTDIR
+        batch.plan([str(shots[0])], str(tmp_path / "out"), suffix="/../x.usda")
     # From the command line: exit 1, a message, nothing written, no cluster started.
     out = tmp_path / "out"
     started = time.perf_counter()

@@ -282,3 +282,24 @@ def test_long_clips_solved_by_sparse_qr_give_one_note_for_the_shot(tmp_path):
     assert len(notes) == 1, notes
     assert notes[0].startswith(f"path solve: {agents} of {agents} path components were solved by sparse QR"), notes
     assert "</World/Crowd/a0>" in notes[0]
+
+
+def test_a_clip_layer_in_other_units_than_the_stage_gets_a_note_naming_it(tmp_path):
+    """USD converts neither a referenced layer's metersPerUnit nor its upAxis: a clip written in
+    metres under a centimetre stage plays its agent a hundredth of its size, and its edits with
+    it. The solve says so once per clip layer, naming it (it had said nothing); a clip that
+    agrees with the stage gets no note."""
+    clip = walker.walk(frames=48, fps=24.0, up="Z", meters_per_unit=0.01, name="walk")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip), examples.AgentSpec(
+        "b", clip, (300.0, 0.0, 0.0))], up_axis="Z", meters_per_unit=0.01, clips_dir=tmp_path / "clips")
+    stage.GetRootLayer().Save()
+    agrees = solve(str(tmp_path / "shot.usda"))
+    assert not [n for n in agrees.report.notes if "clip layer" in n]
+    layer = Sdf.Layer.FindOrOpen(str(tmp_path / "clips" / "walk.usda"))
+    layer.pseudoRoot.SetInfo("metersPerUnit", 1.0)
+    layer.pseudoRoot.SetInfo("upAxis", "Y")
+    layer.Save()
+    result = solve(str(tmp_path / "shot.usda"))
+    notes = [n for n in result.report.notes if "clip layer" in n]
+    assert len(notes) == 1
+    assert "walk.usda says upAxis Y (the stage: Z) and metersPerUnit 1 (the stage: 0.01)" in notes[0]

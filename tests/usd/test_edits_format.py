@@ -101,3 +101,19 @@ def test_values_that_are_none_are_left_out_so_usd_writes_no_warning(tmp_path, ca
     assert layer.Export(str(tmp_path / "edits.usda"))
     assert "Warning" not in capfd.readouterr().err
     assert edits_format.data(Sdf.Layer.FindOrOpen(str(tmp_path / "edits.usda")))["stats"]["agents"] == 2
+
+
+def test_figures_that_are_not_finite_are_left_out_of_the_layer_and_null_in_the_report_json():
+    """A shot whose moved agents have no foot skate to compare has no mean skate ratio: the layer
+    wrote ``double meanFootSkateRatio = nan`` into its data and ``--report`` wrote ``NaN``, which
+    strict JSON readers refuse. The layer leaves it out; the JSON says null."""
+    import math
+    from mocapedit.model.report import Report
+    stats = edits_format.layer_value({"meanFootSkateRatio": float("nan"), "agents": 2, "worst": float("inf")})
+    assert stats == {"agents": 2}
+    report = Report(input="shot.usda")
+    report.stats.extra["meanFootSkateRatio"] = math.nan
+    def refuse(name):
+        raise ValueError(name)
+    text = report.to_json()
+    assert json.loads(text, parse_constant=refuse)["stats"]["meanFootSkateRatio"] is None

@@ -130,6 +130,23 @@ def test_a_failing_write_leaves_no_target_and_no_temporary(tmp_path):
     assert list(tmp_path.iterdir()) == [], "the first file must not be renamed into place either"
 
 
+def test_a_failing_write_removes_the_folders_it_made_and_keeps_the_others(tmp_path):
+    """A write into folders that did not exist makes them; when it fails, they go again (an
+    import of a folder of BVH files whose second file is broken left an empty folder), and a
+    folder that was there before, or that something else put a file in meanwhile, stays."""
+    def write(tmp):
+        raise OSError("disk full")
+
+    (tmp_path / "kept").mkdir()
+    with pytest.raises(OSError):
+        with outputs.Writes() as w:
+            w.add(str(tmp_path / "kept" / "new" / "deeper" / "a.usda"), outputs.write_text("whole"))
+            (tmp_path / "kept" / "new" / "other.txt").write_text("someone else's")
+            w.add(str(tmp_path / "made" / "b.usda"), write)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kept"]
+    assert sorted(p.name for p in (tmp_path / "kept" / "new").iterdir()) == ["other.txt"]
+
+
 def _dead_pid() -> int:
     child = subprocess.Popen([sys.executable, "-c", "pass"])
     child.wait()

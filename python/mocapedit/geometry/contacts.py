@@ -104,8 +104,12 @@ class DetectSettings:
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name.replace('_', '-')} must be a positive number, got {value}")
-        if not (self.release_height >= self.height and self.release_speed >= self.speed):
-            raise ValueError("release thresholds must not be below the entry thresholds")
+        for entry, release in (("height", "release_height"), ("speed", "release_speed")):
+            low, high = getattr(self, entry), getattr(self, release)
+            if not (np.isfinite(high) and high >= low):
+                raise ValueError(f"{release.replace('_', '-')} {high:g} is below {entry} {low:g}: a contact "
+                                 f"is stayed in up to the release threshold, entered below the other; raise "
+                                 f"{release.replace('_', '-')} to {low:g} or more")
         if not (np.isfinite(self.max_gap) and self.max_gap >= 0):
             raise ValueError(f"max-gap must be zero or positive, got {self.max_gap}")
         if not (np.isfinite(self.relative_speed) and self.relative_speed >= 0):

@@ -120,7 +120,7 @@ def evaluate(curve: dict, prim: str = "") -> np.ndarray:
         else:
             basis = curve["basis"]
             if basis not in _BASES:
-                raise ValueError(f"basis '{basis}' is not supported (bezier, bspline, catmullRom)")
+                raise prim_error(prim, f"basis '{basis}' is not supported (bezier, bspline, catmullRom)", "basis")
             seg = _cubic_segments(p, basis, curve["wrap"])
             t = np.linspace(0.0, 1.0, SAMPLES_PER_SEGMENT, endpoint=False)
             powers = np.stack([np.ones_like(t), t, t * t, t * t * t], axis=1) @ _BASES[basis]   # (T,4)

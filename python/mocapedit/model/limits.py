@@ -23,6 +23,12 @@ MAX_TIME_CODE = 1e9
 MAX_ITERATIONS = 1000
 #: Most (agent, shot time) samples the overlap checks may take over a shot.
 MAX_SAMPLES = 20_000_000
+#: Largest extra clearance (metres) collision avoidance keeps between capsules: ``margin``.
+MAX_MARGIN_M = 10.0
+#: Most delay (seconds) collision avoidance may give one walker: ``maxWait``.
+MAX_WAIT_SECONDS = 3600.0
+#: Largest distance (metres) from the stage origin a position or relative constraint may name.
+MAX_DISTANCE_M = 1e6
 #: A retimed clip may play over at most this many times its source duration ...
 MAX_STRETCH = 100.0
 #: ... or this many time codes more than its source, whichever is larger.
@@ -42,6 +48,9 @@ def setting_problem(s: SolveSettings) -> tuple[str, str] | None:
     finite = lambda x: isinstance(x, (int, float)) and math.isfinite(x)  # noqa: E731
     if not (finite(s.max_wait) and s.max_wait >= 0):
         return "maxWait", f"must be a finite number of seconds, 0 or more, got {s.max_wait:g}"
+    if s.max_wait > MAX_WAIT_SECONDS:
+        return "maxWait", (f"{s.max_wait:g} s is more than the {MAX_WAIT_SECONDS:g} s a walker may wait; no wait "
+                           "longer than the shot is ever taken: use the shot's length at most")
     if s.max_iterations < 0:
         return "maxIterations", "must not be negative"
     if not finite(s.sample_step):
@@ -90,6 +99,35 @@ def check_settings(data: StageData) -> None:
     too_many = sample_step_problem(data, s.sample_step)
     if too_many:
         raise prim_error(where, too_many, "sampleStep")
+    widest = data.info.metres(MAX_MARGIN_M)
+    if s.margin > widest:
+        raise prim_error(where, f"{s.margin:g} stage units is more than {MAX_MARGIN_M:g} m ({widest:g} stage units) "
+                         "of extra clearance: no crowd keeps its walkers that far apart", "margin")
+
+
+def check_region_sizes(data: StageData) -> None:
+    """Raises MocapEditError for an avoid region whose radius, size or margin is larger than
+    :data:`MAX_DISTANCE_M` (a slip of units: such a region holds the whole crowd)."""
+    far = data.info.metres(MAX_DISTANCE_M)
+    for region in data.avoid_regions:
+        for prop, value in (("radius", region.radius), ("margin", region.margin),
+                            ("size", float(np.max(np.abs(region.size), initial=0.0)))):
+            if math.isfinite(value) and value > far:
+                raise prim_error(region.path, f"{value:g} stage units is more than {MAX_DISTANCE_M:g} m ({far:g} "
+                                 "stage units): check its units", prop)
+
+
+def check_constraint_positions(data: StageData) -> None:
+    """Raises MocapEditError for a position or relative constraint further from the stage origin
+    than :data:`MAX_DISTANCE_M` (a value that far only comes from a slip, and its arithmetic
+    would overflow)."""
+    far = data.info.metres(MAX_DISTANCE_M)
+    for constraints, prop in ((data.position_constraints, "position"), (data.relative_constraints, "offset")):
+        for c in constraints:
+            value = np.asarray(getattr(c, prop), dtype=np.float64)
+            if np.all(np.isfinite(value)) and float(np.abs(value).max(initial=0.0)) > far:
+                raise prim_error(c.path, f"{tuple(float(v) for v in value)} lies more than {MAX_DISTANCE_M:g} m "
+                                 f"({far:g} stage units) from the stage origin: check its units", prop)
 
 
 def sample_step_problem(data: StageData, step: float) -> str | None:

@@ -265,7 +265,8 @@ class Report:
                    timings=dict(data.get("timings", {})))
 
     def to_json(self, indent: int = 2) -> str:
-        return json.dumps(self.to_dict(), indent=indent, sort_keys=True, default=_plain)
+        return json.dumps(finite_values(self.to_dict()), indent=indent, sort_keys=True, default=_plain,
+                          allow_nan=False)
 
     def summary(self) -> str:
         """What ``mocapedit solve`` prints: the same figures, in the same words, as the
@@ -353,6 +354,20 @@ def plausibility_lines(p: ShotPlausibility | None) -> list[str]:
 
 def _fixed(value, digits: int) -> str:
     return f"{value:.{digits}f}" if _known(value) else "-"
+
+
+def finite_values(value):
+    """``value`` (nested dicts, lists, numpy arrays and scalars) as plain Python with every number
+    that is not finite made None: what strict JSON can hold."""
+    if isinstance(value, dict):
+        return {str(k): finite_values(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite_values(v) for v in value]
+    if hasattr(value, "tolist") and not isinstance(value, (str, bytes)):   # numpy arrays and scalars
+        return finite_values(value.tolist())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
 
 
 def _plain(value):

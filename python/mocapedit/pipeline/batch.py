@@ -73,6 +73,9 @@ def plan(shots: list[str], outdir: str, suffix: str = ".edits.usdc", summary: st
     """
     if not shots:
         raise MocapEditError("batch: no shots given")
+    if "/" in suffix or os.sep in suffix or (os.altsep and os.altsep in suffix):
+        raise MocapEditError(f"--suffix '{suffix}': names a folder; a suffix ends the shot's file name "
+                             "(e.g. .edits.usdc), and the layers go into OUTDIR")
     jobs, by_output = [], {}
     for shot in shots:
         path = os.path.abspath(shot)

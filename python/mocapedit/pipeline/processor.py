@@ -429,6 +429,8 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
     limits.check_overrides(data.settings, overrides)
     limits.check_settings(data)
     limits.check_constraint_times(data)
+    limits.check_constraint_positions(data)
+    limits.check_region_sizes(data)
     timings["read"] = time.perf_counter() - t0
 
     report = Report(input=input_name, output=output)
@@ -439,6 +441,8 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
         report.note(_left_as_authored(data.skel_roots_without_agent, "skeleton", "without MocapAgentAPI")
                     + "; apply MocapAgentAPI to the SkelRoot or Skeleton prim of each agent to edit "
                     "it (`mocapedit import-bvh --agent` writes clips that have it)")
+    for note in reader.clip_unit_notes(data):
+        report.note(note)
     if data.point_instanced_agents:
         report.note(_left_as_authored(data.point_instanced_agents, "agent", "inside a PointInstancer")
                     + ": a prototype plays at the instancer's points, which cannot be edited one by one; "

@@ -208,7 +208,7 @@ def build_clip(source: str, settings: ImportSettings | None = None, progress: Pr
 def import_bvh(source: str, output: str, settings: ImportSettings | None = None,
                progress: Progress | None = None) -> ImportResult:
     """Imports one BVH file and saves the clip layer atomically (``.usda`` or ``.usdc``)."""
-    outputs.check_outputs([outputs.Output(str(output), "-o")], [source])
+    outputs.check_outputs([outputs.Output(str(output), "-o", stem=".clip")], [source])
     result = build_clip(source, settings, progress)
     writer.save_layer(result.layer, str(output))
     result.output = str(output)

@@ -16,6 +16,7 @@ from pxr import Sdf, Usd, Vt
 
 from mocapedit import __version__
 from mocapedit.model.errors import MocapEditError
+from mocapedit.model.report import finite_values
 from mocapedit.usd.errors import usd_messages
 
 __all__ = ["KEY", "VERSION", "INPUTS", "CONTENT_HASH", "OPTIONS", "STATS", "REPORT",
@@ -41,9 +42,11 @@ def write(layer: Sdf.Layer, entries: dict) -> None:
 def layer_value(value):
     """A value made fit for customLayerData: lists of numbers or strings become Vt arrays;
     entries of a dictionary that are None are left out (USD cannot hold an empty value: it
-    warns and skips them as it writes)."""
+    warns and skips them as it writes), and so are numbers that are not finite (a figure with
+    nothing to measure: ``nan`` in a layer means nothing to a reader)."""
     if isinstance(value, dict):
-        return {str(k): layer_value(v) for k, v in value.items() if v is not None}
+        return {str(k): layer_value(v) for k, v in value.items()
+                if v is not None and not (isinstance(v, (float, np.floating)) and not math.isfinite(v))}
     if isinstance(value, np.ndarray):
         value = value.tolist()
     if isinstance(value, (list, tuple)):
@@ -59,21 +62,7 @@ def layer_value(value):
 
 def report_text(report: dict) -> str:
     """The report as stored in the layer: compact JSON, sorted keys, non-finite numbers as null."""
-    return json.dumps(_finite(report), sort_keys=True, separators=(",", ":"), allow_nan=False)
-
-
-def _finite(value):
-    if isinstance(value, dict):
-        return {str(k): _finite(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_finite(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _finite(value.tolist())
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
+    return json.dumps(finite_values(report), sort_keys=True, separators=(",", ":"), allow_nan=False)
 
 
 def data(layer: Sdf.Layer | None) -> dict | None:

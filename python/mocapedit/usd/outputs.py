@@ -71,6 +71,7 @@ class Output:
     option: str              # how the user named it: "-o", "--composed", "--report", ...
     kind: str = "layer"      # "layer" (USD), "text", "image", or "any"
     extensions: tuple[str, ...] = ()   # for "image" and "text": the accepted extensions
+    stem: str = ".edits"     # what a name the input does not use might end in, before its extension
 
 
 def _real(path: str) -> str:
@@ -159,7 +160,7 @@ def check_outputs(outputs: Iterable[Output], inputs: Iterable[str] = ()) -> None
             if _same_file(out.path, source):
                 raise MocapEditError(
                     f"{out.option} {out.path}: names a file the input uses ({source}); mocapedit never "
-                    f"overwrites its input: choose another name, e.g. one ending in .edits{os.path.splitext(out.path)[1]}")
+                    f"overwrites its input: choose another name, e.g. one ending in {out.stem}{os.path.splitext(out.path)[1]}")
         for other in outputs[:i]:
             if _same_file(out.path, other.path):
                 raise MocapEditError(f"{out.option} {out.path}: {other.option} names the same file; "
@@ -351,18 +352,25 @@ class Writes:
         # here both files are in place, or (on any exception) neither was touched
 
     A file's folder is made when needed. On an exception or a signal every temporary is
-    removed and no target is touched.
+    removed, no target is touched, and the folders it made are removed again.
     """
 
     def __init__(self):
         self._pending: list[tuple[str, str]] = []
+        self._made: list[str] = []      # folders made for the files, outermost first
 
     def __enter__(self) -> "Writes":
         return self
 
     def add(self, path: str, write: Callable[[str], object]) -> None:
         """Writes one file through ``write(temporary path)``; it is renamed at commit."""
+        folder = os.path.dirname(os.path.abspath(path))
+        missing = []
+        while folder and not os.path.exists(folder):
+            missing.append(folder)
+            folder = os.path.dirname(folder)
         os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+        self._made.extend(reversed(missing))
         sweep_stale(path)
         try:
             tmp = temporary_beside(path)
@@ -385,6 +393,13 @@ class Writes:
         for tmp, _ in self._pending:
             remove_temporary(tmp)
         self._pending = []
+        if exc_type is not None:
+            for folder in reversed(self._made):
+                try:
+                    os.rmdir(folder)     # only when empty: nothing else was put there meanwhile
+                except OSError:
+                    pass
+        self._made = []
         return False
 
 

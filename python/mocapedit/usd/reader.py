@@ -12,7 +12,7 @@ import re
 import sys
 
 import numpy as np
-from pxr import Sdf, Usd, UsdGeom, UsdSkel
+from pxr import Sdf, Tf, Usd, UsdGeom, UsdSkel
 
 from mocapedit.geometry import contacts
 from mocapedit.model import data as model
@@ -112,6 +112,32 @@ def check_composition(stage: Usd.Stage) -> None:
                     f"root layer (or make the sublayer agree with it)")
 
 
+def clip_unit_notes(data: model.StageData) -> list[str]:
+    """One note per clip layer that authors another ``upAxis`` or ``metersPerUnit`` than the
+    stage: USD converts neither through a reference, so its agents play at another size or
+    lying down, and every figure measured on them is off by as much."""
+    info, notes, seen = data.info, [], set()
+    for clip in data.clips.values():
+        spec = clip.sample_spec
+        layer = Sdf.Layer.Find(spec[0]) if spec else None
+        if layer is None or layer.identifier in seen:
+            continue
+        seen.add(layer.identifier)
+        says = []
+        if layer.pseudoRoot.HasInfo("upAxis") and str(layer.pseudoRoot.GetInfo("upAxis")) != info.up_axis:
+            says.append(f"upAxis {layer.pseudoRoot.GetInfo('upAxis')} (the stage: {info.up_axis})")
+        if layer.pseudoRoot.HasInfo("metersPerUnit") and not np.isclose(
+                float(layer.pseudoRoot.GetInfo("metersPerUnit")), info.meters_per_unit, rtol=1e-9, atol=0.0):
+            says.append(f"metersPerUnit {float(layer.pseudoRoot.GetInfo('metersPerUnit')):g} "
+                        f"(the stage: {info.meters_per_unit:g})")
+        if says:
+            notes.append(f"clip layer {layer.identifier} says {' and '.join(says)}: USD converts neither through a "
+                         "reference, so the agents that play it are at another size or lie down, and so are "
+                         "their edits; write the clip in the stage's units and axis (import-bvh --meters-per-unit "
+                         "and --up) or reference one that is")
+    return notes
+
+
 def stage_info(stage: Usd.Stage) -> model.StageInfo:
     root = stage.GetRootLayer()
     start, end = shot_range(stage)
@@ -150,6 +176,12 @@ def _authored_type(attr: Usd.Attribute) -> Sdf.ValueTypeName | None:
     return None
 
 
+def _known(type_name: Sdf.ValueTypeName) -> bool:
+    """Whether USD knows the type (a layer may author ``point2d x = ...``: USD reads it, with
+    the type unknown and the value unregistered, and asking the type's parts then crashes)."""
+    return bool(type_name) and type_name.type != Tf.Type.Unknown
+
+
 _KINDS = {"int": "integer", "long": "integer", "unsigned int": "integer", "unsigned long": "integer",
           "unsigned char": "integer", "double": "real", "float": "real", "pxr_half::half": "real",
           "GfTimeCode": "real", "TfToken": "text", "string": "text"}
@@ -158,6 +190,8 @@ _KINDS = {"int": "integer", "long": "integer", "unsigned int": "integer", "unsig
 def _kind(type_name: Sdf.ValueTypeName) -> tuple[str, bool]:
     """What a value of this type means to the reader: text, integer, real, or a vector of
     a size and component kind (float3, double3, point3d and half3 alike), and arrayness."""
+    if not _known(type_name):
+        return "unknown", False
     name = type_name.scalarType.type.typeName
     name = _KINDS.get(name, name)
     if name.startswith("GfVec") and name[-1] in "dfh":
@@ -193,6 +227,9 @@ def _get(prim: Usd.Prim, name: str, default=None):
             raise prim_error(prim.GetPath(), "is authored only as time samples; it takes one value: "
                              "author it without a time", name)
         expected = prim.GetPrimDefinition().GetAttributeDefinition(name)
+        if isinstance(attr.Get(), Sdf.UnregisteredValue) or not _known(attr.GetTypeName()):
+            schema = f"; the schema's type is {expected.GetTypeName()}" if expected else ""
+            raise prim_error(prim.GetPath(), f"is authored with a type USD does not know{schema}", name)
         authored = _authored_type(attr)
         if expected and authored and not _compatible(authored, expected.GetTypeName()):
             raise prim_error(prim.GetPath(), f"is authored as {authored} {attr.Get()!r}; the schema's type "
@@ -502,6 +539,11 @@ class StageReader:
         rotations = read("rotations", 4, (0.0, 0.0, 0.0, 1.0))
         if not np.all(np.isfinite(rotations)):
             raise prim_error(anim.GetPath(), "holds non-finite values", "rotations")
+        zero = np.linalg.norm(rotations, axis=-1) < 1e-6
+        if zero.any():
+            i, k = np.argwhere(zero)[0]
+            raise prim_error(anim.GetPath(), f"at time {float(times[i]):g} holds a zero quaternion for joint "
+                             f"'{joints[k]}', which is no rotation; author (1, 0, 0, 0) for none", "rotations")
         translations = read("translations", 3, 0.0)
         if not np.all(np.isfinite(translations)):
             raise prim_error(anim.GetPath(), "holds non-finite values", "translations")

@@ -64,7 +64,9 @@ def add_review_options(p: argparse.ArgumentParser, prefix: str, prefix_help: str
 def check_review_outputs(args, stage) -> None:
     """Refuses, before any work, outputs that name the input or a layer it uses (see outputs)."""
     from mocapedit.usd import outputs
-    outputs.check_outputs([outputs.Output(args.output, "-o"), outputs.Output(args.composed, "--composed")],
+    stem = "." + args.command.split("-", 1)[-1]    # detect-contacts: .contacts
+    outputs.check_outputs([outputs.Output(args.output, "-o", stem=stem),
+                           outputs.Output(args.composed, "--composed", stem=stem + ".composed")],
                           outputs.input_files(stage))
 
 

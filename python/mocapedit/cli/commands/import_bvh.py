@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 
@@ -68,15 +69,27 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
+#: Lengths the unit options may give, in metres (or stage units per BVH unit for --scale): far
+#: beyond any real rig either way, near enough that no joint position overflows.
+UNIT_RANGE = (1e-9, 1e9)
+
+
+def _in_range(option: str, value: float, what: str) -> float:
+    from mocapedit.model.errors import MocapEditError
+    low, high = UNIT_RANGE
+    if not (math.isfinite(value) and value > 0):
+        raise MocapEditError(f"{option} must be {what}, a finite number above 0, got {value:g}")
+    if not low <= value <= high:
+        raise MocapEditError(f"{option} {value:g} is outside {low:g} .. {high:g}: check it")
+    return value
+
+
 def _scale(args) -> float:
     from mocapedit.formats.bvh import UNITS
     from mocapedit.model.errors import MocapEditError
-    if not (args.meters_per_unit and args.meters_per_unit > 0):
-        raise MocapEditError(f"--meters-per-unit must be positive, got {args.meters_per_unit}")
+    mpu = _in_range("--meters-per-unit", args.meters_per_unit, "the stage unit in metres")
     if args.scale is not None:
-        if not args.scale > 0:
-            raise MocapEditError(f"--scale must be positive, got {args.scale}")
-        return args.scale
+        return _in_range("--scale", args.scale, "stage units per BVH unit")
     unit = UNITS.get(args.unit.lower())
     if unit is None:
         try:
@@ -84,9 +97,8 @@ def _scale(args) -> float:
         except ValueError:
             raise MocapEditError(f"--unit '{args.unit}' is neither a unit name ({', '.join(UNITS)}) nor a "
                                  "length in metres") from None
-    if not unit > 0:
-        raise MocapEditError(f"--unit must be a positive length, got {args.unit}")
-    return unit / args.meters_per_unit
+        unit = _in_range("--unit", unit, "a length in metres")
+    return unit / mpu
 
 
 def _inputs(args) -> tuple[list[str], bool]:
