@@ -82,3 +82,44 @@ def test_a_second_solve_on_the_composed_stage_keeps_the_first_edits(tmp_path):
     names = [{c.name for c in (Sdf.Layer.FindOrOpen(str(tmp_path / f"{n}.usda")).GetPrimAtPath("/MocapEdit/Animations")
                                or Sdf.Layer.CreateAnonymous().pseudoRoot).nameChildren} for n in ("first", "second")]
     assert names[0] and names[1] and not names[0] & names[1], names
+
+
+def test_a_second_solve_of_a_30_fps_clip_under_a_24_fps_shot_keeps_its_frames(tmp_path):
+    """A 30 fps walk under a 24 fps shot (USD scales the reference), re-timed by a time constraint
+    and bent by handles, so that its legs are locked: the first layer plays the clip through value
+    clips at the clip's own times (0.8 shot frames apart) and bakes the locked rotations on the
+    shot's whole frames. The second solve read the union of both as the clip's frames (144 of 90
+    frames), put every constraint on another frame and moved the walker again, reporting them
+    met. Its frames are the value clip's: a second solve with nothing new changes nothing."""
+    frames = 90
+    clip = walker.walk(frames=frames, fps=30.0, name="walk30")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)], fps=30.0)
+    layer = stage.GetRootLayer()
+    layer.timeCodesPerSecond = layer.framesPerSecond = 24.0
+    layer.startTimeCode, layer.endTimeCode = 0.0, 80.0
+    layer.Save()
+    stage = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    a = "/World/Crowd/a"
+    ends = evaluate.agent_root_positions(stage, a, [0.0, (frames - 1) * 0.8])
+    examples.add_position_constraint(stage, "/Edits/keep", a, 0, tuple(map(float, ends[0])))
+    examples.add_position_constraint(stage, "/Edits/aside", a, frames - 1, tuple(map(float, ends[1] + [0.8, 0, 0])))
+    examples.add_time_constraint(stage, "/Edits/late", a, 45, 40.0)
+    stage.GetRootLayer().Save()
+    first = solve(str(tmp_path / "shot.usda"), output=str(tmp_path / "first.usda"),
+                  composed=str(tmp_path / "first.composed.usda"), guides=False)
+    assert first.report.agents[a]["footContactsLocked"] > 0, "the legs are locked"
+    edits = Sdf.Layer.FindOrOpen(str(tmp_path / "first.usda"))
+    anim = edits.GetPrimAtPath("/MocapEdit/Animations/World_Crowd_a")
+    assert anim and len(anim.GetInfo("clips")["default"]["times"]) == frames, "re-timed by a value clip"
+
+    _over(tmp_path, "first.composed.usda", "again.usda")
+    again = solve(str(tmp_path / "again.usda"), output=str(tmp_path / "second.usda"),
+                  composed=str(tmp_path / "second.composed.usda"), guides=False)
+    entry = again.report.agents[a]
+    assert entry.frames == frames
+    assert not entry.edited
+    assert all(c.met for c in again.report.constraints)
+    one, two = (Usd.Stage.Open(str(tmp_path / n)) for n in ("first.composed.usda", "second.composed.usda"))
+    times = np.arange(0.0, 81.0)
+    np.testing.assert_allclose(evaluate.joint_world_positions(two, a, times),
+                               evaluate.joint_world_positions(one, a, times), atol=1e-6)

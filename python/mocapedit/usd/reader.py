@@ -479,8 +479,14 @@ class StageReader:
             self._same_times[specs] = same
         if same:
             return np.asarray(sampled[0][0].GetTimeSamples(), dtype=np.float64)
+        # A clip re-timed by value clips with some channels baked over it (an edits layer's legs
+        # locked on a warped clip, baked on the shot's whole frames): its frames are the value
+        # clip's, the source's own; the baked channels are read between their samples. (The
+        # union made a 30 fps clip under a 24 fps shot 360 frames long instead of 225, and a
+        # second solve put its constraints on the wrong frames.)
+        clipped = [a for a in attrs if a and a.GetResolveInfo().GetSource() == Usd.ResolveInfoSourceValueClips]
         times = np.unique(np.concatenate(
-            [np.asarray(a.GetTimeSamples(), dtype=np.float64) for a in attrs if a] + [np.zeros(0)]))
+            [np.asarray(a.GetTimeSamples(), dtype=np.float64) for a in (clipped or attrs) if a] + [np.zeros(0)]))
         # Channels of one frame sampled at times that differ by rounding (a value clip's mapped
         # times beside samples baked at the same frames) are one frame, not two a hair apart.
         keep = np.ones(len(times), dtype=bool)
