@@ -1,6 +1,7 @@
 """Input values that ask for more work than any machine has stop before the work, naming the property."""
 from __future__ import annotations
 
+import numpy as np
 import pytest
 from pxr import Sdf
 
@@ -72,3 +73,35 @@ def test_a_clip_stretched_over_ages_is_refused_naming_its_constraints(crowd):
     examples.add_time_constraint(crowd, "/Edits/end", "/World/Crowd/a1", 47, 5e7)
     with pytest.raises(MocapEditError, match=r"</Edits/start>, </Edits/end> stretch </World/Crowd/a1>"):
         solve(crowd)
+
+
+@pytest.mark.parametrize("kwargs, needle", [
+    ({"guides": "no"}, r"solve\(guides='no'\): must be True or False"),        # "no" is truthy: guides were written
+    ({"collisions": "yes"}, r"solve\(collisions='yes'\): must be True or False \(or None\)"),
+    ({"bake_timing": "x"}, r"solve\(bake_timing='x'\): must be True or False"),
+    ({"components": 3}, r"solve\(components=3\): give a ComponentPool"),     # AttributeError deep in the path pass
+])
+def test_solve_keywords_of_the_wrong_kind_are_refused(crowd, kwargs, needle):
+    with pytest.raises(MocapEditError, match=needle):
+        solve(crowd, **kwargs)
+
+
+def test_numpy_numbers_are_numbers_to_the_keyword_settings(crowd):
+    """``max_iterations=np.int64(5)`` was refused as not a whole number, then failed writing the
+    layer's provenance; numpy's numbers are taken as Python's."""
+    result = solve(crowd, collisions=True, max_iterations=np.int64(5), margin=np.float32(0.05))
+    assert result.report.stats.agents == 3
+
+
+def test_the_report_is_written_as_json_and_a_stage_with_unsaved_changes_gets_no_composed_stage(crowd, tmp_path):
+    """A report file named .usda got JSON; and a stage on disk with unsaved changes was solved with
+    them while its composed stage sub-layered the file without them (the solve's constraints
+    missing from what it wrote)."""
+    crowd.GetRootLayer().Save()
+    with pytest.raises(MocapEditError, match=r"report .*r\.usda: this file is written as \.json"):
+        solve(crowd, output=str(tmp_path / "e.usda"), report_json=str(tmp_path / "r.usda"))
+    examples.add_time_constraint(crowd, "/Edits/t", "/World/Crowd/a0", 20, 25.0)   # not saved
+    with pytest.raises(MocapEditError, match=r"the stage has unsaved changes .*save it first"):
+        solve(crowd, output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"))
+    assert not (tmp_path / "e.usda").exists() and not (tmp_path / "c.usda").exists()
+    solve(crowd, output=str(tmp_path / "e.usda"))          # without a composed stage it is solved as it is

@@ -73,13 +73,14 @@ def check_overrides(settings: SolveSettings, overrides: dict) -> None:
         if key not in SETTING_NAMES:
             raise MocapEditError(f"unknown solve setting '{key}' (the settings are {', '.join(SETTING_NAMES)})")
         kind = kinds[key]
-        ok = {"bool": isinstance(value, bool), "int": isinstance(value, int) and not isinstance(value, bool),
-              "float": isinstance(value, (int, float)) and not isinstance(value, bool),
+        ok = {"bool": isinstance(value, (bool, np.bool_)),
+              "int": isinstance(value, (int, np.integer)) and not isinstance(value, bool),
+              "float": isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool),
               "str": isinstance(value, str)}[kind]
         if not ok:
             what = {"bool": "True or False", "int": "a whole number", "float": "a number", "str": "a string"}[kind]
             raise MocapEditError(f"solve({key}={value!r}): must be {what} (MocapSolveSettings.{SETTING_NAMES[key]})")
-        setattr(settings, key, float(value) if kind == "float" else value)
+        setattr(settings, key, {"float": float, "int": int, "bool": bool}.get(kind, str)(value))
     problem = setting_problem(settings)
     if problem is not None:
         prop, message = problem

@@ -410,6 +410,14 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
         raise MocapEditError(f"progress is a {type(progress).__name__}; give a mocapedit.model.progress.Progress "
                              f"(or None for silence)")
     progress = progress or Silent()
+    overrides = {k: v.item() if isinstance(v, np.generic) else v for k, v in overrides.items()}   # numpy scalars
+    for name, value, none_ok in (("guides", guides, False), ("bake_timing", bake_timing, False),
+                                 ("collisions", collisions, True)):
+        if not (isinstance(value, (bool, np.bool_)) or (none_ok and value is None)):
+            raise MocapEditError(f"solve({name}={value!r}): must be True or False" + (" (or None)" if none_ok else ""))
+    if components is not None and not (hasattr(components, "map") and isinstance(getattr(components, "chunks", None), int)):
+        raise MocapEditError(f"solve(components={components!r}): give a ComponentPool (see "
+                             "mocapedit.pipeline.batch.DaskComponents) or None")
     threads.check_environment()
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -420,9 +428,13 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
     if composed and not input_file:
         raise MocapEditError("a composed stage sub-layers the input file, but this stage is in memory; "
                              "save it first or leave out the composed stage")
+    if composed and source.unsaved:
+        raise MocapEditError(f"a composed stage sub-layers {input_file}, but the stage has unsaved changes the "
+                             "solve would see and the composed stage would not; save it first or leave out the "
+                             "composed stage")
     outputs.check_outputs([outputs.Output(output, "edits layer"),
                            outputs.Output(composed, "composed stage"),
-                           outputs.Output(report_json, "report", kind="text")],
+                           outputs.Output(report_json, "report", kind="text", extensions=(".json",))],
                           outputs.input_files(stage))
 
     data = reader.read_stage(stage, progress)

@@ -155,12 +155,13 @@ def check_outputs(outputs: Iterable[Output], inputs: Iterable[str] = ()) -> None
             raise MocapEditError(f"{out.option}: the output path is empty")
         if os.path.isdir(out.path):
             raise MocapEditError(f"{out.option} {out.path}: is a folder; give the name of a file to write")
-        _check_extension(out)
         for source in inputs:
             if _same_file(out.path, source):
+                ext = os.path.splitext(out.path)[1] if out.kind == "layer" or not out.extensions else out.extensions[0]
                 raise MocapEditError(
                     f"{out.option} {out.path}: names a file the input uses ({source}); mocapedit never "
-                    f"overwrites its input: choose another name, e.g. one ending in {out.stem}{os.path.splitext(out.path)[1]}")
+                    f"overwrites its input: choose another name, e.g. one ending in {out.stem}{ext}")
+        _check_extension(out)
         for other in outputs[:i]:
             if _same_file(out.path, other.path):
                 raise MocapEditError(f"{out.option} {out.path}: {other.option} names the same file; "

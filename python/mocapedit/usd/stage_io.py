@@ -24,6 +24,11 @@ class SolveInput:
     file: str | None           # the root layer's file on disk; None for a stage only in memory
 
     @property
+    def unsaved(self) -> bool:
+        """Whether a layer of the stage's layer stack holds changes not saved to its file."""
+        return any(layer.dirty for layer in self.stage.GetLayerStack(includeSessionLayers=False))
+
+    @property
     def default_prim(self) -> str | None:
         return self.stage.GetRootLayer().defaultPrim or None
 

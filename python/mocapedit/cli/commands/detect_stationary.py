@@ -93,7 +93,6 @@ def run(args) -> int:
     clips, info = tags.detect(stage, settings, root_joint=args.root_joint, animation=args.animation,
                               prefix=args.prefix)
     save_review(args, stage, tags.build_layer(clips, info, settings), info)
-    fps = info.time_codes_per_second
     for clip in clips:
         tagged = ", ".join(f"{name} ({a}-{b})" for name, a, b in clip.existing)
         progress.message(f"<{clip.animation}> ({clip.frames} frames, measured on {clip.joint.rsplit('/', 1)[-1]}): "
@@ -102,7 +101,7 @@ def run(args) -> int:
         for name, r in zip(clip.names, clip.ranges):
             bridged = (f"; bridges {r.bridged} frame{'s' if r.bridged != 1 else ''} of shorter gaps (--max-gap) "
                        f"reaching {r.bridged_max_speed:.3f} m/s, {r.bridged_max_turn:.1f} deg/s") if r.bridged else ""
-            progress.message(f"  {name}: frames {r.first}-{r.last} ({r.duration:.2f} s at {fps:g} fps), "
+            progress.message(f"  {name}: frames {r.first}-{r.last} ({r.duration:.2f} s), "
                              f"speed <= {r.max_speed:.3f} m/s, turning <= {r.max_turn:.1f} deg/s{bridged}")
     if not args.quiet:
         print(f"wrote {os.path.abspath(args.output)}", file=sys.stderr)
