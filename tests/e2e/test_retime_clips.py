@@ -305,3 +305,32 @@ def test_a_retimed_agent_far_from_the_origin_turned_by_its_path_stays_on_it_betw
     assert len(whole) > FRAMES + 10
     gap = np.abs(_world(out, a, whole) - _world(ref, a, whole)).max()
     assert gap < 1e-4, gap
+
+
+def test_a_120_fps_walk_under_a_24_fps_shot_with_locked_legs_is_measured_where_the_report_measures_it(tmp_path):
+    """A 120 fps walk under a 24 fps shot, bent by handles so that its legs are locked, keeps its
+    timing: its value clip plays the clip on its own samples, the locked rotations baked on the same.
+    The FK tool measured its feet at the shot's whole frames (a fifth of the samples: 5.08 cm/s in
+    the source) while the report measured them at the clip's (10.11): it is now measured there
+    too, as an agent without a value clip is."""
+    frames = 480
+    clip = walker.walk(frames=frames, fps=120.0, name="walk120")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)], fps=120.0)
+    layer = stage.GetRootLayer()
+    layer.timeCodesPerSecond = layer.framesPerSecond = 24.0
+    layer.startTimeCode, layer.endTimeCode = 0.0, (frames - 1) * 0.2
+    layer.Save()
+    stage = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    a = f"{CROWD}/a"
+    ends = evaluate.agent_root_positions(stage, a, [0.0, (frames // 2) * 0.2, (frames - 1) * 0.2])
+    examples.add_position_constraint(stage, "/Edits/keep", a, 0, tuple(map(float, ends[0])))
+    examples.add_position_constraint(stage, "/Edits/mid", a, frames // 2, tuple(map(float, ends[1] + [0.6, 0, 0])))
+    examples.add_position_constraint(stage, "/Edits/end", a, frames - 1, tuple(map(float, ends[2])))
+    stage.GetRootLayer().Save()
+    result, out, _ = _composed(tmp_path, str(tmp_path / "shot.usda"), "locked")
+    entry = result.report.agents[a]
+    assert entry["footContactsLocked"] > 0, "the legs are locked"
+    assert evaluate.played_frames(out, a, [0.0, 1.0]) is not None, "played through a value clip"
+    fk = measure.plausibility(stage, out, a)
+    assert fk.foot_skate_source == pytest.approx(entry["footSkateSource"], rel=1e-3)
+    assert fk.foot_skate_edited == pytest.approx(entry["footSkateEdited"], rel=1e-3)

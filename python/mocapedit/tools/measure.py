@@ -60,7 +60,11 @@ def plausibility(source_stage, edited_stage, agent_path, joint: Union[int, str, 
     frames = evaluate.played_frames(edited_stage, agent_path, te)
     # The times the feet are measured at, and the source frame each plays.
     tf, ff = te, frames
-    if frames is not None and len(te) > 1:
+    # A value clip that plays the clip on its own samples (legs locked on an agent that keeps its
+    # timing: the rotations baked on the same samples) is measured there, as an agent without one.
+    own = frames is not None and len(frames) == len(feet_s.times) and np.allclose(
+        frames, np.arange(len(frames)), rtol=0.0, atol=1e-6) and np.allclose(te, feet_s.times, rtol=0.0, atol=1e-6)
+    if frames is not None and len(te) > 1 and not own:
         # A re-timed agent's composed samples mix its value clip's own (the source samples
         # through the new timing) with the frames its pose edits are baked on, each attribute
         # interpolated between its own: a 60 fps clip under legs locked on a 30 fps shot's frames
