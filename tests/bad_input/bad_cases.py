@@ -269,6 +269,21 @@ def _broken_base(folder: Path) -> None:
 
 
 shot("layer-sublayer-syntax", "", r"shot\.usda: .*base\.usda:\d+:\d+: ", base=_broken_base)
+
+
+def _broken_clip(folder: Path) -> None:
+    from bad_base import write_base
+    write_base(folder)
+    (folder / "broken.usda").write_text('#usda 1.0\ndef Skeleton "Skel"\n{\n    float3[] x = [(1, 2\n}\n')
+
+
+# A clip file two agents reference does not parse: one line (it spanned two, each naming USD's
+# parser rule), the file, line and column, and both prims.
+shot("clip-does-not-parse", 'def "More"\n{\n' + "".join(
+    f'    def SkelRoot "{n}" (\n        prepend references = @broken.usda@</Skel>\n    )\n    {{\n    }}\n'
+    for n in ("a", "b")) + "}\n",
+    r"broken\.usda@ for reference introduced by @.*shot\.usda@ at 2 prims \(</More/a>, </More/b>\) "
+    r"\(.*broken\.usda:\d+:\d+: parse error", base=_broken_clip)
 shot("settings-two-prims", prim("MocapSolveSettings", "S1", SETTINGS) + prim("MocapSolveSettings", "S2", SETTINGS),
      r"more than one MocapSolveSettings prim: </S1>, </S2>")
 

@@ -65,6 +65,14 @@ def open_layer(path: str) -> Sdf.Layer:
     return layer
 
 
+def _plain_usd_text(text: str) -> str:
+    """A USD composition error on one line, without the names of USD's C++ internals (a clip
+    file that does not parse: its file:line:column and the property, not the parser's rule)."""
+    text = " ".join(line.strip() for line in text.strip().splitlines() if line.strip()).rstrip(".;")
+    text = re.sub(r"parse error matching \S+ at '[^']*'", "parse error", text)
+    return re.sub(r"pxrInternal_v\w+?__pxrReserved__::", "", text)
+
+
 def check_composition(stage: Usd.Stage) -> None:
     """Raises a MocapEditError when the stage did not compose as authored: a sublayer,
     reference or payload whose file cannot be opened (USD only warns and goes on without
@@ -78,15 +86,16 @@ def check_composition(stage: Usd.Stage) -> None:
     if errors:
         # One missing clip file referenced by a thousand agents is one problem: group by
         # what failed, and name a few of the prims where.
-        where: dict[str, list[str]] = {}
+        where: dict[tuple[str, str], list[str]] = {}
         for error in errors:
-            text = str(error).strip().rstrip(".")
-            arc = re.fullmatch(r"(.* introduced by @[^@]*@)(<[^>]*>)", text)
-            where.setdefault(arc[1] if arc else text, []).extend([arc[2]] if arc else [])
+            text = _plain_usd_text(str(error))
+            arc = re.fullmatch(r"(.* introduced by @[^@]*@)(<[^>]*>)(?: -- (.*))?", text)
+            where.setdefault((arc[1], (arc[3] or "").strip()) if arc else (text, ""), []).extend([arc[2]] if arc else [])
         where = {what: sorted(set(sites)) for what, sites in where.items()}  # USD reports in no set order
-        parts = [what if not sites else what + sites[0] if len(sites) == 1 else
-                 f"{what} at {len(sites)} prims ({', '.join(sites[:3])}{', ...' if len(sites) > 3 else ''})"
-                 for what, sites in sorted(where.items())]
+        parts = [(what if not sites else what + sites[0] if len(sites) == 1 else
+                  f"{what} at {len(sites)} prims ({', '.join(sites[:3])}{', ...' if len(sites) > 3 else ''})")
+                 + (f" ({why})" if why else "")
+                 for (what, why), sites in sorted(where.items())]
         raise MocapEditError(f"{stage.GetRootLayer().identifier}: the stage does not compose: " + "; ".join(parts))
     root = stage.GetRootLayer()
     stage_says = {"upAxis": str(UsdGeom.GetStageUpAxis(stage)),
