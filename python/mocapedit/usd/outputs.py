@@ -155,6 +155,9 @@ def check_outputs(outputs: Iterable[Output], inputs: Iterable[str] = ()) -> None
             raise MocapEditError(f"{out.option}: the output path is empty")
         if os.path.isdir(out.path):
             raise MocapEditError(f"{out.option} {out.path}: is a folder; give the name of a file to write")
+        if os.path.exists(out.path) and not os.path.isfile(out.path):
+            raise MocapEditError(f"{out.option} {out.path}: is not a regular file (a pipe or a device); mocapedit "
+                                 "writes whole files and renames them into place: give the name of a file")
         for source in inputs:
             if _same_file(out.path, source):
                 ext = os.path.splitext(out.path)[1] if out.kind == "layer" or not out.extensions else out.extensions[0]
@@ -364,7 +367,10 @@ class Writes:
         return self
 
     def add(self, path: str, write: Callable[[str], object]) -> None:
-        """Writes one file through ``write(temporary path)``; it is renamed at commit."""
+        """Writes one file through ``write(temporary path)``; it is renamed at commit. A path that
+        is a symbolic link writes the file it links to (the link stays a link)."""
+        if os.path.islink(path):
+            path = os.path.realpath(path)
         folder = os.path.dirname(os.path.abspath(path))
         missing = []
         while folder and not os.path.exists(folder):

@@ -86,16 +86,23 @@ def check_composition(stage: Usd.Stage) -> None:
     if errors:
         # One missing clip file referenced by a thousand agents is one problem: group by
         # what failed, and name a few of the prims where.
-        where: dict[tuple[str, str], list[str]] = {}
+        where: dict[str, list[str]] = {}
+        why: dict[str, str] = {}
         for error in errors:
             text = _plain_usd_text(str(error))
             arc = re.fullmatch(r"(.* introduced by @[^@]*@)(<[^>]*>)(?: -- (.*))?", text)
-            where.setdefault((arc[1], (arc[3] or "").strip()) if arc else (text, ""), []).extend([arc[2]] if arc else [])
+            what = arc[1] if arc else text
+            where.setdefault(what, []).extend([arc[2]] if arc else [])
+            # USD composes prims on several threads: which of them reports why the file failed
+            # (the others may only say that it did) varies; the fullest reason is kept.
+            reason = (arc[3] or "").strip() if arc else ""
+            if len(reason) > len(why.get(what, "")):
+                why[what] = reason
         where = {what: sorted(set(sites)) for what, sites in where.items()}  # USD reports in no set order
         parts = [(what if not sites else what + sites[0] if len(sites) == 1 else
                   f"{what} at {len(sites)} prims ({', '.join(sites[:3])}{', ...' if len(sites) > 3 else ''})")
-                 + (f" ({why})" if why else "")
-                 for (what, why), sites in sorted(where.items())]
+                 + (f" ({why[what]})" if why.get(what) else "")
+                 for what, sites in sorted(where.items())]
         raise MocapEditError(f"{stage.GetRootLayer().identifier}: the stage does not compose: " + "; ".join(parts))
     root = stage.GetRootLayer()
     stage_says = {"upAxis": str(UsdGeom.GetStageUpAxis(stage)),
