@@ -193,9 +193,6 @@ shot("clip-short-translations", anim_over("float3[] translations.timeSamples = {
 shot("clip-nan-rotations", anim_over("quatf[] rotations.timeSamples = {4: [(nan, 0, 0, 0), (1, 0, 0, 0), "
                                      "(1, 0, 0, 0), (1, 0, 0, 0)]}"),
      r"</World/agent0/Skel/Anim>\.rotations: holds non-finite values")
-shot("clip-zero-rotation", anim_over("quatf[] rotations.timeSamples = {4: [(1, 0, 0, 0), (0, 0, 0, 0), "
-                                     "(1, 0, 0, 0), (1, 0, 0, 0)]}"),
-     r"</World/agent0/Skel/Anim>\.rotations: at time \d+ holds a zero quaternion for joint '[^']+'")
 shot("curve-basis-unknown", agent_over("rel mocap:pathCurve = </Curves/path>") +
      'def "Curves"\n{\n    def BasisCurves "path"\n    {\n        uniform token type = "cubic"\n'
      '        uniform token basis = "bogus"\n        point3f[] points = [(0, 0, 0), (50, 0, 0), (100, 0, 0), '
@@ -337,7 +334,7 @@ OWN = {
         "position-unknown-type": ("position", "uniform point2d position = (1, 2)",
                                   r"position: is authored with a type USD does not know; the schema's type is point3d"),
         "position-far": ("position", "uniform point3d position = (1e300, 0, 0)",
-                         r"position: .* lies more than 1e\+06 m .* from the stage origin"),
+                         r"position: .* lies more than 1e\+08 m .* from the stage origin"),
     },
     ("MocapRelativeConstraint", "Rel", REL): {
         "no-target": ("target", None, r"target: has no target"),
@@ -349,7 +346,7 @@ OWN = {
         "targetframe-double": ("targetFrame", "uniform double targetFrame = 4.5", r"targetFrame: is authored as double"),
         "offset-nan": ("offset", "uniform vector3d offset = (nan, 0, 0)", r"offset: must be a finite number"),
         "offset-float": ("offset", "uniform float offset = 2", r"offset: is authored as float"),
-        "offset-far": ("offset", "uniform vector3d offset = (0, 0, -2e20)", r"offset: .* lies more than 1e\+06 m"),
+        "offset-far": ("offset", "uniform vector3d offset = (0, 0, -2e20)", r"offset: .* lies more than 1e\+08 m"),
         "no-offset": ("offset", None, r"offset: has no offset; author the agent's root position"),
         "target-as-attribute": ("target", 'uniform string target = "/World/agent1"',
                                 r"target: is authored as an attribute; it is a relationship"),
@@ -422,8 +419,8 @@ prop_cases("MocapAvoidRegion", "Fountain", REGION, {
     "radius-negative": ("radius", "uniform double radius = -5", AR + r"radius: radius must be positive"),
     "radius-nan": ("radius", "uniform double radius = nan", AR + r"radius: must be a finite number"),
     "radius-inf": ("radius", "uniform double radius = inf", AR + r"radius: must be a finite number"),
-    "radius-huge": ("radius", "uniform double radius = 1e12", AR + r"radius: 1e\+12 stage units is more than 1e\+06 m"),
-    "margin-huge": ("margin", "uniform double margin = 1e30", AR + r"margin: 1e\+30 stage units is more than 1e\+06 m"),
+    "radius-huge": ("radius", "uniform double radius = 1e12", AR + r"radius: 1e\+12 stage units is more than 1e\+08 m"),
+    "margin-huge": ("margin", "uniform double margin = 1e30", AR + r"margin: 1e\+30 stage units is more than 1e\+08 m"),
     "radius-string": ("radius", 'uniform string radius = "big"', AR + r"radius: is authored as string"),
     "size-negative": ("shape", 'uniform token shape = "box"\nuniform double3 size = (10, -1, 10)', AR + r"size: size must be positive"),
     "size-nan": ("shape", 'uniform token shape = "box"\nuniform double3 size = (10, nan, 10)', AR + r"size: must be a finite number"),

@@ -89,7 +89,8 @@ def test_solve_keywords_of_the_wrong_kind_are_refused(crowd, kwargs, needle):
 def test_numpy_numbers_are_numbers_to_the_keyword_settings(crowd):
     """``max_iterations=np.int64(5)`` was refused as not a whole number, then failed writing the
     layer's provenance; numpy's numbers are taken as Python's."""
-    result = solve(crowd, collisions=True, max_iterations=np.int64(5), margin=np.float32(0.05))
+    result = solve(crowd, collisions=np.True_, guides=np.False_, bake_timing=np.False_,
+                   max_iterations=np.int64(5), margin=np.float32(0.05))
     assert result.report.stats.agents == 3
 
 

@@ -303,3 +303,25 @@ def test_a_clip_layer_in_other_units_than_the_stage_gets_a_note_naming_it(tmp_pa
     notes = [n for n in result.report.notes if "clip layer" in n]
     assert len(notes) == 1
     assert "walk.usda says upAxis Y (the stage: Z) and metersPerUnit 1 (the stage: 0.01)" in notes[0]
+
+
+def test_a_zero_quaternion_in_a_clip_plays_as_no_turn_as_usdskel_plays_it(tmp_path):
+    """Some exporters write a zero quaternion for a joint they do not animate. UsdSkel plays it as
+    no turn; the solve made every figure of the agent NaN. It is read as no turn too."""
+    import math
+    from pxr import Gf
+    clip = walker.walk(frames=48, fps=24.0, name="walk")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)],
+                                       clips_dir=tmp_path / "clips")
+    layer = Sdf.Layer.FindOrOpen(str(tmp_path / "clips" / "walk.usda"))
+    attr = next(a for p in [layer.GetPrimAtPath("/Skel/Anim")] for a in p.attributes if a.name == "rotations")
+    value = list(layer.QueryTimeSample(attr.path, 7.0))
+    value[3] = Gf.Quatf(0.0, 0.0, 0.0, 0.0)
+    layer.SetTimeSample(attr.path, 7.0, Vt.QuatfArray(value))
+    layer.Save()
+    start = evaluate.agent_root_positions(stage, "/World/Crowd/a", [0.0])[0]
+    examples.add_position_constraint(stage, "/Edits/aside", "/World/Crowd/a", 0, tuple(map(float, start + [0.5, 0, 0])))
+    stage.GetRootLayer().Save()
+    result = solve(str(tmp_path / "shot.usda"))
+    figures = result.report.agents["/World/Crowd/a"].plausibility
+    assert math.isfinite(figures.length_ratio) and math.isfinite(figures.max_facing_rate)

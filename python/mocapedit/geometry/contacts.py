@@ -106,7 +106,9 @@ class DetectSettings:
                 raise ValueError(f"{name.replace('_', '-')} must be a positive number, got {value}")
         for entry, release in (("height", "release_height"), ("speed", "release_speed")):
             low, high = getattr(self, entry), getattr(self, release)
-            if not (np.isfinite(high) and high >= low):
+            if not np.isfinite(high):
+                raise ValueError(f"{release.replace('_', '-')} must be a finite number, got {high}")
+            if not high >= low:
                 raise ValueError(f"{release.replace('_', '-')} {high:g} is below {entry} {low:g}: a contact "
                                  f"is stayed in up to the release threshold, entered below the other; raise "
                                  f"{release.replace('_', '-')} to {low:g} or more")

@@ -27,8 +27,9 @@ MAX_SAMPLES = 20_000_000
 MAX_MARGIN_M = 10.0
 #: Most delay (seconds) collision avoidance may give one walker: ``maxWait``.
 MAX_WAIT_SECONDS = 3600.0
-#: Largest distance (metres) from the stage origin a position or relative constraint may name.
-MAX_DISTANCE_M = 1e6
+#: Largest distance (metres) from the stage origin a position or relative constraint may name
+#: (beyond any georeferenced world: the Earth's radius is 6.4e6 m; far below any overflow).
+MAX_DISTANCE_M = 1e8
 #: A retimed clip may play over at most this many times its source duration ...
 MAX_STRETCH = 100.0
 #: ... or this many time codes more than its source, whichever is larger.
@@ -111,8 +112,11 @@ def check_region_sizes(data: StageData) -> None:
     :data:`MAX_DISTANCE_M` (a slip of units: such a region holds the whole crowd)."""
     far = data.info.metres(MAX_DISTANCE_M)
     for region in data.avoid_regions:
-        for prop, value in (("radius", region.radius), ("margin", region.margin),
-                            ("size", float(np.max(np.abs(region.size), initial=0.0)))):
+        used = [("margin", region.margin)]
+        if region.geometry is None:
+            used.append(("radius", region.radius) if region.shape == "circle" else
+                        ("size", float(np.max(np.abs(region.size), initial=0.0))))
+        for prop, value in used:
             if math.isfinite(value) and value > far:
                 raise prim_error(region.path, f"{value:g} stage units is more than {MAX_DISTANCE_M:g} m ({far:g} "
                                  "stage units): check its units", prop)

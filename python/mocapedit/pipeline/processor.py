@@ -415,6 +415,8 @@ def solve(stage_or_path, output: str | None = None, composed: str | None = None,
                                  ("collisions", collisions, True)):
         if not (isinstance(value, (bool, np.bool_)) or (none_ok and value is None)):
             raise MocapEditError(f"solve({name}={value!r}): must be True or False" + (" (or None)" if none_ok else ""))
+    guides, bake_timing = bool(guides), bool(bake_timing)
+    collisions = None if collisions is None else bool(collisions)
     if components is not None and not (hasattr(components, "map") and isinstance(getattr(components, "chunks", None), int)):
         raise MocapEditError(f"solve(components={components!r}): give a ComponentPool (see "
                              "mocapedit.pipeline.batch.DaskComponents) or None")

@@ -367,10 +367,7 @@ class Writes:
         return self
 
     def add(self, path: str, write: Callable[[str], object]) -> None:
-        """Writes one file through ``write(temporary path)``; it is renamed at commit. A path that
-        is a symbolic link writes the file it links to (the link stays a link)."""
-        if os.path.islink(path):
-            path = os.path.realpath(path)
+        """Writes one file through ``write(temporary path)``; it is renamed at commit."""
         folder = os.path.dirname(os.path.abspath(path))
         missing = []
         while folder and not os.path.exists(folder):

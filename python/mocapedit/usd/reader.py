@@ -19,6 +19,7 @@ from mocapedit.model import data as model
 from mocapedit.model import limits
 from mocapedit.model.errors import MocapEditError, prim_error
 from mocapedit.model.names import hips_joint, resolve_joint
+from mocapedit.usd import edits_format
 from mocapedit.usd.errors import USD_ERRORS, usd_diagnostics_held, usd_messages
 from mocapedit.usd.evaluate import shot_range, skeleton_candidates
 
@@ -63,6 +64,12 @@ def open_layer(path: str) -> Sdf.Layer:
     if layer is None:
         raise MocapEditError(f"{path}: cannot be read as a USD layer")
     return layer
+
+
+def _is_edits_layer(identifier: str) -> bool:
+    """Whether the layer is an edits layer this tool wrote (its ``customLayerData`` says so)."""
+    layer = Sdf.Layer.Find(identifier)
+    return bool(layer) and edits_format.KEY in (layer.customLayerData or {})
 
 
 def _plain_usd_text(text: str) -> str:
@@ -501,6 +508,9 @@ class StageReader:
         # union made a 30 fps clip under a 24 fps shot 360 frames long instead of 225, and a
         # second solve put its constraints on the wrong frames.)
         clipped = [a for a in attrs if a and a.GetResolveInfo().GetSource() == Usd.ResolveInfoSourceValueClips]
+        baked = [s for a, s in zip(attrs, specs) if a and a not in clipped and s is not None]
+        if not (clipped and baked and all(_is_edits_layer(s[0]) for s in baked)):
+            clipped = []        # a clip of the user's own: every channel's samples are frames
         times = np.unique(np.concatenate(
             [np.asarray(a.GetTimeSamples(), dtype=np.float64) for a in (clipped or attrs) if a] + [np.zeros(0)]))
         # Channels of one frame sampled at times that differ by rounding (a value clip's mapped
@@ -561,11 +571,9 @@ class StageReader:
         rotations = read("rotations", 4, (0.0, 0.0, 0.0, 1.0))
         if not np.all(np.isfinite(rotations)):
             raise prim_error(anim.GetPath(), "holds non-finite values", "rotations")
-        zero = np.linalg.norm(rotations, axis=-1) < 1e-6
-        if zero.any():
-            i, k = np.argwhere(zero)[0]
-            raise prim_error(anim.GetPath(), f"at time {float(times[i]):g} holds a zero quaternion for joint "
-                             f"'{joints[k]}', which is no rotation; author (1, 0, 0, 0) for none", "rotations")
+        # A zero quaternion (some exporters write one for a joint they do not animate) is no turn
+        # to UsdSkel, which plays it as none: so is it here (it made every figure NaN).
+        rotations[np.linalg.norm(rotations, axis=-1) < 1e-6] = (0.0, 0.0, 0.0, 1.0)
         translations = read("translations", 3, 0.0)
         if not np.all(np.isfinite(translations)):
             raise prim_error(anim.GetPath(), "holds non-finite values", "translations")
