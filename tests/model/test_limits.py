@@ -106,3 +106,15 @@ def test_the_report_is_written_as_json_and_a_stage_with_unsaved_changes_gets_no_
         solve(crowd, output=str(tmp_path / "e.usda"), composed=str(tmp_path / "c.usda"))
     assert not (tmp_path / "e.usda").exists() and not (tmp_path / "c.usda").exists()
     solve(crowd, output=str(tmp_path / "e.usda"))          # without a composed stage it is solved as it is
+
+
+def test_a_region_is_held_to_the_limit_on_the_fields_its_shape_uses(crowd):
+    """A box region that also authors a radius (a circle's field, unused) is not refused for it;
+    a circle whose radius is 1e12 m is."""
+    examples.define_mocap_prim(crowd, "/Edits/box", "MocapAvoidRegion", attributes={
+        "shape": (Sdf.ValueTypeNames.Token, "box"), "size": (Sdf.ValueTypeNames.Double3, (1.0, 1.0, 1.0)),
+        "radius": (Sdf.ValueTypeNames.Double, 1e12)})
+    solve(crowd)
+    crowd.GetPrimAtPath("/Edits/box").GetAttribute("shape").Set("circle")
+    with pytest.raises(MocapEditError, match=r"</Edits/box>\.radius: 1e\+12 stage units is more than 1e\+08 m"):
+        solve(crowd)

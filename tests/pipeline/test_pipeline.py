@@ -325,3 +325,28 @@ def test_a_zero_quaternion_in_a_clip_plays_as_no_turn_as_usdskel_plays_it(tmp_pa
     result = solve(str(tmp_path / "shot.usda"))
     figures = result.report.agents["/World/Crowd/a"].plausibility
     assert math.isfinite(figures.length_ratio) and math.isfinite(figures.max_facing_rate)
+
+
+def test_a_users_value_clip_over_one_channel_keeps_the_frames_of_the_others(tmp_path):
+    """A walk's scales played from a value clip of one sample while its translations and rotations
+    keep their own 30 samples: the frames are all of them. (Where this tool's edits layer bakes
+    locked rotations over a re-timed clip, the value clip's frames are the clip's: a rule that
+    took them whatever baked the other channels left this walk 2 frames.)"""
+    clip = walker.walk(frames=30, fps=24.0, name="walk")
+    stage = examples.build_crowd_stage(tmp_path / "shot.usda", [examples.AgentSpec("a", clip)],
+                                       clips_dir=tmp_path / "clips")
+    scales = Sdf.Layer.CreateNew(str(tmp_path / "scales_clip.usda"))
+    prim = Sdf.CreatePrimInLayer(scales, "/Anim")
+    prim.specifier = Sdf.SpecifierDef
+    attr = Sdf.AttributeSpec(prim, "scales", Sdf.ValueTypeNames.Half3Array)
+    scales.SetTimeSample(attr.path, 0.0, Vt.Vec3hArray([(1.0, 1.0, 1.0)] * len(clip.joints)))
+    scales.Save()
+    clips = Usd.ClipsAPI(stage.GetPrimAtPath("/World/Crowd/a/Skel/Anim"))
+    clips.SetClipAssetPaths([Sdf.AssetPath("./scales_clip.usda")])
+    clips.SetClipPrimPath("/Anim")
+    clips.SetClipActive([(0.0, 0.0)])
+    clips.SetClipTimes([(0.0, 0.0), (7.2, 9.0)])
+    stage.GetRootLayer().Save()
+    agent = reader.read_stage(Usd.Stage.Open(str(tmp_path / "shot.usda"))).agents["/World/Crowd/a"]
+    assert agent.frame_count >= 30
+    np.testing.assert_array_equal(agent.sample_times[[0, -1]], [0.0, 29.0])
